@@ -1,0 +1,63 @@
+# Shared helpers for the benchmark scripts (sourced, not run).
+set -euo pipefail
+
+BENCH_DIR="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+ROOT="$(cd "$BENCH_DIR/.." && pwd)"
+CACHE="$BENCH_DIR/.cache"
+EARTH=/usr/share/xplanet/images/earth.jpg
+TIME_BIN=/usr/bin/time
+
+die() {
+  printf '%s: %s\n' "$(basename "$0")" "$*" >&2
+  exit 1
+}
+need() {
+  local t
+  for t in "$@"; do
+    command -v "$t" >/dev/null 2>&1 || die "missing '$t' (run scripts/setup.sh)"
+  done
+}
+
+# find_vts [PATH]: prints the vts executable to benchmark (default build/cli/vts from run.sh).
+find_vts() {
+  local vts=${1:-$ROOT/build/cli/vts}
+  [[ -x $vts ]] || die "no vts executable at $vts (build it with: bash scripts/run.sh)"
+  printf '%s\n' "$vts"
+}
+
+# measure LOG CMD...: runs CMD under /usr/bin/time -v (stdout+stderr to LOG) and sets
+# M_RC (exit code), M_WALL (seconds), M_RSS_MB (peak resident set, MiB), M_CPU (user+sys seconds).
+measure() {
+  local log=$1 tf
+  shift
+  tf=$(mktemp)
+  set +e
+  "$TIME_BIN" -v -o "$tf" "$@" >"$log" 2>&1 </dev/null
+  M_RC=$?
+  set -e
+  M_WALL=$(awk -F': ' '/Elapsed \(wall clock\)/ {
+      n = split($2, p, ":"); s = 0; for (i = 1; i <= n; i++) s = s * 60 + p[i]; printf "%.2f", s }' "$tf")
+  M_RSS_MB=$(awk -F': ' '/Maximum resident set size/ { printf "%.0f", $2 / 1024 }' "$tf")
+  M_CPU=$(awk -F': ' '/User time/ { u = $2 } /System time/ { s = $2 } END { printf "%.1f", u + s }' "$tf")
+  rm -f "$tf"
+}
+
+# bytes_of PATH...: total size in bytes of files and directories.
+bytes_of() {
+  du -scb "$@" | awk 'END { print $1 }'
+}
+
+# machine_info: markdown lines describing this machine and the date.
+machine_info() {
+  local cpu mem
+  cpu=$(awk -F': ' '/^model name/ { print $2; exit }' /proc/cpuinfo)
+  mem=$(awk '/^MemTotal/ { printf "%.1f GiB", $2 / 1048576 }' /proc/meminfo)
+  echo "- machine: $(nproc) cores ($cpu), $mem RAM, $(uname -sr)"
+  echo "- date: $(date -u '+%Y-%m-%d %H:%M UTC')"
+  echo "- vtstream: $(git -C "$ROOT" describe --always --dirty 2>/dev/null || echo 'no git revision')"
+}
+
+ratio() { # A B: A/B to 2 decimals, or "-" when B is 0/empty
+  awk -v a="$1" -v b="$2" 'BEGIN { if (b + 0 == 0) print "-"; else printf "%.2f", a / b }'
+}
+mb() { awk -v b="$1" 'BEGIN { printf "%.1f", b / 1048576 }'; }

@@ -1,0 +1,208 @@
+// vts info / verify / extract: inspect an archive.
+#include <cstdio>
+#include <nlohmann/json.hpp>
+
+#include "commands.hpp"
+#include "progress.hpp"
+#include "vts/protocol/inspect.hpp"
+#include "vts/server/extract.hpp"
+
+namespace vts::cli {
+
+namespace {
+
+Result<std::shared_ptr<pmtiles::Reader>> open_archive(const std::string& path) {
+  auto r = pmtiles::Reader::open(path);
+  if (!r) {
+    Error e = std::move(r).error();
+    e.message = "'" + path + "': " + e.message;
+    return e;
+  }
+  return r;
+}
+
+int run_info(const std::string& path, bool json) {
+  auto reader = open_archive(path);
+  if (!reader) return report_error(reader.error());
+  auto summary = summarize_archive(**reader);
+  if (!summary) {
+    Error e = summary.error();
+    e.message = "'" + path + "': " + e.message;
+    return report_error(e);
+  }
+  const ArchiveSummary& s = *summary;
+  const Geometry& g = s.info.geometry;
+  if (json) {
+    nlohmann::json j;
+    j["path"] = path;
+    j["name"] = s.info.name;
+    j["description"] = s.info.description;
+    j["format_version"] = s.info.format_version;
+    j["width"] = g.width();
+    j["height"] = g.height();
+    j["tile_size"] = g.tile_size();
+    j["border"] = g.border();
+    j["stored_size"] = g.stored_size();
+    j["max_zoom"] = g.max_zoom();
+    j["codec"] = codec_name(s.info.codec);
+    j["color_space"] = s.info.color_space;
+    j["downsample"] = s.info.downsample;
+    j["sparse"] = s.info.sparse;
+    j["tiles"] = s.addressed_tiles;
+    j["unique_tiles"] = s.unique_tiles;
+    j["entries"] = s.entries;
+    j["leaf_directories"] = s.leaf_directories;
+    j["bytes"] = s.file_bytes;
+    j["tile_bytes"] = s.stored_bytes;
+    j["addressed_bytes"] = s.addressed_bytes;
+    j["dedup_ratio"] = s.dedup_ratio;
+    j["bytes_per_tile"] = s.addressed_tiles ? double(s.addressed_bytes) / s.addressed_tiles : 0.0;
+    j["levels"] = nlohmann::json::array();
+    for (const auto& l : s.levels)
+      j["levels"].push_back({{"z", l.z},
+                             {"width", l.width},
+                             {"height", l.height},
+                             {"tiles", l.tiles_present},
+                             {"tiles_possible", l.tiles_possible},
+                             {"bytes", l.bytes}});
+    std::printf("%s\n", j.dump(2).c_str());
+    return 0;
+  }
+  std::printf("%s\n", path.c_str());
+  std::printf("  name         %s\n", s.info.name.c_str());
+  std::printf("  image        %llu x %llu texels, %s, downsampled %s\n",
+              (unsigned long long)g.width(), (unsigned long long)g.height(),
+              s.info.color_space.c_str(), s.info.downsample.c_str());
+  std::printf("  tiles        %u + 2x%u border = %u texels stored, levels 0..%d%s\n", g.tile_size(),
+              g.border(), g.stored_size(), g.max_zoom(), s.info.sparse ? " (sparse)" : "");
+  std::printf("  codec        %s (format v%d)\n", codec_name(s.info.codec), s.info.format_version);
+  std::printf("  archive      %s, %llu tiles, %llu unique, %llu entries, %llu leaf directories\n",
+              human_bytes(s.file_bytes).c_str(), (unsigned long long)s.addressed_tiles,
+              (unsigned long long)s.unique_tiles, (unsigned long long)s.entries,
+              (unsigned long long)s.leaf_directories);
+  std::printf("  dedup        %.3fx (%s addressed, %s stored), %.1f KiB/tile\n", s.dedup_ratio,
+              human_bytes(s.addressed_bytes).c_str(), human_bytes(s.stored_bytes).c_str(),
+              s.addressed_tiles ? double(s.addressed_bytes) / s.addressed_tiles / 1024.0 : 0.0);
+  std::printf("  %5s %12s %12s %10s %12s\n", "level", "width", "height", "tiles", "bytes");
+  for (const auto& l : s.levels)
+    std::printf("  %5d %12llu %12llu %10llu %12s\n", l.z, (unsigned long long)l.width,
+                (unsigned long long)l.height, (unsigned long long)l.tiles_present,
+                human_bytes(l.bytes).c_str());
+  return 0;
+}
+
+int run_verify(const std::string& path, bool json, unsigned threads) {
+  auto reader = open_archive(path);
+  if (!reader) return report_error(reader.error());
+  ProgressBar bar("verify", "payloads", !json);
+  auto report = verify_archive(**reader, threads, [&](std::uint64_t done, std::uint64_t total) {
+    bar.update(done, total);
+  });
+  bar.finish();
+  if (!report) {
+    Error e = report.error();
+    e.message = "'" + path + "': " + e.message;
+    return report_error(e);
+  }
+  const VerifyReport& r = *report;
+  if (json) {
+    nlohmann::json j{{"path", path},
+                     {"ok", r.ok()},
+                     {"tiles_checked", r.tiles_checked},
+                     {"payloads_checked", r.payloads_checked},
+                     {"bad_tiles", r.bad_tiles}};
+    if (r.first_bad) j["first_bad_tile"] = r.first_bad->to_string();
+    if (!r.first_error.empty()) j["first_error"] = r.first_error;
+    if (!r.structural_error.empty()) j["structural_error"] = r.structural_error;
+    std::printf("%s\n", j.dump(2).c_str());
+  }
+  if (!r.structural_error.empty()) {
+    std::fprintf(stderr, "vts: error: '%s': %s\n", path.c_str(), r.structural_error.c_str());
+    return exit_code(ErrorCode::corrupt);
+  }
+  if (r.bad_tiles) {
+    std::fprintf(stderr, "vts: error: '%s': %llu of %llu tiles are bad; first bad tile %s: %s\n",
+                 path.c_str(), (unsigned long long)r.bad_tiles,
+                 (unsigned long long)r.tiles_checked,
+                 r.first_bad ? r.first_bad->to_string().c_str() : "?", r.first_error.c_str());
+    return exit_code(ErrorCode::corrupt);
+  }
+  if (!json)
+    std::printf("%s: ok, %llu tiles (%llu distinct payloads) verified\n", path.c_str(),
+                (unsigned long long)r.tiles_checked, (unsigned long long)r.payloads_checked);
+  return 0;
+}
+
+struct ExtractArgs {
+  std::string archive, tile, output;
+  int level = -1;
+  bool with_border = false;
+  int channels = 4;
+};
+
+int run_extract(const ExtractArgs& a) {
+  if (a.tile.empty() == (a.level < 0))
+    return report_error(
+        make_error(ErrorCode::invalid_argument, "give exactly one of Z/X/Y or --level Z"));
+  auto reader = open_archive(a.archive);
+  if (!reader) return report_error(reader.error());
+  auto info = TilesetInfo::from_json((*reader)->metadata_json());
+  if (!info) return report_error(info.error());
+  ExtractOptions o;
+  o.output = a.output;
+  o.with_border = a.with_border;
+  o.channels = a.channels;
+  Status st;
+  if (!a.tile.empty()) {
+    auto id = parse_tile_id(a.tile);
+    if (!id) return report_error(id.error());
+    st = extract_tile(**reader, *info, *id, o);
+  } else {
+    if (a.with_border)
+      return report_error(
+          make_error(ErrorCode::invalid_argument, "--with-border applies to a single tile"));
+    st = extract_level(**reader, *info, a.level, o);
+  }
+  if (!st) return report_error(st.error());
+  return 0;
+}
+
+}  // namespace
+
+Runner add_info(CLI::App& app) {
+  auto path = std::make_shared<std::string>();
+  auto json = std::make_shared<bool>(false);
+  CLI::App* c = app.add_subcommand("info", "Describe an archive: geometry, tiles per level, bytes");
+  c->add_option("archive", *path, "Archive (.pmtiles)")->required();
+  c->add_flag("--json", *json, "Print as JSON");
+  return [path, json] { return run_info(*path, *json); };
+}
+
+Runner add_verify(CLI::App& app) {
+  auto path = std::make_shared<std::string>();
+  auto json = std::make_shared<bool>(false);
+  auto threads = std::make_shared<unsigned>(0);
+  CLI::App* c = app.add_subcommand(
+      "verify", "Check every directory and decode every tile (checksums); exit 0 only if all good");
+  c->add_option("archive", *path, "Archive (.pmtiles)")->required();
+  c->add_option("--threads", *threads, "Decoder threads (0 = all cores)");
+  c->add_flag("--json", *json, "Print the report as JSON");
+  return [path, json, threads] { return run_verify(*path, *json, *threads); };
+}
+
+Runner add_extract(CLI::App& app) {
+  auto a = std::make_shared<ExtractArgs>();
+  CLI::App* c = app.add_subcommand(
+      "extract", "Write one tile, or a whole level stitched together, as an image file");
+  c->add_option("archive", a->archive, "Archive (.pmtiles)")->required();
+  c->add_option("tile", a->tile, "Tile as Z/X/Y");
+  c->add_option("--level", a->level, "Extract the whole level Z");
+  c->add_option("-o,--output", a->output, "Output image; format from the extension")->required();
+  c->add_flag("--with-border", a->with_border, "Include the tile's border texels");
+  c->add_option("--channels", a->channels, "4 = RGBA, 3 = RGB")
+      ->check(CLI::IsMember({3, 4}))
+      ->capture_default_str();
+  return [a] { return run_extract(*a); };
+}
+
+}  // namespace vts::cli

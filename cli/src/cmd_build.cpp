@@ -1,0 +1,170 @@
+// vts build: image(s) or the synthetic source → PMTiles pyramid archive.
+#include <csignal>
+#include <cstdio>
+#include <nlohmann/json.hpp>
+
+#include "commands.hpp"
+#include "progress.hpp"
+#include "vts/server/builder.hpp"
+
+namespace vts::cli {
+
+namespace {
+
+std::atomic<bool> g_cancel{false};
+
+extern "C" void on_signal(int) { g_cancel.store(true); }
+
+// SIGINT/SIGTERM ask the build to stop cleanly (no output file is left); a second signal kills.
+void install_cancel_handlers() {
+  struct sigaction sa {};
+  sa.sa_handler = on_signal;
+  sa.sa_flags = SA_RESETHAND;
+  sigemptyset(&sa.sa_mask);
+  sigaction(SIGINT, &sa, nullptr);
+  sigaction(SIGTERM, &sa, nullptr);
+}
+
+template <typename T>
+bool parse_pair(const std::string& text, char sep, T& a, T& b) {
+  unsigned long long x = 0, y = 0;
+  char c = 0;
+  int consumed = 0;
+  std::string fmt = std::string("%llu") + sep + "%llu%n";
+  if (std::sscanf(text.c_str(), fmt.c_str(), &x, &y, &consumed) != 2 ||
+      consumed != static_cast<int>(text.size()))
+    return false;
+  (void)c;
+  a = static_cast<T>(x);
+  b = static_cast<T>(y);
+  return true;
+}
+
+struct BuildArgs {
+  std::vector<std::string> inputs;
+  std::string output;
+  std::uint32_t tile = 256, border = 4;
+  std::string codec = "lossless";
+  int zstd_level = 3;
+  std::string filter = "auto";
+  unsigned threads = 0;
+  std::string grid, synthetic, region;
+  int region_level = 6;
+  std::string name;
+  bool json = false, quiet = false;
+};
+
+int run_build(const BuildArgs& a) {
+  BuildOptions o;
+  for (const auto& i : a.inputs) o.inputs.emplace_back(i);
+  o.output = a.output;
+  o.tile_size = a.tile;
+  o.border = a.border;
+  auto codec = parse_codec_name(a.codec);
+  if (!codec) return report_error(codec.error());
+  o.codec = *codec;
+  o.encode.zstd_level = a.zstd_level;
+  o.encode.filter = a.filter == "none"       ? FilterChoice::none
+                    : a.filter == "gradient" ? FilterChoice::gradient
+                                             : FilterChoice::automatic;
+  o.threads = a.threads;
+  o.name = a.name;
+  if (!a.grid.empty() && !parse_pair(a.grid, 'x', o.grid_columns, o.grid_rows))
+    return report_error(make_error(ErrorCode::invalid_argument,
+                                   "--grid '" + a.grid + "' is not of the form CxR, e.g. 4x2"));
+  if (!a.synthetic.empty()) {
+    SyntheticSpec s;
+    if (!parse_pair(a.synthetic, 'x', s.width, s.height))
+      return report_error(make_error(ErrorCode::invalid_argument,
+                                     "--synthetic '" + a.synthetic + "' is not of the form WxH"));
+    if (!a.region.empty()) {
+      unsigned long long r[4];
+      int consumed = 0;
+      if (std::sscanf(a.region.c_str(), "%llu,%llu,%llu,%llu%n", &r[0], &r[1], &r[2], &r[3],
+                      &consumed) != 4 ||
+          consumed != static_cast<int>(a.region.size()))
+        return report_error(make_error(
+            ErrorCode::invalid_argument,
+            "--region '" + a.region + "' is not of the form x0,y0,x1,y1 (finest-level texels)"));
+      s.region = TexelRect{r[0], r[1], r[2], r[3]};
+    }
+    s.region_level = a.region_level;
+    o.synthetic = s;
+  } else if (!a.region.empty()) {
+    return report_error(
+        make_error(ErrorCode::invalid_argument, "--region applies to --synthetic builds only"));
+  }
+
+  ProgressBar bar("build", "tiles", !a.quiet && !a.json);
+  o.on_progress = [&](const BuildProgress& p) {
+    bar.update(p.tiles_done, p.tiles_total, human_bytes(p.bytes_written));
+  };
+  install_cancel_handlers();
+  o.cancel = &g_cancel;
+  auto report = build_pyramid(o);
+  bar.finish();
+  if (!report) return report_error(report.error());
+  const BuildReport& r = *report;
+  const Geometry& g = r.info.geometry;
+  if (a.json) {
+    nlohmann::json j;
+    j["output"] = a.output;
+    j["input"] = r.input_description;
+    j["width"] = g.width();
+    j["height"] = g.height();
+    j["tile_size"] = g.tile_size();
+    j["border"] = g.border();
+    j["max_zoom"] = g.max_zoom();
+    j["codec"] = codec_name(r.info.codec);
+    j["tiles"] = r.stats.addressed_tiles;
+    j["unique_tiles"] = r.stats.tile_contents;
+    j["entries"] = r.stats.tile_entries;
+    j["tile_bytes"] = r.stats.tile_bytes;
+    j["file_bytes"] = r.stats.file_bytes;
+    j["seconds"] = r.seconds;
+    j["tiles_per_second"] = r.seconds > 0 ? double(r.stats.addressed_tiles) / r.seconds : 0.0;
+    std::printf("%s\n", j.dump(2).c_str());
+  } else if (!a.quiet) {
+    std::printf("built %s: %llux%llu, %d levels, %llu tiles (%llu unique), %s in %s (%.0f tiles/s)\n",
+                a.output.c_str(), (unsigned long long)g.width(), (unsigned long long)g.height(),
+                g.level_count(), (unsigned long long)r.stats.addressed_tiles,
+                (unsigned long long)r.stats.tile_contents, human_bytes(r.stats.file_bytes).c_str(),
+                human_duration(r.seconds).c_str(),
+                r.seconds > 0 ? double(r.stats.addressed_tiles) / r.seconds : 0.0);
+  }
+  return 0;
+}
+
+}  // namespace
+
+Runner add_build(CLI::App& app) {
+  auto a = std::make_shared<BuildArgs>();
+  CLI::App* c = app.add_subcommand("build", "Cut images into a tile pyramid archive (PMTiles)");
+  c->add_option("inputs", a->inputs,
+                "Input image(s): anything OpenImageIO reads; C*R images row-major with --grid");
+  c->add_option("-o,--output", a->output, "Output archive (.pmtiles)")->required();
+  c->add_option("--tile", a->tile, "Tile content size T, a power of two")->capture_default_str();
+  c->add_option("--border", a->border, "Border B copied from neighbours")->capture_default_str();
+  c->add_option("--codec", a->codec, "Tile codec: lossless")->capture_default_str();
+  c->add_option("--zstd-level", a->zstd_level, "zstd level (1..19)")
+      ->check(CLI::Range(-7, 22))
+      ->capture_default_str();
+  c->add_option("--filter", a->filter, "Prediction filter before zstd: auto|none|gradient")
+      ->check(CLI::IsMember({"auto", "none", "gradient"}))
+      ->capture_default_str();
+  c->add_option("--threads", a->threads, "Encoder threads (0 = all cores)")->capture_default_str();
+  c->add_option("--grid", a->grid, "Inputs form a CxR mosaic, e.g. 4x2 (row-major order)");
+  c->add_option("--synthetic", a->synthetic,
+                "Build the built-in coordinate-encoding source of WxH texels instead of inputs");
+  c->add_option("--region", a->region,
+                "With --synthetic: only tiles over x0,y0,x1,y1 (finest texels) exist at levels "
+                ">= --region-level");
+  c->add_option("--region-level", a->region_level, "First level restricted to --region")
+      ->capture_default_str();
+  c->add_option("--name", a->name, "Tileset name (default: output file stem)");
+  c->add_flag("--json", a->json, "Print the result as JSON");
+  c->add_flag("-q,--quiet", a->quiet, "No progress bar or summary");
+  return [a] { return run_build(*a); };
+}
+
+}  // namespace vts::cli

@@ -1,0 +1,22 @@
+// Subcommand registration. Each add_* function declares its options on `app` and returns the
+// function that runs it once parsing succeeded; the runner returns the process exit code.
+#pragma once
+
+#include <CLI/CLI.hpp>
+#include <functional>
+
+#include "vts/protocol/result.hpp"
+
+namespace vts::cli {
+
+using Runner = std::function<int()>;
+
+Runner add_build(CLI::App& app);
+Runner add_info(CLI::App& app);
+Runner add_verify(CLI::App& app);
+Runner add_extract(CLI::App& app);
+
+// Prints "vts: error: <message>" to stderr and returns the mapped exit code.
+int report_error(const vts::Error& e);
+
+}  // namespace vts::cli

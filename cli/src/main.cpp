@@ -1,0 +1,45 @@
+// vts — the vtstream command line: one subcommand per user journey.
+#include <cstdio>
+#include <exception>
+
+#include "commands.hpp"
+#include "vts/protocol/result.hpp"
+
+namespace vts::cli {
+
+int report_error(const Error& e) {
+  std::fprintf(stderr, "vts: error: %s\n", e.message.c_str());
+  return exit_code(e.code);
+}
+
+}  // namespace vts::cli
+
+int main(int argc, char** argv) {
+  CLI::App app{"vtstream: build, serve and view planet-scale textures as streamed tile pyramids",
+               "vts"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "vts 0.1.0");
+  std::vector<std::pair<CLI::App*, vts::cli::Runner>> runners;
+  auto add = [&](vts::cli::Runner (*fn)(CLI::App&)) {
+    const std::size_t before = app.get_subcommands({}).size();
+    vts::cli::Runner r = fn(app);
+    runners.emplace_back(app.get_subcommands({})[before], std::move(r));
+  };
+  add(&vts::cli::add_build);
+  add(&vts::cli::add_info);
+  add(&vts::cli::add_verify);
+  add(&vts::cli::add_extract);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  try {
+    for (auto& [sub, run] : runners)
+      if (sub->parsed()) return run();
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "vts: error: %s\n", e.what());
+    return 70;
+  }
+  return 2;
+}

@@ -1,0 +1,93 @@
+// Tile codecs. A stored tile ("payload") is a valid zstd stream made of two frames:
+//
+//   1. a zstd *skippable* frame (magic 0x184D2A5A) carrying our 32-byte tile header — codec, filter,
+//      dimensions, decoded size and an XXH3-64 checksum of the bytes that follow;
+//   2. one ordinary zstd frame holding the codec's body (for `lossless`: the possibly filtered
+//      RGBA8 texels, see docs/FORMAT.md).
+//
+// So the archive can declare tile_compression = zstd truthfully (generic tools skip our header
+// frame), and any holder of the payload — server, cache, CDN checker — can verify the checksum
+// without decoding. Every decode verifies the checksum and checks every declared size against
+// hard limits before allocating; hostile bytes yield an Error, never a crash.
+//
+// Codecs are stateless singletons; encode() and decode() are thread-safe.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <string_view>
+#include <vector>
+
+#include "vts/protocol/result.hpp"
+
+namespace vts {
+
+enum class CodecId : std::uint8_t { lossless = 0, bc1 = 1 };
+enum class PixelFormat : std::uint8_t { rgba8 = 0, bc1 = 1 };
+// Prediction filter applied before zstd by the lossless codec.
+enum class Filter : std::uint8_t {
+  none = 0,      // interleaved RGBA8 as is
+  gradient = 1,  // planar R,G,B,A, each byte predicted by clamp(left + up - upleft), residual mod 256
+};
+enum class FilterChoice : std::uint8_t { none, gradient, automatic };
+
+const char* codec_name(CodecId id) noexcept;
+Result<CodecId> parse_codec_name(std::string_view name);
+const char* filter_name(Filter f) noexcept;
+
+// Decoded texels. rgba8: width*height*4 bytes, rows top to bottom, no padding, sRGB-encoded colour
+// with straight (not premultiplied) alpha. bc1: ceil(w/4)*ceil(h/4) blocks of 8 bytes.
+struct TileImage {
+  std::uint32_t width = 0;
+  std::uint32_t height = 0;
+  PixelFormat format = PixelFormat::rgba8;
+  std::vector<std::uint8_t> pixels;
+};
+
+struct EncodeOptions {
+  int zstd_level = 3;  // 1..19 (negative fast levels also accepted by zstd)
+  FilterChoice filter = FilterChoice::automatic;  // automatic: keep the smaller of none / gradient
+};
+
+// What the skippable header frame says. parse_tile_header() reads it without decompressing.
+struct TileHeader {
+  static constexpr std::uint32_t kSkippableMagic = 0x184D2A5A;
+  static constexpr std::uint32_t kHeaderBytes = 32;  // content of the skippable frame
+  static constexpr std::uint32_t kFrameBytes = 8 + kHeaderBytes;
+  static constexpr std::uint8_t kVersion = 1;
+  static constexpr std::uint32_t kMaxDimension = 8192;
+
+  std::uint8_t version = kVersion;
+  CodecId codec = CodecId::lossless;
+  Filter filter = Filter::none;
+  PixelFormat format = PixelFormat::rgba8;
+  std::uint32_t width = 0;
+  std::uint32_t height = 0;
+  std::uint32_t body_size = 0;  // decompressed size of the zstd body frame
+  std::uint64_t checksum = 0;   // XXH3-64 (seed 0) of every payload byte after the header frame
+};
+
+// Parses and validates the header frame (magic, version, known codec/filter, dimensions within
+// kMaxDimension, body_size consistent with codec and dimensions). Does not touch the body.
+Result<TileHeader> parse_tile_header(std::span<const std::uint8_t> payload);
+// parse_tile_header() plus the checksum of the body. Cheap: hashing only, no decompression.
+Result<TileHeader> verify_tile(std::span<const std::uint8_t> payload);
+
+class Codec {
+ public:
+  virtual ~Codec() = default;
+  virtual CodecId id() const = 0;
+  virtual PixelFormat decoded_format() const = 0;
+  // `image` must be rgba8 of the tileset's stored size. Returns the complete payload.
+  virtual Result<std::vector<std::uint8_t>> encode(const TileImage& image,
+                                                   const EncodeOptions& options) const = 0;
+  // Verifies the header and checksum, then decodes into the codec's decoded_format().
+  virtual Result<TileImage> decode(std::span<const std::uint8_t> payload) const = 0;
+};
+
+// The codec singleton for an id; nullptr when not implemented in this build.
+const Codec* find_codec(CodecId id) noexcept;
+// Decodes any payload with the codec its header names.
+Result<TileImage> decode_tile(std::span<const std::uint8_t> payload);
+
+}  // namespace vts

@@ -1,0 +1,149 @@
+// PMTiles v3 archives (protomaps/PMTiles spec/v3/spec.md): reader and writer.
+//
+// Our archives are ordinary PMTiles v3 files: a 127-byte header, a root directory inside the first
+// 16 KiB, JSON metadata, optional leaf directories, then tile data clustered in tile-id (Hilbert)
+// order with identical payloads stored once. Directories and metadata are gzip-compressed (the
+// most widely supported internal compression); tile payloads declare zstd (see codec.hpp).
+// The generic layer here knows nothing of our pyramid: metadata is an opaque JSON string.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "vts/protocol/geometry.hpp"
+#include "vts/protocol/result.hpp"
+
+namespace vts::pmtiles {
+
+enum class Compression : std::uint8_t { unknown = 0, none = 1, gzip = 2, brotli = 3, zstd = 4 };
+enum class TileType : std::uint8_t { unknown = 0, mvt = 1, png = 2, jpeg = 3, webp = 4, avif = 5 };
+
+constexpr std::size_t kHeaderSize = 127;
+constexpr std::size_t kRootDirectoryLimit = 16384 - kHeaderSize;  // root dir ends within 16 KiB
+constexpr int kMaxDirectoryDepth = 4;  // root + up to 3 leaf levels; deeper means a cycle/hostile
+
+// Hilbert tile id of (z, x, y): the count of tiles on all coarser levels plus the position of
+// (x, y) along the level's Hilbert curve. Requires z <= 31 and x, y < 2^z.
+std::uint64_t zxy_to_tile_id(std::uint8_t z, std::uint32_t x, std::uint32_t y);
+Result<TileId> tile_id_to_zxy(std::uint64_t tile_id);
+
+struct Header {
+  std::uint64_t root_dir_offset = 0, root_dir_length = 0;
+  std::uint64_t metadata_offset = 0, metadata_length = 0;
+  std::uint64_t leaf_dirs_offset = 0, leaf_dirs_length = 0;
+  std::uint64_t tile_data_offset = 0, tile_data_length = 0;
+  std::uint64_t addressed_tiles = 0, tile_entries = 0, tile_contents = 0;
+  bool clustered = true;
+  Compression internal_compression = Compression::gzip;
+  Compression tile_compression = Compression::zstd;
+  TileType tile_type = TileType::unknown;
+  std::uint8_t min_zoom = 0, max_zoom = 0;
+  std::int32_t min_lon_e7 = -1800000000, min_lat_e7 = -900000000;
+  std::int32_t max_lon_e7 = 1800000000, max_lat_e7 = 900000000;
+  std::uint8_t center_zoom = 0;
+  std::int32_t center_lon_e7 = 0, center_lat_e7 = 0;
+};
+
+std::array<std::uint8_t, kHeaderSize> serialize_header(const Header& h);
+// Checks magic "PMTiles" and version 3; does not check offsets against a file size.
+Result<Header> parse_header(std::span<const std::uint8_t> bytes);
+
+// One directory entry. run_length == 0 marks a leaf-directory pointer (offset relative to the
+// leaf-directories section); otherwise `offset` is relative to the tile-data section and the
+// entry addresses tile ids [tile_id, tile_id + run_length).
+struct Entry {
+  std::uint64_t tile_id = 0;
+  std::uint64_t offset = 0;
+  std::uint32_t length = 0;
+  std::uint32_t run_length = 0;
+  bool operator==(const Entry&) const = default;
+};
+
+// Uncompressed varint serialisation of a directory (entries sorted by tile_id).
+std::vector<std::uint8_t> serialize_directory(std::span<const Entry> entries);
+// Parses an uncompressed directory; rejects truncation, trailing bytes, non-increasing ids,
+// zero-length entries and more than max_entries entries.
+Result<std::vector<Entry>> parse_directory(std::span<const std::uint8_t> bytes,
+                                           std::size_t max_entries = 1u << 22);
+
+// Compress / decompress with an internal-compression method (none, gzip, zstd). decompress()
+// fails with too_large rather than produce more than max_output bytes (decompression bombs).
+Result<std::vector<std::uint8_t>> compress(std::span<const std::uint8_t> bytes, Compression c);
+Result<std::vector<std::uint8_t>> decompress(std::span<const std::uint8_t> bytes, Compression c,
+                                             std::size_t max_output);
+
+struct WriterOptions {
+  std::filesystem::path path;  // final name; nothing appears under it until finish() succeeds
+  Compression internal_compression = Compression::gzip;
+  Compression tile_compression = Compression::zstd;
+  TileType tile_type = TileType::unknown;
+  std::uint8_t min_zoom = 0, max_zoom = 0;
+  Header bounds;  // only the lon/lat/center fields are used
+};
+
+struct WriterStats {
+  std::uint64_t addressed_tiles = 0;  // add_tile() calls
+  std::uint64_t tile_contents = 0;    // distinct payloads stored
+  std::uint64_t tile_entries = 0;     // directory entries after run-length merging
+  std::uint64_t tile_bytes = 0;       // bytes of distinct payloads
+  std::uint64_t file_bytes = 0;       // size of the finished archive
+};
+
+// Builds an archive. Payloads are spooled to a temporary file beside the destination as they
+// arrive (any order, any thread); finish() orders them by tile id, writes the final file under a
+// temporary name, fsyncs it and renames it into place. Dropping an unfinished writer removes
+// every temporary file. Payloads with equal 128-bit XXH3 hashes (and equal bytes) are stored once.
+class Writer {
+ public:
+  static Result<std::unique_ptr<Writer>> create(WriterOptions options);
+  virtual ~Writer() = default;
+  // Thread-safe. Adding the same tile twice is an invalid_argument error.
+  virtual Status add_tile(TileId id, std::span<const std::uint8_t> payload) = 0;
+  // Not thread-safe with add_tile(). metadata_json is stored as given (gzip-compressed).
+  virtual Result<WriterStats> finish(const std::string& metadata_json) = 0;
+  // Removes temporary files; the destination is left untouched.
+  virtual void abort() noexcept = 0;
+};
+
+struct ReaderOptions {
+  std::size_t leaf_cache_entries = 64;           // decoded leaf directories kept (LRU)
+  std::size_t max_directory_bytes = 64u << 20;   // decompressed size limit of one directory
+  std::size_t max_metadata_bytes = 16u << 20;    // decompressed size limit of the metadata
+};
+
+// Reads an archive from a read-only memory mapping (or borrowed bytes). Construction validates the
+// header against the file size, decodes the root directory and the metadata; lookups validate
+// every entry they follow. All const member functions are thread-safe.
+class Reader {
+ public:
+  static Result<std::shared_ptr<Reader>> open(const std::filesystem::path& path,
+                                              ReaderOptions options = {});
+  // The bytes must outlive the reader (used by fuzzers and tests).
+  static Result<std::shared_ptr<Reader>> open_bytes(std::span<const std::uint8_t> bytes,
+                                                    ReaderOptions options = {});
+  virtual ~Reader() = default;
+
+  virtual const Header& header() const = 0;
+  virtual const std::string& metadata_json() const = 0;
+  // The whole archive as mapped.
+  virtual std::span<const std::uint8_t> bytes() const = 0;
+
+  // The stored payload of a tile, a view into the mapping valid while the reader lives.
+  // not_found when the archive has no such tile; corrupt/truncated on a malformed directory.
+  virtual Result<std::span<const std::uint8_t>> get(TileId id) const = 0;
+  virtual Result<std::span<const std::uint8_t>> get_by_tile_id(std::uint64_t tile_id) const = 0;
+
+  // Visits every tile entry (run_length >= 1) in tile-id order, descending into leaf directories.
+  // Stops and returns the error when a directory is malformed or visitor returns false (then ok).
+  virtual Status for_each_entry(const std::function<bool(const Entry&)>& visitor) const = 0;
+  // Number of leaf directories (for info).
+  virtual Result<std::uint64_t> leaf_directory_count() const = 0;
+};
+
+}  // namespace vts::pmtiles

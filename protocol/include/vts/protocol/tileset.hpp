@@ -1,0 +1,33 @@
+// What our archive metadata says about a tileset: geometry, codec and format version. Stored in
+// the PMTiles JSON metadata under the key "vtstream" (docs/FORMAT.md lists every key), next to
+// the generic keys other PMTiles tools read ("name", "description", "type", "format").
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include "vts/protocol/codec.hpp"
+#include "vts/protocol/geometry.hpp"
+#include "vts/protocol/result.hpp"
+
+namespace vts {
+
+struct TilesetInfo {
+  static constexpr int kFormatVersion = 1;
+
+  int format_version = kFormatVersion;
+  Geometry geometry = Geometry::create(1, 1).value();
+  CodecId codec = CodecId::lossless;
+  std::string name;
+  std::string description;
+  std::string color_space = "srgb";        // texel encoding of decoded rgba8
+  std::string downsample = "box-linear";   // how level z-1 was made from level z
+  bool sparse = false;                     // some tiles inside the image may be absent
+  std::string generator = "vtstream";      // tool and version that wrote the archive
+
+  std::string to_json() const;
+  // Validates every field (unknown codec, unsupported format_version, bad geometry → error).
+  static Result<TilesetInfo> from_json(const std::string& metadata_json);
+};
+
+}  // namespace vts

@@ -1,0 +1,85 @@
+#!/usr/bin/env bash
+# Installs everything vtstream needs to build, test and benchmark on Debian 12 (bookworm):
+# Debian packages with apt, then the npm packages the integration tests use (from the committed
+# package-lock.json). Safe to run again: each step is skipped when already done.
+#
+#   bash scripts/setup.sh            # as root, or as a user with sudo
+#   VTS_SETUP_FORCE=1 bash scripts/setup.sh   # run apt-get and npm ci even if all looks installed
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+FORCE=${VTS_SETUP_FORCE:-0}
+
+log() { printf '[setup] %s\n' "$*"; }
+
+SUDO=()
+if [[ $(id -u) -ne 0 ]]; then
+  if command -v sudo >/dev/null 2>&1; then
+    SUDO=(sudo)
+  else
+    echo "setup.sh: installing packages needs root; run as root or install sudo" >&2
+    exit 1
+  fi
+fi
+
+PACKAGES=(
+  # toolchain and build
+  build-essential cmake ninja-build pkg-config git clang libclang-rt-14-dev clang-format
+  # libraries
+  libopenimageio-dev libzstd-dev libxxhash-dev zlib1g-dev nlohmann-json3-dev libcli11-dev
+  libspdlog-dev libfmt-dev
+  # tests and benchmarks
+  libgtest-dev libgmock-dev libbenchmark-dev
+  # real peers, sample data and measuring tools for tests and benchmarks
+  openimageio-tools libvips-tools xplanet-images curl ca-certificates time python3
+)
+# Node.js may come from elsewhere (e.g. NodeSource) with its own npm: only ask Debian for what is
+# missing, so the two never fight over /usr/bin/node or /usr/bin/npm.
+command -v node >/dev/null 2>&1 || PACKAGES+=(nodejs)
+command -v npm >/dev/null 2>&1 || PACKAGES+=(npm)
+
+missing=()
+for pkg in "${PACKAGES[@]}"; do
+  status=$(dpkg-query -W -f='${db:Status-Status}' "$pkg" 2>/dev/null || true)
+  [[ $status == installed ]] || missing+=("$pkg")
+done
+
+if ((${#missing[@]} > 0)) || [[ $FORCE == 1 ]]; then
+  if ((${#missing[@]} > 0)); then
+    log "installing Debian packages: ${missing[*]}"
+  else
+    log "VTS_SETUP_FORCE=1: reinstalling Debian packages"
+  fi
+  apt_opts=(-o DPkg::Lock::Timeout=600 -o Dpkg::Use-Pty=0)
+  "${SUDO[@]}" env DEBIAN_FRONTEND=noninteractive apt-get "${apt_opts[@]}" update -q
+  "${SUDO[@]}" env DEBIAN_FRONTEND=noninteractive apt-get "${apt_opts[@]}" install -y -q \
+    --no-install-recommends "${PACKAGES[@]}"
+else
+  log "all ${#PACKAGES[@]} Debian packages already installed"
+fi
+
+for tool in node npm cmake ninja oiiotool idiff vips; do
+  command -v "$tool" >/dev/null 2>&1 || {
+    echo "setup.sh: '$tool' is still missing after installing packages" >&2
+    exit 1
+  }
+done
+
+# npm packages for the integration tests: exactly what package-lock.json pins. A stamp holding the
+# lock file's hash makes re-runs instant; a changed lock file (or VTS_SETUP_FORCE=1) reinstalls.
+npm_ci() { # DIR
+  local dir=$1 stamp want
+  stamp="$dir/node_modules/.vts-setup-stamp"
+  want="$(sha256sum "$dir/package-lock.json" | cut -d' ' -f1) node-$(node --version)"
+  if [[ $FORCE != 1 && -f $stamp && $(cat "$stamp") == "$want" ]]; then
+    log "npm packages in ${dir#"$ROOT"/} up to date"
+    return
+  fi
+  log "npm ci in ${dir#"$ROOT"/}"
+  (cd "$dir" && npm ci --no-audit --no-fund --loglevel=error </dev/null)
+  printf '%s\n' "$want" >"$stamp"
+}
+export npm_config_update_notifier=false
+npm_ci "$ROOT/tests/integration/pmtiles_js"
+
+log "done"

@@ -1,0 +1,137 @@
+#!/usr/bin/env bash
+# The whole test suite, as CI runs it (.ci/run calls exactly this):
+#   1. scripts/setup.sh (packages; quick when already installed)
+#   2. build/      RelWithDebInfo: every ctest (unit, fuzz-corpus replays, integration)
+#   3. build-asan/ ASan + UBSan: the unit tests (ctest -L unit)
+# Keeps going after a failure so one run reports everything; exits non-zero if any step failed.
+# Logs of every step are kept in build-logs/.
+#
+#   bash scripts/test.sh
+#   VTS_TEST_SKIP_ASAN=1 bash scripts/test.sh    # quicker local run without the sanitizer build
+set -uo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$ROOT"
+
+JOBS=${VTS_JOBS:-2}
+LOGS="$ROOT/build-logs"
+mkdir -p "$LOGS"
+T0=$(date +%s)
+
+STEP_RESULTS=()
+FAILED=0
+TESTS_PASSED=0
+TESTS_FAILED=0
+
+banner() { printf '\n==== %s ====\n' "$*"; }
+
+record() { # NAME RESULT SECONDS [DETAIL]
+  STEP_RESULTS+=("$(printf '%-5s %-34s %5ss  %s' "$2" "$1" "$3" "${4:-}")")
+  [[ $2 == FAIL ]] && FAILED=1
+  return 0
+}
+
+# step NAME CMD...: runs CMD, logging to build-logs/NAME.log; records PASS/FAIL. Returns CMD's rc.
+step() {
+  local name=$1 log start rc
+  shift
+  log="$LOGS/${name//[^A-Za-z0-9_.-]/_}.log"
+  banner "$name"
+  start=$(date +%s)
+  "$@" 2>&1 | tee "$log"
+  rc=${PIPESTATUS[0]}
+  if ((rc == 0)); then
+    record "$name" PASS $(($(date +%s) - start))
+  else
+    record "$name" FAIL $(($(date +%s) - start)) "exit $rc; log: ${log#"$ROOT"/}"
+  fi
+  return "$rc"
+}
+
+skip() { # NAME REASON
+  banner "$1 (skipped: $2)"
+  STEP_RESULTS+=("$(printf '%-5s %-34s %5s   %s' SKIP "$1" - "$2")")
+}
+
+# ctest_step NAME BUILD_DIR [CTEST ARGS...]: like step, and adds ctest's counts to the totals.
+ctest_step() {
+  local name=$1 dir=$2 log start rc line failed total
+  shift 2
+  log="$LOGS/${name//[^A-Za-z0-9_.-]/_}.log"
+  banner "$name"
+  start=$(date +%s)
+  ctest --test-dir "$dir" --output-on-failure --no-tests=error -j"$JOBS" --timeout 900 "$@" 2>&1 |
+    tee "$log"
+  rc=${PIPESTATUS[0]}
+  line=$(grep -E '^[0-9]+% tests passed, [0-9]+ tests? failed out of [0-9]+' "$log" | tail -n1)
+  if [[ -n $line ]]; then
+    failed=$(sed -E 's/.* ([0-9]+) tests? failed out of ([0-9]+).*/\1/' <<<"$line")
+    total=$(sed -E 's/.* failed out of ([0-9]+).*/\1/' <<<"$line")
+    TESTS_PASSED=$((TESTS_PASSED + total - failed))
+    TESTS_FAILED=$((TESTS_FAILED + failed))
+  fi
+  local secs=$(($(date +%s) - start))
+  if ((rc == 0)); then
+    record "$name" PASS "$secs" "${total:-?} tests"
+  else
+    record "$name" FAIL "$secs" "${failed:-?} of ${total:-?} tests failed; log: ${log#"$ROOT"/}"
+  fi
+  return "$rc"
+}
+
+# configure DIR CMAKE ARGS...: cmake -G Ninja, starting afresh if DIR was made by another generator.
+configure() {
+  local dir=$1
+  shift
+  if [[ -f $dir/CMakeCache.txt ]] && ! grep -q '^CMAKE_GENERATOR:INTERNAL=Ninja$' "$dir/CMakeCache.txt"; then
+    echo "$dir was configured with another generator; reconfiguring from scratch"
+    rm -rf "$dir/CMakeCache.txt" "$dir/CMakeFiles"
+  fi
+  cmake -S "$ROOT" -B "$dir" -G Ninja "$@"
+}
+
+# --- 1. set-up -----------------------------------------------------------------------------------
+step "setup" bash scripts/setup.sh
+
+# --- 2. main build: everything ------------------------------------------------------------------
+if step "configure build/" configure build -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+  -DVTS_BUILD_RENDERER="${VTS_BUILD_RENDERER:-OFF}"; then
+  if step "build build/" cmake --build build -j"$JOBS"; then
+    ctest_step "ctest build/" build
+  else
+    skip "ctest build/" "build failed"
+  fi
+else
+  skip "build build/" "configure failed"
+  skip "ctest build/" "configure failed"
+fi
+
+# --- 3. sanitizer build: unit tests under ASan + UBSan --------------------------------------------
+if [[ ${VTS_TEST_SKIP_ASAN:-0} == 1 ]]; then
+  skip "ASan+UBSan" "VTS_TEST_SKIP_ASAN=1"
+else
+  export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:check_initialization_order=1:strict_init_order=1:detect_stack_use_after_return=1}
+  export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
+  if step "configure build-asan/" configure build-asan -DCMAKE_BUILD_TYPE=Debug -DCMAKE_CXX_FLAGS=-O1 \
+    -DVTS_SANITIZE=ON -DVTS_BUILD_RENDERER=OFF -DVTS_BUILD_BENCH=OFF; then
+    if step "build build-asan/" cmake --build build-asan -j"$JOBS"; then
+      ctest_step "ctest build-asan/ -L unit" build-asan -L unit
+    else
+      skip "ctest build-asan/ -L unit" "build failed"
+    fi
+  else
+    skip "build build-asan/" "configure failed"
+    skip "ctest build-asan/ -L unit" "configure failed"
+  fi
+fi
+
+# --- summary ---------------------------------------------------------------------------------------
+banner "vtstream test summary ($(($(date +%s) - T0))s)"
+printf '  %s\n' "${STEP_RESULTS[@]}"
+if ((FAILED)); then
+  echo "RESULT: FAILED"
+else
+  echo "RESULT: all steps passed"
+fi
+echo "tests: $TESTS_PASSED passed, $TESTS_FAILED failed"
+exit "$FAILED"

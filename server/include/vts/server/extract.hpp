@@ -1,0 +1,28 @@
+// `vts extract`: one tile, or a whole level stitched back together, written as an image file
+// through OpenImageIO (format chosen by the file extension).
+#pragma once
+
+#include <filesystem>
+
+#include "vts/protocol/pmtiles.hpp"
+#include "vts/protocol/tileset.hpp"
+
+namespace vts {
+
+struct ExtractOptions {
+  std::filesystem::path output;
+  bool with_border = false;  // tile only: write the stored (T+2B)^2 texels, not just the content
+  int channels = 4;          // 4 = RGBA, 3 = drop alpha
+};
+
+// Writes tile `id`'s content (clipped to the image at its level) or, with_border, the stored
+// tile. not_found when the archive lacks the tile.
+Status extract_tile(const pmtiles::Reader& reader, const TilesetInfo& info, TileId id,
+                    const ExtractOptions& options);
+
+// Writes level z (level_width x level_height texels), one row of tiles at a time so memory stays
+// at about level_width * T * 4 bytes. Tiles absent from a sparse archive come out transparent.
+Status extract_level(const pmtiles::Reader& reader, const TilesetInfo& info, int z,
+                     const ExtractOptions& options);
+
+}  // namespace vts
