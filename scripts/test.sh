@@ -11,7 +11,7 @@
 set -uo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-cd "$ROOT"
+cd "$ROOT" || exit 1
 
 JOBS=${VTS_JOBS:-2}
 LOGS="$ROOT/build-logs"
@@ -80,6 +80,7 @@ ctest_step() {
 }
 
 # configure DIR CMAKE ARGS...: cmake -G Ninja, starting afresh if DIR was made by another generator.
+# shellcheck disable=SC2317  # called through step()
 configure() {
   local dir=$1
   shift

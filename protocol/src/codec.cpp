@@ -71,9 +71,9 @@ std::uint64_t expected_body_size(CodecId codec, PixelFormat format, std::uint32_
 // Validates what parse_tile_header() promises about a header, wherever it came from.
 Status check_header(const TileHeader& h) {
   if (h.version != TileHeader::kVersion)
-    return make_error(ErrorCode::unsupported,
-                      "tile header version " + std::to_string(h.version) + " (this build reads " +
-                          std::to_string(TileHeader::kVersion) + ")");
+    return make_error(ErrorCode::unsupported, "tile header version " + std::to_string(h.version) +
+                                                  " (this build reads " +
+                                                  std::to_string(TileHeader::kVersion) + ")");
   if (static_cast<std::uint8_t>(h.codec) > static_cast<std::uint8_t>(CodecId::bc1))
     return make_error(ErrorCode::unsupported,
                       "unknown tile codec " + std::to_string(static_cast<int>(h.codec)));
@@ -88,23 +88,22 @@ Status check_header(const TileHeader& h) {
                                               std::to_string(h.width) + "x" +
                                               std::to_string(h.height) + ")");
   if (h.width > TileHeader::kMaxDimension || h.height > TileHeader::kMaxDimension)
-    return make_error(ErrorCode::too_large,
-                      "tile header declares " + std::to_string(h.width) + "x" +
-                          std::to_string(h.height) + " texels (limit " +
-                          std::to_string(TileHeader::kMaxDimension) + " per side)");
+    return make_error(ErrorCode::too_large, "tile header declares " + std::to_string(h.width) +
+                                                "x" + std::to_string(h.height) + " texels (limit " +
+                                                std::to_string(TileHeader::kMaxDimension) +
+                                                " per side)");
   const std::uint64_t expected = expected_body_size(h.codec, h.format, h.width, h.height);
   if (expected == 0)
-    return make_error(ErrorCode::corrupt,
-                      std::string("tile header pairs codec ") + codec_name(h.codec) +
-                          " with pixel format " + std::to_string(static_cast<int>(h.format)));
+    return make_error(ErrorCode::corrupt, std::string("tile header pairs codec ") +
+                                              codec_name(h.codec) + " with pixel format " +
+                                              std::to_string(static_cast<int>(h.format)));
   if (h.codec == CodecId::bc1 && h.filter != Filter::none)
     return make_error(ErrorCode::corrupt, "bc1 tiles take no filter");
   if (h.body_size != expected)
     return make_error(ErrorCode::corrupt, "tile header body_size " + std::to_string(h.body_size) +
                                               " != " + std::to_string(expected) + " for " +
                                               std::to_string(h.width) + "x" +
-                                              std::to_string(h.height) + " " +
-                                              codec_name(h.codec));
+                                              std::to_string(h.height) + " " + codec_name(h.codec));
   return {};
 }
 
@@ -140,18 +139,28 @@ ZSTD_DCtx* thread_dctx() {
 }
 
 // Per-thread scratch buffers, so that encoding millions of tiles does not allocate per tile
-// except for the returned payload. Each keeps the capacity of the largest tile seen.
-std::vector<std::uint8_t>& scratch(int slot) {
+// except for the returned payload. Each keeps the capacity of the largest recent tile, unless
+// that exceeds kKeepScratchBytes: a rare huge tile must not pin its size per thread for ever.
+constexpr std::size_t kKeepScratchBytes = std::size_t(16) << 20;
+std::vector<std::uint8_t>* scratch_buffers() {
   thread_local std::vector<std::uint8_t> buffers[3];
-  return buffers[slot];
+  return buffers;
 }
+std::vector<std::uint8_t>& scratch(int slot) {
+  return scratch_buffers()[slot];
+}
+struct TrimScratchOnExit {
+  ~TrimScratchOnExit() {
+    for (int i = 0; i < 3; ++i)
+      if (scratch(i).capacity() > kKeepScratchBytes) std::vector<std::uint8_t>().swap(scratch(i));
+  }
+};
 
 // Upper bound of what one zstd frame may decompress to, from its block headers alone (raw and RLE
 // blocks state their size, a compressed block yields at most blockSizeMax). Lets a decoder reject
 // a header that declares far more texels than the body could ever produce before allocating.
-// Returns 0 on a malformed block list (the caller then reports zstd's own diagnosis).
-std::uint64_t frame_content_bound(std::span<const std::uint8_t> frame,
-                                  const ZSTD_frameHeader& fh) {
+// Returns 0 on a malformed block list (check_body_frame() rejects those first).
+std::uint64_t frame_content_bound(std::span<const std::uint8_t> frame, const ZSTD_frameHeader& fh) {
   std::size_t pos = fh.headerSize;
   std::uint64_t bound = 0;
   for (;;) {
@@ -160,12 +169,11 @@ std::uint64_t frame_content_bound(std::span<const std::uint8_t> frame,
                              std::uint32_t(frame[pos + 2]) << 16;
     pos += 3;
     const std::uint32_t type = (bh >> 1) & 3, size = bh >> 3;
-    switch (type) {
-      case 0: bound += size; pos += size; break;          // raw
-      case 1: bound += size; pos += 1; break;             // RLE: one byte repeated `size` times
-      case 2: bound += fh.blockSizeMax; pos += size; break;  // compressed
-      default: return 0;                                  // reserved
-    }
+    if (type == 3) return 0;  // reserved block type
+    // Raw and RLE blocks state their decoded size; a compressed one yields at most blockSizeMax.
+    bound += type == 2 ? fh.blockSizeMax : size;
+    // An RLE block stores its one repeated byte; raw and compressed blocks store `size` bytes.
+    pos += type == 1 ? 1 : size;
     if (pos > frame.size()) return 0;
     if (bh & 1) return bound;  // last block
   }
@@ -187,14 +195,13 @@ Status check_body_frame(const TileHeader& h, std::span<const std::uint8_t> body)
   if (fh.frameContentSize != h.body_size)
     return make_error(ErrorCode::corrupt, "tile body frame declares " +
                                               std::to_string(fh.frameContentSize) +
-                                              " bytes, header says " +
-                                              std::to_string(h.body_size));
+                                              " bytes, header says " + std::to_string(h.body_size));
   const std::size_t frame_size = ZSTD_findFrameCompressedSize(body.data(), body.size());
   if (ZSTD_isError(frame_size)) {
     if (ZSTD_getErrorCode(frame_size) == ZSTD_error_srcSize_wrong)
       return make_error(ErrorCode::truncated, "tile body ends inside its zstd frame");
-    return make_error(ErrorCode::corrupt,
-                      std::string("tile body frame is malformed: ") + ZSTD_getErrorName(frame_size));
+    return make_error(ErrorCode::corrupt, std::string("tile body frame is malformed: ") +
+                                              ZSTD_getErrorName(frame_size));
   }
   if (frame_size != body.size())
     return make_error(ErrorCode::corrupt, std::to_string(body.size() - frame_size) +
@@ -212,8 +219,7 @@ Result<TileHeader> verify_impl(std::span<const std::uint8_t> payload) {
     // A truncated body fails here too; say so when the frame structure suggests it, but keep the
     // code `checksum`: a flipped block-header byte looks exactly like a truncation.
     const std::size_t fs = ZSTD_findFrameCompressedSize(body.data(), body.size());
-    const bool short_frame =
-        ZSTD_isError(fs) && ZSTD_getErrorCode(fs) == ZSTD_error_srcSize_wrong;
+    const bool short_frame = ZSTD_isError(fs) && ZSTD_getErrorCode(fs) == ZSTD_error_srcSize_wrong;
     return make_error(ErrorCode::checksum,
                       "tile checksum mismatch: header says " + hex64(header->checksum) +
                           ", body hashes to " + hex64(actual) +
@@ -232,7 +238,8 @@ class LosslessCodec final : public Codec {
   Result<TileImage> decode(std::span<const std::uint8_t> payload) const override;
 };
 
-// Tiles with at most this many distinct RGBA values count as "paletted" for FilterChoice::automatic.
+// Tiles with at most this many distinct RGBA values count as "paletted" for
+// FilterChoice::automatic.
 constexpr std::size_t kPaletteColours = 256;
 
 // True when the texels hold at most `limit` distinct RGBA values. Stops at the (limit+1)-th
@@ -277,7 +284,8 @@ Status compress_payload(const std::uint8_t* body, std::size_t body_size, int lev
   const std::size_t n =
       ZSTD_compress2(cctx, out.data() + kFrameBytes, out.size() - kFrameBytes, body, body_size);
   if (ZSTD_isError(n))
-    return make_error(ErrorCode::internal, std::string("zstd compression: ") + ZSTD_getErrorName(n));
+    return make_error(ErrorCode::internal,
+                      std::string("zstd compression: ") + ZSTD_getErrorName(n));
   out.resize(kFrameBytes + n);
   header.body_size = static_cast<std::uint32_t>(body_size);
   header.checksum = XXH3_64bits(out.data() + kFrameBytes, n);
@@ -291,10 +299,10 @@ Result<std::vector<std::uint8_t>> LosslessCodec::encode(const TileImage& image,
     return make_error(ErrorCode::invalid_argument, "lossless codec encodes rgba8 images only");
   if (image.width == 0 || image.height == 0 || image.width > TileHeader::kMaxDimension ||
       image.height > TileHeader::kMaxDimension)
-    return make_error(ErrorCode::invalid_argument,
-                      "tile size " + std::to_string(image.width) + "x" +
-                          std::to_string(image.height) + " outside 1.." +
-                          std::to_string(TileHeader::kMaxDimension));
+    return make_error(ErrorCode::invalid_argument, "tile size " + std::to_string(image.width) +
+                                                       "x" + std::to_string(image.height) +
+                                                       " outside 1.." +
+                                                       std::to_string(TileHeader::kMaxDimension));
   const std::size_t body_size = std::size_t(image.width) * image.height * 4;
   if (image.pixels.size() != body_size)
     return make_error(ErrorCode::invalid_argument,
@@ -313,6 +321,7 @@ Result<std::vector<std::uint8_t>> LosslessCodec::encode(const TileImage& image,
   header.width = image.width;
   header.height = image.height;
 
+  const TrimScratchOnExit trim;
   std::vector<std::uint8_t>& plain = scratch(0);
   std::vector<std::uint8_t>& filtered = scratch(1);
   // automatic: continuous-tone tiles (photographs, rendered terrain) always compress better with
@@ -326,8 +335,8 @@ Result<std::vector<std::uint8_t>> LosslessCodec::encode(const TileImage& image,
   const bool try_gradient = options.filter != FilterChoice::none;
   if (try_none) {
     header.filter = Filter::none;
-    if (Status s = compress_payload(image.pixels.data(), body_size, options.zstd_level, header,
-                                    plain);
+    if (Status s =
+            compress_payload(image.pixels.data(), body_size, options.zstd_level, header, plain);
         !s)
       return s.error();
   }
@@ -336,8 +345,7 @@ Result<std::vector<std::uint8_t>> LosslessCodec::encode(const TileImage& image,
     planes.resize(body_size);
     detail::gradient_filter(image.pixels.data(), image.width, image.height, planes.data());
     header.filter = Filter::gradient;
-    if (Status s = compress_payload(planes.data(), body_size, options.zstd_level, header,
-                                    filtered);
+    if (Status s = compress_payload(planes.data(), body_size, options.zstd_level, header, filtered);
         !s)
       return s.error();
   }
@@ -353,9 +361,9 @@ Result<TileImage> LosslessCodec::decode(std::span<const std::uint8_t> payload) c
   auto header = verify_impl(payload);
   if (!header) return std::move(header).error();
   if (header->codec != CodecId::lossless)
-    return make_error(ErrorCode::invalid_argument,
-                      std::string("lossless codec asked to decode a ") + codec_name(header->codec) +
-                          " tile");
+    return make_error(
+        ErrorCode::invalid_argument,
+        std::string("lossless codec asked to decode a ") + codec_name(header->codec) + " tile");
   return detail::decode_lossless_body(*header, payload.subspan(kFrameBytes));
 }
 
@@ -365,8 +373,10 @@ const LosslessCodec kLossless;
 
 const char* codec_name(CodecId id) noexcept {
   switch (id) {
-    case CodecId::lossless: return "lossless";
-    case CodecId::bc1: return "bc1";
+    case CodecId::lossless:
+      return "lossless";
+    case CodecId::bc1:
+      return "bc1";
   }
   return "unknown";
 }
@@ -380,8 +390,10 @@ Result<CodecId> parse_codec_name(std::string_view name) {
 
 const char* filter_name(Filter f) noexcept {
   switch (f) {
-    case Filter::none: return "none";
-    case Filter::gradient: return "gradient";
+    case Filter::none:
+      return "none";
+    case Filter::gradient:
+      return "gradient";
   }
   return "unknown";
 }
@@ -393,9 +405,9 @@ Result<TileHeader> parse_tile_header(std::span<const std::uint8_t> payload) {
     return make_error(ErrorCode::corrupt, "not a vtstream tile (bad header frame magic " +
                                               hex64(load_u32(payload.data())) + ")");
   if (payload.size() >= 8 && load_u32(payload.data() + 4) != TileHeader::kHeaderBytes)
-    return make_error(ErrorCode::corrupt,
-                      "tile header frame size " + std::to_string(load_u32(payload.data() + 4)) +
-                          " != " + std::to_string(TileHeader::kHeaderBytes));
+    return make_error(ErrorCode::corrupt, "tile header frame size " +
+                                              std::to_string(load_u32(payload.data() + 4)) +
+                                              " != " + std::to_string(TileHeader::kHeaderBytes));
   if (payload.size() < kFrameBytes)
     return make_error(ErrorCode::truncated, "tile payload of " + std::to_string(payload.size()) +
                                                 " bytes ends inside its " +
@@ -424,8 +436,10 @@ Result<TileHeader> verify_tile(std::span<const std::uint8_t> payload) {
 
 const Codec* find_codec(CodecId id) noexcept {
   switch (id) {
-    case CodecId::lossless: return &kLossless;
-    case CodecId::bc1: return nullptr;  // not implemented yet
+    case CodecId::lossless:
+      return &kLossless;
+    case CodecId::bc1:
+      return nullptr;  // not implemented yet
   }
   return nullptr;
 }
@@ -466,6 +480,7 @@ Result<TileImage> decode_lossless_body(const TileHeader& header,
   // Filter none decompresses straight into the image; gradient goes through a scratch buffer.
   std::vector<std::uint8_t>* planes = nullptr;
   std::uint8_t* dst = image.pixels.data();
+  const TrimScratchOnExit trim;
   if (header.filter == Filter::gradient) {
     planes = &scratch(2);
     planes->resize(header.body_size);

@@ -23,7 +23,9 @@ constexpr std::uint32_t kMaxRowBytes = TileHeader::kMaxDimension * 4;
 alignas(64) constexpr std::uint8_t kZeroRow[kMaxRowBytes] = {};
 
 // clamp(left + up - upleft, 0, 255).
-inline int predict(int a, int b, int c) { return std::clamp(a + b - c, 0, 255); }
+inline int predict(int a, int b, int c) {
+  return std::clamp(a + b - c, 0, 255);
+}
 
 // Scalar kernels for texels [x0, width) of one row; x0 >= 1.
 void filter_row_scalar(const std::uint8_t* cur, const std::uint8_t* up, std::uint32_t x0,
@@ -66,10 +68,12 @@ inline void store16(std::uint8_t* p, __m128i v) {
 inline __m128i filter4(const std::uint8_t* cur, const std::uint8_t* up) {
   const __m128i zero = _mm_setzero_si128();
   const __m128i x = load16(cur), a = load16(cur - 4), b = load16(up), c = load16(up - 4);
-  const __m128i lo = _mm_sub_epi16(_mm_add_epi16(_mm_unpacklo_epi8(a, zero), _mm_unpacklo_epi8(b, zero)),
-                                   _mm_unpacklo_epi8(c, zero));
-  const __m128i hi = _mm_sub_epi16(_mm_add_epi16(_mm_unpackhi_epi8(a, zero), _mm_unpackhi_epi8(b, zero)),
-                                   _mm_unpackhi_epi8(c, zero));
+  const __m128i lo =
+      _mm_sub_epi16(_mm_add_epi16(_mm_unpacklo_epi8(a, zero), _mm_unpacklo_epi8(b, zero)),
+                    _mm_unpacklo_epi8(c, zero));
+  const __m128i hi =
+      _mm_sub_epi16(_mm_add_epi16(_mm_unpackhi_epi8(a, zero), _mm_unpackhi_epi8(b, zero)),
+                    _mm_unpackhi_epi8(c, zero));
   // packus saturates each int16 to 0..255: exactly the predictor's clamp.
   return _mm_sub_epi8(x, _mm_packus_epi16(lo, hi));
 }
@@ -179,8 +183,10 @@ void gradient_unfilter(const std::uint8_t* planes, std::uint32_t width, std::uin
         const std::uint8_t* u = up + 4 * x;
         for (int k = 0; k < 4; ++k, c += 16, u += 16) {
           const __m128i uv = load16(u), ul = load16(u - 4);
-          const __m128i d_lo = _mm_sub_epi16(_mm_unpacklo_epi8(uv, zero), _mm_unpacklo_epi8(ul, zero));
-          const __m128i d_hi = _mm_sub_epi16(_mm_unpackhi_epi8(uv, zero), _mm_unpackhi_epi8(ul, zero));
+          const __m128i d_lo =
+              _mm_sub_epi16(_mm_unpacklo_epi8(uv, zero), _mm_unpacklo_epi8(ul, zero));
+          const __m128i d_hi =
+              _mm_sub_epi16(_mm_unpackhi_epi8(uv, zero), _mm_unpackhi_epi8(ul, zero));
           const __m128i v0 = unfilter1(left, d_lo, res[k]);
           const __m128i v1 = unfilter1(left, _mm_srli_si128(d_lo, 8), _mm_srli_si128(res[k], 4));
           const __m128i v2 = unfilter1(left, d_hi, _mm_srli_si128(res[k], 8));

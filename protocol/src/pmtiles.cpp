@@ -27,7 +27,7 @@ constexpr std::uint64_t tiles_before_level(int z) {
   return ((std::uint64_t{1} << (2 * z)) - 1) / 3;
 }
 
-// ---- little-endian helpers -----------------------------------------------------------------------
+// ---- little-endian helpers ----------------------------------------------------------------------
 
 void put_u64(std::uint8_t* p, std::uint64_t v) {
   for (int i = 0; i < 8; ++i) p[i] = static_cast<std::uint8_t>(v >> (8 * i));
@@ -46,7 +46,7 @@ std::uint32_t get_u32(const std::uint8_t* p) {
   return v;
 }
 
-// ---- varints (unsigned LEB128, at most 10 bytes for 64 bits) ---------------------------------------
+// ---- varints (unsigned LEB128, at most 10 bytes for 64 bits) ------------------------------------
 
 void put_varint(std::vector<std::uint8_t>& out, std::uint64_t v) {
   while (v >= 0x80) {
@@ -81,7 +81,10 @@ Status get_varint(std::span<const std::uint8_t> bytes, std::size_t& pos, std::ui
                                             std::to_string(pos) + " is longer than 10 bytes");
 }
 
-// ---- compression -----------------------------------------------------------------------------------
+// ---- compression --------------------------------------------------------------------------------
+
+// zlib counts each call's input and output in uInt (32 bits); larger buffers are fed in pieces.
+constexpr std::size_t kZlibChunk = std::numeric_limits<uInt>::max();
 
 Result<std::vector<std::uint8_t>> gzip_compress(std::span<const std::uint8_t> in) {
   z_stream zs{};
@@ -89,30 +92,41 @@ Result<std::vector<std::uint8_t>> gzip_compress(std::span<const std::uint8_t> in
   if (deflateInit2(&zs, Z_BEST_COMPRESSION, Z_DEFLATED, 15 + 16, 8, Z_DEFAULT_STRATEGY) != Z_OK) {
     return make_error(ErrorCode::internal, "deflateInit2 failed");
   }
-  std::vector<std::uint8_t> out(deflateBound(&zs, static_cast<uLong>(in.size())) + 32);
-  zs.next_in = const_cast<Bytef*>(in.data());  // zlib's API is not const-correct; it only reads
-  zs.avail_in = static_cast<uInt>(in.size());
-  zs.next_out = out.data();
-  zs.avail_out = static_cast<uInt>(out.size());
-  const int rc = deflate(&zs, Z_FINISH);
-  const std::size_t produced = zs.total_out;
-  deflateEnd(&zs);
-  if (rc != Z_STREAM_END) return make_error(ErrorCode::internal, "deflate did not finish");
-  out.resize(produced);
+  std::unique_ptr<z_stream, int (*)(z_stream*)> guard(&zs, &deflateEnd);
+  std::vector<std::uint8_t> out(std::max<std::size_t>(in.size() / 2, 64));
+  std::size_t consumed = 0;
+  for (;;) {
+    if (zs.total_out == out.size()) out.resize(out.size() * 2);
+    const std::size_t in_chunk = std::min(kZlibChunk, in.size() - consumed);
+    zs.next_in = const_cast<Bytef*>(in.data() + consumed);  // zlib is not const-correct; it reads
+    zs.avail_in = static_cast<uInt>(in_chunk);
+    zs.next_out = out.data() + zs.total_out;
+    zs.avail_out = static_cast<uInt>(std::min(kZlibChunk, out.size() - zs.total_out));
+    const bool last = consumed + in_chunk == in.size();
+    const int rc = deflate(&zs, last ? Z_FINISH : Z_NO_FLUSH);
+    consumed += in_chunk - zs.avail_in;
+    if (rc == Z_STREAM_END) break;
+    if (rc != Z_OK && rc != Z_BUF_ERROR) return make_error(ErrorCode::internal, "deflate failed");
+  }
+  out.resize(zs.total_out);
   return out;
 }
 
-// Output buffers grow geometrically from a guess, never beyond max_output + 1 bytes: producing
+// Output buffers grow geometrically from a guess up to a cap of max_output + 1 bytes: producing
 // that last byte is how we know the stream wants more than the caller allows.
+std::size_t output_cap(std::size_t max_output) {
+  return max_output == std::numeric_limits<std::size_t>::max() ? max_output : max_output + 1;
+}
 std::size_t initial_capacity(std::size_t input, std::size_t max_output) {
   const std::size_t guess = input > (std::numeric_limits<std::size_t>::max() / 4)
                                 ? std::numeric_limits<std::size_t>::max()
                                 : std::max<std::size_t>(input * 4, 4096);
-  return std::min(guess, max_output + 1);
+  return std::min(guess, output_cap(max_output));
 }
 std::size_t grow_capacity(std::size_t current, std::size_t max_output) {
-  const std::size_t doubled = current > max_output ? current : current * 2;
-  return std::min(doubled, max_output + 1);
+  const std::size_t doubled =
+      current > std::numeric_limits<std::size_t>::max() / 2 ? current : current * 2;
+  return std::min(doubled, output_cap(max_output));
 }
 
 Error too_large_error(std::size_t max_output) {
@@ -122,12 +136,6 @@ Error too_large_error(std::size_t max_output) {
 
 Result<std::vector<std::uint8_t>> gzip_decompress(std::span<const std::uint8_t> in,
                                                   std::size_t max_output) {
-  // zlib counts in uInt; our directories and metadata are far below 4 GiB, so refuse rather than
-  // feed zlib in pieces.
-  if (in.size() >= std::numeric_limits<uInt>::max() ||
-      max_output >= std::numeric_limits<uInt>::max()) {
-    return make_error(ErrorCode::too_large, "gzip input or limit beyond 4 GiB");
-  }
   z_stream zs{};
   // windowBits 15 + 32: accept gzip and, leniently, zlib headers.
   if (inflateInit2(&zs, 15 + 32) != Z_OK) {
@@ -135,32 +143,35 @@ Result<std::vector<std::uint8_t>> gzip_decompress(std::span<const std::uint8_t> 
   }
   std::unique_ptr<z_stream, int (*)(z_stream*)> guard(&zs, &inflateEnd);
   std::vector<std::uint8_t> out(initial_capacity(in.size(), max_output));
-  zs.next_in = const_cast<Bytef*>(in.data());  // zlib's API is not const-correct; it only reads
-  zs.avail_in = static_cast<uInt>(in.size());
+  std::size_t consumed = 0;
   for (;;) {
     if (zs.total_out == out.size()) {
       if (out.size() > max_output) return too_large_error(max_output);
       out.resize(grow_capacity(out.size(), max_output));
     }
+    const std::size_t in_chunk = std::min(kZlibChunk, in.size() - consumed);
+    zs.next_in = const_cast<Bytef*>(in.data() + consumed);
+    zs.avail_in = static_cast<uInt>(in_chunk);
     zs.next_out = out.data() + zs.total_out;
-    zs.avail_out = static_cast<uInt>(out.size() - zs.total_out);
+    zs.avail_out = static_cast<uInt>(std::min(kZlibChunk, out.size() - zs.total_out));
     const int rc = inflate(&zs, Z_NO_FLUSH);
+    consumed += in_chunk - zs.avail_in;
     if (zs.total_out > max_output) return too_large_error(max_output);
     if (rc == Z_STREAM_END) break;
     if (rc != Z_OK && rc != Z_BUF_ERROR) {
       return make_error(ErrorCode::corrupt, std::string("invalid gzip stream: ") +
                                                 (zs.msg != nullptr ? zs.msg : "inflate error"));
     }
-    // inflate returns (without an error) only when the output is full or the input is used up;
+    // inflate returns without an error only when the output is full or the input is used up;
     // with room left and no input, the stream was cut before its end marker.
-    if (zs.avail_out != 0 && zs.avail_in == 0) {
-      return make_error(ErrorCode::truncated, "gzip stream ends after " +
-                                                  std::to_string(in.size()) +
-                                                  " bytes, before its end marker");
+    if (zs.avail_out != 0 && consumed == in.size()) {
+      return make_error(
+          ErrorCode::truncated,
+          "gzip stream ends after " + std::to_string(in.size()) + " bytes, before its end marker");
     }
   }
-  if (zs.total_in != in.size()) {
-    return make_error(ErrorCode::corrupt, std::to_string(in.size() - zs.total_in) +
+  if (consumed != in.size()) {
+    return make_error(ErrorCode::corrupt, std::to_string(in.size() - consumed) +
                                               " trailing bytes after the gzip stream");
   }
   out.resize(zs.total_out);
@@ -222,11 +233,12 @@ Result<std::vector<std::uint8_t>> zstd_decompress(std::span<const std::uint8_t> 
 
 }  // namespace
 
-// ---- tile ids --------------------------------------------------------------------------------------
+// ---- tile ids -----------------------------------------------------------------------------------
 
 std::uint64_t zxy_to_tile_id(std::uint8_t z, std::uint32_t x, std::uint32_t y) {
   assert(z <= kMaxZ);
   assert(std::uint64_t{x} < (std::uint64_t{1} << z) && std::uint64_t{y} < (std::uint64_t{1} << z));
+  if (z > kMaxZ) return std::numeric_limits<std::uint64_t>::max();  // release builds: no UB shift
   // Hilbert curve index of (x, y) on a 2^z grid: at each scale s, pick the quadrant, add the
   // number of cells in the quadrants before it, and rotate/flip the remaining low bits so the
   // sub-square is walked in the canonical orientation.
@@ -278,7 +290,7 @@ Result<TileId> tile_id_to_zxy(std::uint64_t tile_id) {
                 static_cast<std::uint32_t>(ty)};
 }
 
-// ---- header ----------------------------------------------------------------------------------------
+// ---- header -------------------------------------------------------------------------------------
 
 std::array<std::uint8_t, kHeaderSize> serialize_header(const Header& h) {
   std::array<std::uint8_t, kHeaderSize> b{};
@@ -354,7 +366,7 @@ Result<Header> parse_header(std::span<const std::uint8_t> bytes) {
   return h;
 }
 
-// ---- directories -----------------------------------------------------------------------------------
+// ---- directories --------------------------------------------------------------------------------
 
 std::vector<std::uint8_t> serialize_directory(std::span<const Entry> entries) {
   std::vector<std::uint8_t> out;
@@ -472,15 +484,19 @@ Result<std::vector<Entry>> parse_directory(std::span<const std::uint8_t> bytes,
   return entries;
 }
 
-// ---- compression -----------------------------------------------------------------------------------
+// ---- compression --------------------------------------------------------------------------------
 
 Result<std::vector<std::uint8_t>> compress(std::span<const std::uint8_t> bytes, Compression c) {
   switch (c) {
-    case Compression::none: return std::vector<std::uint8_t>(bytes.begin(), bytes.end());
-    case Compression::gzip: return gzip_compress(bytes);
-    case Compression::zstd: return zstd_compress(bytes);
+    case Compression::none:
+      return std::vector<std::uint8_t>(bytes.begin(), bytes.end());
+    case Compression::gzip:
+      return gzip_compress(bytes);
+    case Compression::zstd:
+      return zstd_compress(bytes);
     case Compression::unknown:
-    case Compression::brotli: break;
+    case Compression::brotli:
+      break;
   }
   return make_error(ErrorCode::unsupported, "internal compression " +
                                                 std::to_string(static_cast<int>(c)) +
@@ -493,10 +509,13 @@ Result<std::vector<std::uint8_t>> decompress(std::span<const std::uint8_t> bytes
     case Compression::none:
       if (bytes.size() > max_output) return too_large_error(max_output);
       return std::vector<std::uint8_t>(bytes.begin(), bytes.end());
-    case Compression::gzip: return gzip_decompress(bytes, max_output);
-    case Compression::zstd: return zstd_decompress(bytes, max_output);
+    case Compression::gzip:
+      return gzip_decompress(bytes, max_output);
+    case Compression::zstd:
+      return zstd_decompress(bytes, max_output);
     case Compression::unknown:
-    case Compression::brotli: break;
+    case Compression::brotli:
+      break;
   }
   return make_error(ErrorCode::unsupported, "internal compression " +
                                                 std::to_string(static_cast<int>(c)) +

@@ -91,11 +91,11 @@ class ReaderImpl final : public Reader {
           Section{"leaf directories", header_.leaf_dirs_offset, header_.leaf_dirs_length},
           Section{"tile data", header_.tile_data_offset, header_.tile_data_length}}) {
       if (!within(s.offset, s.length, size)) {
-        return make_error(ErrorCode::truncated,
-                          std::string(s.name) + " section (offset " + std::to_string(s.offset) +
-                              ", length " + std::to_string(s.length) +
-                              ") extends past the end of the archive (" + std::to_string(size) +
-                              " bytes)");
+        return make_error(ErrorCode::truncated, std::string(s.name) + " section (offset " +
+                                                    std::to_string(s.offset) + ", length " +
+                                                    std::to_string(s.length) +
+                                                    ") extends past the end of the archive (" +
+                                                    std::to_string(size) + " bytes)");
       }
       if (s.length > 0 && s.offset < kHeaderSize) {
         return make_error(ErrorCode::corrupt, std::string(s.name) + " section (offset " +
@@ -137,12 +137,14 @@ class ReaderImpl final : public Reader {
   }
 
   Result<std::span<const std::uint8_t>> get_by_tile_id(std::uint64_t tile_id) const override {
-    Directory dir = root_;
+    // The root is borrowed; only leaves (which the cache may evict) are held by shared_ptr.
+    const std::vector<Entry>* dir = root_.get();
+    Directory leaf_holder;
     for (int level = 0; level < kMaxDirectoryDepth; ++level) {
       // The last entry with tile_id <= the wanted id is the only one that can hold it.
-      const auto it = std::upper_bound(
-          dir->begin(), dir->end(), tile_id,
-          [](std::uint64_t id, const Entry& e) { return id < e.tile_id; });
+      const auto it =
+          std::upper_bound(dir->begin(), dir->end(), tile_id,
+                           [](std::uint64_t id, const Entry& e) { return id < e.tile_id; });
       if (it == dir->begin()) break;
       const Entry e = *(it - 1);
       if (e.run_length > 0) {
@@ -158,7 +160,8 @@ class ReaderImpl final : public Reader {
       }
       Result<Directory> leaf = load_leaf(e);
       if (!leaf) return std::move(leaf).error();
-      dir = std::move(*leaf);
+      leaf_holder = std::move(*leaf);
+      dir = leaf_holder.get();
     }
     return make_error(ErrorCode::not_found,
                       "tile id " + std::to_string(tile_id) + " is not in the archive");
@@ -191,11 +194,11 @@ class ReaderImpl final : public Reader {
 
   Status check_tile_entry(const Entry& e) const {
     if (!within(e.offset, e.length, header_.tile_data_length)) {
-      return make_error(ErrorCode::corrupt,
-                        "tile entry for tile id " + std::to_string(e.tile_id) + " (offset " +
-                            std::to_string(e.offset) + ", length " + std::to_string(e.length) +
-                            ") extends past the tile data section (size " +
-                            std::to_string(header_.tile_data_length) + ")");
+      return make_error(ErrorCode::corrupt, "tile entry for tile id " + std::to_string(e.tile_id) +
+                                                " (offset " + std::to_string(e.offset) +
+                                                ", length " + std::to_string(e.length) +
+                                                ") extends past the tile data section (size " +
+                                                std::to_string(header_.tile_data_length) + ")");
     }
     return {};
   }
@@ -203,9 +206,8 @@ class ReaderImpl final : public Reader {
   // Decompresses and parses the directory at [offset, offset + length) of the archive, which the
   // caller has bounds-checked.
   Result<Directory> decode_directory(std::uint64_t offset, std::uint64_t length) const {
-    Result<std::vector<std::uint8_t>> raw =
-        decompress(bytes_.subspan(offset, length), header_.internal_compression,
-                   options_.max_directory_bytes);
+    Result<std::vector<std::uint8_t>> raw = decompress(
+        bytes_.subspan(offset, length), header_.internal_compression, options_.max_directory_bytes);
     if (!raw) return std::move(raw).error();
     Result<std::vector<Entry>> entries = parse_directory(*raw);
     if (!entries) return std::move(entries).error();
@@ -217,11 +219,11 @@ class ReaderImpl final : public Reader {
     const std::string where = "leaf directory at offset " + std::to_string(pointer.offset) +
                               " length " + std::to_string(pointer.length);
     if (!within(pointer.offset, pointer.length, header_.leaf_dirs_length)) {
-      return make_error(ErrorCode::corrupt,
-                        where + " extends past the leaf section (size " +
-                            std::to_string(header_.leaf_dirs_length) + ")");
+      return make_error(ErrorCode::corrupt, where + " extends past the leaf section (size " +
+                                                std::to_string(header_.leaf_dirs_length) + ")");
     }
-    Result<Directory> d = decode_directory(header_.leaf_dirs_offset + pointer.offset, pointer.length);
+    Result<Directory> d =
+        decode_directory(header_.leaf_dirs_offset + pointer.offset, pointer.length);
     if (!d) return with_context(where, std::move(d).error());
     return d;
   }
@@ -283,10 +285,10 @@ class ReaderImpl final : public Reader {
                               std::to_string(kMaxDirectoryDepth) + " levels");
       }
       if (!walk.seen.insert(LeafKey{e.offset, e.length}).second) {
-        return make_error(ErrorCode::corrupt, "leaf directory at offset " +
-                                                  std::to_string(e.offset) + " length " +
-                                                  std::to_string(e.length) +
-                                                  " is referenced more than once");
+        return make_error(ErrorCode::corrupt,
+                          "leaf directory at offset " + std::to_string(e.offset) + " length " +
+                              std::to_string(e.length) +
+                              " is referenced more than once (a cycle or a shared leaf)");
       }
       ++walk.leaf_count;
       Result<Directory> leaf = decode_leaf(e);
@@ -324,9 +326,9 @@ Result<std::shared_ptr<Reader>> make_reader(std::span<const std::uint8_t> bytes,
 Result<std::shared_ptr<Reader>> Reader::open(const std::filesystem::path& path,
                                              ReaderOptions options) {
   const auto sys_error = [&](const char* what, int err) {
-    return make_error(err == ENOENT ? ErrorCode::not_found : ErrorCode::io,
-                      std::string(what) + " " + path.string() + ": " +
-                          std::generic_category().message(err));
+    return make_error(
+        err == ENOENT ? ErrorCode::not_found : ErrorCode::io,
+        std::string(what) + " " + path.string() + ": " + std::generic_category().message(err));
   };
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd < 0) return sys_error("cannot open", errno);

@@ -14,6 +14,7 @@
 #include <xxhash.h>
 
 #include <algorithm>
+#include <cassert>
 #include <cerrno>
 #include <cstring>
 #include <limits>
@@ -70,8 +71,7 @@ class Fd {
 // Creates dir/".NAME.<kind>-XXXXXX" with O_EXCL. We do not use mkstemp so that the archive gets the
 // usual umask-derived permissions (mkstemp forces 0600).
 Result<std::pair<Fd, std::filesystem::path>> create_unique(const std::filesystem::path& dir,
-                                                           const std::string& stem,
-                                                           mode_t mode) {
+                                                           const std::string& stem, mode_t mode) {
   static constexpr char kChars[] = "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789";
   std::random_device rd;
   std::mt19937_64 rng((std::uint64_t{rd()} << 32) ^ rd());
@@ -251,8 +251,8 @@ Result<Directories> build_directories(std::span<const Entry> entries, Compressio
       return d;
     }
   }
-  for (std::size_t leaf_size = 4096;; leaf_size = std::min(leaf_size + leaf_size / 2,
-                                                           kMaxEntriesPerDirectory)) {
+  for (std::size_t leaf_size = 4096;;
+       leaf_size = std::min(leaf_size + leaf_size / 2, kMaxEntriesPerDirectory)) {
     d.leaves.clear();
     std::vector<Entry> pointers;
     for (std::size_t i = 0; i < entries.size(); i += leaf_size) {
@@ -286,7 +286,9 @@ Result<Directories> build_directories(std::span<const Entry> entries, Compressio
 class WriterImpl final : public Writer {
  public:
   WriterImpl(WriterOptions options, Fd spool, std::filesystem::path spool_path)
-      : options_(std::move(options)), spool_(std::move(spool)), spool_path_(std::move(spool_path)) {}
+      : options_(std::move(options)),
+        spool_(std::move(spool)),
+        spool_path_(std::move(spool_path)) {}
   ~WriterImpl() override { abort(); }
 
   Status add_tile(TileId id, std::span<const std::uint8_t> payload) override {
@@ -296,7 +298,8 @@ class WriterImpl final : public Writer {
     }
     if (payload.empty()) {
       // PMTiles entries must have a length > 0; an absent tile is expressed by not adding it.
-      return make_error(ErrorCode::invalid_argument, "tile " + tile_name(id) + " has an empty payload");
+      return make_error(ErrorCode::invalid_argument,
+                        "tile " + tile_name(id) + " has an empty payload");
     }
     if (payload.size() > std::numeric_limits<std::uint32_t>::max()) {
       return make_error(ErrorCode::too_large,
@@ -339,8 +342,8 @@ class WriterImpl final : public Writer {
         return s;
       }
       blob = blobs_.size();
-      blobs_.push_back(Blob{spool_size_, hash.low64, hash.high64,
-                            static_cast<std::uint32_t>(payload.size())});
+      blobs_.push_back(
+          Blob{spool_size_, hash.low64, hash.high64, static_cast<std::uint32_t>(payload.size())});
       spool_size_ += payload.size();
       blob_index_.insert(hash.low64, blob + 1,
                          [&](std::uint64_t v) { return blobs_[v - 1].hash_low; });
@@ -392,7 +395,8 @@ class WriterImpl final : public Writer {
     scratch_.resize(std::min<std::size_t>(kChunk, payload.size()));
     for (std::size_t done = 0; done < payload.size();) {
       const std::size_t n = std::min(kChunk, payload.size() - done);
-      if (Status s = pread_all(spool_.get(), scratch_.data(), n, b.spool_offset + done, spool_path_);
+      if (Status s =
+              pread_all(spool_.get(), scratch_.data(), n, b.spool_offset + done, spool_path_);
           !s) {
         return s.error();
       }
@@ -509,7 +513,8 @@ class WriterImpl final : public Writer {
     if (Status s = w.flush(); !s) return s.error();
     assert(w.position() == stats.file_bytes);
     if (::fsync(out.get()) != 0) return io_error("cannot fsync", tmp_path_, errno);
-    if (const int err = out.close_checked(); err != 0) return io_error("cannot close", tmp_path_, err);
+    if (const int err = out.close_checked(); err != 0)
+      return io_error("cannot close", tmp_path_, err);
     if (::rename(tmp_path_.c_str(), options_.path.c_str()) != 0) {
       return io_error("cannot rename " + tmp_path_.string() + " to", options_.path, errno);
     }
@@ -517,7 +522,8 @@ class WriterImpl final : public Writer {
     // Make the rename itself durable. The archive is complete either way, so a failure here is
     // still reported: the caller asked for a durable file.
     Fd dfd(::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC));
-    if (dfd.get() < 0 || ::fsync(dfd.get()) != 0) return io_error("cannot fsync directory", dir, errno);
+    if (dfd.get() < 0 || ::fsync(dfd.get()) != 0)
+      return io_error("cannot fsync directory", dir, errno);
     return stats;
   }
 
@@ -551,7 +557,8 @@ Result<std::unique_ptr<Writer>> Writer::create(WriterOptions options) {
   switch (options.internal_compression) {
     case Compression::none:
     case Compression::gzip:
-    case Compression::zstd: break;
+    case Compression::zstd:
+      break;
     default:
       return make_error(ErrorCode::invalid_argument,
                         "internal compression must be none, gzip or zstd");

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # `vts build` on bad input fails cleanly and writes nothing: no output file, no temporary files,
 # and an archive already under the output name is left exactly as it was.
+# shellcheck source=lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 
 D="$WORK/out"

@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
 # A build from a real JPEG verifies clean and `vts info --json` describes its geometry.
+# shellcheck source=lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 require_tool "$NODE"
 

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # One flipped byte inside one tile's payload: `vts verify` exits 5 and names that tile (z/x/y) on
 # stderr, and `vts extract` refuses to hand out the tile.
+# shellcheck source=lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 : "${PMTILES_DUMP:?PMTILES_DUMP must name the pmtiles_dump tool}"
 

@@ -2,6 +2,7 @@
 # Lossless end to end: the finest level extracted from an archive built from the Earth JPEG equals
 # the source pixels exactly (OpenImageIO's idiff with zero tolerance), and so do single tiles, with
 # and without their borders. Coarser levels have the expected sizes.
+# shellcheck source=lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 require_tool "$OIIOTOOL"
 require_tool "$IDIFF"

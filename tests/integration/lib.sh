@@ -1,3 +1,4 @@
+# shellcheck shell=bash disable=SC2034  # variables here are used by the scripts that source this file
 # Shared helpers for the integration tests (sourced, not run). Each test is one bash script run by
 # ctest (see CMakeLists.txt here) with these variables in its environment:
 #   VTS            the vts executable under test

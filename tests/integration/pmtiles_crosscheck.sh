@@ -3,6 +3,7 @@
 # addressed tile (id, z/x/y, length, FNV-1a 64 of the payload) and the header fields match exactly.
 #
 #   pmtiles_crosscheck.sh synthetic|earth
+# shellcheck source=lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 : "${PMTILES_DUMP:?PMTILES_DUMP must name the pmtiles_dump tool}"
 : "${PMTILES_JS:?PMTILES_JS must name tests/integration/pmtiles_js}"

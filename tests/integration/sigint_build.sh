@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # A build interrupted with SIGINT stops promptly, exits 130 (cancelled), and leaves nothing on
 # disk: no file under the output name and no temporary files beside it.
+# shellcheck source=lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 
 D="$WORK/out"

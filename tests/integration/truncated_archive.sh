@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # A truncated, empty or missing archive makes `vts verify` and `vts info` fail cleanly: non-zero
 # exit, a message on stderr, no crash and no hang.
+# shellcheck source=lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 
 A="$WORK/earth.pmtiles"

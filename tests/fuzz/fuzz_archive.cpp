@@ -1,0 +1,71 @@
+// Fuzz target: a PMTiles archive from untrusted bytes. Opens the input with Reader::open_bytes and
+// does what a server or `vts info` would: looks up a handful of tile ids (fixed ones and ones the
+// directories name), walks every entry and counts leaf directories. Also feeds the raw bytes to
+// the header and directory parsers directly. Any crash, sanitizer report, out-of-bounds view or
+// hang is a bug; errors are the expected outcome for most inputs.
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "vts/protocol/pmtiles.hpp"
+
+namespace {
+
+using vts::pmtiles::Entry;
+using vts::pmtiles::Reader;
+
+// A returned tile must be a view inside the input.
+void check_view(std::span<const std::uint8_t> all, std::span<const std::uint8_t> tile) {
+  if (tile.data() < all.data() || tile.size() > all.size() ||
+      tile.data() + tile.size() > all.data() + all.size()) {
+    __builtin_trap();
+  }
+}
+
+}  // namespace
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+  const std::span<const std::uint8_t> bytes(data, size);
+
+  (void)vts::pmtiles::parse_header(bytes);
+  (void)vts::pmtiles::parse_directory(bytes, 1u << 16);
+
+  // Small limits keep each input fast; the limits themselves are exercised by the unit tests.
+  vts::pmtiles::ReaderOptions options;
+  options.max_directory_bytes = 1u << 20;
+  options.max_metadata_bytes = 1u << 20;
+  options.leaf_cache_entries = 2;  // small, so eviction runs too
+  auto opened = Reader::open_bytes(bytes, options);
+  if (!opened) return 0;
+  const Reader& reader = **opened;
+
+  for (std::uint64_t id = 0; id < 8; ++id) {
+    if (auto t = reader.get_by_tile_id(id)) check_view(bytes, *t);
+  }
+  for (const vts::TileId t :
+       {vts::TileId{0, 0, 0}, vts::TileId{1, 1, 0}, vts::TileId{3, 7, 7},
+        vts::TileId{31, 0x7fffffff, 0}, vts::TileId{2, 4, 0}, vts::TileId{40, 0, 0}}) {
+    if (auto tile = reader.get(t)) check_view(bytes, *tile);
+  }
+
+  // Ids the archive itself mentions: the first and last tile of the first few runs, and the ids
+  // just outside them.
+  std::vector<Entry> seen;
+  (void)reader.for_each_entry([&](const Entry& e) {
+    seen.push_back(e);
+    return seen.size() < 16;
+  });
+  for (const Entry& e : seen) {
+    for (std::uint64_t id :
+         {e.tile_id - 1, e.tile_id, e.tile_id + e.run_length - 1, e.tile_id + e.run_length}) {
+      if (auto t = reader.get_by_tile_id(id)) check_view(bytes, *t);
+    }
+  }
+
+  // A full walk, bounded so that a huge but valid archive cannot stall the fuzzer.
+  std::uint64_t visits = 0;
+  (void)reader.for_each_entry([&](const Entry&) { return ++visits < 100000; });
+  (void)reader.leaf_directory_count();
+  return 0;
+}
