@@ -95,9 +95,8 @@ int run_verify(const std::string& path, bool json, unsigned threads) {
   auto reader = open_archive(path);
   if (!reader) return report_error(reader.error());
   ProgressBar bar("verify", "payloads", !json);
-  auto report = verify_archive(**reader, threads, [&](std::uint64_t done, std::uint64_t total) {
-    bar.update(done, total);
-  });
+  auto report = verify_archive(
+      **reader, threads, [&](std::uint64_t done, std::uint64_t total) { bar.update(done, total); });
   bar.finish();
   if (!report) {
     Error e = report.error();
@@ -122,8 +121,7 @@ int run_verify(const std::string& path, bool json, unsigned threads) {
   }
   if (r.bad_tiles) {
     std::fprintf(stderr, "vts: error: '%s': %llu of %llu tiles are bad; first bad tile %s: %s\n",
-                 path.c_str(), (unsigned long long)r.bad_tiles,
-                 (unsigned long long)r.tiles_checked,
+                 path.c_str(), (unsigned long long)r.bad_tiles, (unsigned long long)r.tiles_checked,
                  r.first_bad ? r.first_bad->to_string().c_str() : "?", r.first_error.c_str());
     return exit_code(ErrorCode::corrupt);
   }

@@ -13,7 +13,9 @@ namespace {
 
 std::atomic<bool> g_cancel{false};
 
-extern "C" void on_signal(int) { g_cancel.store(true); }
+extern "C" void on_signal(int) {
+  g_cancel.store(true);
+}
 
 // SIGINT/SIGTERM ask the build to stop cleanly (no output file is left); a second signal kills.
 void install_cancel_handlers() {
@@ -125,12 +127,13 @@ int run_build(const BuildArgs& a) {
     j["tiles_per_second"] = r.seconds > 0 ? double(r.stats.addressed_tiles) / r.seconds : 0.0;
     std::printf("%s\n", j.dump(2).c_str());
   } else if (!a.quiet) {
-    std::printf("built %s: %llux%llu, %d levels, %llu tiles (%llu unique), %s in %s (%.0f tiles/s)\n",
-                a.output.c_str(), (unsigned long long)g.width(), (unsigned long long)g.height(),
-                g.level_count(), (unsigned long long)r.stats.addressed_tiles,
-                (unsigned long long)r.stats.tile_contents, human_bytes(r.stats.file_bytes).c_str(),
-                human_duration(r.seconds).c_str(),
-                r.seconds > 0 ? double(r.stats.addressed_tiles) / r.seconds : 0.0);
+    std::printf(
+        "built %s: %llux%llu, %d levels, %llu tiles (%llu unique), %s in %s (%.0f tiles/s)\n",
+        a.output.c_str(), (unsigned long long)g.width(), (unsigned long long)g.height(),
+        g.level_count(), (unsigned long long)r.stats.addressed_tiles,
+        (unsigned long long)r.stats.tile_contents, human_bytes(r.stats.file_bytes).c_str(),
+        human_duration(r.seconds).c_str(),
+        r.seconds > 0 ? double(r.stats.addressed_tiles) / r.seconds : 0.0);
   }
   return 0;
 }

@@ -12,9 +12,13 @@ ProgressBar::ProgressBar(std::string label, std::string unit, bool enabled)
       enabled_(enabled && stderr_is_terminal()),
       t0_(std::chrono::steady_clock::now()) {}
 
-ProgressBar::~ProgressBar() { finish(); }
+ProgressBar::~ProgressBar() {
+  finish();
+}
 
-bool ProgressBar::stderr_is_terminal() { return ::isatty(STDERR_FILENO) == 1; }
+bool ProgressBar::stderr_is_terminal() {
+  return ::isatty(STDERR_FILENO) == 1;
+}
 
 void ProgressBar::update(std::uint64_t done, std::uint64_t total, const std::string& extra) {
   if (!enabled_) return;

@@ -9,8 +9,12 @@ namespace {
 std::uint64_t ceil_shift(std::uint64_t v, int shift) {
   return shift >= 64 ? (v ? 1 : 0) : (v + ((std::uint64_t{1} << shift) - 1)) >> shift;
 }
-std::uint64_t ceil_div(std::uint64_t a, std::uint64_t b) { return (a + b - 1) / b; }
-bool is_pow2(std::uint64_t v) { return v && !(v & (v - 1)); }
+std::uint64_t ceil_div(std::uint64_t a, std::uint64_t b) {
+  return (a + b - 1) / b;
+}
+bool is_pow2(std::uint64_t v) {
+  return v && !(v & (v - 1));
+}
 }  // namespace
 
 std::string TileId::to_string() const {
@@ -49,8 +53,7 @@ Result<Geometry> Geometry::create(std::uint64_t width, std::uint64_t height,
   if (!is_pow2(tile_size) || tile_size < kMinTileSize || tile_size > kMaxTileSize)
     return make_error(ErrorCode::invalid_argument,
                       "tile size " + std::to_string(tile_size) + " must be a power of two in [" +
-                          std::to_string(kMinTileSize) + ", " + std::to_string(kMaxTileSize) +
-                          "]");
+                          std::to_string(kMinTileSize) + ", " + std::to_string(kMaxTileSize) + "]");
   if (border > tile_size / 2)
     return make_error(ErrorCode::invalid_argument, "border " + std::to_string(border) +
                                                        " exceeds half the tile size " +
@@ -110,8 +113,8 @@ std::vector<TileId> Geometry::children(TileId t) const {
 }
 
 TexelRect Geometry::content_slot(TileId t) const {
-  return {std::uint64_t{t.x} * tile_, std::uint64_t{t.y} * tile_,
-          (std::uint64_t{t.x} + 1) * tile_, (std::uint64_t{t.y} + 1) * tile_};
+  return {std::uint64_t{t.x} * tile_, std::uint64_t{t.y} * tile_, (std::uint64_t{t.x} + 1) * tile_,
+          (std::uint64_t{t.y} + 1) * tile_};
 }
 
 TexelRect Geometry::content_rect(TileId t) const {

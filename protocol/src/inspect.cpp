@@ -44,8 +44,9 @@ Result<ArchiveSummary> summarize_archive(const pmtiles::Reader& reader) {
   return s;
 }
 
-Result<VerifyReport> verify_archive(const pmtiles::Reader& reader, unsigned threads,
-                                    const std::function<void(std::uint64_t, std::uint64_t)>& on_progress) {
+Result<VerifyReport> verify_archive(
+    const pmtiles::Reader& reader, unsigned threads,
+    const std::function<void(std::uint64_t, std::uint64_t)>& on_progress) {
   VerifyReport report;
   auto info = TilesetInfo::from_json(reader.metadata_json());
   if (!info) return std::move(info).error();

@@ -56,29 +56,49 @@ void put_varint(std::vector<std::uint8_t>& out, std::uint64_t v) {
   out.push_back(static_cast<std::uint8_t>(v));
 }
 
-// Reads one varint at bytes[pos], advancing pos. Fails on a varint cut by the end of the input
-// (truncated) and on one longer than 10 bytes or whose 10th byte carries bits beyond 64 (corrupt).
-Status get_varint(std::span<const std::uint8_t> bytes, std::size_t& pos, std::uint64_t& value,
-                  const char* what) {
+enum class VarintStatus : std::uint8_t { ok, truncated, overflow, too_long };
+
+// Reads one varint at bytes[pos], advancing pos. This is the inner loop of directory parsing (a
+// leaf of 4096 entries is 16384 varints), so it reports failures as a small enum and leaves the
+// message to varint_error(). Fails on a varint cut by the end of the input, on one whose 10th
+// byte carries bits beyond 64, and on one longer than 10 bytes.
+inline VarintStatus read_varint(std::span<const std::uint8_t> bytes, std::size_t& pos,
+                                std::uint64_t& value) {
+  const std::uint8_t* p = bytes.data();
+  const std::size_t size = bytes.size();
+  if (pos < size && p[pos] < 0x80) {  // one-byte varints dominate directories
+    value = p[pos++];
+    return VarintStatus::ok;
+  }
   std::uint64_t v = 0;
   for (int i = 0; i < 10; ++i) {
-    if (pos >= bytes.size()) {
-      return make_error(ErrorCode::truncated, std::string("directory ends inside a varint (") +
-                                                  what + ") at byte " + std::to_string(pos));
-    }
-    const std::uint8_t b = bytes[pos++];
-    if (i == 9 && b > 1) {
-      return make_error(ErrorCode::corrupt, std::string("varint (") + what + ") ending at byte " +
-                                                std::to_string(pos) + " overflows 64 bits");
-    }
+    if (pos >= size) return VarintStatus::truncated;
+    const std::uint8_t b = p[pos++];
+    if (i == 9 && b > 1) return VarintStatus::overflow;
     v |= std::uint64_t{b & 0x7fu} << (7 * i);
     if ((b & 0x80) == 0) {
       value = v;
-      return {};
+      return VarintStatus::ok;
     }
   }
-  return make_error(ErrorCode::corrupt, std::string("varint (") + what + ") ending at byte " +
-                                            std::to_string(pos) + " is longer than 10 bytes");
+  return VarintStatus::too_long;
+}
+
+Error varint_error(VarintStatus status, std::size_t pos, const char* what) {
+  const std::string field = std::string("varint (") + what + ")";
+  switch (status) {
+    case VarintStatus::truncated:
+      return make_error(ErrorCode::truncated,
+                        "directory ends inside a " + field + " at byte " + std::to_string(pos));
+    case VarintStatus::overflow:
+      return make_error(ErrorCode::corrupt,
+                        field + " ending at byte " + std::to_string(pos) + " overflows 64 bits");
+    case VarintStatus::too_long:
+    case VarintStatus::ok:
+      break;
+  }
+  return make_error(ErrorCode::corrupt,
+                    field + " ending at byte " + std::to_string(pos) + " is longer than 10 bytes");
 }
 
 // ---- compression --------------------------------------------------------------------------------
@@ -396,7 +416,9 @@ Result<std::vector<Entry>> parse_directory(std::span<const std::uint8_t> bytes,
                                            std::size_t max_entries) {
   std::size_t pos = 0;
   std::uint64_t n = 0;
-  if (Status s = get_varint(bytes, pos, n, "entry count"); !s) return s.error();
+  if (VarintStatus vs = read_varint(bytes, pos, n); vs != VarintStatus::ok) {
+    return varint_error(vs, pos, "entry count");
+  }
   if (n > max_entries) {
     return make_error(ErrorCode::too_large, "directory declares " + std::to_string(n) +
                                                 " entries, more than the limit of " +
@@ -415,7 +437,9 @@ Result<std::vector<Entry>> parse_directory(std::span<const std::uint8_t> bytes,
   std::uint64_t id = 0;
   for (std::size_t i = 0; i < entries.size(); ++i) {
     std::uint64_t delta = 0;
-    if (Status s = get_varint(bytes, pos, delta, "tile id"); !s) return s.error();
+    if (VarintStatus vs = read_varint(bytes, pos, delta); vs != VarintStatus::ok) {
+      return varint_error(vs, pos, "tile id");
+    }
     if (i > 0 && delta == 0) {
       return make_error(ErrorCode::corrupt, "directory entry " + std::to_string(i) +
                                                 " repeats the tile id of the entry before it");
@@ -429,7 +453,9 @@ Result<std::vector<Entry>> parse_directory(std::span<const std::uint8_t> bytes,
   }
   for (std::size_t i = 0; i < entries.size(); ++i) {
     std::uint64_t v = 0;
-    if (Status s = get_varint(bytes, pos, v, "run length"); !s) return s.error();
+    if (VarintStatus vs = read_varint(bytes, pos, v); vs != VarintStatus::ok) {
+      return varint_error(vs, pos, "run length");
+    }
     if (v > kMaxU32) {
       return make_error(ErrorCode::corrupt, "directory entry " + std::to_string(i) +
                                                 " run length " + std::to_string(v) +
@@ -439,7 +465,9 @@ Result<std::vector<Entry>> parse_directory(std::span<const std::uint8_t> bytes,
   }
   for (std::size_t i = 0; i < entries.size(); ++i) {
     std::uint64_t v = 0;
-    if (Status s = get_varint(bytes, pos, v, "length"); !s) return s.error();
+    if (VarintStatus vs = read_varint(bytes, pos, v); vs != VarintStatus::ok) {
+      return varint_error(vs, pos, "length");
+    }
     if (v > kMaxU32) {
       return make_error(ErrorCode::corrupt, "directory entry " + std::to_string(i) + " length " +
                                                 std::to_string(v) + " exceeds 32 bits");
@@ -452,7 +480,9 @@ Result<std::vector<Entry>> parse_directory(std::span<const std::uint8_t> bytes,
   }
   for (std::size_t i = 0; i < entries.size(); ++i) {
     std::uint64_t v = 0;
-    if (Status s = get_varint(bytes, pos, v, "offset"); !s) return s.error();
+    if (VarintStatus vs = read_varint(bytes, pos, v); vs != VarintStatus::ok) {
+      return varint_error(vs, pos, "offset");
+    }
     if (v == 0 && i > 0) {
       const Entry& prev = entries[i - 1];
       if (prev.offset > std::numeric_limits<std::uint64_t>::max() - prev.length) {

@@ -44,7 +44,8 @@ struct Shared {
   }
   // True when the build must stop (an error, or the caller cancelled).
   bool stopping() {
-    if (!failed && cancel && cancel->load()) fail(make_error(ErrorCode::cancelled, "build cancelled"));
+    if (!failed && cancel && cancel->load())
+      fail(make_error(ErrorCode::cancelled, "build cancelled"));
     return failed;
   }
   void store(TileId id, const TileImage& img) {
@@ -125,8 +126,8 @@ class Cascade {
     const Level& l = levels_[static_cast<std::size_t>(z)];
     const std::int64_t tile_start =
         std::int64_t{l.next_tile_row} * g_.tile_size() - std::int64_t{g_.border()};
-    return std::min<std::uint64_t>(static_cast<std::uint64_t>(std::max<std::int64_t>(tile_start, 0)),
-                                   2 * l.next_parent_row);
+    return std::min<std::uint64_t>(
+        static_cast<std::uint64_t>(std::max<std::int64_t>(tile_start, 0)), 2 * l.next_parent_row);
   }
 
   void emit_tile_row(int z, std::uint32_t ty) {
@@ -229,7 +230,8 @@ class StripChannel {
 
 class ProgressTicker {
  public:
-  ProgressTicker(const BuildOptions& o, Shared& s, std::uint64_t tiles_total, std::uint64_t rows_total)
+  ProgressTicker(const BuildOptions& o, Shared& s, std::uint64_t tiles_total,
+                 std::uint64_t rows_total)
       : o_(o), s_(s), t0_(Clock::now()) {
     p_.tiles_total = tiles_total;
     p_.rows_total = rows_total;
@@ -282,8 +284,8 @@ Status build_from_source(const BuildOptions& o, ImageSource& src, const Geometry
   Cascade cascade(g, queue, shared);
   const std::uint64_t row_bytes = g.width() * 4;
   // About 4 MiB per strip, at least one row, at most 64.
-  const auto strip_rows = static_cast<std::uint32_t>(
-      std::clamp<std::uint64_t>((4u << 20) / row_bytes, 1, 64));
+  const auto strip_rows =
+      static_cast<std::uint32_t>(std::clamp<std::uint64_t>((4u << 20) / row_bytes, 1, 64));
   StripChannel channel(3, strip_rows * row_bytes);
   std::thread reader([&] {
     std::optional<Error> error;
@@ -421,7 +423,8 @@ Result<BuildReport> build_pyramid(const BuildOptions& o) {
   info.downsample = o.synthetic ? "synthetic-per-level" : "box-linear";
   info.sparse = o.synthetic && o.synthetic->region.has_value();
   for (int z = 0; z <= g.max_zoom(); ++z) {
-    const std::uint64_t n = o.synthetic ? synthetic_range(g, *o.synthetic, z).count() : g.tile_count(z);
+    const std::uint64_t n =
+        o.synthetic ? synthetic_range(g, *o.synthetic, z).count() : g.tile_count(z);
     report.levels.push_back({z, g.level_width(z), g.level_height(z), n});
   }
   if (o.cancel && o.cancel->load()) {

@@ -44,7 +44,9 @@ const Tables& tables() {
 
 }  // namespace
 
-float decode_srgb8(std::uint8_t code) { return tables().to_linear[code]; }
+float decode_srgb8(std::uint8_t code) {
+  return tables().to_linear[code];
+}
 
 std::uint8_t encode_srgb8(float linear) {
   const Tables& t = tables();
@@ -70,8 +72,8 @@ void downsample_row_rgba8(const std::uint8_t* a, const std::uint8_t* b, std::uin
     const std::uint8_t* p10 = b + 4 * x0;
     const std::uint8_t* p11 = b + 4 * x1;
     for (int c = 0; c < 3; ++c) {
-      const float sum = t.to_linear[p00[c]] + t.to_linear[p01[c]] + t.to_linear[p10[c]] +
-                        t.to_linear[p11[c]];
+      const float sum =
+          t.to_linear[p00[c]] + t.to_linear[p01[c]] + t.to_linear[p10[c]] + t.to_linear[p11[c]];
       out[4 * i + c] = encode_srgb8(sum * 0.25f);
     }
     const unsigned alpha = unsigned{p00[3]} + p01[3] + p10[3] + p11[3];

@@ -81,7 +81,8 @@ class Output {
       return make_error(ErrorCode::io, "writing '" + path_.string() + "' failed");
     }
     std::filesystem::rename(tmp_, path_, ec);
-    if (ec) return make_error(ErrorCode::io, "renaming to '" + path_.string() + "': " + ec.message());
+    if (ec)
+      return make_error(ErrorCode::io, "renaming to '" + path_.string() + "': " + ec.message());
     return {};
   }
   ~Output() {
@@ -134,8 +135,9 @@ Status extract_level(const pmtiles::Reader& reader, const TilesetInfo& info, int
                      const ExtractOptions& o) {
   const Geometry& g = info.geometry;
   if (!g.valid_level(z))
-    return make_error(ErrorCode::invalid_argument,
-                      "level " + std::to_string(z) + " is outside 0.." + std::to_string(g.max_zoom()));
+    return make_error(
+        ErrorCode::invalid_argument,
+        "level " + std::to_string(z) + " is outside 0.." + std::to_string(g.max_zoom()));
   const std::uint64_t w = g.level_width(z), h = g.level_height(z);
   auto out = Output::open(o, w, h);
   if (!out) return std::move(out).error();

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 #include "vts/server/downsample.hpp"
 
@@ -16,8 +17,41 @@ struct ImageSource::Piece {
   std::filesystem::path path;
   std::uint64_t width = 0, height = 0;
   int channels = 0;
-  bool is_float = false;      // float/half data: linear light, converted with the sRGB OETF
+  bool is_float = false;       // float/half data: linear light, converted with the sRGB OETF
   bool float_is_srgb = false;  // float data the file declares as sRGB-encoded
+  // Tiled files are read one band of tile rows at a time with read_tiles(): OpenImageIO 2.4's
+  // read_scanlines() on tiled TIFFs crashes (SIGFPE), and whole tile rows are what it would
+  // decode anyway.
+  int tile_height = 0;
+  std::vector<std::uint8_t> band;
+  std::int64_t band_y0 = -1;
+
+  // Reads rows [y, y + n) of channels [0, nch) as `type` into out (tightly packed).
+  bool read(std::uint64_t y, std::uint32_t n, int nch, OIIO::TypeDesc type, void* out) {
+    if (tile_height <= 0)
+      return in->read_scanlines(0, 0, static_cast<int>(y), static_cast<int>(y + n), 0, 0, nch, type,
+                                out);
+    const std::size_t row_bytes = width * nch * type.size();
+    auto* dst = static_cast<std::uint8_t*>(out);
+    for (std::uint64_t row = y; row < y + n;) {
+      const auto b0 = static_cast<std::int64_t>(row / tile_height * tile_height);
+      const auto b1 = std::min<std::int64_t>(b0 + tile_height, static_cast<std::int64_t>(height));
+      if (b0 != band_y0) {
+        band.resize(static_cast<std::size_t>(b1 - b0) * row_bytes);
+        if (!in->read_tiles(0, 0, 0, static_cast<int>(width), static_cast<int>(b0),
+                            static_cast<int>(b1), 0, 1, 0, nch, type, band.data()))
+          return false;
+        band_y0 = b0;
+      }
+      const std::uint64_t take =
+          std::min<std::uint64_t>(y + n, static_cast<std::uint64_t>(b1)) - row;
+      std::memcpy(dst, band.data() + (row - static_cast<std::uint64_t>(b0)) * row_bytes,
+                  take * row_bytes);
+      dst += take * row_bytes;
+      row += take;
+    }
+    return true;
+  }
 };
 
 namespace {
@@ -73,8 +107,8 @@ Result<std::unique_ptr<ImageSource>> ImageSource::open(
       if (src->column_widths_[c] != w || src->row_heights_[r] != h)
         return make_error(ErrorCode::invalid_argument,
                           "input '" + path.string() + "' is " + std::to_string(w) + "x" +
-                              std::to_string(h) + " but grid column " + std::to_string(c) +
-                              " is " + std::to_string(src->column_widths_[c]) + " wide and row " +
+                              std::to_string(h) + " but grid column " + std::to_string(c) + " is " +
+                              std::to_string(src->column_widths_[c]) + " wide and row " +
                               std::to_string(r) + " is " + std::to_string(src->row_heights_[r]) +
                               " high");
       if (first_desc.empty())
@@ -84,11 +118,11 @@ Result<std::unique_ptr<ImageSource>> ImageSource::open(
   }
   for (auto w : src->column_widths_) src->width_ += w;
   for (auto h : src->row_heights_) src->height_ += h;
-  src->description_ = inputs.size() == 1 ? first_desc
-                                         : std::to_string(columns) + "x" + std::to_string(rows) +
-                                               " mosaic " + std::to_string(src->width_) + "x" +
-                                               std::to_string(src->height_) + " (first: " +
-                                               first_desc + ")";
+  src->description_ = inputs.size() == 1
+                          ? first_desc
+                          : std::to_string(columns) + "x" + std::to_string(rows) + " mosaic " +
+                                std::to_string(src->width_) + "x" + std::to_string(src->height_) +
+                                " (first: " + first_desc + ")";
   return src;
 }
 
@@ -105,6 +139,7 @@ Status ImageSource::open_row(std::uint32_t grid_row) {
     piece->width = static_cast<std::uint64_t>(spec.width);
     piece->height = static_cast<std::uint64_t>(spec.height);
     piece->channels = spec.nchannels;
+    piece->tile_height = spec.tile_width > 0 ? spec.tile_height : 0;
     const auto base = spec.format.basetype;
     piece->is_float = base == OIIO::TypeDesc::FLOAT || base == OIIO::TypeDesc::HALF ||
                       base == OIIO::TypeDesc::DOUBLE;
@@ -158,9 +193,7 @@ Status ImageSource::read_rows(std::uint64_t y, std::uint32_t count, std::uint8_t
       bool ok;
       if (piece->is_float) {
         scratch_float_.resize(texels * read_ch);
-        ok = piece->in->read_scanlines(0, 0, static_cast<int>(local_y),
-                                       static_cast<int>(local_y + n), 0, 0, read_ch,
-                                       OIIO::TypeDesc::FLOAT, scratch_float_.data());
+        ok = piece->read(local_y, n, read_ch, OIIO::TypeDesc::FLOAT, scratch_float_.data());
         const bool srgb = piece->float_is_srgb;
         const float* f = scratch_float_.data();
         if (ok)
@@ -174,9 +207,7 @@ Status ImageSource::read_rows(std::uint64_t y, std::uint32_t count, std::uint8_t
           });
       } else {
         scratch_.resize(texels * read_ch);
-        ok = piece->in->read_scanlines(0, 0, static_cast<int>(local_y),
-                                       static_cast<int>(local_y + n), 0, 0, read_ch,
-                                       OIIO::TypeDesc::UINT8, scratch_.data());
+        ok = piece->read(local_y, n, read_ch, OIIO::TypeDesc::UINT8, scratch_.data());
         const std::uint8_t* b = scratch_.data();
         if (ok) expand([&](std::size_t i, int c) { return b[i * read_ch + c]; });
       }

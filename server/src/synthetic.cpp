@@ -11,7 +11,8 @@ TileImage synthetic_tile(const Geometry& g, TileId t) {
   std::uint8_t* p = img.pixels.data();
   for (std::uint32_t sy = 0; sy < s; ++sy) {
     const std::uint64_t py = g.stored_to_level_y(t, sy);
-    for (std::uint32_t sx = 0; sx < s; ++sx, p += 4) synthetic_texel(g.stored_to_level_x(t, sx), py, p);
+    for (std::uint32_t sx = 0; sx < s; ++sx, p += 4)
+      synthetic_texel(g.stored_to_level_x(t, sx), py, p);
   }
   return img;
 }

@@ -240,11 +240,61 @@ INSTANTIATE_TEST_SUITE_P(Builder, OddSizes,
                                            std::tuple{64, 64, 4}, std::tuple{65, 1, 1},
                                            std::tuple{517, 301, 3}, std::tuple{130, 257, 2}));
 
+TEST(Builder, TiledBigTiffAndSixteenBitGreyInputsAreRead) {
+  TempDir dir;
+  const int w = 700, h = 333;
+  const auto px = noise(std::size_t(w) * h * 3, 11);
+  {
+    auto out = OIIO::ImageOutput::create((dir / "tiled.tif").string());
+    OIIO::ImageSpec spec(w, h, 3, OIIO::TypeDesc::UINT8);
+    spec.tile_width = spec.tile_height = 64;  // tiled, with partial edge tiles
+    spec.attribute("tiff:bigtiff", 1);
+    spec.attribute("compression", "zip");
+    ASSERT_TRUE(out->open((dir / "tiled.tif").string(), spec));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, px.data()));
+    out->close();
+  }
+  BuildOptions o = options_for(dir / "tiled.tif", dir / "tiled.pmtiles");
+  o.tile_size = 128;
+  build(o);
+  const Archive a = Archive::open(dir / "tiled.pmtiles");
+  Rgba expect{std::uint64_t(w), std::uint64_t(h),
+              std::vector<std::uint8_t>(std::size_t(w) * h * 4)};
+  for (std::size_t i = 0; i < std::size_t(w) * h; ++i) {
+    std::memcpy(&expect.px[i * 4], &px[i * 3], 3);
+    expect.px[i * 4 + 3] = 255;
+  }
+  expect_same(a.level(a.info.geometry.max_zoom()), expect, "tiled BigTIFF finest level");
+
+  std::vector<std::uint16_t> grey(std::size_t(w) * h);
+  for (std::size_t i = 0; i < grey.size(); ++i) grey[i] = static_cast<std::uint16_t>(i * 97);
+  {
+    auto out = OIIO::ImageOutput::create((dir / "grey16.tif").string());
+    OIIO::ImageSpec spec(w, h, 1, OIIO::TypeDesc::UINT16);
+    ASSERT_TRUE(out->open((dir / "grey16.tif").string(), spec));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT16, grey.data()));
+    out->close();
+  }
+  o = options_for(dir / "grey16.tif", dir / "grey16.pmtiles");
+  o.tile_size = 128;
+  build(o);
+  const Archive b = Archive::open(dir / "grey16.pmtiles");
+  const Rgba finest = b.level(b.info.geometry.max_zoom());
+  std::size_t bad = 0;
+  for (std::size_t i = 0; i < grey.size(); ++i) {
+    const auto v = static_cast<std::uint8_t>(std::lround(grey[i] / 257.0));
+    const std::uint8_t* t = &finest.px[i * 4];
+    bad += !(t[0] == v && t[1] == v && t[2] == v && t[3] == 255);
+  }
+  EXPECT_EQ(bad, 0u) << "16-bit grey texels not expanded to rounded 8-bit RGB";
+}
+
 TEST(Builder, UniformImageStoresOneBlob) {
   TempDir dir;
   const fs::path in = dir / "flat.png";
   std::vector<std::uint8_t> flat(1500 * 700 * 3);
-  for (std::size_t i = 0; i < flat.size(); i += 3) flat[i] = 10, flat[i + 1] = 120, flat[i + 2] = 200;
+  for (std::size_t i = 0; i < flat.size(); i += 3)
+    flat[i] = 10, flat[i + 1] = 120, flat[i + 2] = 200;
   write_image(in, 1500, 700, 3, flat);
   const BuildReport r = build(options_for(in, dir / "flat.pmtiles"));
   EXPECT_GT(r.stats.addressed_tiles, 10u);
@@ -394,9 +444,7 @@ TEST(Builder, FailedBuildLeavesNoFileBehind) {
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.error().code, ErrorCode::not_found);
   EXPECT_NE(r.error().message.find("missing.jpg"), std::string::npos);
-  {
-    std::ofstream(dir / "junk.png") << "this is not an image";
-  }
+  { std::ofstream(dir / "junk.png") << "this is not an image"; }
   r = build_pyramid(options_for(dir / "junk.png", dir / "out.pmtiles"));
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.error().code, ErrorCode::invalid_argument);

@@ -116,8 +116,8 @@ TEST(Geometry, EveryExistingTileHoldsImageTexels) {
   std::uint64_t total = 0;
   for (int z = 0; z <= g.max_zoom(); ++z) {
     total += g.tile_count(z);
-    const TexelRect last = g.content_rect({static_cast<std::uint8_t>(z), g.tiles_x(z) - 1,
-                                           g.tiles_y(z) - 1});
+    const TexelRect last =
+        g.content_rect({static_cast<std::uint8_t>(z), g.tiles_x(z) - 1, g.tiles_y(z) - 1});
     EXPECT_FALSE(last.empty()) << "z=" << z;
     EXPECT_EQ(last.x1, g.level_width(z));
     EXPECT_EQ(last.y1, g.level_height(z));
@@ -128,8 +128,8 @@ TEST(Geometry, EveryExistingTileHoldsImageTexels) {
 TEST(Geometry, TexelToTileAndBackAtEveryLevel) {
   Geometry g = make(10752, 9216, 256, 4);
   for (int z = 0; z <= g.max_zoom(); ++z) {
-    for (std::uint64_t px : {std::uint64_t{0}, std::uint64_t{255}, std::uint64_t{256},
-                             g.level_width(z) - 1}) {
+    for (std::uint64_t px :
+         {std::uint64_t{0}, std::uint64_t{255}, std::uint64_t{256}, g.level_width(z) - 1}) {
       if (px >= g.level_width(z)) continue;
       const TileId t = g.tile_of_texel(z, px, 0);
       const TexelRect r = g.content_rect(t);
@@ -144,9 +144,9 @@ TEST(Geometry, TexelToTileAndBackAtEveryLevel) {
 TEST(Geometry, BorderTexelsComeFromNeighboursAndClampAtTheEdge) {
   Geometry g = make(1000, 600, 256, 4);
   const TileId t{2, 1, 0};
-  EXPECT_EQ(g.stored_to_level_x(t, 0), 252u);   // 4 texels into the left neighbour
+  EXPECT_EQ(g.stored_to_level_x(t, 0), 252u);    // 4 texels into the left neighbour
   EXPECT_EQ(g.stored_to_level_x(t, 263), 515u);  // 4 texels into the right neighbour
-  EXPECT_EQ(g.stored_to_level_y(t, 0), 0u);     // clamped at the top edge
+  EXPECT_EQ(g.stored_to_level_y(t, 0), 0u);      // clamped at the top edge
   const TileId edge{2, 3, 2};
   EXPECT_EQ(g.stored_to_level_x(edge, 263), 999u);  // clamped at the right image edge
   EXPECT_EQ(g.stored_to_level_y(edge, 263), 599u);

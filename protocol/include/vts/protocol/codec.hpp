@@ -1,6 +1,7 @@
 // Tile codecs. A stored tile ("payload") is a valid zstd stream made of two frames:
 //
-//   1. a zstd *skippable* frame (magic 0x184D2A5A) carrying our 32-byte tile header — codec, filter,
+//   1. a zstd *skippable* frame (magic 0x184D2A5A) carrying our 32-byte tile header — codec,
+//   filter,
 //      dimensions, decoded size and an XXH3-64 checksum of the bytes that follow;
 //   2. one ordinary zstd frame holding the codec's body (for `lossless`: the possibly filtered
 //      RGBA8 texels, see docs/FORMAT.md).
@@ -26,8 +27,9 @@ enum class CodecId : std::uint8_t { lossless = 0, bc1 = 1 };
 enum class PixelFormat : std::uint8_t { rgba8 = 0, bc1 = 1 };
 // Prediction filter applied before zstd by the lossless codec.
 enum class Filter : std::uint8_t {
-  none = 0,      // interleaved RGBA8 as is
-  gradient = 1,  // planar R,G,B,A, each byte predicted by clamp(left + up - upleft), residual mod 256
+  none = 0,  // interleaved RGBA8 as is
+  gradient =
+      1,  // planar R,G,B,A, each byte predicted by clamp(left + up - upleft), residual mod 256
 };
 enum class FilterChoice : std::uint8_t { none, gradient, automatic };
 

@@ -38,12 +38,12 @@ struct ArchiveSummary {
 Result<ArchiveSummary> summarize_archive(const pmtiles::Reader& reader);
 
 struct VerifyReport {
-  std::uint64_t tiles_checked = 0;  // addressed tiles
+  std::uint64_t tiles_checked = 0;     // addressed tiles
   std::uint64_t payloads_checked = 0;  // distinct payloads decoded
-  std::uint64_t bad_tiles = 0;      // addressed tiles whose payload failed, or that lie outside
-  std::optional<TileId> first_bad;  // in tile-id order
+  std::uint64_t bad_tiles = 0;         // addressed tiles whose payload failed, or that lie outside
+  std::optional<TileId> first_bad;     // in tile-id order
   std::string first_error;
-  std::string structural_error;     // set when a directory itself is malformed
+  std::string structural_error;  // set when a directory itself is malformed
   bool ok() const { return bad_tiles == 0 && structural_error.empty(); }
 };
 

@@ -112,9 +112,9 @@ class Writer {
 };
 
 struct ReaderOptions {
-  std::size_t leaf_cache_entries = 64;           // decoded leaf directories kept (LRU)
-  std::size_t max_directory_bytes = 64u << 20;   // decompressed size limit of one directory
-  std::size_t max_metadata_bytes = 16u << 20;    // decompressed size limit of the metadata
+  std::size_t leaf_cache_entries = 64;          // decoded leaf directories kept (LRU)
+  std::size_t max_directory_bytes = 64u << 20;  // decompressed size limit of one directory
+  std::size_t max_metadata_bytes = 16u << 20;   // decompressed size limit of the metadata
 };
 
 // Reads an archive from a read-only memory mapping (or borrowed bytes). Construction validates the

@@ -20,10 +20,10 @@ struct TilesetInfo {
   CodecId codec = CodecId::lossless;
   std::string name;
   std::string description;
-  std::string color_space = "srgb";        // texel encoding of decoded rgba8
-  std::string downsample = "box-linear";   // how level z-1 was made from level z
-  bool sparse = false;                     // some tiles inside the image may be absent
-  std::string generator = "vtstream";      // tool and version that wrote the archive
+  std::string color_space = "srgb";       // texel encoding of decoded rgba8
+  std::string downsample = "box-linear";  // how level z-1 was made from level z
+  bool sparse = false;                    // some tiles inside the image may be absent
+  std::string generator = "vtstream";     // tool and version that wrote the archive
 
   std::string to_json() const;
   // Validates every field (unknown codec, unsupported format_version, bad geometry → error).

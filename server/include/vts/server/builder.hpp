@@ -41,7 +41,7 @@ struct SyntheticSpec {
 struct BuildProgress {
   std::uint64_t tiles_done = 0;
   std::uint64_t tiles_total = 0;
-  std::uint64_t rows_read = 0;    // input scanlines read so far (0 for synthetic)
+  std::uint64_t rows_read = 0;  // input scanlines read so far (0 for synthetic)
   std::uint64_t rows_total = 0;
   std::uint64_t bytes_written = 0;  // tile payload bytes so far (before dedup)
   double seconds = 0;
@@ -50,7 +50,7 @@ struct BuildProgress {
 struct BuildOptions {
   std::vector<std::filesystem::path> inputs;  // row-major order for a grid
   std::uint32_t grid_columns = 1, grid_rows = 1;
-  std::optional<SyntheticSpec> synthetic;     // instead of inputs
+  std::optional<SyntheticSpec> synthetic;  // instead of inputs
   std::filesystem::path output;
   std::uint32_t tile_size = 256;
   std::uint32_t border = 4;
