@@ -171,7 +171,7 @@ void exercise(std::span<const std::uint8_t> bytes) {
 
 // ---- tile ids -----------------------------------------------------------------------------------
 
-TEST(TileIdTest, MatchesSpecValuesAtLowZooms) {
+TEST(TileId, MatchesSpecValuesAtLowZooms) {
   EXPECT_EQ(zxy_to_tile_id(0, 0, 0), 0u);
   EXPECT_EQ(zxy_to_tile_id(1, 0, 0), 1u);
   EXPECT_EQ(zxy_to_tile_id(1, 0, 1), 2u);
@@ -182,14 +182,14 @@ TEST(TileIdTest, MatchesSpecValuesAtLowZooms) {
   EXPECT_EQ(zxy_to_tile_id(3, 7, 0), 84u);
 }
 
-TEST(TileIdTest, MatchesReferenceImplementationValuesAtHighZooms) {
+TEST(TileId, MatchesReferenceImplementationValuesAtHighZooms) {
   // Values asserted by the protomaps reference implementations' own tests.
   EXPECT_EQ(zxy_to_tile_id(20, 0, 0), 366503875925u);
   EXPECT_EQ(zxy_to_tile_id(12, 3423, 1763), 19078479u);
   EXPECT_EQ(zxy(19078479), (TileId{12, 3423, 1763}));
 }
 
-TEST(TileIdTest, AgreesWithTextbookHilbertCurveForRandomTilesUpToZoom31) {
+TEST(TileId, AgreesWithTextbookHilbertCurveForRandomTilesUpToZoom31) {
   std::mt19937_64 rng(7);
   for (int i = 0; i < 20000; ++i) {
     const int z = static_cast<int>(rng() % 32);
@@ -202,7 +202,7 @@ TEST(TileIdTest, AgreesWithTextbookHilbertCurveForRandomTilesUpToZoom31) {
   }
 }
 
-TEST(TileIdTest, RoundTripsEveryTileUpToZoom7AndRandomIdsUpToZoom31) {
+TEST(TileId, RoundTripsEveryTileUpToZoom7AndRandomIdsUpToZoom31) {
   for (int z = 0; z <= 7; ++z)
     for (std::uint32_t x = 0; x < (1u << z); ++x)
       for (std::uint32_t y = 0; y < (1u << z); ++y) {
@@ -218,7 +218,7 @@ TEST(TileIdTest, RoundTripsEveryTileUpToZoom7AndRandomIdsUpToZoom31) {
   }
 }
 
-TEST(TileIdTest, RoundTripsTheCornersOfEveryZoom) {
+TEST(TileId, RoundTripsTheCornersOfEveryZoom) {
   for (int z = 0; z <= 31; ++z) {
     const std::uint32_t m = static_cast<std::uint32_t>((std::uint64_t{1} << z) - 1);
     for (const TileId t : {TileId{std::uint8_t(z), 0, 0}, TileId{std::uint8_t(z), m, 0},
@@ -228,7 +228,7 @@ TEST(TileIdTest, RoundTripsTheCornersOfEveryZoom) {
   }
 }
 
-TEST(TileIdTest, ConsecutiveIdsWithinALevelAreEdgeNeighbours) {
+TEST(TileId, ConsecutiveIdsWithinALevelAreEdgeNeighbours) {
   const std::uint64_t first = zxy_to_tile_id(6, 0, 0), end = zxy_to_tile_id(7, 0, 0);
   for (std::uint64_t id = first + 1; id < end; ++id) {
     const TileId a = zxy(id - 1), b = zxy(id);
@@ -238,7 +238,7 @@ TEST(TileIdTest, ConsecutiveIdsWithinALevelAreEdgeNeighbours) {
   }
 }
 
-TEST(TileIdTest, RejectsIdsBeyondZoom31) {
+TEST(TileId, RejectsIdsBeyondZoom31) {
   const std::uint64_t first_z32 = 6148914691236517205ULL;  // (4^32 - 1) / 3
   EXPECT_EQ(zxy(first_z32 - 1).z, 31);
   EXPECT_EQ(tile_id_to_zxy(first_z32).error().code, ErrorCode::invalid_argument);
@@ -276,7 +276,7 @@ Header full_header() {
   return h;
 }
 
-TEST(HeaderTest, RoundTripsEveryField) {
+TEST(Header, RoundTripsEveryField) {
   const Header h = full_header();
   const auto bytes = serialize_header(h);
   const Header back = parse_header(bytes).value();
@@ -291,7 +291,7 @@ TEST(HeaderTest, RoundTripsEveryField) {
   EXPECT_EQ(back.center_lat_e7, 7);
 }
 
-TEST(HeaderTest, FollowsTheSpecByteLayout) {
+TEST(Header, FollowsTheSpecByteLayout) {
   const auto b = serialize_header(full_header());
   EXPECT_EQ(std::string(b.begin(), b.begin() + 7), "PMTiles");
   EXPECT_EQ(b[7], 3);
@@ -313,7 +313,7 @@ TEST(HeaderTest, FollowsTheSpecByteLayout) {
   EXPECT_EQ(b[123], 7);  // center lat
 }
 
-TEST(HeaderTest, RejectsShortInputBadMagicAndOtherVersions) {
+TEST(Header, RejectsShortInputBadMagicAndOtherVersions) {
   auto b = serialize_header(full_header());
   EXPECT_EQ(parse_header(std::span(b).first(126)).error().code, ErrorCode::truncated);
   auto bad = b;
@@ -326,7 +326,7 @@ TEST(HeaderTest, RejectsShortInputBadMagicAndOtherVersions) {
 
 // ---- directories --------------------------------------------------------------------------------
 
-TEST(DirectoryTest, RoundTripsEntriesWithRunsGapsAndLeafPointers) {
+TEST(Directory, RoundTripsEntriesWithRunsGapsAndLeafPointers) {
   const std::vector<Entry> entries{{0, 0, 10, 1},
                                    {1, 10, 5, 3},    // contiguous
                                    {7, 0, 10, 1},    // dedup: points back
@@ -336,7 +336,7 @@ TEST(DirectoryTest, RoundTripsEntriesWithRunsGapsAndLeafPointers) {
   EXPECT_EQ(parse_directory(raw).value(), entries);
 }
 
-TEST(DirectoryTest, DecodesColumnsWithZeroMeaningContiguousOffset) {
+TEST(Directory, DecodesColumnsWithZeroMeaningContiguousOffset) {
   // 3 entries: ids 1,2,5 (deltas 1,1,3), runs 1,1,1, lengths 10,20,30, offsets 0+1, then 0, 0.
   const Bytes raw{3, 1, 1, 3, 1, 1, 1, 10, 20, 30, 1, 0, 0};
   const std::vector<Entry> expected{{1, 0, 10, 1}, {2, 10, 20, 1}, {5, 30, 30, 1}};
@@ -344,12 +344,12 @@ TEST(DirectoryTest, DecodesColumnsWithZeroMeaningContiguousOffset) {
   EXPECT_EQ(serialize_directory(expected), raw);
 }
 
-TEST(DirectoryTest, ReadsZeroOffsetOfTheFirstEntryAsOffsetZero) {
+TEST(Directory, ReadsZeroOffsetOfTheFirstEntryAsOffsetZero) {
   const Bytes raw{1, 4, 1, 9, 0};
   EXPECT_EQ(parse_directory(raw).value(), (std::vector<Entry>{{4, 0, 9, 1}}));
 }
 
-TEST(DirectoryTest, RejectsTruncationAtEveryByte) {
+TEST(Directory, RejectsTruncationAtEveryByte) {
   const std::vector<Entry> entries{{3, 0, 300, 1}, {70000, 5000000, 7, 2}, {70005, 0, 1, 0}};
   const Bytes raw = serialize_directory(entries);
   for (std::size_t n = 0; n < raw.size(); ++n) {
@@ -359,7 +359,7 @@ TEST(DirectoryTest, RejectsTruncationAtEveryByte) {
   }
 }
 
-TEST(DirectoryTest, RejectsVarintsLongerThanTenBytesOrBeyond64Bits) {
+TEST(Directory, RejectsVarintsLongerThanTenBytesOrBeyond64Bits) {
   Bytes eleven{0x80, 0x80, 0x80, 0x80, 0x80, 0x80, 0x80, 0x80, 0x80, 0x80, 0x00};
   EXPECT_EQ(parse_directory(eleven).error().code, ErrorCode::corrupt);
   Bytes overflow{0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0x02};
@@ -369,7 +369,7 @@ TEST(DirectoryTest, RejectsVarintsLongerThanTenBytesOrBeyond64Bits) {
   EXPECT_EQ(parse_directory(max_delta).value()[0].tile_id, ~std::uint64_t{0});
 }
 
-TEST(DirectoryTest, RejectsTrailingBytes) {
+TEST(Directory, RejectsTrailingBytes) {
   Bytes raw = serialize_directory(std::vector<Entry>{{1, 0, 1, 1}});
   raw.push_back(0);
   auto r = parse_directory(raw);
@@ -377,18 +377,18 @@ TEST(DirectoryTest, RejectsTrailingBytes) {
   EXPECT_NE(r.error().message.find("trailing"), std::string::npos);
 }
 
-TEST(DirectoryTest, RejectsRepeatedTileIdsButAllowsZeroDeltaFirst) {
+TEST(Directory, RejectsRepeatedTileIdsButAllowsZeroDeltaFirst) {
   EXPECT_TRUE(parse_directory(Bytes{2, 0, 1, 1, 1, 1, 1, 1, 0}).ok());
   auto r = parse_directory(Bytes{2, 5, 0, 1, 1, 1, 1, 1, 0});
   EXPECT_EQ(r.error().code, ErrorCode::corrupt);
 }
 
-TEST(DirectoryTest, RejectsZeroLengthEntries) {
+TEST(Directory, RejectsZeroLengthEntries) {
   EXPECT_EQ(parse_directory(Bytes{1, 0, 1, 0, 1}).error().code, ErrorCode::corrupt);
   EXPECT_EQ(parse_directory(Bytes{1, 0, 0, 0, 1}).error().code, ErrorCode::corrupt);  // leaf too
 }
 
-TEST(DirectoryTest, RejectsLengthsAndRunLengthsBeyond32Bits) {
+TEST(Directory, RejectsLengthsAndRunLengthsBeyond32Bits) {
   // run length 2^32 (varint 80 80 80 80 10)
   EXPECT_EQ(parse_directory(Bytes{1, 0, 0x80, 0x80, 0x80, 0x80, 0x10, 1, 1}).error().code,
             ErrorCode::corrupt);
@@ -396,7 +396,7 @@ TEST(DirectoryTest, RejectsLengthsAndRunLengthsBeyond32Bits) {
             ErrorCode::corrupt);
 }
 
-TEST(DirectoryTest, RejectsHugeEntryCountsBeforeAllocating) {
+TEST(Directory, RejectsHugeEntryCountsBeforeAllocating) {
   // 2^60 entries declared in 9 bytes: refused by the limit, not by a failed allocation.
   Bytes huge{0x80, 0x80, 0x80, 0x80, 0x80, 0x80, 0x80, 0x80, 0x10};
   EXPECT_EQ(parse_directory(huge).error().code, ErrorCode::too_large);
@@ -407,7 +407,7 @@ TEST(DirectoryTest, RejectsHugeEntryCountsBeforeAllocating) {
             ErrorCode::too_large);
 }
 
-TEST(DirectoryTest, RejectsRunsOverlappingTheNextEntryAndIdOverflow) {
+TEST(Directory, RejectsRunsOverlappingTheNextEntryAndIdOverflow) {
   // ids 0 and 2, first run length 3 covers id 2.
   EXPECT_EQ(parse_directory(Bytes{2, 0, 2, 3, 1, 1, 1, 1, 0}).error().code, ErrorCode::corrupt);
   Bytes overflow{2,    0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff,
@@ -415,14 +415,14 @@ TEST(DirectoryTest, RejectsRunsOverlappingTheNextEntryAndIdOverflow) {
   EXPECT_EQ(parse_directory(overflow).error().code, ErrorCode::corrupt);
 }
 
-TEST(DirectoryTest, AcceptsAnEmptyDirectory) {
+TEST(Directory, AcceptsAnEmptyDirectory) {
   EXPECT_TRUE(parse_directory(Bytes{0}).value().empty());
   EXPECT_EQ(parse_directory(Bytes{}).error().code, ErrorCode::truncated);
 }
 
 // ---- compression --------------------------------------------------------------------------------
 
-TEST(CompressionTest, RoundTripsNoneGzipAndZstd) {
+TEST(Compression, RoundTripsNoneGzipAndZstd) {
   Bytes data;
   for (int i = 0; i < 100000; ++i) data.push_back(static_cast<std::uint8_t>(i * 7 % 251));
   for (Compression c : {Compression::none, Compression::gzip, Compression::zstd}) {
@@ -436,7 +436,7 @@ TEST(CompressionTest, RoundTripsNoneGzipAndZstd) {
                   .empty());
 }
 
-TEST(CompressionTest, WritesRealGzipStreams) {
+TEST(Compression, WritesRealGzipStreams) {
   const Bytes g = compress(bytes_of("hello"), Compression::gzip).value();
   ASSERT_GE(g.size(), 18u);
   EXPECT_EQ(g[0], 0x1f);
@@ -444,7 +444,7 @@ TEST(CompressionTest, WritesRealGzipStreams) {
   EXPECT_EQ(g[2], 8);  // deflate
 }
 
-TEST(CompressionTest, StopsDecompressionBombsAtTheLimit) {
+TEST(Compression, StopsDecompressionBombsAtTheLimit) {
   const Bytes zeros(16u << 20, 0);
   for (Compression c : {Compression::gzip, Compression::zstd}) {
     const Bytes bomb = compress(zeros, c).value();
@@ -455,7 +455,7 @@ TEST(CompressionTest, StopsDecompressionBombsAtTheLimit) {
   }
 }
 
-TEST(CompressionTest, ReportsEveryCutStreamAsTruncated) {
+TEST(Compression, ReportsEveryCutStreamAsTruncated) {
   Bytes data;
   std::mt19937 rng(3);
   for (int i = 0; i < 3000; ++i) data.push_back(static_cast<std::uint8_t>(rng() % 16));
@@ -470,7 +470,7 @@ TEST(CompressionTest, ReportsEveryCutStreamAsTruncated) {
   }
 }
 
-TEST(CompressionTest, RejectsGarbageTrailingBytesAndUnsupportedMethods) {
+TEST(Compression, RejectsGarbageTrailingBytesAndUnsupportedMethods) {
   for (Compression c : {Compression::gzip, Compression::zstd}) {
     Bytes packed = compress(bytes_of("some bytes"), c).value();
     packed.push_back(0x42);
@@ -486,7 +486,7 @@ TEST(CompressionTest, RejectsGarbageTrailingBytesAndUnsupportedMethods) {
 
 // ---- writer -> reader ---------------------------------------------------------------------------
 
-TEST(ArchiveTest, RoundTripsASmallArchiveThroughWriterAndReader) {
+TEST(Archive, RoundTripsASmallArchiveThroughWriterAndReader) {
   TempDir dir;
   WriterOptions o;
   o.path = dir.path() / "small.pmtiles";
@@ -531,7 +531,7 @@ TEST(ArchiveTest, RoundTripsASmallArchiveThroughWriterAndReader) {
   EXPECT_EQ(r.leaf_directory_count().value(), 0u);
 }
 
-TEST(ArchiveTest, LargeArchiveSpillsIntoLeafDirectoriesAndReadsBackEveryTile) {
+TEST(Archive, LargeArchiveSpillsIntoLeafDirectoriesAndReadsBackEveryTile) {
   TempDir dir;
   constexpr std::uint64_t kTiles = 200000;
   std::mt19937 rng(5);
@@ -584,7 +584,7 @@ TEST(ArchiveTest, LargeArchiveSpillsIntoLeafDirectoriesAndReadsBackEveryTile) {
   EXPECT_EQ(reader->get_by_tile_id(kTiles).error().code, ErrorCode::not_found);
 }
 
-TEST(ArchiveTest, WritesZstdAndUncompressedDirectoriesToo) {
+TEST(Archive, WritesZstdAndUncompressedDirectoriesToo) {
   for (Compression c : {Compression::zstd, Compression::none}) {
     TempDir dir;
     WriterOptions o;
@@ -601,7 +601,7 @@ TEST(ArchiveTest, WritesZstdAndUncompressedDirectoriesToo) {
   }
 }
 
-TEST(WriterTest, StoresIdenticalPayloadsOnce) {
+TEST(Writer, StoresIdenticalPayloadsOnce) {
   TempDir dir;
   WriterOptions o;
   o.path = dir.path() / "dedup.pmtiles";
@@ -627,7 +627,7 @@ TEST(WriterTest, StoresIdenticalPayloadsOnce) {
   EXPECT_EQ(a.data(), r->bytes().data() + r->header().tile_data_offset);
 }
 
-TEST(WriterTest, KeepsPayloadsThatDifferOnlyAfterTheirFirstBytesApart) {
+TEST(Writer, KeepsPayloadsThatDifferOnlyAfterTheirFirstBytesApart) {
   TempDir dir;
   std::map<TileId, Bytes> tiles;
   Bytes a(200000, 1), b(200000, 1);
@@ -640,7 +640,7 @@ TEST(WriterTest, KeepsPayloadsThatDifferOnlyAfterTheirFirstBytesApart) {
   EXPECT_EQ(Bytes(got.begin(), got.end()), b);
 }
 
-TEST(WriterTest, MergesConsecutiveIdenticalTilesIntoOneRun) {
+TEST(Writer, MergesConsecutiveIdenticalTilesIntoOneRun) {
   TempDir dir;
   std::map<TileId, Bytes> tiles;
   // ids 5..20 (all of zoom 2) plus id 21 (3/0/0) carry the same bytes; id 22 differs.
@@ -660,7 +660,7 @@ TEST(WriterTest, MergesConsecutiveIdenticalTilesIntoOneRun) {
   EXPECT_EQ(r->get_by_tile_id(4).error().code, ErrorCode::not_found);
 }
 
-TEST(WriterTest, AcceptsTilesFromManyThreadsInAnyOrder) {
+TEST(Writer, AcceptsTilesFromManyThreadsInAnyOrder) {
   TempDir dir;
   WriterOptions o;
   o.path = dir.path() / "mt.pmtiles";
@@ -691,7 +691,7 @@ TEST(WriterTest, AcceptsTilesFromManyThreadsInAnyOrder) {
   }
 }
 
-TEST(WriterTest, RejectsDuplicateTilesInvalidCoordinatesAndEmptyPayloads) {
+TEST(Writer, RejectsDuplicateTilesInvalidCoordinatesAndEmptyPayloads) {
   TempDir dir;
   WriterOptions o;
   o.path = dir.path() / "x.pmtiles";
@@ -709,7 +709,7 @@ TEST(WriterTest, RejectsDuplicateTilesInvalidCoordinatesAndEmptyPayloads) {
   EXPECT_EQ(r->header().addressed_tiles, 1u);
 }
 
-TEST(WriterTest, RejectsBadOptions) {
+TEST(Writer, RejectsBadOptions) {
   TempDir dir;
   WriterOptions o;
   EXPECT_EQ(Writer::create(o).error().code, ErrorCode::invalid_argument);  // no path
@@ -725,7 +725,7 @@ TEST(WriterTest, RejectsBadOptions) {
   EXPECT_TRUE(dir.names().empty());
 }
 
-TEST(WriterTest, DroppedOrAbortedWriterLeavesNoFiles) {
+TEST(Writer, DroppedOrAbortedWriterLeavesNoFiles) {
   TempDir dir;
   {
     WriterOptions o;
@@ -745,7 +745,7 @@ TEST(WriterTest, DroppedOrAbortedWriterLeavesNoFiles) {
   }
 }
 
-TEST(WriterTest, LeavesTheDestinationUntouchedUntilFinishSucceeds) {
+TEST(Writer, LeavesTheDestinationUntouchedUntilFinishSucceeds) {
   TempDir dir;
   const fs::path dest = dir.path() / "a.pmtiles";
   std::ofstream(dest) << "previous archive";
@@ -764,7 +764,7 @@ TEST(WriterTest, LeavesTheDestinationUntouchedUntilFinishSucceeds) {
   EXPECT_EQ(dir.names(), std::vector<std::string>{"a.pmtiles"});
 }
 
-TEST(WriterTest, RefusesToFinishAnArchiveWithoutTiles) {
+TEST(Writer, RefusesToFinishAnArchiveWithoutTiles) {
   TempDir dir;
   WriterOptions o;
   o.path = dir.path() / "empty.pmtiles";
@@ -773,7 +773,7 @@ TEST(WriterTest, RefusesToFinishAnArchiveWithoutTiles) {
   EXPECT_TRUE(dir.names().empty());
 }
 
-TEST(WriterTest, ReportsAnIoErrorNamingTheUnwritablePath) {
+TEST(Writer, ReportsAnIoErrorNamingTheUnwritablePath) {
   WriterOptions o;
   o.path = "/nonexistent-vts-dir/sub/a.pmtiles";
   auto r = Writer::create(o);
@@ -786,7 +786,7 @@ TEST(WriterTest, ReportsAnIoErrorNamingTheUnwritablePath) {
   EXPECT_EQ(Writer::create(o).error().code, ErrorCode::io);
 }
 
-TEST(WriterTest, FailingWriteDuringFinishReturnsIoErrorAndLeavesNoFiles) {
+TEST(Writer, FailingWriteDuringFinishReturnsIoErrorAndLeavesNoFiles) {
   // RLIMIT_FSIZE makes writes past the limit fail with EFBIG, as a full disk fails with ENOSPC.
   TempDir dir;
   WriterOptions o;
@@ -819,7 +819,7 @@ TEST(WriterTest, FailingWriteDuringFinishReturnsIoErrorAndLeavesNoFiles) {
 
 // ---- reader: files and hostile archives ---------------------------------------------------------
 
-TEST(ReaderTest, ReportsMissingEmptyAndNonArchiveFiles) {
+TEST(Reader, ReportsMissingEmptyAndNonArchiveFiles) {
   TempDir dir;
   EXPECT_EQ(Reader::open(dir.path() / "missing.pmtiles").error().code, ErrorCode::not_found);
   std::ofstream(dir.path() / "empty.pmtiles").close();
@@ -831,7 +831,7 @@ TEST(ReaderTest, ReportsMissingEmptyAndNonArchiveFiles) {
   EXPECT_EQ(Reader::open(dir.path()).error().code, ErrorCode::io);
 }
 
-TEST(ReaderTest, ReadsAHandAssembledTwoLevelArchive) {
+TEST(Reader, ReadsAHandAssembledTwoLevelArchive) {
   const Bytes file = assemble(two_level_parts());
   auto r = Reader::open_bytes(file).value();
   auto tile = [&](std::uint64_t id) {
@@ -853,7 +853,7 @@ TEST(ReaderTest, ReadsAHandAssembledTwoLevelArchive) {
   EXPECT_EQ(n, 4);  // stopped by the visitor, which is not an error
 }
 
-TEST(ReaderTest, RejectsArchiveTruncatedAtAnyByte) {
+TEST(Reader, RejectsArchiveTruncatedAtAnyByte) {
   TempDir dir;
   const Bytes written = read_all(write_archive(dir, small_tiles()));
   for (const Bytes& file : {written, assemble(two_level_parts())}) {
@@ -867,7 +867,7 @@ TEST(ReaderTest, RejectsArchiveTruncatedAtAnyByte) {
   }
 }
 
-TEST(ReaderTest, SurvivesEveryBitFlip) {
+TEST(Reader, SurvivesEveryBitFlip) {
   TempDir dir;
   const Bytes written = read_all(write_archive(dir, small_tiles()));
   for (const Bytes& file : {written, assemble(two_level_parts())}) {
@@ -879,7 +879,7 @@ TEST(ReaderTest, SurvivesEveryBitFlip) {
   }
 }
 
-TEST(ReaderTest, RejectsSectionsExtendingPastTheEndOfTheFile) {
+TEST(Reader, RejectsSectionsExtendingPastTheEndOfTheFile) {
   const Parts p = two_level_parts();
   const Header good = header_for(p);
   for (int section = 0; section < 4; ++section) {
@@ -905,7 +905,7 @@ TEST(ReaderTest, RejectsSectionsExtendingPastTheEndOfTheFile) {
   EXPECT_EQ(Reader::open_bytes(assemble(p, h)).error().code, ErrorCode::corrupt);
 }
 
-TEST(ReaderTest, RejectsALeafDirectoryThatPointsToItself) {
+TEST(Reader, RejectsALeafDirectoryThatPointsToItself) {
   Parts p;
   p.data = bytes_of("tile");
   // The leaf holds one leaf pointer to offset 0, its own offset; the root points at it too.
@@ -938,7 +938,7 @@ Bytes leaf_chain(int leaf_levels) {
   return assemble(p);
 }
 
-TEST(ReaderTest, FollowsLeavesUpToTheDepthLimitAndNoFurther) {
+TEST(Reader, FollowsLeavesUpToTheDepthLimitAndNoFurther) {
   for (int leaf_levels = 0; leaf_levels < kMaxDirectoryDepth; ++leaf_levels) {
     const Bytes file = leaf_chain(leaf_levels);
     auto r = Reader::open_bytes(file).value();
@@ -954,7 +954,7 @@ TEST(ReaderTest, FollowsLeavesUpToTheDepthLimitAndNoFurther) {
   EXPECT_EQ(r->for_each_entry([](const Entry&) { return true; }).error().code, ErrorCode::corrupt);
 }
 
-TEST(ReaderTest, RejectsALeafReferencedTwiceWhenWalking) {
+TEST(Reader, RejectsALeafReferencedTwiceWhenWalking) {
   Parts p = two_level_parts();
   const std::vector<Entry> leaves = parse_directory(p.root).value();
   // Both root pointers lead to the first leaf: lookups of ids 1..4 still work, a walk refuses.
@@ -965,7 +965,7 @@ TEST(ReaderTest, RejectsALeafReferencedTwiceWhenWalking) {
   EXPECT_EQ(r->for_each_entry([](const Entry&) { return true; }).error().code, ErrorCode::corrupt);
 }
 
-TEST(ReaderTest, NamesALeafPointerBeyondTheLeafSection) {
+TEST(Reader, NamesALeafPointerBeyondTheLeafSection) {
   Parts p = two_level_parts();
   p.root = serialize_directory(std::vector<Entry>{{1, 123, 456, 0}});
   p.leaves.resize(400);
@@ -978,7 +978,7 @@ TEST(ReaderTest, NamesALeafPointerBeyondTheLeafSection) {
             "leaf directory at offset 123 length 456 extends past the leaf section (size 400)");
 }
 
-TEST(ReaderTest, RejectsATileEntryBeyondTheTileData) {
+TEST(Reader, RejectsATileEntryBeyondTheTileData) {
   Parts p;
   p.data = bytes_of("0123456789");
   p.root = serialize_directory(std::vector<Entry>{{0, 0, 10, 1}, {1, 5, 6, 1}});
@@ -992,7 +992,7 @@ TEST(ReaderTest, RejectsATileEntryBeyondTheTileData) {
   EXPECT_EQ(r->for_each_entry([](const Entry&) { return true; }).error().code, ErrorCode::corrupt);
 }
 
-TEST(ReaderTest, StopsAGzipBombInTheRootOrALeafDirectory) {
+TEST(Reader, StopsAGzipBombInTheRootOrALeafDirectory) {
   // 16 MiB of zeros: a directory of zero entries followed by garbage, after decompression.
   const Bytes bomb = compress(Bytes(16u << 20, 0), Compression::gzip).value();
   ReaderOptions small;
@@ -1037,7 +1037,7 @@ TEST(ReaderTest, StopsAGzipBombInTheRootOrALeafDirectory) {
   }
 }
 
-TEST(ReaderTest, RejectsAHugeEntryCountWithoutAllocatingIt) {
+TEST(Reader, RejectsAHugeEntryCountWithoutAllocatingIt) {
   Parts p;
   p.root = {0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0x7f, 1, 1, 1, 1};
   p.data = bytes_of("x");
@@ -1047,13 +1047,13 @@ TEST(ReaderTest, RejectsAHugeEntryCountWithoutAllocatingIt) {
   EXPECT_EQ(r.error().code, ErrorCode::too_large);
 }
 
-TEST(ReaderTest, RejectsUnsupportedInternalCompression) {
+TEST(Reader, RejectsUnsupportedInternalCompression) {
   Parts p = two_level_parts();
   p.compression = Compression::brotli;
   EXPECT_EQ(Reader::open_bytes(assemble(p)).error().code, ErrorCode::unsupported);
 }
 
-TEST(ReaderTest, ValidatesTileCoordinatesBeforeLookingUp) {
+TEST(Reader, ValidatesTileCoordinatesBeforeLookingUp) {
   TempDir dir;
   auto r = Reader::open(write_archive(dir, small_tiles())).value();
   EXPECT_EQ(r->get(TileId{32, 0, 0}).error().code, ErrorCode::invalid_argument);
@@ -1062,7 +1062,7 @@ TEST(ReaderTest, ValidatesTileCoordinatesBeforeLookingUp) {
   EXPECT_EQ(r->get(TileId{31, 0x7fffffff, 0x7fffffff}).error().code, ErrorCode::not_found);
 }
 
-TEST(ReaderTest, ServesConcurrentLookupsThroughATinyLeafCache) {
+TEST(Reader, ServesConcurrentLookupsThroughATinyLeafCache) {
   TempDir dir;
   WriterOptions o;
   o.path = dir.path() / "leafy.pmtiles";
@@ -1094,7 +1094,7 @@ TEST(ReaderTest, ServesConcurrentLookupsThroughATinyLeafCache) {
   EXPECT_EQ(bad.load(), 0);
 }
 
-TEST(ReaderTest, ReadsAnArchiveWithoutMetadata) {
+TEST(Reader, ReadsAnArchiveWithoutMetadata) {
   Parts p = two_level_parts();
   p.metadata.clear();
   const Bytes file = assemble(p);  // must outlive the reader
