@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The main job: set up, build vtstream (Release, into build/), and build a pyramid archive.
+# The main job: set up, build vtstream (RelWithDebInfo, into build/), and build a pyramid archive.
 #
 #   bash scripts/run.sh                  # Earth JPEG -> out/earth.pmtiles, then `vts info` on it
 #   bash scripts/run.sh IN.tif -o X.pmtiles [vts build options...]   # your own `vts build` run
@@ -12,11 +12,11 @@ cd "$ROOT"
 
 bash scripts/setup.sh
 
-echo "[run] configuring build/ (Release)"
-cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=Release \
+echo "[run] configuring build/ (RelWithDebInfo, the same build the tests use)"
+cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DVTS_BUILD_RENDERER="${VTS_BUILD_RENDERER:-OFF}" >/dev/null
 echo "[run] building"
-cmake --build build -j2
+cmake --build build -j2 --target vts
 
 VTS=build/cli/vts
 if (($# > 0)); then
