@@ -22,7 +22,7 @@ struct ImageSource::Piece {
   // Tiled files are read one band of tile rows at a time with read_tiles(): OpenImageIO 2.4's
   // read_scanlines() on tiled TIFFs crashes (SIGFPE), and whole tile rows are what it would
   // decode anyway.
-  int tile_height = 0;
+  int tile_width = 0, tile_height = 0;
   std::vector<std::uint8_t> band;
   std::int64_t band_y0 = -1;
 
@@ -38,9 +38,18 @@ struct ImageSource::Piece {
       const auto b1 = std::min<std::int64_t>(b0 + tile_height, static_cast<std::int64_t>(height));
       if (b0 != band_y0) {
         band.resize(static_cast<std::size_t>(b1 - b0) * row_bytes);
-        if (!in->read_tiles(0, 0, 0, static_cast<int>(width), static_cast<int>(b0),
-                            static_cast<int>(b1), 0, 1, 0, nch, type, band.data()))
-          return false;
+        // A few tiles at a time: OpenImageIO stages a read_tiles() region in a buffer of its own,
+        // which for a whole band would double the band's memory.
+        const std::uint64_t chunk = std::uint64_t(tile_width) * 8;
+        for (std::uint64_t x0 = 0; x0 < width; x0 += chunk) {
+          const std::uint64_t x1 = std::min(width, x0 + chunk);
+          const std::size_t px = nch * type.size();
+          if (!in->read_tiles(0, 0, static_cast<int>(x0), static_cast<int>(x1),
+                              static_cast<int>(b0), static_cast<int>(b1), 0, 1, 0, nch, type,
+                              band.data() + x0 * px, static_cast<OIIO::stride_t>(px),
+                              static_cast<OIIO::stride_t>(row_bytes)))
+            return false;
+        }
         band_y0 = b0;
       }
       const std::uint64_t take =
@@ -139,6 +148,7 @@ Status ImageSource::open_row(std::uint32_t grid_row) {
     piece->width = static_cast<std::uint64_t>(spec.width);
     piece->height = static_cast<std::uint64_t>(spec.height);
     piece->channels = spec.nchannels;
+    piece->tile_width = spec.tile_width;
     piece->tile_height = spec.tile_width > 0 ? spec.tile_height : 0;
     const auto base = spec.format.basetype;
     piece->is_float = base == OIIO::TypeDesc::FLOAT || base == OIIO::TypeDesc::HALF ||

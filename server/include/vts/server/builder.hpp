@@ -4,10 +4,12 @@
 // Streaming: the input is read in strips of scanlines by a reader thread; every level keeps only a
 // ring of T + 2B + 2 rows of its own width, from which it cuts one row of tiles at a time and makes
 // the next coarser level's rows (2x2 box filter in linear light). Peak memory is therefore about
-//     8 * (T + 2B + 2) * W  bytes   (all levels together: a geometric series of 4 * ... * W)
-//   + threads * 4 tiles being encoded + one input strip,
-// independent of the image height and of the number of texels; 100k x 50k RGB at T=256 needs
-// ~0.25 GB. Tile encoding runs on a pool of worker threads.
+//     8 * (T + 2B + 2) * W  bytes   (all levels' rings: their widths sum to ~2W)
+//   + one band of input tiles for a tiled input (tile_height * W * channels)
+//   + threads * 4 tiles being encoded + three input strips of <= 4 MiB,
+// independent of the image height and of the number of texels; a 100k x 50k RGB tiled BigTIFF at
+// T=256 peaks at ~0.45 GB RSS including ~130 MiB of code and fixed buffers. Tile encoding runs on
+// a pool of worker threads.
 //
 // A build writes the archive under a temporary name and renames it at the end: a failed or
 // cancelled build leaves nothing under the output name.
