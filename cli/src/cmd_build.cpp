@@ -99,7 +99,8 @@ int run_build(const BuildArgs& a) {
 
   ProgressBar bar("build", "tiles", !a.quiet && !a.json);
   o.on_progress = [&](const BuildProgress& p) {
-    bar.update(p.tiles_done, p.tiles_total, human_bytes(p.bytes_written));
+    bar.update(p.tiles_done, p.tiles_total,
+               human_bytes(p.bytes_written) + (p.finishing ? "  writing archive..." : ""));
   };
   install_cancel_handlers();
   o.cancel = &g_cancel;

@@ -431,6 +431,14 @@ Result<BuildReport> build_pyramid(const BuildOptions& o) {
     (*writer)->abort();
     return make_error(ErrorCode::cancelled, "build cancelled");
   }
+  if (o.on_progress) {
+    BuildProgress p;
+    p.tiles_done = p.tiles_total = shared.tiles_done;
+    p.bytes_written = shared.bytes;
+    p.seconds = seconds_since(t0);
+    p.finishing = true;
+    o.on_progress(p);
+  }
   auto stats = (*writer)->finish(info.to_json());
   if (!stats) return std::move(stats).error();
   report.stats = *stats;

@@ -47,6 +47,7 @@ struct BuildProgress {
   std::uint64_t rows_total = 0;
   std::uint64_t bytes_written = 0;  // tile payload bytes so far (before dedup)
   double seconds = 0;
+  bool finishing = false;  // every tile is encoded; the archive file is being assembled
 };
 
 struct BuildOptions {
