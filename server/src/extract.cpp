@@ -14,7 +14,8 @@ Result<TileImage> load_tile(const pmtiles::Reader& reader, const TilesetInfo& in
   auto bytes = reader.get(id);
   if (!bytes) {
     Error e = std::move(bytes).error();
-    e.message = "tile " + id.to_string() + ": " + e.message;
+    if (e.message.find(id.to_string()) == std::string::npos)
+      e.message = "tile " + id.to_string() + ": " + e.message;
     return e;
   }
   auto img = decode_tile(*bytes);
@@ -139,6 +140,15 @@ Status extract_level(const pmtiles::Reader& reader, const TilesetInfo& info, int
         ErrorCode::invalid_argument,
         "level " + std::to_string(z) + " is outside 0.." + std::to_string(g.max_zoom()));
   const std::uint64_t w = g.level_width(z), h = g.level_height(z);
+  // One row of tiles is held in memory; refuse levels whose row would not fit comfortably (and
+  // whose image few formats or viewers could take anyway).
+  constexpr std::uint64_t kMaxStripBytes = 1ull << 30;
+  if (w * g.tile_size() * 4 > kMaxStripBytes || w * h > (1ull << 34))
+    return make_error(ErrorCode::too_large,
+                      "level " + std::to_string(z) + " is " + std::to_string(w) + "x" +
+                          std::to_string(h) +
+                          " texels, too large to write as one image; extract single tiles or a "
+                          "coarser level");
   auto out = Output::open(o, w, h);
   if (!out) return std::move(out).error();
   const std::uint32_t T = g.tile_size(), B = g.border(), S = g.stored_size();
