@@ -10,6 +10,7 @@
 
 #include "vts/protocol/pmtiles.hpp"
 #include "vts/server/downsample.hpp"
+#include "vts/server/extract.hpp"
 #include "vts/server/synthetic.hpp"
 
 namespace vts {
@@ -436,6 +437,36 @@ TEST(Builder, SparsePlanetSizedSyntheticArchiveStaysSmall) {
   EXPECT_EQ(missing.error().code, ErrorCode::not_found);
   EXPECT_EQ(r.levels[17].tiles, 8u * 4u);
   EXPECT_EQ(r.levels[3].tiles, 64u);
+  // The finest level is far too large to write as one image: a clear error, no allocation.
+  ExtractOptions eo;
+  eo.output = dir / "level17.png";
+  const Status too_big = extract_level(*a.reader, a.info, 17, eo);
+  ASSERT_FALSE(too_big.ok());
+  EXPECT_EQ(too_big.error().code, ErrorCode::too_large);
+  EXPECT_FALSE(fs::exists(eo.output));
+}
+
+TEST(Builder, SparseLevelExtractsWithAbsentTilesTransparent) {
+  TempDir dir;
+  BuildOptions o;
+  o.synthetic = SyntheticSpec{1024, 1024, TexelRect{100, 100, 200, 150}, 2};
+  o.tile_size = 64;
+  o.output = dir / "sparse.pmtiles";
+  build(o);
+  const Archive a = Archive::open(dir / "sparse.pmtiles");
+  ASSERT_EQ(a.info.geometry.max_zoom(), 4);
+  ExtractOptions eo;
+  eo.output = dir / "level4.png";
+  ASSERT_TRUE(extract_level(*a.reader, a.info, 4, eo).ok());
+  const Rgba img = read_source(eo.output);  // alpha kept: the file has 4 channels
+  ASSERT_EQ(img.w, 1024u);
+  std::uint8_t expect[4];
+  synthetic_texel(150, 120, expect);
+  EXPECT_EQ(std::memcmp(img.at(150, 120), expect, 4), 0);  // inside the region: exact
+  synthetic_texel(64, 64, expect);
+  EXPECT_EQ(std::memcmp(img.at(64, 64), expect, 4), 0);  // in a tile that touches the region
+  const std::uint8_t clear[4] = {0, 0, 0, 0};
+  EXPECT_EQ(std::memcmp(img.at(900, 900), clear, 4), 0);  // absent tile: transparent
 }
 
 TEST(Builder, FailedBuildLeavesNoFileBehind) {
