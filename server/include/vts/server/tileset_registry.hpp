@@ -1,0 +1,64 @@
+// The tilesets a server hosts, by name. A tileset is an opened archive plus what the HTTP layer
+// needs precomputed (metadata, version). Lookups return a shared_ptr snapshot: a request holds it
+// until its response is sent, so a hot reload can swap in a new archive while in-flight requests
+// finish on the old mapping. Names come from file stems and are looked up in a table — never
+// joined into a filesystem path.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "vts/protocol/pmtiles.hpp"
+#include "vts/protocol/result.hpp"
+#include "vts/protocol/tileset.hpp"
+
+namespace vts {
+
+struct Tileset {
+  std::string name;
+  std::filesystem::path path;
+  std::shared_ptr<pmtiles::Reader> reader;
+  TilesetInfo info;
+  // 16 lowercase hex digits identifying the archive's content (XXH3-64 of its header, root
+  // directory and metadata bytes). Versioned URLs carry it; a rebuilt archive gets a new one.
+  std::string version;
+  // Identity of the file that was opened (for change detection on reload).
+  std::uint64_t file_size = 0;
+  std::int64_t file_mtime_ns = 0;
+  std::uint64_t file_inode = 0;
+};
+
+// Opens one archive as a tileset named after its file stem; validates metadata.
+Result<std::shared_ptr<const Tileset>> open_tileset(const std::filesystem::path& path);
+
+// Thread-safe registry. Readers take snapshots; writers replace entries atomically.
+class TilesetRegistry {
+ public:
+  // Adds every archive named by `paths`: a *.pmtiles file, or a folder whose *.pmtiles files
+  // (not recursive) are each a tileset. Fails on the first unreadable archive or duplicate name.
+  Status load(const std::vector<std::filesystem::path>& paths);
+
+  // Re-opens every tileset whose file changed (size, mtime or inode) or, with force, all of them.
+  // A new archive that fails to open is refused and the old one kept (its error is returned in
+  // the list of failures). Returns how many were swapped.
+  struct ReloadResult {
+    int swapped = 0;
+    std::vector<Error> failures;
+  };
+  ReloadResult reload(bool force);
+
+  std::shared_ptr<const Tileset> find(std::string_view name) const;
+  std::vector<std::shared_ptr<const Tileset>> all() const;  // sorted by name
+  std::size_t size() const;
+
+ private:
+  mutable std::mutex mutex_;
+  std::map<std::string, std::shared_ptr<const Tileset>, std::less<>> tilesets_;
+};
+
+}  // namespace vts
