@@ -48,6 +48,7 @@ int run_info(const std::string& path, bool json) {
     j["color_space"] = s.info.color_space;
     j["downsample"] = s.info.downsample;
     j["sparse"] = s.info.sparse;
+    j["content_hash"] = s.info.content_hash;
     j["tiles"] = s.addressed_tiles;
     j["unique_tiles"] = s.unique_tiles;
     j["entries"] = s.entries;

@@ -166,6 +166,10 @@ Result<TilesetInfo> parse(const json& root) {
   auto generator = get_string(v, p, "generator");
   if (!generator) return std::move(generator).error();
   info.generator = *generator;
+  // Optional: archives written before it existed simply have no content hash.
+  auto content_hash = get_optional_string(v, "content_hash");
+  if (!content_hash) return std::move(content_hash).error();
+  info.content_hash = *content_hash;
 
   // Generic keys: optional (other tools may rewrite them), but typed when present.
   auto name = get_optional_string(root, "name");
@@ -203,6 +207,7 @@ std::string TilesetInfo::to_json() const {
       {"payload", kPayloadName},
       {"generator", generator},
   };
+  if (!content_hash.empty()) ours["content_hash"] = content_hash;
   ordered_json root = {
       {"name", name},        {"description", description},
       {"type", "baselayer"}, {"format", std::string("vts-") + codec_name(codec)},

@@ -3,10 +3,13 @@
 #include <algorithm>
 #include <cassert>
 #include <condition_variable>
+#include <cstdio>
 #include <cstring>
 #include <deque>
 #include <mutex>
 #include <thread>
+
+#include <xxhash.h>
 
 #include "image_source.hpp"
 #include "vts/server/downsample.hpp"
@@ -33,6 +36,9 @@ struct Shared {
   const std::atomic<bool>* cancel = nullptr;
   std::atomic<std::uint64_t> tiles_done{0};
   std::atomic<std::uint64_t> bytes{0};
+  // Sum over tiles of XXH3(tile id, payload checksum): order-independent, so encoder threads can
+  // add in any order. Becomes TilesetInfo::content_hash.
+  std::atomic<std::uint64_t> content_sum{0};
   std::atomic<bool> failed{false};
   std::mutex error_mutex;
   std::optional<Error> error;
@@ -53,6 +59,10 @@ struct Shared {
     auto payload = codec->encode(img, encode);
     if (!payload) return fail(std::move(payload).error());
     if (auto st = writer->add_tile(id, *payload); !st) return fail(st.error());
+    if (auto header = parse_tile_header(*payload)) {
+      const std::uint64_t key[2] = {pmtiles::zxy_to_tile_id(id.z, id.x, id.y), header->checksum};
+      content_sum += XXH3_64bits(key, sizeof key);
+    }
     bytes += payload->size();
     ++tiles_done;
   }
@@ -422,6 +432,10 @@ Result<BuildReport> build_pyramid(const BuildOptions& o) {
   info.description = o.description.empty() ? input_desc : o.description;
   info.downsample = o.synthetic ? "synthetic-per-level" : "box-linear";
   info.sparse = o.synthetic && o.synthetic->region.has_value();
+  char hash[17];
+  std::snprintf(hash, sizeof hash, "%016llx",
+                static_cast<unsigned long long>(shared.content_sum.load()));
+  info.content_hash = hash;
   for (int z = 0; z <= g.max_zoom(); ++z) {
     const std::uint64_t n =
         o.synthetic ? synthetic_range(g, *o.synthetic, z).count() : g.tile_count(z);

@@ -334,6 +334,27 @@ TEST(Builder, GridMosaicEqualsTheWholeImage) {
     expect_same(a.level(z), b.level(z), "level " + std::to_string(z));
 }
 
+TEST(Builder, ContentHashFollowsTheTilesNotTheBuild) {
+  TempDir dir;
+  write_image(dir / "a.png", 300, 200, 3, noise(300 * 200 * 3, 1));
+  auto b = noise(300 * 200 * 3, 1);
+  b[1000] ^= 1;  // one texel differs
+  write_image(dir / "b.png", 300, 200, 3, b);
+  BuildOptions o = options_for(dir / "a.png", dir / "a1.pmtiles");
+  o.threads = 1;
+  const std::string a1 = build(o).info.content_hash;
+  o.output = dir / "a2.pmtiles";
+  o.threads = 3;  // another order of completion
+  const std::string a2 = build(o).info.content_hash;
+  o.inputs = {dir / "b.png"};
+  o.output = dir / "b.pmtiles";
+  const std::string h_b = build(o).info.content_hash;
+  EXPECT_EQ(a1.size(), 16u);
+  EXPECT_EQ(a1, a2);
+  EXPECT_NE(a1, h_b);
+  EXPECT_EQ(Archive::open(dir / "a1.pmtiles").info.content_hash, a1);
+}
+
 TEST(Builder, GridWithMismatchedPiecesIsRejected) {
   TempDir dir;
   write_image(dir / "a.png", 10, 10, 3, noise(300, 1));

@@ -24,6 +24,10 @@ struct TilesetInfo {
   std::string downsample = "box-linear";  // how level z-1 was made from level z
   bool sparse = false;                    // some tiles inside the image may be absent
   std::string generator = "vtstream";     // tool and version that wrote the archive
+  // 16 hex digits summarising every tile's id and payload checksum (order-independent), so two
+  // archives with different tile bytes never share metadata — and the server's archive version,
+  // which hashes the metadata, always changes with the tiles. Optional; empty when unknown.
+  std::string content_hash;
 
   std::string to_json() const;
   // Validates every field (unknown codec, unsupported format_version, bad geometry → error).
