@@ -29,6 +29,7 @@ int main(int argc, char** argv) {
   add(&vts::cli::add_info);
   add(&vts::cli::add_verify);
   add(&vts::cli::add_extract);
+  add(&vts::cli::add_serve);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

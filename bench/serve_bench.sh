@@ -1,0 +1,195 @@
+#!/usr/bin/env bash
+# Tile serving benchmark (DESIGN.md §6, issue 3): `vts serve` against nginx serving the same tiles
+# extracted as static files (sendfile on, access_log off, 2 workers), on this machine in one run,
+# with wrk -t2 -c64 --latency and bench/random_tiles.lua:
+#   tiles  random existing tiles (GET /earth/z/x/y), bodies from the archive mapping / sendfile
+#   304    the same with a matching If-None-Match (each server's own ETags)
+#   range  random tile-sized Range reads of /earth.pmtiles (206)
+# Prints a markdown table (req/s, MB/s, p50, p99, ratio vs nginx) with machine, date and commit.
+#
+#   bash bench/serve_bench.sh [--vts PATH] [--duration 10s] [--input IMAGE] [--out FILE]
+#
+# Input: bench/.cache/earth_16384x8192.tif if present (see build_bench.sh), else the Earth JPEG
+# upscaled 4x (8192x4096) with oiiotool. The archive is built once into bench/.cache.
+# shellcheck source=lib.sh
+source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
+
+VTS_ARG=""
+DURATION=10s
+INPUT=""
+OUT_FILE=""
+while (($#)); do
+  case $1 in
+    --vts) VTS_ARG=$2; shift 2 ;;
+    --duration) DURATION=$2; shift 2 ;;
+    --input) INPUT=$2; shift 2 ;;
+    --out) OUT_FILE=$2; shift 2 ;;
+    *) die "unknown argument '$1'" ;;
+  esac
+done
+need wrk nginx curl dd
+VTS=$(find_vts "$VTS_ARG")
+DUMP=${PMTILES_DUMP:-$(dirname "$VTS")/../tests/integration/pmtiles_dump}
+[[ -x $DUMP ]] || die "no pmtiles_dump at $DUMP (build the tests, or set PMTILES_DUMP)"
+
+mkdir -p "$CACHE"
+if [[ -z $INPUT ]]; then
+  INPUT=$CACHE/earth_16384x8192.tif
+  if [[ ! -r $INPUT ]]; then
+    INPUT=$CACHE/earth_8192x4096.tif
+    if [[ ! -r $INPUT ]]; then
+      need oiiotool
+      oiiotool "$EARTH" --resize:filter=lanczos3 8192x4096 -d uint8 -o "$INPUT"
+    fi
+  fi
+fi
+ARCHIVE=$CACHE/serve_$(basename "${INPUT%.*}").pmtiles
+if [[ ! -s $ARCHIVE || $INPUT -nt $ARCHIVE ]]; then
+  echo "building $ARCHIVE from $INPUT" >&2
+  "$VTS" build "$INPUT" -o "$ARCHIVE" >/dev/null
+fi
+
+T=$(mktemp -d "${TMPDIR:-/tmp}/vts-serve-bench.XXXXXX")
+NGINX_PID=""
+VTS_PID=""
+finish() {
+  [[ -n $VTS_PID ]] && kill -TERM "$VTS_PID" 2>/dev/null && wait "$VTS_PID" 2>/dev/null
+  [[ -n $NGINX_PID ]] && kill -QUIT "$NGINX_PID" 2>/dev/null && wait "$NGINX_PID" 2>/dev/null
+  rm -rf "$T"
+}
+trap finish EXIT
+
+# Static copy for nginx: every stored tile as the file earth/z/x/y, plus the archive itself.
+echo "extracting tiles for nginx" >&2
+mkdir -p "$T/static/earth"
+cp "$ARCHIVE" "$T/static/earth.pmtiles"
+"$DUMP" offsets "$ARCHIVE" >"$T/offsets"
+while read -r _ z x y off len; do
+  mkdir -p "$T/static/earth/$z/$x"
+  dd if="$ARCHIVE" of="$T/static/earth/$z/$x/$y" iflag=skip_bytes,count_bytes skip="$off" \
+    count="$len" status=none
+done <"$T/offsets"
+awk '{ print "/earth/" $2 "/" $3 "/" $4 }' "$T/offsets" >"$T/tiles.txt"
+awk '{ print "/earth.pmtiles", $5, $5 + $6 - 1 }' "$T/offsets" >"$T/ranges.txt"
+NTILES=$(wc -l <"$T/tiles.txt")
+TILE_BYTES=$(awk '{ s += $6 } END { print s }' "$T/offsets")
+chmod -R a+rX "$T"
+
+free_port() {
+  local p
+  while :; do
+    p=$((20000 + RANDOM % 30000))
+    ss -ltn | awk '{ print $4 }' | grep -q ":$p\$" || { echo "$p"; return; }
+  done
+}
+NGINX_PORT=$(free_port)
+mkdir -p "$T/nginx/logs"
+cat >"$T/nginx/nginx.conf" <<CONF
+worker_processes 2;
+daemon off;
+pid $T/nginx/nginx.pid;
+error_log $T/nginx/error.log warn;
+events { worker_connections 4096; }
+http {
+  access_log off;
+  sendfile on;
+  tcp_nopush on;
+  tcp_nodelay on;
+  keepalive_requests 1000000;
+  default_type application/octet-stream;
+  client_body_temp_path $T/nginx/body;
+  proxy_temp_path $T/nginx/proxy;
+  fastcgi_temp_path $T/nginx/fastcgi;
+  uwsgi_temp_path $T/nginx/uwsgi;
+  scgi_temp_path $T/nginx/scgi;
+  server {
+    listen 127.0.0.1:$NGINX_PORT;
+    root $T/static;
+    location / { }
+  }
+}
+CONF
+nginx -p "$T/nginx" -c "$T/nginx/nginx.conf" 2>"$T/nginx/stderr" &
+NGINX_PID=$!
+
+"$VTS" serve "$ARCHIVE" --listen 127.0.0.1:0 --admin 127.0.0.1:0 --threads 2 \
+  >"$T/vts.out" 2>"$T/vts.err" &
+VTS_PID=$!
+for ((i = 0; i < 100; i++)); do
+  grep -q 'listening on' "$T/vts.out" 2>/dev/null && break
+  sleep 0.05
+done
+VTS_PORT=$(sed -nE 's|.*listening on http://[^ ]*:([0-9]+) .*|\1|p' "$T/vts.out")
+[[ -n $VTS_PORT ]] || die "vts serve did not start: $(cat "$T/vts.err")"
+# The archive is named serve_<input>; serve it under /earth like nginx's copy.
+VTS_NAME=$(basename "${ARCHIVE%.pmtiles}")
+for ((i = 0; i < 100; i++)); do
+  curl -sf -o /dev/null "http://127.0.0.1:$NGINX_PORT/earth.pmtiles" -r 0-0 && break
+  sleep 0.05
+done
+
+declare -A BASE=([vts]="http://127.0.0.1:$VTS_PORT" [nginx]="http://127.0.0.1:$NGINX_PORT")
+declare -A PREFIX=([vts]="/$VTS_NAME" [nginx]="/earth")
+
+# Lists per server (path prefix differs; the tile set is the same), and each server's ETags.
+for s in vts nginx; do
+  sed "s|^/earth|${PREFIX[$s]}|" "$T/tiles.txt" >"$T/$s.tiles"
+  sed "s|^/earth|${PREFIX[$s]}|" "$T/ranges.txt" >"$T/$s.ranges"
+  sed "s|^|url = \"${BASE[$s]}|; s|\$|\"\noutput = \"/dev/null\"|" "$T/$s.tiles" >"$T/$s.curlcfg"
+  curl -s -I -K "$T/$s.curlcfg" -w '%{url_effective} %header{etag}\n' |
+    sed -E "s|^${BASE[$s]}||" >"$T/$s.inm"
+  [[ $(awk 'NF == 2' "$T/$s.inm" | wc -l) == "$NTILES" ]] || die "$s: missing ETags"
+done
+# Sanity: the same bytes from both for a few tiles.
+for p in $(shuf -n 20 "$T/tiles.txt"); do
+  cmp -s <(curl -sf "${BASE[vts]}${p/#\/earth/${PREFIX[vts]}}") \
+    <(curl -sf "${BASE[nginx]}$p") || die "vts and nginx differ on $p"
+done
+
+to_ms() { # wrk latency like 1.23ms / 456.00us / 1.20s
+  awk -v v="$1" 'BEGIN { n = v + 0; if (v ~ /us$/) n /= 1000; else if (v ~ /ms$/) ; else if (v ~ /s$/) n *= 1000; printf "%.2f", n }'
+}
+to_mb() { # wrk Transfer/sec like 1.49GB / 600.00MB / 12.00KB
+  awk -v v="$1" 'BEGIN { n = v + 0; if (v ~ /GB$/) n *= 1024; else if (v ~ /KB$/) n /= 1024; else if (v ~ /B$/ && v !~ /MB$/) n /= 1048576; printf "%.1f", n }'
+}
+declare -A RPS MBS P50 P99 ERR
+run_wrk() { # SERVER MODE LIST
+  local s=$1 mode=$2 list=$3 log="$T/wrk_$1_$2.txt"
+  wrk -t2 -c64 -d"$DURATION" --latency -s "$BENCH_DIR/random_tiles.lua" "${BASE[$s]}" -- \
+    "$list" "$mode" >"$log" 2>&1 || die "wrk failed: $(cat "$log")"
+  RPS[$s.$mode]=$(awk '/^Requests\/sec:/ { printf "%.0f", $2 }' "$log")
+  MBS[$s.$mode]=$(to_mb "$(awk '/^Transfer\/sec:/ { print $2 }' "$log")")
+  P50[$s.$mode]=$(to_ms "$(awk '$1 == "50%" { print $2 }' "$log")")
+  P99[$s.$mode]=$(to_ms "$(awk '$1 == "99%" { print $2 }' "$log")")
+  ERR[$s.$mode]=$(awk '/Non-2xx or 3xx/ { print $NF } /Socket errors/ { print }' "$log" | head -1)
+  echo "$s $mode: ${RPS[$s.$mode]} req/s, ${MBS[$s.$mode]} MB/s, p50 ${P50[$s.$mode]} ms, p99 ${P99[$s.$mode]} ms ${ERR[$s.$mode]}" >&2
+}
+for mode in tiles inm range; do
+  for s in nginx vts; do
+    case $mode in
+      tiles) run_wrk "$s" tiles "$T/$s.tiles" ;;
+      inm) run_wrk "$s" inm "$T/$s.inm" ;;
+      range) run_wrk "$s" range "$T/$s.ranges" ;;
+    esac
+  done
+done
+
+{
+  echo "### Serving: vts serve vs nginx static ($(date -u '+%Y-%m-%d'))"
+  echo
+  machine_info
+  echo "- input: $(basename "$INPUT"), $NTILES tiles, $(mb "$TILE_BYTES") MiB of tile payloads (avg $((TILE_BYTES / NTILES)) B)"
+  echo "- wrk -t2 -c64 -d$DURATION --latency, bench/random_tiles.lua; nginx $(nginx -v 2>&1 | sed 's|.*/||') (2 workers, sendfile), vts serve --threads 2"
+  echo
+  echo "| workload | server | req/s | MB/s | p50 ms | p99 ms | req/s vs nginx | p99 vs nginx |"
+  echo "|---|---|---:|---:|---:|---:|---:|---:|"
+  for mode in tiles inm range; do
+    label=$mode
+    [[ $mode == tiles ]] && label="random tiles (200)"
+    [[ $mode == inm ]] && label="If-None-Match (304)"
+    [[ $mode == range ]] && label="Range on .pmtiles (206)"
+    for s in nginx vts; do
+      echo "| $label | $s | ${RPS[$s.$mode]} | ${MBS[$s.$mode]} | ${P50[$s.$mode]} | ${P99[$s.$mode]} | $(ratio "${RPS[$s.$mode]}" "${RPS[nginx.$mode]}") | $(ratio "${P99[$s.$mode]}" "${P99[nginx.$mode]}") |"
+    done
+  done
+} | tee "${OUT_FILE:-/dev/null}"

@@ -1,0 +1,88 @@
+// The network layer of `vts serve`: an asynchronous HTTP/1.1 server (Boost.Beast/Asio) that parses
+// requests into vts::HttpRequest, answers them with vts::route() and writes the HttpResponse —
+// tile bodies straight from the archive mapping, without a copy. A second listener (admin) serves
+// /metrics (Prometheus text) and /health.
+//
+// Concurrency model (classic completion handlers, not coroutines — the pipelined read/write pair
+// of one connection is easier to express as two independent handler chains):
+// - `threads` io_contexts, each run by one thread; accepted connections are dealt out round-robin
+//   and stay on their context, so all of a connection's handlers run on one thread, in order, and
+//   it needs no lock (the one-thread context plays the role of a per-connection strand without
+//   its cost, and no scheduler lock is shared between threads).
+// - Per connection, reading and writing run concurrently: the next pipelined request is read
+//   while earlier responses are queued or being written. At most `max_pipeline` responses are
+//   queued; when the queue is full the connection stops reading (back-pressure) until the writer
+//   catches up. Responses are written in request order.
+// - Timeouts: a connection waiting for the first byte of a request gets `idle_timeout`; once a
+//   byte has arrived, the whole header must arrive within `header_timeout` (slowloris). Every
+//   write_some must make progress within `write_timeout`. Expiry closes the connection.
+// - Limits: header bytes (431), target length (414), any request body (413), connections beyond
+//   `max_connections` are accepted and closed at once. A parse error answers 400/413/414/431 with
+//   `Connection: close` and closes after the response.
+// - stop() (SIGTERM/SIGINT when handle_signals): close the listeners, let every queued response
+//   finish (responses carry `Connection: close` from then on), close idle connections; after
+//   `drain_timeout` whatever is left is cut. run() then returns.
+// - Reload: a background thread calls registry.reload(false) every `reload_interval` (0 = never)
+//   and registry.reload(true) on SIGHUP or reload(); swaps and refusals are logged to stderr.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "vts/protocol/result.hpp"
+#include "vts/server/router.hpp"
+#include "vts/server/tileset_registry.hpp"
+
+namespace vts {
+
+struct HttpServerLimits {
+  std::size_t max_header_bytes = 8 * 1024;  // request line + headers; beyond: 431
+  std::size_t max_target_bytes = 2 * 1024;  // request target; beyond: 414
+  std::size_t max_connections = 10000;      // open client connections (both listeners)
+  std::size_t max_pipeline = 16;            // queued responses per connection
+  std::chrono::milliseconds idle_timeout{30000};
+  std::chrono::milliseconds header_timeout{10000};
+  std::chrono::milliseconds write_timeout{30000};
+  std::chrono::milliseconds drain_timeout{10000};
+};
+
+struct HttpServerOptions {
+  std::string listen_host = "127.0.0.1";
+  std::uint16_t listen_port = 8080;  // 0 = any free port; port() tells which
+  std::string admin_host = "127.0.0.1";
+  std::uint16_t admin_port = 9090;  // 0 = any free port
+  bool admin_enabled = true;
+  int threads = 0;  // 0 = std::thread::hardware_concurrency()
+  HttpServerLimits limits;
+  RouterConfig router;
+  std::chrono::milliseconds reload_interval{2000};  // 0 = no periodic check
+  bool handle_signals = true;  // SIGTERM/SIGINT → stop(), SIGHUP → reload(true)
+  std::string access_log;      // "" = off, "-" = stdout, else a file (appended)
+};
+
+class HttpServer {
+ public:
+  // Binds both listeners (so port() is known before run()). Fails with io when an address cannot
+  // be bound, invalid_argument when it does not parse. The registry must outlive the server.
+  static Result<std::unique_ptr<HttpServer>> create(HttpServerOptions options,
+                                                    std::shared_ptr<TilesetRegistry> registry);
+  virtual ~HttpServer() = default;
+
+  virtual std::uint16_t port() const = 0;
+  virtual std::uint16_t admin_port() const = 0;  // 0 when the admin listener is disabled
+
+  // /health answers 503 "loading" until set_ready(true). Thread-safe.
+  virtual void set_ready(bool ready) = 0;
+  // Serves on `threads` threads (the caller's included) until stopped and drained.
+  virtual void run() = 0;
+  // Graceful stop; thread-safe and idempotent; returns at once (run() returns when drained).
+  virtual void stop() = 0;
+  // Asks the reload thread for registry.reload(force); returns at once. Thread-safe.
+  virtual void request_reload(bool force) = 0;
+  // The Prometheus exposition /metrics serves.
+  virtual std::string metrics_text() const = 0;
+};
+
+}  // namespace vts

@@ -1,0 +1,883 @@
+// Boost.Beast implementation of HttpServer; the contract is in http_server.hpp.
+#include "vts/server/http_server.hpp"
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <boost/asio/bind_executor.hpp>
+#include <boost/asio/dispatch.hpp>
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/ip/tcp.hpp>
+#include <boost/asio/post.hpp>
+#include <boost/asio/signal_set.hpp>
+#include <boost/asio/steady_timer.hpp>
+#include <boost/asio/strand.hpp>
+#include <boost/beast/core/flat_buffer.hpp>
+#include <boost/beast/http.hpp>
+#include <cassert>
+#include <condition_variable>
+#include <csignal>
+#include <cstdio>
+#include <ctime>
+#include <deque>
+#include <mutex>
+#include <optional>
+#include <span>
+#include <thread>
+#include <unordered_map>
+#include <vector>
+
+namespace vts {
+
+namespace {
+
+namespace asio = boost::asio;
+namespace beast = boost::beast;
+namespace http = beast::http;
+using tcp = asio::ip::tcp;
+using Clock = std::chrono::steady_clock;
+
+// ---- metrics ---------------------------------------------------------------------------------
+
+constexpr std::array<int, 16> kStatuses = {200, 204, 206, 304, 400, 401, 403, 404,
+                                           405, 413, 414, 416, 431, 500, 503, 0};
+constexpr int kRouteCount = 7;  // Route values + admin
+constexpr std::array<double, 16> kBuckets = {0.0001, 0.00025, 0.0005, 0.001, 0.0025, 0.005,
+                                             0.01,   0.025,   0.05,   0.1,   0.25,   0.5,
+                                             1.0,    2.5,     5.0,    10.0};
+
+int status_index(int status) {
+  for (std::size_t i = 0; i + 1 < kStatuses.size(); ++i)
+    if (kStatuses[i] == status) return int(i);
+  return int(kStatuses.size()) - 1;  // "other"
+}
+
+const char* route_label(int r) {
+  return r < 6 ? route_name(Route(r)) : "admin";
+}
+
+struct Metrics {
+  std::array<std::array<std::atomic<std::uint64_t>, kStatuses.size()>, kRouteCount> requests{};
+  std::array<std::atomic<std::uint64_t>, kBuckets.size() + 1> buckets{};  // last = +Inf
+  std::atomic<std::uint64_t> duration_us_sum{0};
+  std::atomic<std::uint64_t> response_bytes{0};
+  std::atomic<std::int64_t> open_connections{0};
+  std::atomic<std::uint64_t> reloads_swapped{0}, reloads_refused{0};
+  std::atomic<std::uint64_t> refused_connections{0};
+
+  void record(int route, int status, std::uint64_t bytes, Clock::duration d) {
+    requests[std::size_t(route)][std::size_t(status_index(status))].fetch_add(
+        1, std::memory_order_relaxed);
+    response_bytes.fetch_add(bytes, std::memory_order_relaxed);
+    const double s = std::chrono::duration<double>(d).count();
+    std::size_t b = 0;
+    while (b < kBuckets.size() && s > kBuckets[b]) ++b;
+    buckets[b].fetch_add(1, std::memory_order_relaxed);
+    duration_us_sum.fetch_add(
+        std::uint64_t(std::chrono::duration_cast<std::chrono::microseconds>(d).count()),
+        std::memory_order_relaxed);
+  }
+};
+
+// ---- small helpers -------------------------------------------------------------------------
+
+// RFC 9110 IMF-fixdate, cached per second per thread.
+std::string_view http_date() {
+  thread_local std::time_t cached = 0;
+  thread_local char buf[40];
+  const std::time_t now = std::time(nullptr);
+  if (now != cached) {
+    std::tm tm{};
+    gmtime_r(&now, &tm);
+    std::strftime(buf, sizeof buf, "%a, %d %b %Y %H:%M:%S GMT", &tm);
+    cached = now;
+  }
+  return buf;
+}
+
+std::string json_escape(std::string_view s) {
+  std::string out;
+  out.reserve(s.size() + 2);
+  for (const char c : s) {
+    const auto u = static_cast<unsigned char>(c);
+    if (c == '"' || c == '\\') {
+      out += '\\';
+      out += c;
+    } else if (u < 0x20 || u >= 0x7f) {
+      char b[8];
+      std::snprintf(b, sizeof b, "\\u%04x", u);
+      out += b;
+    } else {
+      out += c;
+    }
+  }
+  return out;
+}
+
+HttpMethod to_method(http::verb v) {
+  switch (v) {
+    case http::verb::get:
+      return HttpMethod::get;
+    case http::verb::head:
+      return HttpMethod::head;
+    case http::verb::options:
+      return HttpMethod::options;
+    default:
+      return HttpMethod::other;
+  }
+}
+
+std::string_view field(const http::request_parser<http::empty_body>::value_type& req,
+                       http::field f) {
+  auto it = req.find(f);
+  if (it == req.end()) return {};
+  const auto v = it->value();
+  return {v.data(), v.size()};
+}
+
+HttpResponse plain_response(int status, std::string body) {
+  HttpResponse r;
+  r.status = status;
+  r.route = Route::error;
+  r.headers.emplace_back("Content-Type", "text/plain; charset=utf-8");
+  r.owned = std::move(body);
+  r.content_length = r.owned.size();
+  return r;
+}
+
+class Server;
+
+// ---- one connection -------------------------------------------------------------------------
+
+// A response is written as its serialised header plus a view of its body (the archive mapping or
+// `response.owned`) in one gathered write — no copy of the body, no per-field allocations.
+
+struct Outgoing {
+  HttpResponse response;
+  std::string head;            // status line and header fields, CRLF CRLF
+  std::span<const char> body;  // empty for HEAD, 204 and 304
+  std::size_t sent = 0;        // bytes of head + body written so far
+  Clock::time_point start;
+  int route = 0;
+  bool close = false;
+  // For the access log (only filled when it is on).
+  std::string method, target, tileset;
+};
+
+class Session : public std::enable_shared_from_this<Session> {
+ public:
+  Session(Server& server, tcp::socket socket, bool admin);
+  ~Session();
+  void start();
+  // Called (on the strand) when the server stops: close now if nothing is queued.
+  void on_server_stop();
+
+ private:
+  void wait_for_request();
+  void read_request();
+  void on_read(beast::error_code ec);
+  void enqueue(std::unique_ptr<Outgoing> out);
+  void write_next();
+  void on_write(beast::error_code ec, std::size_t bytes);
+  void fail_parse(int status, const char* message);
+  void arm(asio::steady_timer& timer, std::chrono::milliseconds d);
+  void close();
+  void linger_close();
+  void drain_input();
+
+  Server& server_;
+  tcp::socket socket_;
+  bool admin_;
+  asio::steady_timer read_timer_, write_timer_;
+  beast::flat_buffer buffer_;
+  std::optional<http::request_parser<http::empty_body>> parser_;
+  std::deque<std::unique_ptr<Outgoing>> queue_;
+  bool reading_ = false;      // a read (wait or header) is outstanding
+  bool read_paused_ = false;  // stopped reading because the pipeline is full
+  bool read_done_ = false;    // no more requests will be read (close requested / error / EOF)
+  bool writing_ = false;
+  bool closed_ = false;
+  std::string remote_;
+};
+
+// ---- the server -----------------------------------------------------------------------------
+
+class Server final : public HttpServer {
+ public:
+  Server(HttpServerOptions options, std::shared_ptr<TilesetRegistry> registry)
+      : options_(std::move(options)),
+        registry_(std::move(registry)),
+        ioc_(1),
+        acceptor_(ioc_),
+        admin_acceptor_(ioc_),
+        signals_(ioc_),
+        strand_(asio::make_strand(ioc_)),
+        drain_timer_(strand_) {
+    const int n = options_.threads > 0 ? options_.threads
+                                       : std::max(1, int(std::thread::hardware_concurrency()));
+    for (int i = 1; i < n; ++i) workers_.push_back(std::make_unique<asio::io_context>(1));
+    if (!options_.access_log.empty()) {
+      if (options_.access_log == "-") {
+        log_ = stdout;
+      } else {
+        log_ = std::fopen(options_.access_log.c_str(), "a");
+        owns_log_ = log_ != nullptr;
+      }
+    }
+  }
+  ~Server() override {
+    destroying_ = true;
+    beast::error_code ec;
+    acceptor_.close(ec);
+    admin_acceptor_.close(ec);
+    // Sessions still pending (after a drain timeout) die with ioc_, while what they use lives.
+    if (owns_log_) std::fclose(log_);
+  }
+
+  Status bind() {
+    if (options_.access_log.size() && !log_)
+      return make_error(ErrorCode::io, "cannot open access log '" + options_.access_log + "'");
+    if (auto st = bind_one(acceptor_, options_.listen_host, options_.listen_port); !st.ok())
+      return st;
+    if (options_.admin_enabled)
+      if (auto st = bind_one(admin_acceptor_, options_.admin_host, options_.admin_port); !st.ok())
+        return st;
+    return {};
+  }
+
+  std::uint16_t port() const override { return acceptor_.local_endpoint().port(); }
+  std::uint16_t admin_port() const override {
+    return options_.admin_enabled ? admin_acceptor_.local_endpoint().port() : 0;
+  }
+  void set_ready(bool ready) override { ready_.store(ready); }
+
+  void run() override {
+    accept(acceptor_, false);
+    if (options_.admin_enabled) accept(admin_acceptor_, true);
+    if (options_.handle_signals) {
+      signals_.add(SIGTERM);
+      signals_.add(SIGINT);
+      signals_.add(SIGHUP);
+      wait_signal();
+    }
+    std::thread reloader([this] { reload_loop(); });
+    std::vector<std::thread> threads;
+    for (auto& w : workers_) {
+      guards_.push_back(asio::make_work_guard(*w));
+      threads.emplace_back([&w] { w->run(); });
+    }
+    ioc_.run();
+    for (auto& t : threads) t.join();
+    {
+      std::lock_guard lock(reload_mutex_);
+      reload_quit_ = true;
+    }
+    reload_cv_.notify_all();
+    reloader.join();
+  }
+
+  void stop() override {
+    // On the server strand, so the drain timer is never touched by two threads at once.
+    asio::post(strand_, [this] {
+      if (stopping_.exchange(true)) return;
+      std::fprintf(stderr, "vts serve: stopping; draining open connections\n");
+      beast::error_code ec;
+      acceptor_.close(ec);
+      admin_acceptor_.close(ec);
+      signals_.cancel(ec);
+      {
+        std::lock_guard lock(reload_mutex_);
+        reload_quit_ = true;
+      }
+      reload_cv_.notify_all();
+      std::vector<std::weak_ptr<Session>> sessions;
+      {
+        std::lock_guard lock(sessions_mutex_);
+        for (auto& [p, w] : sessions_) sessions.push_back(w);
+      }
+      for (auto& w : sessions)
+        if (auto s = w.lock()) s->on_server_stop();
+      drain_timer_.expires_after(options_.limits.drain_timeout);
+      drain_timer_.async_wait([this](beast::error_code e) {
+        if (e) return;
+        std::fprintf(stderr, "vts serve: drain timeout; closing remaining connections\n");
+        ioc_.stop();
+        for (auto& w : workers_) w->stop();
+      });
+      std::lock_guard lock(sessions_mutex_);
+      if (sessions_.empty()) drained();
+    });
+  }
+
+  void request_reload(bool force) override {
+    {
+      std::lock_guard lock(reload_mutex_);
+      reload_pending_ = true;
+      reload_force_ = reload_force_ || force;
+    }
+    reload_cv_.notify_all();
+  }
+
+  std::string metrics_text() const override;
+
+  // -- used by sessions --
+  const HttpServerOptions& options() const { return options_; }
+  const TilesetRegistry& registry() const { return *registry_; }
+  Metrics& metrics() { return metrics_; }
+  bool stopping() const { return stopping_.load(std::memory_order_relaxed); }
+  FILE* access_log() const { return log_; }
+  std::mutex& log_mutex() { return log_mutex_; }
+
+  void add_session(const std::shared_ptr<Session>& s) {
+    std::lock_guard lock(sessions_mutex_);
+    sessions_.emplace(s.get(), s);
+  }
+  void remove_session(Session* s) {
+    bool last = false;
+    {
+      std::lock_guard lock(sessions_mutex_);
+      sessions_.erase(s);
+      last = sessions_.empty();
+    }
+    // When drained, nothing keeps the io_context busy but the drain timer.
+    if (last && stopping() && !destroying_) asio::post(strand_, [this] { drained(); });
+  }
+
+  HttpResponse admin_route(const HttpRequest& req) {
+    const std::string_view path = req.target.substr(0, req.target.find('?'));
+    if (req.method != HttpMethod::get && req.method != HttpMethod::head) {
+      HttpResponse r = plain_response(405, "method not allowed\n");
+      r.headers.emplace_back("Allow", "GET, HEAD");
+      r.head_only = req.method == HttpMethod::head;
+      return r;
+    }
+    HttpResponse r;
+    if (path == "/metrics") {
+      r = plain_response(200, metrics_text());
+      r.headers[0].second = "text/plain; version=0.0.4; charset=utf-8";
+    } else if (path == "/health") {
+      r = ready_.load() ? plain_response(200, "ok\n") : plain_response(503, "loading\n");
+    } else {
+      r = plain_response(404, "not found\n");
+    }
+    r.headers.emplace_back("Cache-Control", "no-store");
+    r.head_only = req.method == HttpMethod::head;
+    return r;
+  }
+
+ private:
+  Status bind_one(tcp::acceptor& acc, const std::string& host, std::uint16_t port) {
+    beast::error_code ec;
+    const auto addr = asio::ip::make_address(host == "localhost" ? "127.0.0.1" : host, ec);
+    if (ec) return make_error(ErrorCode::invalid_argument, "bad listen address '" + host + "'");
+    const tcp::endpoint ep(addr, port);
+    acc.open(ep.protocol(), ec);
+    if (!ec) acc.set_option(asio::socket_base::reuse_address(true), ec);
+    if (!ec) acc.bind(ep, ec);
+    if (!ec) acc.listen(asio::socket_base::max_listen_connections, ec);
+    if (ec)
+      return make_error(ErrorCode::io, "cannot listen on " + host + ":" + std::to_string(port) +
+                                           ": " + ec.message());
+    return {};
+  }
+
+  // On strand_, once every session is gone: nothing keeps any io_context busy any more.
+  void drained() {
+    drain_timer_.cancel();
+    guards_.clear();
+  }
+
+  // One io_context per thread (each run by exactly one thread, so a connection's handlers are
+  // serialised without a strand and the scheduler never contends); connections are dealt out
+  // round-robin.
+  asio::io_context& next_context() {
+    const std::size_t i = next_context_++ % (workers_.size() + 1);
+    return i == 0 ? ioc_ : *workers_[i - 1];
+  }
+
+  void accept(tcp::acceptor& acc, bool admin) {
+    acc.async_accept(next_context(), [this, &acc, admin](beast::error_code ec, tcp::socket socket) {
+      if (ec == asio::error::operation_aborted || !acc.is_open()) return;
+      if (ec) {
+        // EMFILE and friends: back off briefly rather than spin.
+        std::fprintf(stderr, "vts serve: accept: %s\n", ec.message().c_str());
+        auto t = std::make_shared<asio::steady_timer>(ioc_, std::chrono::milliseconds(50));
+        t->async_wait([this, &acc, admin, t](beast::error_code) { accept(acc, admin); });
+        return;
+      }
+      if (std::size_t(metrics_.open_connections.load()) >= options_.limits.max_connections) {
+        metrics_.refused_connections.fetch_add(1, std::memory_order_relaxed);
+        beast::error_code ignored;
+        socket.close(ignored);
+      } else {
+        auto s = std::make_shared<Session>(*this, std::move(socket), admin);
+        add_session(s);
+        s->start();
+      }
+      accept(acc, admin);
+    });
+  }
+
+  void wait_signal() {
+    signals_.async_wait([this](beast::error_code ec, int sig) {
+      if (ec) return;
+      if (sig == SIGHUP) {
+        std::fprintf(stderr, "vts serve: SIGHUP: reloading every tileset\n");
+        request_reload(true);
+        wait_signal();
+      } else {
+        stop();
+      }
+    });
+  }
+
+  void reload_loop() {
+    std::unique_lock lock(reload_mutex_);
+    while (!reload_quit_) {
+      if (options_.reload_interval.count() > 0)
+        reload_cv_.wait_for(lock, options_.reload_interval,
+                            [this] { return reload_quit_ || reload_pending_; });
+      else
+        reload_cv_.wait(lock, [this] { return reload_quit_ || reload_pending_; });
+      if (reload_quit_) break;
+      const bool force = reload_force_;
+      reload_pending_ = reload_force_ = false;
+      lock.unlock();
+      auto result = registry_->reload(force);
+      if (result.swapped > 0) {
+        metrics_.reloads_swapped.fetch_add(std::uint64_t(result.swapped));
+        std::fprintf(stderr, "vts serve: reloaded %d tileset(s)\n", result.swapped);
+      }
+      for (const auto& e : result.failures) {
+        metrics_.reloads_refused.fetch_add(1);
+        std::fprintf(stderr, "vts serve: reload refused, keeping the old archive: %s\n",
+                     e.to_string().c_str());
+      }
+      lock.lock();
+    }
+  }
+
+  // Declared before the io_context so that they outlive it: destroying the io_context destroys
+  // pending handlers, and with them sessions, which touch the metrics and the session table.
+  HttpServerOptions options_;
+  std::shared_ptr<TilesetRegistry> registry_;
+  std::atomic<bool> stopping_{false}, ready_{false}, destroying_{false};
+  Metrics metrics_;
+  std::mutex sessions_mutex_;
+  std::unordered_map<Session*, std::weak_ptr<Session>> sessions_;
+  std::mutex reload_mutex_;
+  std::condition_variable reload_cv_;
+  bool reload_quit_ = false, reload_pending_ = false, reload_force_ = false;
+  FILE* log_ = nullptr;
+  bool owns_log_ = false;
+  std::mutex log_mutex_;
+
+  asio::io_context ioc_;
+  std::vector<std::unique_ptr<asio::io_context>> workers_;
+  std::vector<asio::executor_work_guard<asio::io_context::executor_type>> guards_;
+  std::size_t next_context_ = 0;  // only touched by accept handlers, which run on ioc_'s thread
+  tcp::acceptor acceptor_, admin_acceptor_;
+  asio::signal_set signals_;
+  asio::strand<asio::io_context::executor_type> strand_;
+  asio::steady_timer drain_timer_;
+};
+
+std::string Server::metrics_text() const {
+  std::string out;
+  out.reserve(8192);
+  char line[256];
+  out +=
+      "# HELP vts_http_requests_total HTTP requests answered, by route and status.\n"
+      "# TYPE vts_http_requests_total counter\n";
+  for (int r = 0; r < kRouteCount; ++r)
+    for (std::size_t s = 0; s < kStatuses.size(); ++s) {
+      const auto n = metrics_.requests[std::size_t(r)][s].load(std::memory_order_relaxed);
+      if (n == 0) continue;
+      const std::string status = kStatuses[s] ? std::to_string(kStatuses[s]) : "other";
+      std::snprintf(line, sizeof line, "vts_http_requests_total{route=\"%s\",status=\"%s\"} %llu\n",
+                    route_label(r), status.c_str(), (unsigned long long)n);
+      out += line;
+    }
+  out +=
+      "# HELP vts_http_request_duration_seconds Time from a parsed request to its last byte "
+      "written.\n"
+      "# TYPE vts_http_request_duration_seconds histogram\n";
+  std::uint64_t cumulative = 0;
+  for (std::size_t b = 0; b <= kBuckets.size(); ++b) {
+    cumulative += metrics_.buckets[b].load(std::memory_order_relaxed);
+    if (b < kBuckets.size())
+      std::snprintf(line, sizeof line, "vts_http_request_duration_seconds_bucket{le=\"%g\"} %llu\n",
+                    kBuckets[b], (unsigned long long)cumulative);
+    else
+      std::snprintf(line, sizeof line,
+                    "vts_http_request_duration_seconds_bucket{le=\"+Inf\"} %llu\n",
+                    (unsigned long long)cumulative);
+    out += line;
+  }
+  std::snprintf(line, sizeof line,
+                "vts_http_request_duration_seconds_sum %.6f\n"
+                "vts_http_request_duration_seconds_count %llu\n",
+                double(metrics_.duration_us_sum.load()) * 1e-6, (unsigned long long)cumulative);
+  out += line;
+  std::snprintf(line, sizeof line,
+                "# HELP vts_http_response_bytes_total Response bytes written (headers and "
+                "bodies).\n# TYPE vts_http_response_bytes_total counter\n"
+                "vts_http_response_bytes_total %llu\n",
+                (unsigned long long)metrics_.response_bytes.load());
+  out += line;
+  std::snprintf(line, sizeof line,
+                "# HELP vts_http_open_connections Open client connections.\n"
+                "# TYPE vts_http_open_connections gauge\nvts_http_open_connections %lld\n",
+                (long long)metrics_.open_connections.load());
+  out += line;
+  std::snprintf(line, sizeof line,
+                "# HELP vts_http_refused_connections_total Connections closed at once because "
+                "max_connections were open.\n# TYPE vts_http_refused_connections_total counter\n"
+                "vts_http_refused_connections_total %llu\n",
+                (unsigned long long)metrics_.refused_connections.load());
+  out += line;
+  std::snprintf(line, sizeof line,
+                "# HELP vts_tilesets_loaded Tilesets being served.\n"
+                "# TYPE vts_tilesets_loaded gauge\nvts_tilesets_loaded %zu\n",
+                registry_->size());
+  out += line;
+  std::snprintf(line, sizeof line,
+                "# HELP vts_reloads_total Archive reloads, by result.\n"
+                "# TYPE vts_reloads_total counter\n"
+                "vts_reloads_total{result=\"swapped\"} %llu\n"
+                "vts_reloads_total{result=\"refused\"} %llu\n",
+                (unsigned long long)metrics_.reloads_swapped.load(),
+                (unsigned long long)metrics_.reloads_refused.load());
+  out += line;
+  return out;
+}
+
+// ---- Session implementation ------------------------------------------------------------------
+
+Session::Session(Server& server, tcp::socket socket, bool admin)
+    : server_(server),
+      socket_(std::move(socket)),
+      admin_(admin),
+      read_timer_(socket_.get_executor()),
+      write_timer_(socket_.get_executor()) {
+  server_.metrics().open_connections.fetch_add(1, std::memory_order_relaxed);
+  beast::error_code ec;
+  socket_.set_option(tcp::no_delay(true), ec);
+  if (server_.access_log()) {
+    const auto ep = socket_.remote_endpoint(ec);
+    if (!ec) remote_ = ep.address().to_string() + ":" + std::to_string(ep.port());
+  }
+}
+
+Session::~Session() {
+  server_.metrics().open_connections.fetch_sub(1, std::memory_order_relaxed);
+  server_.remove_session(this);
+}
+
+void Session::start() {
+  asio::dispatch(socket_.get_executor(), [self = shared_from_this()] {
+    if (self->server_.stopping()) return self->close();
+    self->wait_for_request();
+  });
+}
+
+void Session::on_server_stop() {
+  asio::post(socket_.get_executor(), [self = shared_from_this()] {
+    self->read_done_ = true;
+    if (self->queue_.empty()) self->close();
+  });
+}
+
+// Timer expiry closes the socket, which aborts the pending operation. A handler that was already
+// queued when the timer was re-armed sees a future expiry and does nothing.
+void Session::arm(asio::steady_timer& timer, std::chrono::milliseconds d) {
+  timer.expires_after(d);
+  timer.async_wait([self = shared_from_this(), &timer](beast::error_code ec) {
+    if (ec || timer.expiry() > Clock::now()) return;
+    self->close();
+  });
+}
+
+// Hard close (timeouts, errors, idle connections): pending operations complete with an error.
+void Session::close() {
+  closed_ = true;
+  read_done_ = true;
+  beast::error_code ec;
+  socket_.close(ec);
+  read_timer_.cancel();
+  write_timer_.cancel();
+}
+
+// Close after the last response: send FIN, then read and discard whatever the client still sends
+// (pipelined requests we will not answer, a refused body) until it closes or kLinger passes.
+// Closing a socket with unread input makes the kernel send RST, which can destroy the response
+// bytes the client has not read yet (the "lingering close" of RFC 9112 §9.6).
+void Session::linger_close() {
+  constexpr std::chrono::milliseconds kLinger{2000};
+  if (closed_) return;
+  closed_ = true;
+  read_done_ = true;
+  write_timer_.cancel();
+  beast::error_code ec;
+  socket_.shutdown(tcp::socket::shutdown_send, ec);
+  if (ec) return close();
+  socket_.cancel(ec);  // a read still waiting for a request we will not serve
+  arm(read_timer_, kLinger);
+  drain_input();
+}
+
+void Session::drain_input() {
+  static thread_local char scratch[4096];
+  socket_.async_read_some(asio::buffer(scratch),
+                          [self = shared_from_this()](beast::error_code ec, std::size_t) {
+                            if (ec == asio::error::operation_aborted && self->socket_.is_open())
+                              return;  // the cancelled earlier read; this chain continues
+                            if (ec) return self->close();
+                            self->drain_input();
+                          });
+}
+
+// Waits (idle timeout) for the first byte of the next request; the header then has its own
+// deadline, so a client that trickles a header cannot hold the connection for idle_timeout.
+void Session::wait_for_request() {
+  if (closed_ || read_done_) return;
+  if (queue_.size() >= server_.options().limits.max_pipeline) {
+    read_paused_ = true;
+    return;
+  }
+  if (buffer_.size() > 0) return read_request();
+  reading_ = true;
+  arm(read_timer_, server_.options().limits.idle_timeout);
+  socket_.async_read_some(buffer_.prepare(4096),
+                          [self = shared_from_this()](beast::error_code ec, std::size_t n) {
+                            self->reading_ = false;
+                            if (self->closed_) return;
+                            self->read_timer_.cancel();
+                            if (ec || n == 0) {
+                              self->read_done_ = true;
+                              if (self->queue_.empty()) self->close();
+                              return;
+                            }
+                            self->buffer_.commit(n);
+                            if (self->server_.stopping()) {
+                              self->read_done_ = true;
+                              if (self->queue_.empty()) self->close();
+                              return;
+                            }
+                            self->read_request();
+                          });
+}
+
+void Session::read_request() {
+  const auto& limits = server_.options().limits;
+  parser_.emplace();
+  parser_->header_limit(std::uint32_t(limits.max_header_bytes));
+  parser_->body_limit(0);
+  reading_ = true;
+  arm(read_timer_, limits.header_timeout);
+  http::async_read(socket_, buffer_, *parser_,
+                   [self = shared_from_this()](beast::error_code ec, std::size_t) {
+                     self->reading_ = false;
+                     if (self->closed_) return;
+                     self->read_timer_.cancel();
+                     self->on_read(ec);
+                   });
+}
+
+void Session::fail_parse(int status, const char* message) {
+  auto out = std::make_unique<Outgoing>();
+  out->response = plain_response(status, message);
+  out->start = Clock::now();
+  out->route = int(Route::error);
+  out->close = true;
+  read_done_ = true;
+  enqueue(std::move(out));
+}
+
+void Session::on_read(beast::error_code ec) {
+  if (closed_) return;
+  const auto& limits = server_.options().limits;
+  if (ec == http::error::header_limit) {
+    // A request line longer than the target limit is a long URI (414), not big headers (431).
+    const auto data = buffer_.cdata();
+    const std::string_view head(static_cast<const char*>(data.data()), data.size());
+    const auto eol = head.find('\n');
+    const std::size_t line = eol == std::string_view::npos ? head.size() : eol;
+    // Beast consumes the request line once parsed; then the target is in the message.
+    const auto parsed_target = parser_->get().target();
+    if (parsed_target.size() > limits.max_target_bytes ||
+        (parsed_target.empty() && line > limits.max_target_bytes + 16))
+      return fail_parse(414, "request target too long\n");
+    return fail_parse(431, "request header fields too large\n");
+  }
+  if (ec == http::error::body_limit) return fail_parse(413, "request body not allowed\n");
+  if (ec) {
+    read_done_ = true;
+    // end_of_stream / reset / timeout (socket closed): nothing to answer.
+    if (ec == http::error::end_of_stream || ec == asio::error::operation_aborted ||
+        ec == asio::error::connection_reset || ec == asio::error::eof || !socket_.is_open()) {
+      if (queue_.empty()) close();
+      return;
+    }
+    return fail_parse(400, "bad request\n");
+  }
+
+  auto& req = parser_->get();
+  auto out = std::make_unique<Outgoing>();
+  out->start = Clock::now();
+  const auto target = req.target();
+  HttpRequest hr;
+  hr.method = to_method(req.method());
+  const auto mt = req.method_string();
+  hr.method_text = {mt.data(), mt.size()};
+  hr.target = {target.data(), target.size()};
+  hr.host = field(req, http::field::host);
+  hr.if_none_match = field(req, http::field::if_none_match);
+  hr.range = field(req, http::field::range);
+  hr.if_range = field(req, http::field::if_range);
+  hr.origin = field(req, http::field::origin);
+  hr.authorization = field(req, http::field::authorization);
+  hr.access_control_request_method = field(req, http::field::access_control_request_method);
+
+  if (target.size() > limits.max_target_bytes) {
+    out->response = plain_response(414, "request target too long\n");
+  } else if (target.empty() || target.front() != '/') {
+    out->response = plain_response(400, "bad request target\n");
+  } else if (admin_) {
+    out->response = server_.admin_route(hr);
+  } else {
+    out->response = route(hr, server_.registry(), server_.options().router);
+  }
+  if (!req.keep_alive() || server_.stopping()) out->close = true;
+  out->route = admin_ ? 6 : int(out->response.route);
+  if (server_.access_log()) {
+    out->method = std::string(hr.method_text);
+    out->target = std::string(hr.target);
+    if (out->response.hold) out->tileset = out->response.hold->name;
+  }
+  if (out->close) read_done_ = true;
+  enqueue(std::move(out));
+  parser_.reset();
+  wait_for_request();
+}
+
+void Session::enqueue(std::unique_ptr<Outgoing> out) {
+  HttpResponse& r = out->response;
+  std::string& h = out->head;
+  h.reserve(512);
+  h += "HTTP/1.1 ";
+  h += std::to_string(r.status);
+  h += ' ';
+  const auto reason = http::obsolete_reason(static_cast<http::status>(r.status));
+  h.append(reason.data(), reason.size());
+  h += "\r\nServer: vtstream\r\nDate: ";
+  h += http_date();
+  h += "\r\n";
+  for (const auto& [k, v] : r.headers) {
+    // Header injection guard: a value with CR or LF (from a bad config) is dropped, not sent.
+    if (k.find_first_of("\r\n:") != std::string::npos ||
+        v.find_first_of("\r\n") != std::string::npos)
+      continue;
+    h += k;
+    h += ": ";
+    h += v;
+    h += "\r\n";
+  }
+  if (out->close) h += "Connection: close\r\n";
+  const bool no_body = r.status == 304 || r.status == 204 || (r.status >= 100 && r.status < 200);
+  if (!no_body) {
+    h += "Content-Length: ";
+    h += std::to_string(r.content_length);
+    h += "\r\n";
+  }
+  h += "\r\n";
+  if (!r.head_only && !no_body) {
+    if (!r.view.empty())
+      out->body = {reinterpret_cast<const char*>(r.view.data()), r.view.size()};
+    else
+      out->body = {r.owned.data(), r.owned.size()};
+    assert(out->body.size() == r.content_length);
+  }
+  queue_.push_back(std::move(out));
+  if (!writing_) write_next();
+}
+
+void Session::write_next() {
+  if (closed_ || queue_.empty()) return;
+  writing_ = true;
+  arm(write_timer_, server_.options().limits.write_timeout);
+  const Outgoing& o = *queue_.front();
+  std::array<asio::const_buffer, 2> bufs;
+  if (o.sent < o.head.size()) {
+    bufs[0] = asio::buffer(o.head.data() + o.sent, o.head.size() - o.sent);
+    bufs[1] = asio::buffer(o.body.data(), o.body.size());
+  } else {
+    const std::size_t off = o.sent - o.head.size();
+    bufs[0] = asio::buffer(o.body.data() + off, o.body.size() - off);
+  }
+  socket_.async_write_some(bufs, [self = shared_from_this()](beast::error_code ec, std::size_t n) {
+    self->on_write(ec, n);
+  });
+}
+
+void Session::on_write(beast::error_code ec, std::size_t bytes) {
+  write_timer_.cancel();
+  writing_ = false;
+  if (ec || closed_) {
+    close();
+    queue_.clear();
+    return;
+  }
+  Outgoing& out = *queue_.front();
+  server_.metrics().response_bytes.fetch_add(bytes, std::memory_order_relaxed);
+  out.sent += bytes;
+  if (out.sent < out.head.size() + out.body.size()) return write_next();
+
+  const auto elapsed = Clock::now() - out.start;
+  server_.metrics().record(out.route, out.response.status, 0, elapsed);
+  if (FILE* log = server_.access_log()) {
+    char tbuf[32];
+    const std::time_t now = std::time(nullptr);
+    std::tm tm{};
+    gmtime_r(&now, &tm);
+    std::strftime(tbuf, sizeof tbuf, "%Y-%m-%dT%H:%M:%SZ", &tm);
+    const std::string line =
+        std::string("{\"time\":\"") + tbuf + "\",\"remote\":\"" + remote_ + "\",\"method\":\"" +
+        json_escape(out.method) + "\",\"target\":\"" + json_escape(out.target) +
+        "\",\"status\":" + std::to_string(out.response.status) +
+        ",\"bytes\":" + std::to_string(out.response.head_only ? 0 : out.response.content_length) +
+        ",\"duration_us\":" +
+        std::to_string(std::chrono::duration_cast<std::chrono::microseconds>(elapsed).count()) +
+        ",\"route\":\"" + route_label(out.route) + "\",\"tileset\":\"" + json_escape(out.tileset) +
+        "\"}\n";
+    std::lock_guard lock(server_.log_mutex());
+    std::fwrite(line.data(), 1, line.size(), log);
+    std::fflush(log);
+  }
+  const bool close_after = out.close;
+  queue_.pop_front();
+  if (close_after) {
+    queue_.clear();
+    return linger_close();
+  }
+  if (!queue_.empty()) write_next();
+  if (read_paused_ && queue_.size() < server_.options().limits.max_pipeline) {
+    read_paused_ = false;
+    wait_for_request();
+  }
+  // Nothing more will be answered (stop, EOF, Connection: close): a read still pending is only
+  // waiting for a request we will not serve.
+  if (read_done_ && queue_.empty()) linger_close();
+}
+
+}  // namespace
+
+Result<std::unique_ptr<HttpServer>> HttpServer::create(HttpServerOptions options,
+                                                       std::shared_ptr<TilesetRegistry> registry) {
+  if (!registry) return make_error(ErrorCode::invalid_argument, "no tileset registry");
+  auto s = std::make_unique<Server>(std::move(options), std::move(registry));
+  if (auto st = s->bind(); !st.ok()) return st.error();
+  return std::unique_ptr<HttpServer>(std::move(s));
+}
+
+}  // namespace vts

@@ -1,0 +1,214 @@
+// Tileset registry: opens archives, computes their version, and swaps snapshots on reload.
+#include "vts/server/tileset_registry.hpp"
+
+#include <sys/stat.h>
+#include <xxhash.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <string_view>
+#include <system_error>
+
+namespace vts {
+namespace {
+
+namespace fs = std::filesystem;
+
+// Tileset names travel in URLs and are looked up in a table: keep them to a conservative,
+// unreserved-only alphabet so that no name needs escaping and none can mean a path.
+Status validate_name(std::string_view name, const fs::path& path) {
+  auto bad = [&](const std::string& why) {
+    return Status(make_error(ErrorCode::invalid_argument,
+                             path.string() + ": tileset name \"" + std::string(name) + "\" " + why +
+                                 " (names are [A-Za-z0-9._-], at most 128 characters, "
+                                 "no leading dot; rename the file)"));
+  };
+  if (name.empty()) return bad("is empty");
+  if (name.size() > 128) return bad("is longer than 128 characters");
+  if (name.front() == '.') return bad("starts with a dot");
+  for (char c : name) {
+    const bool ok = (c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') ||
+                    c == '.' || c == '_' || c == '-';
+    if (!ok) return bad("contains a character outside [A-Za-z0-9._-]");
+  }
+  return {};
+}
+
+struct FileIdentity {
+  std::uint64_t size = 0;
+  std::int64_t mtime_ns = 0;
+  std::uint64_t inode = 0;
+  bool operator==(const FileIdentity&) const = default;
+};
+
+Result<FileIdentity> identify(const fs::path& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) {
+    return make_error(
+        ErrorCode::not_found,
+        path.string() + ": " + std::error_code(errno, std::generic_category()).message());
+  }
+  FileIdentity id;
+  id.size = static_cast<std::uint64_t>(st.st_size);
+  id.mtime_ns = static_cast<std::int64_t>(st.st_mtim.tv_sec) * 1'000'000'000 + st.st_mtim.tv_nsec;
+  id.inode = static_cast<std::uint64_t>(st.st_ino);
+  return id;
+}
+
+FileIdentity identity_of(const Tileset& t) {
+  return {t.file_size, t.file_mtime_ns, t.file_inode};
+}
+
+bool is_archive_name(const fs::path& p) {
+  return p.extension() == ".pmtiles";
+}
+
+}  // namespace
+
+Result<std::shared_ptr<const Tileset>> open_tileset(const fs::path& path) {
+  const std::string name = path.stem().string();
+  if (Status s = validate_name(name, path); !s) return s.error();
+
+  // Stat before opening: if the file is replaced in between, the recorded identity is the old
+  // one, so the next reload sees a change and re-opens (never the reverse, which would pin a
+  // stale mapping forever).
+  auto id = identify(path);
+  if (!id) return id.error();
+
+  pmtiles::ReaderOptions options;
+  options.leaf_cache_entries = 4096;
+  auto reader = pmtiles::Reader::open(path, options);
+  if (!reader)
+    return make_error(reader.error().code, path.string() + ": " + reader.error().message);
+
+  auto info = TilesetInfo::from_json((*reader)->metadata_json());
+  if (!info) return make_error(info.error().code, path.string() + ": " + info.error().message);
+
+  // Version: XXH3-64 of the header, root directory and metadata bytes as stored. The reader has
+  // checked these sections lie inside the file.
+  const auto bytes = (*reader)->bytes();
+  const auto& h = (*reader)->header();
+  XXH3_state_t* state = XXH3_createState();
+  if (state == nullptr) return make_error(ErrorCode::internal, "XXH3_createState failed");
+  XXH3_64bits_reset(state);
+  XXH3_64bits_update(state, bytes.data(), pmtiles::kHeaderSize);
+  XXH3_64bits_update(state, bytes.data() + h.root_dir_offset, h.root_dir_length);
+  XXH3_64bits_update(state, bytes.data() + h.metadata_offset, h.metadata_length);
+  const XXH64_hash_t hash = XXH3_64bits_digest(state);
+  XXH3_freeState(state);
+  char hex[17];
+  std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(hash));
+
+  auto t = std::make_shared<Tileset>();
+  t->name = name;
+  t->path = path;
+  t->reader = std::move(*reader);
+  t->info = std::move(*info);
+  t->version = hex;
+  t->file_size = id->size;
+  t->file_mtime_ns = id->mtime_ns;
+  t->file_inode = id->inode;
+  return std::shared_ptr<const Tileset>(std::move(t));
+}
+
+Status TilesetRegistry::load(const std::vector<fs::path>& paths) {
+  std::vector<fs::path> files;
+  for (const auto& p : paths) {
+    std::error_code ec;
+    const auto st = fs::status(p, ec);
+    if (ec || !fs::exists(st)) {
+      return make_error(ErrorCode::not_found, p.string() + ": no such file or folder");
+    }
+    if (fs::is_directory(st)) {
+      std::vector<fs::path> found;
+      for (fs::directory_iterator it(p, ec), end; !ec && it != end; it.increment(ec)) {
+        if (is_archive_name(it->path()) && it->is_regular_file(ec)) found.push_back(it->path());
+      }
+      if (ec) return make_error(ErrorCode::io, p.string() + ": " + ec.message());
+      if (found.empty()) {
+        return make_error(ErrorCode::not_found,
+                          p.string() + ": folder holds no *.pmtiles archives");
+      }
+      std::sort(found.begin(), found.end());
+      files.insert(files.end(), found.begin(), found.end());
+    } else {
+      files.push_back(p);
+    }
+  }
+
+  // Open everything first, then commit: a failed load changes nothing.
+  std::map<std::string, std::shared_ptr<const Tileset>, std::less<>> opened;
+  for (const auto& f : files) {
+    auto t = open_tileset(f);
+    if (!t) return t.error();
+    const std::string& name = (*t)->name;
+    auto dup = opened.find(name);
+    if (dup != opened.end()) {
+      return make_error(ErrorCode::invalid_argument, "duplicate tileset name \"" + name +
+                                                         "\": " + dup->second->path.string() +
+                                                         " and " + f.string());
+    }
+    opened.emplace(name, std::move(*t));
+  }
+  std::lock_guard lock(mutex_);
+  for (const auto& [name, t] : opened) {
+    auto dup = tilesets_.find(name);
+    if (dup != tilesets_.end()) {
+      return make_error(ErrorCode::invalid_argument, "duplicate tileset name \"" + name +
+                                                         "\": " + dup->second->path.string() +
+                                                         " and " + t->path.string());
+    }
+  }
+  tilesets_.merge(opened);
+  return {};
+}
+
+TilesetRegistry::ReloadResult TilesetRegistry::reload(bool force) {
+  ReloadResult result;
+  // Open outside the lock so lookups are never blocked by archive I/O.
+  for (const auto& old : all()) {
+    auto id = identify(old->path);
+    if (!id) {
+      result.failures.push_back(make_error(
+          id.error().code, id.error().message + " (tileset \"" + old->name + "\" kept as loaded)"));
+      continue;
+    }
+    if (!force && *id == identity_of(*old)) continue;
+    auto fresh = open_tileset(old->path);
+    if (!fresh) {
+      result.failures.push_back(make_error(
+          fresh.error().code, fresh.error().message + " (new archive refused; tileset \"" +
+                                  old->name + "\" keeps serving the previous one)"));
+      continue;
+    }
+    std::lock_guard lock(mutex_);
+    auto it = tilesets_.find(old->name);
+    // Swap only if nobody replaced the entry meanwhile (a concurrent reload).
+    if (it != tilesets_.end() && it->second == old) {
+      it->second = std::move(*fresh);
+      ++result.swapped;
+    }
+  }
+  return result;
+}
+
+std::shared_ptr<const Tileset> TilesetRegistry::find(std::string_view name) const {
+  std::lock_guard lock(mutex_);
+  auto it = tilesets_.find(name);
+  return it == tilesets_.end() ? nullptr : it->second;
+}
+
+std::vector<std::shared_ptr<const Tileset>> TilesetRegistry::all() const {
+  std::lock_guard lock(mutex_);
+  std::vector<std::shared_ptr<const Tileset>> out;
+  out.reserve(tilesets_.size());
+  for (const auto& [name, t] : tilesets_) out.push_back(t);
+  return out;
+}
+
+std::size_t TilesetRegistry::size() const {
+  std::lock_guard lock(mutex_);
+  return tilesets_.size();
+}
+
+}  // namespace vts
