@@ -16,6 +16,7 @@ Runner add_info(CLI::App& app);
 Runner add_verify(CLI::App& app);
 Runner add_extract(CLI::App& app);
 Runner add_serve(CLI::App& app);
+Runner add_sign(CLI::App& app);
 
 // Prints "vts: error: <message>" to stderr and returns the mapped exit code.
 int report_error(const vts::Error& e);

@@ -30,6 +30,7 @@ int main(int argc, char** argv) {
   add(&vts::cli::add_verify);
   add(&vts::cli::add_extract);
   add(&vts::cli::add_serve);
+  add(&vts::cli::add_sign);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

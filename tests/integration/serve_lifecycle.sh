@@ -11,9 +11,10 @@ expect_ok "$VTS" build --synthetic 2048x1024 -o "$WORK/v1.pmtiles"
 expect_ok "$VTS" build --synthetic 2048x1536 -o "$WORK/v2.pmtiles"
 build_earth "$WORK/serve/earth.pmtiles"
 cp "$WORK/v1.pmtiles" "$WORK/serve/tiles.pmtiles"
+cp "$WORK/v1.pmtiles" "$WORK/serve/signed.pmtiles"
 cat >"$WORK/config.json" <<JSON
 {"reload_interval_ms": 200, "threads": 2, "limits": {"drain_timeout_ms": 10000},
- "access": {"earth": {"tokens": ["s3cret"]}}}
+ "access": {"earth": {"tokens": ["s3cret"]}, "signed": {"hmac_keys": ["k3y-one", "k3y-two"]}}}
 JSON
 start_server "$WORK/serve" --config "$WORK/config.json"
 
@@ -73,6 +74,18 @@ expect_status 403 -H 'Authorization: Bearer wrong' "$BASE/earth/0/0/0"
 expect_status 401 "$BASE/earth.pmtiles"
 expect_status 200 -H 'Authorization: Bearer s3cret' "$BASE/earth/0/0/0"
 expect_status 200 "$BASE/tiles/0/0/0"
+
+note "a tileset protected by expiring HMAC-signed URLs (made with vts sign)"
+expect_status 401 "$BASE/signed/0/0/0"
+good=$("$VTS" sign /signed/0/0/0 --key k3y-two --ttl 300)
+expect_status 200 "$BASE$good"
+expect_status 200 "$BASE$("$VTS" sign /signed.json --key k3y-one)"
+expect_status 403 "$BASE$("$VTS" sign /signed/0/0/0 --key wrong-key)"
+expect_status 403 "$BASE$("$VTS" sign /signed/0/0/0 --key k3y-one --ttl -5)"
+# A signature is bound to its path: reusing it for another tile is refused.
+expect_status 403 "$BASE/signed/1/0/0?${good#*\?}"
+tampered=$(sed -E 's/sig=(.)/sig=\1\1/' <<<"$good")
+expect_status 403 "$BASE$tampered"
 
 note "SIGTERM during a slow download: it completes, then the server exits 0"
 curl -sf --limit-rate 1M -H 'Authorization: Bearer s3cret' "$BASE/earth.pmtiles" -o "$WORK/slow.pmtiles" &
