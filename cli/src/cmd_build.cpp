@@ -30,13 +30,11 @@ void install_cancel_handlers() {
 template <typename T>
 bool parse_pair(const std::string& text, char sep, T& a, T& b) {
   unsigned long long x = 0, y = 0;
-  char c = 0;
   int consumed = 0;
   std::string fmt = std::string("%llu") + sep + "%llu%n";
   if (std::sscanf(text.c_str(), fmt.c_str(), &x, &y, &consumed) != 2 ||
       consumed != static_cast<int>(text.size()))
     return false;
-  (void)c;
   a = static_cast<T>(x);
   b = static_cast<T>(y);
   return true;

@@ -6,6 +6,7 @@
 #include <mutex>
 #include <thread>
 #include <unordered_map>
+#include <unordered_set>
 
 namespace vts {
 
@@ -19,10 +20,10 @@ Result<ArchiveSummary> summarize_archive(const pmtiles::Reader& reader) {
   const Geometry& g = s.info.geometry;
   for (int z = 0; z <= g.max_zoom(); ++z)
     s.levels.push_back({z, g.level_width(z), g.level_height(z), g.tile_count(z), 0, 0});
-  std::unordered_map<std::uint64_t, bool> seen_offsets;
+  std::unordered_set<std::uint64_t> seen_offsets;
   Status walk = reader.for_each_entry([&](const pmtiles::Entry& e) {
     ++s.entries;
-    if (seen_offsets.emplace(e.offset, true).second) ++s.unique_tiles;
+    if (seen_offsets.insert(e.offset).second) ++s.unique_tiles;
     for (std::uint32_t i = 0; i < e.run_length; ++i) {
       auto id = pmtiles::tile_id_to_zxy(e.tile_id + i);
       ++s.addressed_tiles;

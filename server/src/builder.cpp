@@ -111,12 +111,6 @@ class Cascade {
     }
   }
 
-  std::uint64_t bytes_reserved() const {
-    std::uint64_t n = 0;
-    for (const auto& l : levels_) n += l.ring.size() + l.parent_row.size();
-    return n;
-  }
-
  private:
   struct Level {
     std::uint64_t w = 0, h = 0;
@@ -288,8 +282,8 @@ TileRange synthetic_range(const Geometry& g, const SyntheticSpec& spec, int z) {
   return r;
 }
 
-Status build_from_source(const BuildOptions& o, ImageSource& src, const Geometry& g, Shared& shared,
-                         unsigned threads) {
+void build_from_source(const BuildOptions& o, ImageSource& src, const Geometry& g, Shared& shared,
+                       unsigned threads) {
   WorkQueue queue(threads, std::size_t{threads} * 4);
   Cascade cascade(g, queue, shared);
   const std::uint64_t row_bytes = g.width() * 4;
@@ -330,7 +324,6 @@ Status build_from_source(const BuildOptions& o, ImageSource& src, const Geometry
   if (!shared.failed && rows != g.height())
     shared.fail(make_error(ErrorCode::internal, "input ended early"));
   ticker.tick(rows, true);
-  return {};
 }
 
 void build_synthetic(const BuildOptions& o, const SyntheticSpec& spec, const Geometry& g,
@@ -417,7 +410,7 @@ Result<BuildReport> build_pyramid(const BuildOptions& o) {
   if (o.synthetic)
     build_synthetic(o, *o.synthetic, g, shared, threads);
   else
-    (void)build_from_source(o, *source, g, shared, threads);
+    build_from_source(o, *source, g, shared, threads);
   if (shared.failed) {
     (*writer)->abort();
     return *shared.error;

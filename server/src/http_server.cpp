@@ -519,28 +519,21 @@ std::string Server::metrics_text() const {
                 "vts_http_request_duration_seconds_count %llu\n",
                 double(metrics_.duration_us_sum.load()) * 1e-6, (unsigned long long)cumulative);
   out += line;
-  std::snprintf(line, sizeof line,
-                "# HELP vts_http_response_bytes_total Response bytes written (headers and "
-                "bodies).\n# TYPE vts_http_response_bytes_total counter\n"
-                "vts_http_response_bytes_total %llu\n",
-                (unsigned long long)metrics_.response_bytes.load());
-  out += line;
-  std::snprintf(line, sizeof line,
-                "# HELP vts_http_open_connections Open client connections.\n"
-                "# TYPE vts_http_open_connections gauge\nvts_http_open_connections %lld\n",
-                (long long)metrics_.open_connections.load());
-  out += line;
-  std::snprintf(line, sizeof line,
-                "# HELP vts_http_refused_connections_total Connections closed at once because "
-                "max_connections were open.\n# TYPE vts_http_refused_connections_total counter\n"
-                "vts_http_refused_connections_total %llu\n",
-                (unsigned long long)metrics_.refused_connections.load());
-  out += line;
-  std::snprintf(line, sizeof line,
-                "# HELP vts_tilesets_loaded Tilesets being served.\n"
-                "# TYPE vts_tilesets_loaded gauge\nvts_tilesets_loaded %zu\n",
-                registry_->size());
-  out += line;
+  // One unlabelled sample with its HELP and TYPE lines.
+  auto single = [&out](const char* name, const char* type, const char* help, double value) {
+    char buf[320];
+    std::snprintf(buf, sizeof buf, "# HELP %s %s\n# TYPE %s %s\n%s %.17g\n", name, help, name, type,
+                  name, value);
+    out += buf;
+  };
+  single("vts_http_response_bytes_total", "counter", "Response bytes written (headers and bodies).",
+         double(metrics_.response_bytes.load()));
+  single("vts_http_open_connections", "gauge", "Open client connections.",
+         double(metrics_.open_connections.load()));
+  single("vts_http_refused_connections_total", "counter",
+         "Connections closed at once because max_connections were open.",
+         double(metrics_.refused_connections.load()));
+  single("vts_tilesets_loaded", "gauge", "Tilesets being served.", double(registry_->size()));
   std::snprintf(line, sizeof line,
                 "# HELP vts_reloads_total Archive reloads, by result.\n"
                 "# TYPE vts_reloads_total counter\n"

@@ -8,8 +8,8 @@
 //   + one band of input tiles for a tiled input (tile_height * W * channels)
 //   + threads * 4 tiles being encoded + three input strips of <= 4 MiB,
 // independent of the image height and of the number of texels; a 100k x 50k RGB tiled BigTIFF at
-// T=256 peaks at ~0.45 GB RSS including ~130 MiB of code and fixed buffers. Tile encoding runs on
-// a pool of worker threads.
+// T=256 peaked at 436 MiB RSS (bench/memory_bench.sh), ~130 MiB of it code and fixed buffers.
+// Tile encoding runs on a pool of worker threads.
 //
 // A build writes the archive under a temporary name and renames it at the end: a failed or
 // cancelled build leaves nothing under the output name.
