@@ -27,11 +27,12 @@ PACKAGES=(
   build-essential cmake ninja-build pkg-config git clang libclang-rt-14-dev clang-format
   # libraries
   libopenimageio-dev libzstd-dev libxxhash-dev zlib1g-dev nlohmann-json3-dev libcli11-dev
-  libspdlog-dev libfmt-dev libboost1.81-dev libssl-dev libcurl4-openssl-dev
+  libspdlog-dev libfmt-dev libboost1.81-dev libssl-dev libcurl4-openssl-dev libsqlite3-dev
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
   # real peers, sample data and measuring tools for tests and benchmarks
   openimageio-tools libvips-tools xplanet-images curl ca-certificates time python3 nginx wrk
+  sqlite3
 )
 # Node.js may come from elsewhere (e.g. NodeSource) with its own npm: only ask Debian for what is
 # missing, so the two never fight over /usr/bin/node or /usr/bin/npm.
