@@ -89,6 +89,8 @@ Status apply_config(const std::string& file, HttpServerOptions& o) {
       size("max_target_bytes", L.max_target_bytes);
       size("max_connections", L.max_connections);
       size("max_pipeline", L.max_pipeline);
+      size("min_send_rate", L.min_send_rate);
+      size("sendfile_min_bytes", L.sendfile_min_bytes);
       ms("idle_timeout_ms", L.idle_timeout);
       ms("header_timeout_ms", L.header_timeout);
       ms("write_timeout_ms", L.write_timeout);

@@ -27,23 +27,27 @@ namespace {
 
 using Directory = std::shared_ptr<const std::vector<Entry>>;
 
-// A read-only mapping, unmapped on destruction.
+// A read-only mapping of a file, and the file itself kept open (servers send from it with
+// sendfile); unmapped and closed on destruction.
 class Mapping {
  public:
   Mapping() = default;
-  Mapping(void* addr, std::size_t size) : addr_(addr), size_(size) {}
+  Mapping(void* addr, std::size_t size, int fd) : addr_(addr), size_(size), fd_(fd) {}
   Mapping(const Mapping&) = delete;
   Mapping& operator=(const Mapping&) = delete;
   ~Mapping() {
     if (addr_ != nullptr) ::munmap(addr_, size_);
+    if (fd_ >= 0) ::close(fd_);
   }
   std::span<const std::uint8_t> bytes() const {
     return {static_cast<const std::uint8_t*>(addr_), size_};
   }
+  int fd() const { return fd_; }
 
  private:
   void* addr_ = nullptr;
   std::size_t size_ = 0;
+  int fd_ = -1;
 };
 
 // Keeps the code of an error and puts context in front of its message.
@@ -123,6 +127,7 @@ class ReaderImpl final : public Reader {
   const Header& header() const override { return header_; }
   const std::string& metadata_json() const override { return metadata_; }
   std::span<const std::uint8_t> bytes() const override { return bytes_; }
+  int file_descriptor() const override { return mapping_ ? mapping_->fd() : -1; }
 
   Result<std::span<const std::uint8_t>> get(TileId id) const override {
     if (id.z > 31 || std::uint64_t{id.x} >= (std::uint64_t{1} << id.z) ||
@@ -351,9 +356,11 @@ Result<std::shared_ptr<Reader>> Reader::open(const std::filesystem::path& path,
   // reach us. (Truncating the file under a live reader is outside the contract: SIGBUS.)
   void* addr = ::mmap(nullptr, size, PROT_READ, MAP_PRIVATE, fd, 0);
   const int map_err = errno;
-  ::close(fd);  // the mapping keeps the file referenced
-  if (addr == MAP_FAILED) return sys_error("cannot map", map_err);
-  auto mapping = std::make_unique<Mapping>(addr, size);
+  if (addr == MAP_FAILED) {
+    ::close(fd);
+    return sys_error("cannot map", map_err);
+  }
+  auto mapping = std::make_unique<Mapping>(addr, size, fd);
   const std::span<const std::uint8_t> bytes = mapping->bytes();
   Result<std::shared_ptr<Reader>> r = make_reader(bytes, std::move(mapping), options);
   if (!r) return with_context(path.string(), std::move(r).error());

@@ -1,6 +1,9 @@
 // Boost.Beast implementation of HttpServer; the contract is in http_server.hpp.
 #include "vts/server/http_server.hpp"
 
+#include <sys/sendfile.h>
+#include <sys/socket.h>
+#include <sys/uio.h>
 #include <algorithm>
 #include <array>
 #include <atomic>
@@ -149,25 +152,88 @@ class Server;
 
 // ---- one connection -------------------------------------------------------------------------
 
-// A response is written as its serialised header plus a view of its body (the archive mapping or
-// `response.owned`) in one gathered write — no copy of the body, no per-field allocations.
+// A response is written as its serialised header plus its body, without copying the body: a body
+// from an archive goes out with sendfile(2) from the archive's file (the kernel hands page-cache
+// pages to the socket), the header just before it with MSG_MORE so both leave in one segment;
+// any other body (`response.owned`) goes out with the header in one gathered write.
 
 struct Outgoing {
   HttpResponse response;
   std::string head;            // status line and header fields, CRLF CRLF
   std::span<const char> body;  // empty for HEAD, 204 and 304
+  int file_fd = -1;            // >= 0: send `body` with sendfile from this file ...
+  off_t file_offset = 0;       // ... at this offset (where `body` lies in the mapping)
   std::size_t sent = 0;        // bytes of head + body written so far
   Clock::time_point start;
+  Clock::time_point deadline{};  // set when writing starts: the whole response must be out by then
   int route = 0;
   bool close = false;
+  bool keep_alive_header = false;  // HTTP/1.0 client that asked for keep-alive
   // For the access log (only filled when it is on).
   std::string method, target, tileset;
+
+  std::size_t total() const { return head.size() + body.size(); }
+};
+
+class Session;
+
+// The deadlines of one thread's connections, checked by one periodic timer on that thread. A
+// timer per connection would be armed and cancelled several times per request, each time a
+// scheduler round trip and often a timerfd update; a sweep costs a compare per connection.
+class Sweeper {
+ public:
+  // Sweepers outlive their io_context (sessions destroyed with it still remove themselves);
+  // their timer does not: the server drops it with release() before the io_context goes.
+  Sweeper(asio::io_context& ioc, std::chrono::milliseconds period)
+      : ioc_(ioc), timer_(std::in_place, ioc), period_(period) {}
+  asio::io_context& context() { return ioc_; }
+  void start() {
+    asio::post(ioc_, [this] { schedule(); });
+  }
+  // Stops sweeping (from any thread); the timer then no longer keeps the io_context busy.
+  void stop() {
+    asio::post(ioc_, [this] {
+      stopped_ = true;
+      timer_->cancel();
+    });
+  }
+  void release() {
+    stopped_ = true;
+    timer_.reset();
+  }
+  // add() on the connection's thread; remove() from its destructor, wherever that runs. O(1).
+  void add(Session* s);
+  void remove(Session* s);
+
+ private:
+  void schedule() {
+    if (stopped_) return;
+    timer_->expires_after(period_);
+    timer_->async_wait([this](beast::error_code ec) {
+      if (ec || stopped_) return;
+      sweep();
+      schedule();
+    });
+  }
+  void sweep();
+
+  asio::io_context& ioc_;
+  std::optional<asio::steady_timer> timer_;
+  std::chrono::milliseconds period_;
+  bool stopped_ = false;
+  std::mutex mutex_;
+  std::vector<Session*> sessions_;
 };
 
 class Session : public std::enable_shared_from_this<Session> {
  public:
-  Session(Server& server, tcp::socket socket, bool admin);
+  Session(Server& server, Sweeper& sweeper, tcp::socket socket, bool admin);
   ~Session();
+  // On the connection's thread: closes the connection when a deadline has passed.
+  void check_deadlines(Clock::time_point now) {
+    if (socket_.is_open() && (now >= read_deadline_ || now >= write_deadline_)) close();
+  }
+  std::size_t sweep_slot = 0;  // position in the Sweeper's list
   void start();
   // Called (on the strand) when the server stops: close now if nothing is queued.
   void on_server_stop();
@@ -178,9 +244,12 @@ class Session : public std::enable_shared_from_this<Session> {
   void on_read(beast::error_code ec);
   void enqueue(std::unique_ptr<Outgoing> out);
   void write_next();
-  void on_write(beast::error_code ec, std::size_t bytes);
+  std::size_t write_some(Outgoing& o, beast::error_code& ec);
+  bool complete_front();
   void fail_parse(int status, const char* message);
-  void arm(asio::steady_timer& timer, std::chrono::milliseconds d);
+  // Deadlines, enforced by the connection's thread's Sweeper (expiry closes the connection).
+  void set_read_deadline(std::chrono::milliseconds d) { read_deadline_ = Clock::now() + d; }
+  void clear_read_deadline() { read_deadline_ = Clock::time_point::max(); }
   void close();
   void linger_close();
   void drain_input();
@@ -188,7 +257,9 @@ class Session : public std::enable_shared_from_this<Session> {
   Server& server_;
   tcp::socket socket_;
   bool admin_;
-  asio::steady_timer read_timer_, write_timer_;
+  Sweeper& sweeper_;
+  Clock::time_point read_deadline_ = Clock::time_point::max();
+  Clock::time_point write_deadline_ = Clock::time_point::max();
   beast::flat_buffer buffer_;
   std::optional<http::request_parser<http::empty_body>> parser_;
   std::deque<std::unique_ptr<Outgoing>> queue_;
@@ -216,6 +287,14 @@ class Server final : public HttpServer {
     const int n = options_.threads > 0 ? options_.threads
                                        : std::max(1, int(std::thread::hardware_concurrency()));
     for (int i = 1; i < n; ++i) workers_.push_back(std::make_unique<asio::io_context>(1));
+    // Deadline sweeps at an eighth of the shortest timeout (so a deadline is enforced within
+    // 12.5% of its length), between 10 ms and 250 ms.
+    const auto& l = options_.limits;
+    const auto shortest = std::min({l.idle_timeout, l.header_timeout, l.write_timeout});
+    const auto period =
+        std::clamp(shortest / 8, std::chrono::milliseconds(10), std::chrono::milliseconds(250));
+    sweepers_.push_back(std::make_unique<Sweeper>(ioc_, period));
+    for (auto& w : workers_) sweepers_.push_back(std::make_unique<Sweeper>(*w, period));
     if (!options_.access_log.empty()) {
       if (options_.access_log == "-") {
         log_ = stdout;
@@ -230,7 +309,9 @@ class Server final : public HttpServer {
     beast::error_code ec;
     acceptor_.close(ec);
     admin_acceptor_.close(ec);
-    // Sessions still pending (after a drain timeout) die with ioc_, while what they use lives.
+    // Sessions still pending (after a drain timeout) die with the io_contexts, while what they
+    // use lives (declared earlier); the sweep timers go first, while their io_contexts live.
+    for (auto& sw : sweepers_) sw->release();
     if (owns_log_) std::fclose(log_);
   }
 
@@ -252,6 +333,7 @@ class Server final : public HttpServer {
   void set_ready(bool ready) override { ready_.store(ready); }
 
   void run() override {
+    for (auto& sw : sweepers_) sw->start();
     accept(acceptor_, false);
     if (options_.admin_enabled) accept(admin_acceptor_, true);
     if (options_.handle_signals) {
@@ -384,38 +466,38 @@ class Server final : public HttpServer {
   // On strand_, once every session is gone: nothing keeps any io_context busy any more.
   void drained() {
     drain_timer_.cancel();
+    for (auto& sw : sweepers_) sw->stop();
     guards_.clear();
   }
 
   // One io_context per thread (each run by exactly one thread, so a connection's handlers are
   // serialised without a strand and the scheduler never contends); connections are dealt out
   // round-robin.
-  asio::io_context& next_context() {
-    const std::size_t i = next_context_++ % (workers_.size() + 1);
-    return i == 0 ? ioc_ : *workers_[i - 1];
-  }
+  Sweeper& next_context() { return *sweepers_[next_context_++ % sweepers_.size()]; }
 
   void accept(tcp::acceptor& acc, bool admin) {
-    acc.async_accept(next_context(), [this, &acc, admin](beast::error_code ec, tcp::socket socket) {
-      if (ec == asio::error::operation_aborted || !acc.is_open()) return;
-      if (ec) {
-        // EMFILE and friends: back off briefly rather than spin.
-        std::fprintf(stderr, "vts serve: accept: %s\n", ec.message().c_str());
-        auto t = std::make_shared<asio::steady_timer>(ioc_, std::chrono::milliseconds(50));
-        t->async_wait([this, &acc, admin, t](beast::error_code) { accept(acc, admin); });
-        return;
-      }
-      if (std::size_t(metrics_.open_connections.load()) >= options_.limits.max_connections) {
-        metrics_.refused_connections.fetch_add(1, std::memory_order_relaxed);
-        beast::error_code ignored;
-        socket.close(ignored);
-      } else {
-        auto s = std::make_shared<Session>(*this, std::move(socket), admin);
-        add_session(s);
-        s->start();
-      }
-      accept(acc, admin);
-    });
+    Sweeper& slot = next_context();
+    acc.async_accept(
+        slot.context(), [this, &acc, &slot, admin](beast::error_code ec, tcp::socket socket) {
+          if (ec == asio::error::operation_aborted || !acc.is_open()) return;
+          if (ec) {
+            // EMFILE and friends: back off briefly rather than spin.
+            std::fprintf(stderr, "vts serve: accept: %s\n", ec.message().c_str());
+            auto t = std::make_shared<asio::steady_timer>(ioc_, std::chrono::milliseconds(50));
+            t->async_wait([this, &acc, admin, t](beast::error_code) { accept(acc, admin); });
+            return;
+          }
+          if (std::size_t(metrics_.open_connections.load()) >= options_.limits.max_connections) {
+            metrics_.refused_connections.fetch_add(1, std::memory_order_relaxed);
+            beast::error_code ignored;
+            socket.close(ignored);
+          } else {
+            auto s = std::make_shared<Session>(*this, slot, std::move(socket), admin);
+            add_session(s);
+            s->start();
+          }
+          accept(acc, admin);
+        });
   }
 
   void wait_signal() {
@@ -448,6 +530,11 @@ class Server final : public HttpServer {
         metrics_.reloads_swapped.fetch_add(std::uint64_t(result.swapped));
         std::fprintf(stderr, "vts serve: reloaded %d tileset(s)\n", result.swapped);
       }
+      if (result.added > 0)
+        std::fprintf(stderr, "vts serve: added %d new tileset(s)\n", result.added);
+      if (result.removed > 0)
+        std::fprintf(stderr, "vts serve: removed %d tileset(s) whose archive left its folder\n",
+                     result.removed);
       for (const auto& e : result.failures) {
         metrics_.reloads_refused.fetch_add(1);
         std::fprintf(stderr, "vts serve: reload refused, keeping the old archive: %s\n",
@@ -472,6 +559,7 @@ class Server final : public HttpServer {
   bool owns_log_ = false;
   std::mutex log_mutex_;
 
+  std::vector<std::unique_ptr<Sweeper>> sweepers_;  // [0] for ioc_, then one per worker
   asio::io_context ioc_;
   std::vector<std::unique_ptr<asio::io_context>> workers_;
   std::vector<asio::executor_work_guard<asio::io_context::executor_type>> guards_;
@@ -545,17 +633,39 @@ std::string Server::metrics_text() const {
   return out;
 }
 
+// ---- Sweeper implementation -------------------------------------------------------------------
+
+void Sweeper::add(Session* s) {
+  std::lock_guard lock(mutex_);
+  s->sweep_slot = sessions_.size();
+  sessions_.push_back(s);
+}
+
+void Sweeper::remove(Session* s) {
+  std::lock_guard lock(mutex_);
+  const std::size_t i = s->sweep_slot;
+  if (i >= sessions_.size() || sessions_[i] != s) return;
+  sessions_[i] = sessions_.back();
+  sessions_[i]->sweep_slot = i;
+  sessions_.pop_back();
+}
+
+void Sweeper::sweep() {
+  const auto now = Clock::now();
+  std::lock_guard lock(mutex_);
+  // close() only closes the socket; no session is destroyed (or removed) during the loop.
+  for (Session* s : sessions_) s->check_deadlines(now);
+}
+
 // ---- Session implementation ------------------------------------------------------------------
 
-Session::Session(Server& server, tcp::socket socket, bool admin)
-    : server_(server),
-      socket_(std::move(socket)),
-      admin_(admin),
-      read_timer_(socket_.get_executor()),
-      write_timer_(socket_.get_executor()) {
+Session::Session(Server& server, Sweeper& sweeper, tcp::socket socket, bool admin)
+    : server_(server), socket_(std::move(socket)), admin_(admin), sweeper_(sweeper) {
+  sweeper_.add(this);
   server_.metrics().open_connections.fetch_add(1, std::memory_order_relaxed);
   beast::error_code ec;
   socket_.set_option(tcp::no_delay(true), ec);
+  socket_.native_non_blocking(true, ec);  // write_some() sends with plain syscalls
   if (server_.access_log()) {
     const auto ep = socket_.remote_endpoint(ec);
     if (!ec) remote_ = ep.address().to_string() + ":" + std::to_string(ep.port());
@@ -563,6 +673,7 @@ Session::Session(Server& server, tcp::socket socket, bool admin)
 }
 
 Session::~Session() {
+  sweeper_.remove(this);
   server_.metrics().open_connections.fetch_sub(1, std::memory_order_relaxed);
   server_.remove_session(this);
 }
@@ -577,17 +688,15 @@ void Session::start() {
 void Session::on_server_stop() {
   asio::post(socket_.get_executor(), [self = shared_from_this()] {
     self->read_done_ = true;
-    if (self->queue_.empty()) self->close();
-  });
-}
-
-// Timer expiry closes the socket, which aborts the pending operation. A handler that was already
-// queued when the timer was re-armed sees a future expiry and does nothing.
-void Session::arm(asio::steady_timer& timer, std::chrono::milliseconds d) {
-  timer.expires_after(d);
-  timer.async_wait([self = shared_from_this(), &timer](beast::error_code ec) {
-    if (ec || timer.expiry() > Clock::now()) return;
-    self->close();
+    if (!self->queue_.empty()) return;  // the writer closes after the last queued response
+    // Idle: close at once — unless input is waiting (pipelined requests we will not answer),
+    // where a plain close would reset the connection and could destroy the last response still
+    // in the socket buffer.
+    beast::error_code ec;
+    if (self->buffer_.size() == 0 && self->socket_.available(ec) == 0 && !ec)
+      self->close();
+    else
+      self->linger_close();
   });
 }
 
@@ -597,8 +706,8 @@ void Session::close() {
   read_done_ = true;
   beast::error_code ec;
   socket_.close(ec);
-  read_timer_.cancel();
-  write_timer_.cancel();
+  clear_read_deadline();
+  write_deadline_ = Clock::time_point::max();
 }
 
 // Close after the last response: send FIN, then read and discard whatever the client still sends
@@ -610,12 +719,12 @@ void Session::linger_close() {
   if (closed_) return;
   closed_ = true;
   read_done_ = true;
-  write_timer_.cancel();
+  write_deadline_ = Clock::time_point::max();
   beast::error_code ec;
   socket_.shutdown(tcp::socket::shutdown_send, ec);
   if (ec) return close();
   socket_.cancel(ec);  // a read still waiting for a request we will not serve
-  arm(read_timer_, kLinger);
+  set_read_deadline(kLinger);
   drain_input();
 }
 
@@ -640,12 +749,12 @@ void Session::wait_for_request() {
   }
   if (buffer_.size() > 0) return read_request();
   reading_ = true;
-  arm(read_timer_, server_.options().limits.idle_timeout);
+  set_read_deadline(server_.options().limits.idle_timeout);
   socket_.async_read_some(buffer_.prepare(4096),
                           [self = shared_from_this()](beast::error_code ec, std::size_t n) {
                             self->reading_ = false;
                             if (self->closed_) return;
-                            self->read_timer_.cancel();
+                            self->clear_read_deadline();
                             if (ec || n == 0) {
                               self->read_done_ = true;
                               if (self->queue_.empty()) self->close();
@@ -653,8 +762,10 @@ void Session::wait_for_request() {
                             }
                             self->buffer_.commit(n);
                             if (self->server_.stopping()) {
+                              // Unread input may follow: a plain close would reset the connection
+                              // and could destroy responses still in the socket buffer.
                               self->read_done_ = true;
-                              if (self->queue_.empty()) self->close();
+                              if (self->queue_.empty()) self->linger_close();
                               return;
                             }
                             self->read_request();
@@ -667,12 +778,12 @@ void Session::read_request() {
   parser_->header_limit(std::uint32_t(limits.max_header_bytes));
   parser_->body_limit(0);
   reading_ = true;
-  arm(read_timer_, limits.header_timeout);
+  set_read_deadline(limits.header_timeout);
   http::async_read(socket_, buffer_, *parser_,
                    [self = shared_from_this()](beast::error_code ec, std::size_t) {
                      self->reading_ = false;
                      if (self->closed_) return;
-                     self->read_timer_.cancel();
+                     self->clear_read_deadline();
                      self->on_read(ec);
                    });
 }
@@ -742,6 +853,8 @@ void Session::on_read(beast::error_code ec) {
     out->response = route(hr, server_.registry(), server_.options().router);
   }
   if (!req.keep_alive() || server_.stopping()) out->close = true;
+  // HTTP/1.0 keeps a connection open only when both sides say so.
+  out->keep_alive_header = req.version() < 11 && !out->close;
   out->route = admin_ ? 6 : int(out->response.route);
   if (server_.access_log()) {
     out->method = std::string(hr.method_text);
@@ -776,7 +889,10 @@ void Session::enqueue(std::unique_ptr<Outgoing> out) {
     h += v;
     h += "\r\n";
   }
-  if (out->close) h += "Connection: close\r\n";
+  if (out->close)
+    h += "Connection: close\r\n";
+  else if (out->keep_alive_header)
+    h += "Connection: keep-alive\r\n";
   const bool no_body = r.status == 304 || r.status == 204 || (r.status >= 100 && r.status < 200);
   if (!no_body) {
     h += "Content-Length: ";
@@ -785,47 +901,114 @@ void Session::enqueue(std::unique_ptr<Outgoing> out) {
   }
   h += "\r\n";
   if (!r.head_only && !no_body) {
-    if (!r.view.empty())
+    if (!r.view.empty()) {
       out->body = {reinterpret_cast<const char*>(r.view.data()), r.view.size()};
-    else
+      const pmtiles::Reader* reader = r.hold ? r.hold->reader.get() : nullptr;
+      const auto whole = reader ? reader->bytes() : std::span<const std::uint8_t>{};
+      if (reader && reader->file_descriptor() >= 0 && r.view.data() >= whole.data() &&
+          r.view.data() + r.view.size() <= whole.data() + whole.size() &&
+          r.view.size() >= server_.options().limits.sendfile_min_bytes) {
+        out->file_fd = reader->file_descriptor();
+        out->file_offset = off_t(r.view.data() - whole.data());
+      }
+    } else {
       out->body = {r.owned.data(), r.owned.size()};
+    }
     assert(out->body.size() == r.content_length);
   }
   queue_.push_back(std::move(out));
   if (!writing_) write_next();
 }
 
-void Session::write_next() {
-  if (closed_ || queue_.empty()) return;
-  writing_ = true;
-  arm(write_timer_, server_.options().limits.write_timeout);
-  const Outgoing& o = *queue_.front();
-  std::array<asio::const_buffer, 2> bufs;
+// One non-blocking send of what is left of `o` (one syscall). Sets would_block when the socket
+// buffer is full.
+std::size_t Session::write_some(Outgoing& o, beast::error_code& ec) {
+  const int sock = socket_.native_handle();
+  ssize_t n = 0;
   if (o.sent < o.head.size()) {
-    bufs[0] = asio::buffer(o.head.data() + o.sent, o.head.size() - o.sent);
-    bufs[1] = asio::buffer(o.body.data(), o.body.size());
+    const char* p = o.head.data() + o.sent;
+    const std::size_t len = o.head.size() - o.sent;
+    if (o.file_fd >= 0) {
+      // The body follows from the file: MSG_MORE holds this partial segment for it.
+      n = ::send(sock, p, len, MSG_NOSIGNAL | MSG_MORE);
+    } else {
+      iovec iov[2] = {{const_cast<char*>(p), len},
+                      {const_cast<char*>(o.body.data()), o.body.size()}};
+      msghdr msg{};
+      msg.msg_iov = iov;
+      msg.msg_iovlen = o.body.empty() ? 1 : 2;
+      n = ::sendmsg(sock, &msg, MSG_NOSIGNAL);
+    }
   } else {
-    const std::size_t off = o.sent - o.head.size();
-    bufs[0] = asio::buffer(o.body.data() + off, o.body.size() - off);
+    const std::size_t done = o.sent - o.head.size();
+    const std::size_t len = o.body.size() - done;
+    if (o.file_fd >= 0) {
+      off_t off = o.file_offset + off_t(done);
+      n = ::sendfile(sock, o.file_fd, &off, std::min<std::size_t>(len, std::size_t(1) << 30));
+    } else {
+      n = ::send(sock, o.body.data() + done, len, MSG_NOSIGNAL);
+    }
   }
-  socket_.async_write_some(bufs, [self = shared_from_this()](beast::error_code ec, std::size_t n) {
-    self->on_write(ec, n);
-  });
+  if (n < 0) {
+    const int err = errno;
+    ec = (err == EAGAIN || err == EWOULDBLOCK)
+             ? beast::error_code(asio::error::would_block)
+             : beast::error_code(err, boost::system::system_category());
+    return 0;
+  }
+  if (n == 0) ec = asio::error::eof;  // a file shorter than its mapping: never for a valid reader
+  return std::size_t(n);
 }
 
-void Session::on_write(beast::error_code ec, std::size_t bytes) {
-  write_timer_.cancel();
-  writing_ = false;
-  if (ec || closed_) {
-    close();
-    queue_.clear();
-    return;
+// Writes queued responses in order until the queue is empty or the socket is full; then waits for
+// it to drain. Each response must be completely written by its deadline: `write_timeout` plus its
+// size at `min_send_rate`, so a client reading a trickle cannot hold a connection for ever.
+void Session::write_next() {
+  const auto& limits = server_.options().limits;
+  while (!closed_ && !queue_.empty()) {
+    Outgoing& o = *queue_.front();
+    if (o.deadline == Clock::time_point{}) {
+      o.deadline = Clock::now() + limits.write_timeout;
+      if (limits.min_send_rate > 0)
+        o.deadline += std::chrono::milliseconds(o.total() * 1000 / limits.min_send_rate);
+    }
+    beast::error_code ec;
+    const std::size_t n = o.total() > o.sent ? write_some(o, ec) : 0;
+    if (ec == asio::error::would_block) {
+      writing_ = true;
+      write_deadline_ = o.deadline;
+      socket_.async_wait(tcp::socket::wait_write, [self = shared_from_this()](beast::error_code e) {
+        self->writing_ = false;
+        self->write_deadline_ = Clock::time_point::max();
+        if (e || self->closed_) {
+          self->close();
+          self->queue_.clear();
+          return;
+        }
+        self->write_next();
+      });
+      return;
+    }
+    if (ec == asio::error::interrupted) continue;
+    if (ec) {
+      close();
+      queue_.clear();
+      return;
+    }
+    server_.metrics().response_bytes.fetch_add(n, std::memory_order_relaxed);
+    o.sent += n;
+    if (o.sent < o.total()) continue;
+    if (!complete_front()) return;
   }
-  Outgoing& out = *queue_.front();
-  server_.metrics().response_bytes.fetch_add(bytes, std::memory_order_relaxed);
-  out.sent += bytes;
-  if (out.sent < out.head.size() + out.body.size()) return write_next();
+  // Nothing more will be answered (stop, EOF, Connection: close): a read still pending is only
+  // waiting for a request we will not serve.
+  if (!closed_ && read_done_ && queue_.empty()) linger_close();
+}
 
+// The front response is completely written: account for it, then either close (it asked to) or
+// resume reading if the pipeline had filled. Returns false when the connection is closing.
+bool Session::complete_front() {
+  Outgoing& out = *queue_.front();
   const auto elapsed = Clock::now() - out.start;
   server_.metrics().record(out.route, out.response.status, 0, elapsed);
   if (FILE* log = server_.access_log()) {
@@ -851,16 +1034,14 @@ void Session::on_write(beast::error_code ec, std::size_t bytes) {
   queue_.pop_front();
   if (close_after) {
     queue_.clear();
-    return linger_close();
+    linger_close();
+    return false;
   }
-  if (!queue_.empty()) write_next();
   if (read_paused_ && queue_.size() < server_.options().limits.max_pipeline) {
     read_paused_ = false;
     wait_for_request();
   }
-  // Nothing more will be answered (stop, EOF, Connection: close): a read still pending is only
-  // waiting for a request we will not serve.
-  if (read_done_ && queue_.empty()) linger_close();
+  return true;
 }
 
 }  // namespace

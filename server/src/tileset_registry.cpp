@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <set>
 #include <string_view>
 #include <system_error>
 
@@ -34,12 +35,7 @@ Status validate_name(std::string_view name, const fs::path& path) {
   return {};
 }
 
-struct FileIdentity {
-  std::uint64_t size = 0;
-  std::int64_t mtime_ns = 0;
-  std::uint64_t inode = 0;
-  bool operator==(const FileIdentity&) const = default;
-};
+using FileIdentity = TilesetRegistry::FileIdentity;
 
 Result<FileIdentity> identify(const fs::path& path) {
   struct stat st {};
@@ -61,6 +57,14 @@ FileIdentity identity_of(const Tileset& t) {
 
 bool is_archive_name(const fs::path& p) {
   return p.extension() == ".pmtiles";
+}
+
+bool in_folder(const fs::path& file, const std::vector<fs::path>& folders) {
+  std::error_code ec;
+  const auto parent = fs::weakly_canonical(file.parent_path(), ec);
+  for (const auto& f : folders)
+    if (fs::weakly_canonical(f, ec) == parent) return true;
+  return false;
 }
 
 }  // namespace
@@ -111,8 +115,25 @@ Result<std::shared_ptr<const Tileset>> open_tileset(const fs::path& path) {
   return std::shared_ptr<const Tileset>(std::move(t));
 }
 
+namespace {
+
+// The archives directly inside a folder (not recursive), sorted.
+Result<std::vector<fs::path>> list_archives(const fs::path& folder) {
+  std::vector<fs::path> found;
+  std::error_code ec;
+  for (fs::directory_iterator it(folder, ec), end; !ec && it != end; it.increment(ec)) {
+    std::error_code type_ec;
+    if (is_archive_name(it->path()) && it->is_regular_file(type_ec)) found.push_back(it->path());
+  }
+  if (ec) return make_error(ErrorCode::io, folder.string() + ": " + ec.message());
+  std::sort(found.begin(), found.end());
+  return found;
+}
+
+}  // namespace
+
 Status TilesetRegistry::load(const std::vector<fs::path>& paths) {
-  std::vector<fs::path> files;
+  std::vector<fs::path> files, folders;
   for (const auto& p : paths) {
     std::error_code ec;
     const auto st = fs::status(p, ec);
@@ -120,17 +141,14 @@ Status TilesetRegistry::load(const std::vector<fs::path>& paths) {
       return make_error(ErrorCode::not_found, p.string() + ": no such file or folder");
     }
     if (fs::is_directory(st)) {
-      std::vector<fs::path> found;
-      for (fs::directory_iterator it(p, ec), end; !ec && it != end; it.increment(ec)) {
-        if (is_archive_name(it->path()) && it->is_regular_file(ec)) found.push_back(it->path());
-      }
-      if (ec) return make_error(ErrorCode::io, p.string() + ": " + ec.message());
-      if (found.empty()) {
+      auto found = list_archives(p);
+      if (!found) return found.error();
+      if (found->empty()) {
         return make_error(ErrorCode::not_found,
                           p.string() + ": folder holds no *.pmtiles archives");
       }
-      std::sort(found.begin(), found.end());
-      files.insert(files.end(), found.begin(), found.end());
+      files.insert(files.end(), found->begin(), found->end());
+      folders.push_back(p);
     } else {
       files.push_back(p);
     }
@@ -160,13 +178,72 @@ Status TilesetRegistry::load(const std::vector<fs::path>& paths) {
     }
   }
   tilesets_.merge(opened);
+  folders_.insert(folders_.end(), folders.begin(), folders.end());
   return {};
 }
 
 TilesetRegistry::ReloadResult TilesetRegistry::reload(bool force) {
   ReloadResult result;
+  std::vector<fs::path> folders;
+  {
+    std::lock_guard lock(mutex_);
+    folders = folders_;
+  }
+  // Archives that appeared in a served folder are added; those that left it are removed (requests
+  // in flight finish on their mapping). Files given by name are never removed.
+  std::set<fs::path> in_folders;
+  for (const auto& folder : folders) {
+    auto found = list_archives(folder);
+    if (!found) {
+      result.failures.push_back(found.error());
+      continue;
+    }
+    in_folders.insert(found->begin(), found->end());
+  }
+  std::set<fs::path> known;
+  for (const auto& t : all()) known.insert(t->path);
+  for (const auto& path : in_folders) {
+    if (known.count(path)) continue;
+    auto id = identify(path);
+    if (!id) continue;  // gone again
+    {
+      std::lock_guard lock(mutex_);
+      auto r = refused_.find(path);
+      if (!force && r != refused_.end() && r->second == *id) continue;  // refused as it is
+    }
+    auto fresh = open_tileset(path);
+    std::lock_guard lock(mutex_);
+    if (!fresh) {
+      refused_[path] = *id;
+      result.failures.push_back(
+          make_error(fresh.error().code, fresh.error().message + " (new archive not served)"));
+      continue;
+    }
+    const std::string name = (*fresh)->name;
+    if (auto dup = tilesets_.find(name); dup != tilesets_.end()) {
+      refused_[path] = *id;
+      result.failures.push_back(make_error(ErrorCode::invalid_argument,
+                                           "duplicate tileset name \"" + name +
+                                               "\": " + dup->second->path.string() + " and " +
+                                               path.string() + " (the new one is not served)"));
+      continue;
+    }
+    refused_.erase(path);
+    tilesets_.emplace(name, std::move(*fresh));
+    ++result.added;
+  }
   // Open outside the lock so lookups are never blocked by archive I/O.
   for (const auto& old : all()) {
+    std::error_code ec;
+    if (!fs::exists(old->path, ec) && !ec && in_folder(old->path, folders)) {
+      std::lock_guard lock(mutex_);
+      auto it = tilesets_.find(old->name);
+      if (it != tilesets_.end() && it->second == old) {
+        tilesets_.erase(it);
+        ++result.removed;
+      }
+      continue;
+    }
     auto id = identify(old->path);
     if (!id) {
       result.failures.push_back(make_error(

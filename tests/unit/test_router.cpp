@@ -5,11 +5,13 @@
 #include <unistd.h>
 
 #include <filesystem>
+#include <fstream>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 
 #include "vts/protocol/codec.hpp"
+#include "vts/protocol/pmtiles.hpp"
 #include "vts/server/builder.hpp"
 
 namespace fs = std::filesystem;
@@ -613,4 +615,44 @@ TEST_F(Router, ExpiredOrTamperedSignaturesAre403) {
 
 TEST_F(Router, SignaturesDoNotOpenPublicTilesetsToAnythingNew) {
   EXPECT_EQ(get("/dense/0/0/0?expires=1&sig=00").status, 200);
+}
+
+TEST(RouterDamage, ADamagedTileHeaderAnswers500NamingTheTileAndOtherTilesStillServe) {
+  const fs::path dir =
+      fs::temp_directory_path() / ("vts-router-damage-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  vts::BuildOptions o;
+  o.synthetic = vts::SyntheticSpec{600, 300};
+  o.output = dir / "d.pmtiles";
+  o.threads = 1;
+  ASSERT_TRUE(vts::build_pyramid(o).ok());
+  // Overwrite the magic of tile 2/1/0's header frame in the file itself.
+  std::uint64_t offset = 0;
+  {
+    auto reader = vts::pmtiles::Reader::open(o.output);
+    ASSERT_TRUE(reader.ok());
+    auto payload = (*reader)->get(vts::TileId{2, 1, 0});
+    ASSERT_TRUE(payload.ok());
+    offset = std::uint64_t(payload->data() - (*reader)->bytes().data());
+  }
+  {
+    std::fstream f(o.output, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(std::streamoff(offset));
+    f.write("XXXX", 4);
+  }
+  vts::TilesetRegistry registry;
+  ASSERT_TRUE(registry.load({dir}).ok());
+  vts::RouterConfig config;
+  vts::HttpRequest req;
+  req.method = vts::HttpMethod::get;
+  req.target = "/d/2/1/0";
+  auto r = vts::route(req, registry, config);
+  expect_plain_error(r, 500);
+  EXPECT_NE(r.owned.find("2/1/0"), std::string::npos) << r.owned;
+  EXPECT_NE(r.owned.find("damaged"), std::string::npos) << r.owned;
+  EXPECT_TRUE(r.view.empty());
+  req.target = "/d/2/0/0";
+  EXPECT_EQ(vts::route(req, registry, config).status, 200);
+  std::error_code ec;
+  fs::remove_all(dir, ec);
 }

@@ -227,17 +227,84 @@ TEST(TilesetRegistry, ReloadRefusesABrokenReplacementAndKeepsServingTheOldArchiv
   EXPECT_TRUE(old->reader->get(vts::TileId{0, 0, 0}).ok());
 }
 
-TEST(TilesetRegistry, ReloadReportsADeletedArchiveAndKeepsIt) {
+TEST(TilesetRegistry, ReloadReportsADeletedArchiveLoadedByNameAndKeepsIt) {
+  RegistryTempDir dir;
+  build_archive(dir.path / "a.pmtiles", 300, 200);
+  vts::TilesetRegistry registry;
+  ASSERT_TRUE(registry.load({dir.path / "a.pmtiles"}).ok());
+  fs::remove(dir.path / "a.pmtiles");
+  auto r = registry.reload(false);
+  EXPECT_EQ(r.swapped, 0);
+  EXPECT_EQ(r.removed, 0);
+  EXPECT_EQ(r.failures.size(), 1u);
+  ASSERT_NE(registry.find("a"), nullptr);
+  EXPECT_TRUE(registry.find("a")->reader->get(vts::TileId{0, 0, 0}).ok());
+}
+
+TEST(TilesetRegistry, ReloadAddsArchivesThatAppearInAFolderAndRemovesThoseThatLeave) {
   RegistryTempDir dir;
   build_archive(dir.path / "a.pmtiles", 300, 200);
   vts::TilesetRegistry registry;
   ASSERT_TRUE(registry.load({dir.path}).ok());
-  fs::remove(dir.path / "a.pmtiles");
+  auto a = registry.find("a");
+  ASSERT_NE(a, nullptr);
+
+  build_archive(dir.path / "b.pmtiles", 600, 300);
   auto r = registry.reload(false);
-  EXPECT_EQ(r.swapped, 0);
-  EXPECT_EQ(r.failures.size(), 1u);
-  ASSERT_NE(registry.find("a"), nullptr);
-  EXPECT_TRUE(registry.find("a")->reader->get(vts::TileId{0, 0, 0}).ok());
+  EXPECT_EQ(r.added, 1);
+  EXPECT_TRUE(r.failures.empty());
+  ASSERT_NE(registry.find("b"), nullptr);
+  EXPECT_EQ(registry.find("b")->info.geometry.width(), 600u);
+
+  fs::remove(dir.path / "a.pmtiles");
+  r = registry.reload(false);
+  EXPECT_EQ(r.removed, 1);
+  EXPECT_TRUE(r.failures.empty());
+  EXPECT_EQ(registry.find("a"), nullptr);
+  EXPECT_EQ(registry.size(), 1u);
+  // A request that took its snapshot before the removal still reads the old mapping.
+  EXPECT_TRUE(a->reader->get(vts::TileId{0, 0, 0}).ok());
+  // Nothing changed since: nothing happens.
+  r = registry.reload(false);
+  EXPECT_EQ(r.added + r.removed + r.swapped, 0);
+}
+
+TEST(TilesetRegistry, ReloadRefusesABrokenNewArchiveOnceUntilItsFileChanges) {
+  RegistryTempDir dir;
+  build_archive(dir.path / "a.pmtiles", 300, 200);
+  vts::TilesetRegistry registry;
+  ASSERT_TRUE(registry.load({dir.path}).ok());
+  write_file(dir.path / "junk.tmp", std::string(4096, 'x'));
+  fs::rename(dir.path / "junk.tmp", dir.path / "junk.pmtiles");
+  auto r = registry.reload(false);
+  EXPECT_EQ(r.added, 0);
+  ASSERT_EQ(r.failures.size(), 1u);
+  EXPECT_NE(r.failures[0].message.find("junk.pmtiles"), std::string::npos);
+  // Not retried (nor reported again) while the file stays as it is...
+  r = registry.reload(false);
+  EXPECT_TRUE(r.failures.empty());
+  EXPECT_EQ(registry.find("junk"), nullptr);
+  // ... but a valid archive put in its place is served.
+  build_archive(dir.path / "junk.tmp", 300, 200);
+  fs::rename(dir.path / "junk.tmp", dir.path / "junk.pmtiles");
+  r = registry.reload(false);
+  EXPECT_EQ(r.added, 1);
+  EXPECT_NE(registry.find("junk"), nullptr);
+}
+
+TEST(TilesetRegistry, ReloadRefusesANewArchiveWhoseNameIsTaken) {
+  RegistryTempDir dir;
+  fs::create_directories(dir.path / "f");
+  build_archive(dir.path / "a.pmtiles", 300, 200);
+  build_archive(dir.path / "f" / "b.pmtiles", 300, 200);
+  vts::TilesetRegistry registry;
+  ASSERT_TRUE(registry.load({dir.path / "a.pmtiles", dir.path / "f"}).ok());
+  build_archive(dir.path / "f" / "a.pmtiles", 600, 300);
+  auto r = registry.reload(false);
+  EXPECT_EQ(r.added, 0);
+  ASSERT_EQ(r.failures.size(), 1u);
+  EXPECT_NE(r.failures[0].message.find("duplicate tileset name"), std::string::npos);
+  EXPECT_EQ(registry.find("a")->info.geometry.width(), 300u);
 }
 
 TEST(TilesetRegistry, LookupsDuringReloadAlwaysSeeACompleteReadableTileset) {

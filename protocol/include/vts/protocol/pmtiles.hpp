@@ -133,6 +133,10 @@ class Reader {
   virtual const std::string& metadata_json() const = 0;
   // The whole archive as mapped.
   virtual std::span<const std::uint8_t> bytes() const = 0;
+  // The archive file, open read-only for the reader's lifetime (so a server can sendfile() a
+  // view of bytes() from it: same inode as the mapping, even after the path is replaced); -1 for
+  // a reader over borrowed bytes. Do not close it.
+  virtual int file_descriptor() const = 0;
 
   // The stored payload of a tile, a view into the mapping valid while the reader lives.
   // not_found when the archive has no such tile; corrupt/truncated on a malformed directory.

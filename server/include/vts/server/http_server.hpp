@@ -1,7 +1,7 @@
 // The network layer of `vts serve`: an asynchronous HTTP/1.1 server (Boost.Beast/Asio) that parses
 // requests into vts::HttpRequest, answers them with vts::route() and writes the HttpResponse —
-// tile bodies straight from the archive mapping, without a copy. A second listener (admin) serves
-// /metrics (Prometheus text) and /health.
+// archive bodies with sendfile(2) from the archive file, so they are never copied in user space. A
+// second listener (admin) serves /metrics (Prometheus text) and /health.
 //
 // Concurrency model (classic completion handlers, not coroutines — the pipelined read/write pair
 // of one connection is easier to express as two independent handler chains):
@@ -14,8 +14,9 @@
 //   queued; when the queue is full the connection stops reading (back-pressure) until the writer
 //   catches up. Responses are written in request order.
 // - Timeouts: a connection waiting for the first byte of a request gets `idle_timeout`; once a
-//   byte has arrived, the whole header must arrive within `header_timeout` (slowloris). Every
-//   write_some must make progress within `write_timeout`. Expiry closes the connection.
+//   byte has arrived, the whole header must arrive within `header_timeout` (slowloris). Each
+//   response must be written within `write_timeout` plus its size at `min_send_rate` (slow
+//   readers). Expiry closes the connection.
 // - Limits: header bytes (431), target length (414), any request body (413), connections beyond
 //   `max_connections` are accepted and closed at once. A parse error answers 400/413/414/431 with
 //   `Connection: close` and closes after the response.
@@ -45,6 +46,12 @@ struct HttpServerLimits {
   std::chrono::milliseconds idle_timeout{30000};
   std::chrono::milliseconds header_timeout{10000};
   std::chrono::milliseconds write_timeout{30000};
+  // A response must be written within write_timeout plus its size at this rate (bytes/s; 0 =
+  // no rate bound): a reader that trickles cannot keep a connection for ever.
+  std::size_t min_send_rate = 16 * 1024;
+  // Archive bodies at least this large are sent with sendfile(2); smaller ones are gathered with
+  // their header into one write.
+  std::size_t sendfile_min_bytes = 0;
   std::chrono::milliseconds drain_timeout{10000};
 };
 

@@ -45,9 +45,11 @@ class TilesetRegistry {
 
   // Re-opens every tileset whose file changed (size, mtime or inode) or, with force, all of them.
   // A new archive that fails to open is refused and the old one kept (its error is returned in
-  // the list of failures). Returns how many were swapped.
+  // the list of failures). In loaded folders, archives that appeared are added and archives that
+  // disappeared are removed; a new archive that is refused is not tried again until its file
+  // changes (or force). Files loaded by name are never removed.
   struct ReloadResult {
-    int swapped = 0;
+    int swapped = 0, added = 0, removed = 0;
     std::vector<Error> failures;
   };
   ReloadResult reload(bool force);
@@ -56,9 +58,19 @@ class TilesetRegistry {
   std::vector<std::shared_ptr<const Tileset>> all() const;  // sorted by name
   std::size_t size() const;
 
+  // What reload() compares to decide whether a file changed.
+  struct FileIdentity {
+    std::uint64_t size = 0;
+    std::int64_t mtime_ns = 0;
+    std::uint64_t inode = 0;
+    bool operator==(const FileIdentity&) const = default;
+  };
+
  private:
   mutable std::mutex mutex_;
   std::map<std::string, std::shared_ptr<const Tileset>, std::less<>> tilesets_;
+  std::vector<std::filesystem::path> folders_;             // loaded as folders
+  std::map<std::filesystem::path, FileIdentity> refused_;  // new archives refused, as seen
 };
 
 }  // namespace vts
