@@ -1,0 +1,115 @@
+// Where tiles come from, behind one asynchronous interface: a local archive (mmap), a tile server
+// described by TileJSON (`vts serve` or any server with our tiles), or a remote PMTiles archive
+// read with HTTP range requests (from `vts serve`'s .pmtiles route, nginx or an object store —
+// no tile server needed). The client stack (TileClient) decorates a source with caches,
+// prefetching and decoding; sources themselves keep no tile cache.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "vts/client/fetcher.hpp"
+#include "vts/protocol/geometry.hpp"
+#include "vts/protocol/result.hpp"
+#include "vts/protocol/tileset.hpp"
+
+namespace vts::client {
+
+struct SourceInfo {
+  TilesetInfo info;
+  // Stable identity of the tileset for cache keys: the same for every run and every version of
+  // the tileset (e.g. "http://host:8080/earth" for TileJSON at http://host:8080/earth.json, the
+  // URL of a remote archive, or "file:" + the absolute path of a local one).
+  std::string key;
+  // The tileset's current version as the source knows it (archive version / content hash);
+  // empty when unknown. Informational: tiles are revalidated by ETag.
+  std::string version;
+  // The source's own description, JSON (TileJSON for HTTP sources, the archive's metadata for
+  // archives): what a cache stores so the tileset can be opened offline.
+  std::string description_json;
+};
+
+struct SourceRequest {
+  TileId id;
+  std::string if_none_match;  // the cached tile's ETag, for revalidation
+  int level = 0;              // fetch order: lower level first ...
+  double urgency = 0;         // ... then higher urgency
+};
+
+struct SourceTile {
+  enum class Kind {
+    ok,            // payload + etag
+    not_modified,  // the ETag sent is still current
+    absent,        // no such tile (404 / 204 / not in the archive)
+    error,         // error is set
+    cancelled,
+  };
+  Kind kind = Kind::error;
+  std::vector<std::uint8_t> payload;  // the stored tile bytes, exactly as in the archive
+  std::string etag;                   // quoted, as HTTP sends it
+  std::optional<Error> error;
+};
+
+using SourceCallback = std::function<void(SourceTile&&)>;
+
+class TileSource {
+ public:
+  virtual ~TileSource() = default;
+  virtual const SourceInfo& info() const = 0;
+  // True when reading a tile costs no network (a local archive): the client then reads it on its
+  // disk budget instead of its network budget.
+  virtual bool local() const = 0;
+  // Asynchronous: the callback runs exactly once, on a thread of the source (the fetcher's for
+  // remote sources, or a remote source's own delivery thread for answers it knows without the
+  // network; a local source runs it before fetch() returns). It must not block. A remote source
+  // never runs it inside fetch() or cancel(). Payloads are not verified here (the client
+  // verifies checksums when decoding); the ETag, though, is read from the payload's tile header,
+  // so a payload without a valid header frame is an error (corrupt), as `vts serve` answers 500.
+  using Handle = std::uint64_t;
+  virtual Handle fetch(const SourceRequest& request, SourceCallback callback) = 0;
+  // The callback then runs with Kind::cancelled unless it has already run. Thread-safe.
+  virtual void cancel(Handle h) = 0;
+};
+
+struct SourceOptions {
+  FetcherOptions fetcher;  // for HTTP sources
+  // Extra headers (e.g. "Authorization: Bearer ...") go in fetcher.headers.
+};
+
+// Opens `location`:
+//   - a path to a *.pmtiles file (or file:///path)                → local archive;
+//   - an http(s) URL ending in .pmtiles                           → remote archive, range reads;
+//   - an http(s) URL ending in .json                              → TileJSON;
+//   - any other http(s) URL (e.g. http://host:8080/earth)         → TileJSON at URL + ".json".
+// Blocks while it fetches the TileJSON or the archive header and root directory. Errors name the
+// location and what was wrong (unreachable, not an archive, not our tileset, bad TileJSON...).
+Result<std::unique_ptr<TileSource>> open_source(std::string_view location,
+                                                SourceOptions options = {});
+
+// The three kinds of source, for callers that know which one they want (open_source picks one
+// from the location's form). Same blocking and error behaviour as open_source().
+Result<std::unique_ptr<TileSource>> open_local_archive(const std::filesystem::path& path);
+Result<std::unique_ptr<TileSource>> open_tilejson(std::string_view url, SourceOptions options = {});
+Result<std::unique_ptr<TileSource>> open_remote_archive(std::string_view url,
+                                                        SourceOptions options = {});
+
+// The ETag `vts serve` sends for a stored tile: '"' + 16 lowercase hex digits of the XXH3-64
+// checksum in the payload's tile header frame + '"'. Every source reports this same tag for the
+// same payload. corrupt when the payload has no valid header frame.
+Result<std::string> tile_etag(std::span<const std::uint8_t> payload);
+// If-None-Match comparison as `vts serve` does it (RFC 9110 §13.1.2, weak): `header` is a list
+// of entity tags (W/ prefixes ignored) or "*"; false when empty.
+bool etag_matches(std::string_view header, std::string_view etag);
+
+// A source rebuilt from a SourceInfo a cache kept, for when the network is gone: every fetch
+// answers Kind::error (offline) at once. Lets the client serve what its caches hold.
+std::unique_ptr<TileSource> offline_source(SourceInfo info);
+
+}  // namespace vts::client

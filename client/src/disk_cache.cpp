@@ -1,0 +1,915 @@
+// DiskCache: SQLite 3 in WAL mode, one connection under one mutex.
+//
+// Schema (PRAGMA user_version = 1):
+//
+//   tilesets(id INTEGER PRIMARY KEY, key TEXT UNIQUE)   tileset key string -> small integer
+//   tiles(tileset_id, z, x, y, size, checksum, atime, validated, pinned, etag, payload)
+//     unique index tiles_key (tileset_id, z, x, y); index tiles_lru (pinned, atime) gives the
+//     eviction order (unpinned rows, oldest access first, rowid breaking ties).
+//     checksum = XXH3-64 (seed 0) of the whole payload, stored as a signed 64-bit integer.
+//     atime = microseconds since the epoch of the last access (see next_time_us()).
+//     validated = seconds since the epoch of the last fetch or revalidation.
+//     The payload is the last column, so reading the small columns (eviction, totals upkeep,
+//     access-time updates) never walks the blob's overflow pages.
+//   totals(id = 0, bytes, tiles, pinned_bytes, pinned_tiles)   one row
+//     kept exact by triggers on tiles (insert, delete, update of size or pinned), which run in
+//     the transaction of the change that fires them, whichever process or tool makes it. Upserts
+//     use INSERT ... ON CONFLICT DO UPDATE rather than INSERT OR REPLACE, whose implicit delete
+//     would not fire the delete trigger.
+//
+// Every change is one BEGIN IMMEDIATE transaction (the write lock is taken up front, so two
+// writers never deadlock upgrading from read to write; busy_timeout makes the second one wait).
+// With synchronous=NORMAL a commit is atomic and survives kill -9; only a power cut can lose the
+// last commits (never corrupt the file).
+//
+// Size on disk, beyond the payload bytes (DiskCache::kFileSlackBytes and the max_bytes / 8
+// allowance in the header; FileStaysNearTheCapUnderHeavyOverwriting measures it: with a 4 MiB cap
+// and 8..40 KiB tiles the two files peaked at cap + 2.5 MiB):
+//   - pages: each payload occupies whole 4 KiB pages (on average half a page lost per tile) plus
+//     b-tree and index entries: a few percent for tiles of tens of KiB, but much more for tiles of
+//     a few bytes (the cap counts payload bytes only);
+//   - the WAL: checkpointed every kWalAutocheckpointPages pages (2 MiB) and truncated back to
+//     kJournalSizeLimit (2 MiB) after a checkpoint; one transaction's pages more at worst (another
+//     process reading through a checkpoint can make it grow further until it finishes);
+//   - free pages: evictions free pages that the next puts reuse; when more than
+//     2 * kFreePagesKept (1 MiB) are free, PRAGMA incremental_vacuum (auto_vacuum = INCREMENTAL,
+//     set at creation) returns all but kFreePagesKept of them to the file system.
+#include "vts/client/disk_cache.hpp"
+
+#include <sqlite3.h>
+#include <xxhash.h>
+
+#include <algorithm>
+#include <cassert>
+#include <cerrno>
+#include <cstring>
+#include <functional>
+#include <mutex>
+#include <span>
+#include <system_error>
+#include <unordered_map>
+#include <utility>
+#include <vector>
+
+namespace vts::client {
+namespace {
+
+constexpr int kEvictBatch = 64;               // rows fetched per eviction query
+constexpr int kWalAutocheckpointPages = 512;  // 2 MiB of 4 KiB pages
+constexpr int kJournalSizeLimit = 2 << 20;    // WAL truncated back to this after a checkpoint
+constexpr std::int64_t kFreePagesKept = 128;  // 512 KiB of 4 KiB pages
+constexpr std::size_t kMaxPendingTouchesFactor = 16;  // drop access times beyond batch * this
+
+constexpr const char* kSchemaSql = R"sql(
+CREATE TABLE tilesets(
+  id INTEGER PRIMARY KEY,
+  key TEXT NOT NULL UNIQUE);
+CREATE TABLE tiles(
+  tileset_id INTEGER NOT NULL,
+  z INTEGER NOT NULL,
+  x INTEGER NOT NULL,
+  y INTEGER NOT NULL,
+  size INTEGER NOT NULL,
+  checksum INTEGER NOT NULL,
+  atime INTEGER NOT NULL,
+  validated INTEGER NOT NULL,
+  pinned INTEGER NOT NULL CHECK (pinned IN (0, 1)),
+  etag TEXT NOT NULL,
+  payload BLOB NOT NULL);
+CREATE UNIQUE INDEX tiles_key ON tiles(tileset_id, z, x, y);
+CREATE INDEX tiles_lru ON tiles(pinned, atime);
+CREATE TABLE totals(
+  id INTEGER PRIMARY KEY CHECK (id = 0),
+  bytes INTEGER NOT NULL,
+  tiles INTEGER NOT NULL,
+  pinned_bytes INTEGER NOT NULL,
+  pinned_tiles INTEGER NOT NULL);
+INSERT INTO totals VALUES (0, 0, 0, 0, 0);
+CREATE TRIGGER tiles_totals_insert AFTER INSERT ON tiles BEGIN
+  UPDATE totals SET bytes = bytes + NEW.size, tiles = tiles + 1,
+                    pinned_bytes = pinned_bytes + NEW.pinned * NEW.size,
+                    pinned_tiles = pinned_tiles + NEW.pinned
+   WHERE id = 0;
+END;
+CREATE TRIGGER tiles_totals_delete AFTER DELETE ON tiles BEGIN
+  UPDATE totals SET bytes = bytes - OLD.size, tiles = tiles - 1,
+                    pinned_bytes = pinned_bytes - OLD.pinned * OLD.size,
+                    pinned_tiles = pinned_tiles - OLD.pinned
+   WHERE id = 0;
+END;
+CREATE TRIGGER tiles_totals_update AFTER UPDATE OF size, pinned ON tiles BEGIN
+  UPDATE totals SET bytes = bytes - OLD.size + NEW.size,
+                    pinned_bytes = pinned_bytes - OLD.pinned * OLD.size + NEW.pinned * NEW.size,
+                    pinned_tiles = pinned_tiles - OLD.pinned + NEW.pinned
+   WHERE id = 0;
+END;
+PRAGMA user_version = 1;
+)sql";
+
+#define VTS_TILE_KEY_WHERE "tileset_id = ?1 AND z = ?2 AND x = ?3 AND y = ?4"
+
+// Owns the connection; declared first in Impl so that it closes after every statement is gone.
+struct Connection {
+  sqlite3* db = nullptr;
+  Connection() = default;
+  Connection(const Connection&) = delete;
+  Connection& operator=(const Connection&) = delete;
+  ~Connection() { sqlite3_close_v2(db); }
+};
+
+class Statement {
+ public:
+  Statement() = default;
+  Statement(const Statement&) = delete;
+  Statement& operator=(const Statement&) = delete;
+  ~Statement() { sqlite3_finalize(stmt_); }
+  sqlite3_stmt* get() const { return stmt_; }
+  sqlite3_stmt** out() { return &stmt_; }
+
+ private:
+  sqlite3_stmt* stmt_ = nullptr;
+};
+
+// Resets a statement when leaving a scope, so that no read snapshot or bound buffer outlives the
+// call that used it.
+class ResetGuard {
+ public:
+  explicit ResetGuard(sqlite3_stmt* s) : s_(s) {}
+  ResetGuard(const ResetGuard&) = delete;
+  ResetGuard& operator=(const ResetGuard&) = delete;
+  ~ResetGuard() {
+    sqlite3_reset(s_);
+    sqlite3_clear_bindings(s_);
+  }
+
+ private:
+  sqlite3_stmt* s_;
+};
+
+struct StringHash {
+  using is_transparent = void;
+  std::size_t operator()(std::string_view s) const noexcept {
+    return std::hash<std::string_view>{}(s);
+  }
+};
+
+struct TouchKey {
+  std::int64_t tileset_id = 0;
+  TileId id;
+  bool operator==(const TouchKey&) const = default;
+};
+struct TouchKeyHash {
+  std::size_t operator()(const TouchKey& k) const noexcept {
+    std::uint64_t h = std::uint64_t(k.tileset_id) * 0x9e3779b97f4a7c15ULL;
+    h ^= (std::uint64_t(k.id.z) << 58) ^ (std::uint64_t(k.id.x) << 29) ^ k.id.y;
+    h ^= h >> 31;
+    return static_cast<std::size_t>(h * 0xbf58476d1ce4e5b9ULL);
+  }
+};
+
+struct Totals {
+  std::uint64_t bytes = 0, tiles = 0, pinned_bytes = 0, pinned_tiles = 0;
+};
+
+std::uint64_t checksum_of(std::span<const std::uint8_t> bytes) {
+  return XXH3_64bits(bytes.data(), bytes.size());
+}
+
+std::string tile_name(std::string_view tileset, TileId id) {
+  return "tile " + id.to_string() + " of '" + std::string(tileset) + "'";
+}
+
+std::string mib(std::uint64_t bytes) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.1f MiB", double(bytes) / (1 << 20));
+  return buf;
+}
+
+}  // namespace
+
+struct DiskCache::Impl {
+  Connection conn;  // first: destroyed last
+  DiskCacheOptions options;
+  std::filesystem::path path;
+  std::string path_str;
+
+  std::mutex mutex;  // guards everything below and every use of the connection
+  Statement find_tileset_stmt, insert_tileset_stmt, get_stmt, old_row_stmt, totals_stmt,
+      upsert_stmt, evict_candidates_stmt, delete_rowid_stmt, delete_corrupt_stmt, touch_stmt,
+      validated_stmt, pinned_stmt, remove_stmt, freelist_stmt;
+
+  // Tileset ids seen committed in the database. Rows of `tilesets` are never deleted or renumbered,
+  // so an id once seen stays right for every process.
+  std::unordered_map<std::string, std::int64_t, StringHash, std::equal_to<>> tileset_ids;
+  // Ids inserted by the open write transaction: known to tileset_ids only once it commits.
+  std::vector<std::pair<std::string, std::int64_t>> txn_tilesets;
+  std::uint64_t txn_evicted = 0;
+
+  std::unordered_map<TouchKey, std::int64_t, TouchKeyHash> pending_touches;  // key -> atime (us)
+  std::chrono::steady_clock::time_point first_pending_touch;
+  std::int64_t last_time_us = 0;
+
+  std::uint64_t hits = 0, misses = 0, corrupt_dropped = 0, evicted = 0, write_transactions = 0;
+
+  sqlite3* db() const { return conn.db; }
+
+  // ---- errors -----------------------------------------------------------------------------
+
+  // The error for a failed SQLite call, built from the connection's current message (call it
+  // before anything else touches the connection). `doing` says what the cache was doing.
+  Error db_error(int rc, std::string_view doing) const {
+    const std::string msg = db() ? sqlite3_errmsg(db()) : sqlite3_errstr(rc);
+    const int sys = db() ? sqlite3_system_errno(db()) : 0;
+    const int primary = rc & 0xff;
+    const std::string what = " (" + std::string(doing) + ")";
+    if (primary == SQLITE_FULL ||
+        (primary == SQLITE_IOERR && (sys == ENOSPC || sys == EDQUOT || sys == EFBIG)))
+      return make_error(ErrorCode::io,
+                        "disk full writing cache " + path_str + ": " + msg +
+                            (sys ? std::string(" [") + std::strerror(sys) + "]" : "") + what);
+    if (primary == SQLITE_IOERR)
+      return make_error(ErrorCode::io,
+                        "I/O error on cache " + path_str + ": " + msg +
+                            (sys ? std::string(" [") + std::strerror(sys) + "]" : "") + what);
+    if (primary == SQLITE_BUSY || primary == SQLITE_LOCKED)
+      return make_error(ErrorCode::io, "cache " + path_str + " stayed locked by another user for " +
+                                           std::to_string(options.busy_timeout.count()) + " ms" +
+                                           what);
+    if (primary == SQLITE_NOTADB)
+      return make_error(ErrorCode::corrupt, "cache " + path_str + " is not an SQLite database (" +
+                                                msg + "); move it away or choose another folder");
+    if (primary == SQLITE_CORRUPT)
+      return make_error(ErrorCode::corrupt, "cache " + path_str + " is damaged: " + msg + what);
+    if (primary == SQLITE_READONLY || primary == SQLITE_CANTOPEN || primary == SQLITE_PERM ||
+        primary == SQLITE_AUTH)
+      return make_error(ErrorCode::io, "cannot write cache " + path_str + ": " + msg + what);
+    if (primary == SQLITE_TOOBIG)
+      return make_error(ErrorCode::too_large, "cache " + path_str + ": " + msg + what);
+    return make_error(ErrorCode::internal, "cache " + path_str + ": SQLite error " +
+                                               std::to_string(rc) + ": " + msg + what);
+  }
+
+  // ---- small helpers ----------------------------------------------------------------------
+
+  int exec(const char* sql) { return sqlite3_exec(db(), sql, nullptr, nullptr, nullptr); }
+
+  Status prepare(Statement& stmt, const char* sql) {
+    const int rc =
+        sqlite3_prepare_v3(db(), sql, -1, SQLITE_PREPARE_PERSISTENT, stmt.out(), nullptr);
+    if (rc != SQLITE_OK)
+      return make_error(
+          ErrorCode::unsupported,
+          "cache " + path_str + " does not have the expected tables: " + sqlite3_errmsg(db()));
+    return {};
+  }
+
+  static void bind_key(sqlite3_stmt* s, std::int64_t tileset_id, TileId id) {
+    sqlite3_bind_int64(s, 1, tileset_id);
+    sqlite3_bind_int(s, 2, id.z);
+    sqlite3_bind_int64(s, 3, id.x);
+    sqlite3_bind_int64(s, 4, id.y);
+  }
+
+  // Runs a statement that returns no rows to completion. Returns SQLITE_DONE or the error code.
+  static int run(sqlite3_stmt* s) {
+    int rc;
+    while ((rc = sqlite3_step(s)) == SQLITE_ROW) {
+    }
+    return rc;
+  }
+
+  // Microseconds since the epoch, strictly increasing across this connection's calls so that the
+  // order of accesses is the order of atimes even within one clock tick.
+  std::int64_t next_time_us() {
+    const auto wall = std::chrono::duration_cast<std::chrono::microseconds>(
+                          std::chrono::system_clock::now().time_since_epoch())
+                          .count();
+    last_time_us = std::max<std::int64_t>(wall, last_time_us + 1);
+    return last_time_us;
+  }
+
+  Result<Totals> read_totals(std::string_view doing) {
+    sqlite3_stmt* s = totals_stmt.get();
+    ResetGuard guard(s);
+    const int rc = sqlite3_step(s);
+    if (rc != SQLITE_ROW) {
+      if (rc == SQLITE_DONE)
+        return make_error(ErrorCode::corrupt, "cache " + path_str + " has no totals row");
+      return db_error(rc, doing);
+    }
+    Totals t;
+    t.bytes = static_cast<std::uint64_t>(sqlite3_column_int64(s, 0));
+    t.tiles = static_cast<std::uint64_t>(sqlite3_column_int64(s, 1));
+    t.pinned_bytes = static_cast<std::uint64_t>(sqlite3_column_int64(s, 2));
+    t.pinned_tiles = static_cast<std::uint64_t>(sqlite3_column_int64(s, 3));
+    return t;
+  }
+
+  // The tileset's id if the database has one (nullopt if not). Does not insert.
+  Result<std::optional<std::int64_t>> find_tileset(std::string_view tileset,
+                                                   std::string_view doing) {
+    if (auto it = tileset_ids.find(tileset); it != tileset_ids.end()) return {it->second};
+    for (const auto& [key, id] : txn_tilesets)
+      if (key == tileset) return {id};
+    sqlite3_stmt* s = find_tileset_stmt.get();
+    ResetGuard guard(s);
+    sqlite3_bind_text64(s, 1, tileset.data(), tileset.size(), SQLITE_STATIC, SQLITE_UTF8);
+    const int rc = sqlite3_step(s);
+    if (rc == SQLITE_DONE) return {std::nullopt};
+    if (rc != SQLITE_ROW) return db_error(rc, doing);
+    const std::int64_t id = sqlite3_column_int64(s, 0);
+    // Seen outside our own uncommitted inserts, so it is committed (we hold the write lock when
+    // in a transaction, and a read outside one sees committed rows only).
+    tileset_ids.emplace(std::string(tileset), id);
+    return {id};
+  }
+
+  // The tileset's id, inserting a row for it if needed. Only inside a write transaction.
+  Result<std::int64_t> tileset_for_write(std::string_view tileset, std::string_view doing) {
+    auto found = find_tileset(tileset, doing);
+    if (!found) return std::move(found).error();
+    if (*found) return **found;
+    sqlite3_stmt* s = insert_tileset_stmt.get();
+    ResetGuard guard(s);
+    sqlite3_bind_text64(s, 1, tileset.data(), tileset.size(), SQLITE_STATIC, SQLITE_UTF8);
+    const int rc = run(s);
+    if (rc != SQLITE_DONE) return db_error(rc, doing);
+    const std::int64_t id = sqlite3_last_insert_rowid(db());
+    txn_tilesets.emplace_back(std::string(tileset), id);
+    return id;
+  }
+
+  // ---- transactions -----------------------------------------------------------------------
+
+  // Runs `body` inside BEGIN IMMEDIATE ... COMMIT, after writing the pending access times. On any
+  // failure the whole transaction is rolled back (SQLite may already have done so after a full
+  // disk or I/O error), and the access times stay pending.
+  template <typename Body>
+  Status write_transaction(std::string_view doing, Body&& body) {
+    txn_tilesets.clear();
+    txn_evicted = 0;
+    int rc = exec("BEGIN IMMEDIATE");
+    if (rc != SQLITE_OK) {
+      Error e = db_error(rc, doing);
+      if (!sqlite3_get_autocommit(db())) exec("ROLLBACK");
+      return e;
+    }
+    Status s = write_touches(doing);
+    if (s.ok()) s = body();
+    if (s.ok()) {
+      rc = exec("COMMIT");
+      if (rc != SQLITE_OK) s = db_error(rc, doing);
+    }
+    if (!s.ok()) {
+      if (!sqlite3_get_autocommit(db())) exec("ROLLBACK");
+      txn_tilesets.clear();
+      return s;
+    }
+    ++write_transactions;
+    evicted += txn_evicted;
+    for (auto& [key, id] : txn_tilesets) tileset_ids.emplace(std::move(key), id);
+    txn_tilesets.clear();
+    pending_touches.clear();
+    return {};
+  }
+
+  Status write_touches(std::string_view doing) {
+    sqlite3_stmt* s = touch_stmt.get();
+    for (const auto& [key, atime] : pending_touches) {
+      ResetGuard guard(s);
+      bind_key(s, key.tileset_id, key.id);
+      sqlite3_bind_int64(s, 5, atime);
+      const int rc = run(s);
+      if (rc != SQLITE_DONE) return db_error(rc, doing);
+    }
+    return {};
+  }
+
+  // Records a hit's access time; writes the batch when it is full or old enough. A failure to
+  // write them is not the reader's problem: they stay pending (up to a bound) for the next try.
+  void touch(std::int64_t tileset_id, TileId id) {
+    if (pending_touches.empty()) first_pending_touch = std::chrono::steady_clock::now();
+    pending_touches[TouchKey{tileset_id, id}] = next_time_us();
+    const std::size_t batch = std::max<std::size_t>(options.touch_batch, 1);
+    if (pending_touches.size() >= batch ||
+        std::chrono::steady_clock::now() - first_pending_touch >= options.touch_interval) {
+      const Status s = write_transaction("writing access times", [] { return Status{}; });
+      if (!s.ok() && pending_touches.size() >= batch * kMaxPendingTouchesFactor)
+        pending_touches.clear();  // access times only steer eviction; do not grow without bound
+    }
+  }
+
+  // Deletes unpinned rows other than `keep_rowid`, least recently used first, until the payload
+  // total is within max_bytes. Inside a write transaction.
+  Status evict_to_cap(std::int64_t keep_rowid, std::string_view doing) {
+    auto totals = read_totals(doing);
+    if (!totals) return std::move(totals).error();
+    std::uint64_t bytes = totals->bytes;
+    bool evicted_any = false;
+    std::vector<std::pair<std::int64_t, std::uint64_t>> victims;
+    while (bytes > options.max_bytes) {
+      victims.clear();
+      {
+        sqlite3_stmt* s = evict_candidates_stmt.get();
+        ResetGuard guard(s);
+        sqlite3_bind_int64(s, 1, keep_rowid);
+        sqlite3_bind_int(s, 2, kEvictBatch);
+        int rc;
+        while ((rc = sqlite3_step(s)) == SQLITE_ROW)
+          victims.emplace_back(sqlite3_column_int64(s, 0),
+                               static_cast<std::uint64_t>(sqlite3_column_int64(s, 1)));
+        if (rc != SQLITE_DONE) return db_error(rc, doing);
+      }
+      if (victims.empty()) break;  // only pinned rows (and the kept one) are left
+      for (const auto& [rowid, size] : victims) {
+        if (bytes <= options.max_bytes) break;
+        sqlite3_stmt* s = delete_rowid_stmt.get();
+        ResetGuard guard(s);
+        sqlite3_bind_int64(s, 1, rowid);
+        const int rc = run(s);
+        if (rc != SQLITE_DONE) return db_error(rc, doing);
+        bytes -= std::min(bytes, size);
+        ++txn_evicted;
+        evicted_any = true;
+      }
+    }
+    return evicted_any ? vacuum_if_needed(doing) : Status{};
+  }
+
+  // Gives free pages beyond kFreePagesKept back to the file system once there are twice as many.
+  Status vacuum_if_needed(std::string_view doing) {
+    std::int64_t free_pages = 0;
+    {
+      sqlite3_stmt* s = freelist_stmt.get();
+      ResetGuard guard(s);
+      const int rc = sqlite3_step(s);
+      if (rc != SQLITE_ROW) return db_error(rc, doing);
+      free_pages = sqlite3_column_int64(s, 0);
+    }
+    if (free_pages <= 2 * kFreePagesKept) return {};
+    const std::string sql =
+        "PRAGMA incremental_vacuum(" + std::to_string(free_pages - kFreePagesKept) + ")";
+    const int rc = exec(sql.c_str());
+    if (rc != SQLITE_OK) return db_error(rc, doing);
+    return {};
+  }
+
+  // ---- reads ------------------------------------------------------------------------------
+
+  // Looks a tile up and verifies it; drops a row that fails. With `count_and_touch`, counts a hit
+  // or miss and records the access time of a hit. Called with `lock` held; returns with it held.
+  Result<std::optional<CachedTile>> lookup(std::unique_lock<std::mutex>& lock,
+                                           std::string_view tileset, TileId id,
+                                           bool count_and_touch) {
+    const std::string_view doing = "reading a tile";
+    auto tsid = find_tileset(tileset, doing);
+    if (!tsid) return std::move(tsid).error();
+    if (!*tsid) {
+      if (count_and_touch) ++misses;
+      return {std::nullopt};
+    }
+    CachedTile tile;
+    std::int64_t rowid = 0, stored_checksum = 0;
+    std::uint64_t stored_size = 0;
+    {
+      sqlite3_stmt* s = get_stmt.get();
+      ResetGuard guard(s);
+      bind_key(s, **tsid, id);
+      const int rc = sqlite3_step(s);
+      if (rc == SQLITE_DONE) {
+        if (count_and_touch) ++misses;
+        return {std::nullopt};
+      }
+      if (rc != SQLITE_ROW) return db_error(rc, doing);
+      rowid = sqlite3_column_int64(s, 0);
+      stored_size = static_cast<std::uint64_t>(sqlite3_column_int64(s, 1));
+      stored_checksum = sqlite3_column_int64(s, 2);
+      tile.validated_unix = sqlite3_column_int64(s, 3);
+      const auto* etag = reinterpret_cast<const char*>(sqlite3_column_text(s, 4));
+      if (etag) tile.etag.assign(etag, static_cast<std::size_t>(sqlite3_column_bytes(s, 4)));
+      const auto* blob = static_cast<const std::uint8_t*>(sqlite3_column_blob(s, 5));
+      const auto n = static_cast<std::size_t>(sqlite3_column_bytes(s, 5));
+      if (blob) tile.payload.assign(blob, blob + n);
+    }
+    // Hash without the lock: other threads may use the connection meanwhile.
+    lock.unlock();
+    const bool good = tile.payload.size() == stored_size &&
+                      static_cast<std::int64_t>(checksum_of(tile.payload)) == stored_checksum;
+    lock.lock();
+    if (!good) {
+      ++corrupt_dropped;
+      if (count_and_touch) ++misses;
+      // Delete only the bad version: another process may have replaced the row meanwhile. If the
+      // delete fails (a full disk) the row stays, and is caught again on the next read.
+      (void)write_transaction("dropping a corrupt tile", [&]() -> Status {
+        sqlite3_stmt* s = delete_corrupt_stmt.get();
+        ResetGuard guard(s);
+        sqlite3_bind_int64(s, 1, rowid);
+        sqlite3_bind_int64(s, 2, stored_checksum);
+        const int rc = run(s);
+        if (rc != SQLITE_DONE) return db_error(rc, "dropping a corrupt tile");
+        return {};
+      });
+      return {std::nullopt};
+    }
+    if (count_and_touch) {
+      ++hits;
+      touch(**tsid, id);
+    }
+    return {std::move(tile)};
+  }
+
+  // ---- opening ----------------------------------------------------------------------------
+
+  Result<std::int64_t> query_int(const char* sql, std::string_view doing) {
+    Statement stmt;
+    int rc = sqlite3_prepare_v2(db(), sql, -1, stmt.out(), nullptr);
+    if (rc != SQLITE_OK) return db_error(rc, doing);
+    rc = sqlite3_step(stmt.get());
+    if (rc != SQLITE_ROW) return db_error(rc, doing);
+    return sqlite3_column_int64(stmt.get(), 0);
+  }
+
+  Status check_version(std::int64_t version, std::int64_t tables) {
+    if (version > kSchemaVersion)
+      return make_error(ErrorCode::unsupported,
+                        "cache " + path_str + " has schema version " + std::to_string(version) +
+                            ", newer than this build reads (" + std::to_string(kSchemaVersion) +
+                            "); use a newer vtstream or another cache folder");
+    if (version < 0 || (version == 0 && tables > 0))
+      return make_error(ErrorCode::unsupported,
+                        "cache " + path_str +
+                            " is an SQLite database but not a vtstream cache (schema version " +
+                            std::to_string(version) + ", " + std::to_string(tables) +
+                            " tables); move it away or choose another cache folder");
+    return {};
+  }
+
+  Status setup() {
+    const char* count_tables = "SELECT count(*) FROM sqlite_schema WHERE type = 'table'";
+    // The first read of the header tells a non-SQLite file apart.
+    auto version = query_int("PRAGMA user_version", "opening");
+    if (!version) return std::move(version).error();
+    auto tables = query_int(count_tables, "opening");
+    if (!tables) return std::move(tables).error();
+    if (Status s = check_version(*version, *tables); !s.ok()) return s;
+
+    if (*version == 0) {
+      // Both take effect only before the first table is created (ignored otherwise). The page
+      // size is what the slack constants above are counted in.
+      if (int rc = exec("PRAGMA page_size = 4096; PRAGMA auto_vacuum = INCREMENTAL");
+          rc != SQLITE_OK)
+        return db_error(rc, "creating the database");
+    }
+    {
+      Statement stmt;
+      int rc = sqlite3_prepare_v2(db(), "PRAGMA journal_mode = WAL", -1, stmt.out(), nullptr);
+      if (rc == SQLITE_OK) rc = sqlite3_step(stmt.get());
+      if (rc != SQLITE_ROW) return db_error(rc, "switching to WAL");
+      const auto* mode = reinterpret_cast<const char*>(sqlite3_column_text(stmt.get(), 0));
+      if (!mode || std::string_view(mode) != "wal")
+        return make_error(ErrorCode::unsupported,
+                          "cache " + path_str + " cannot use a write-ahead log (journal mode '" +
+                              std::string(mode ? mode : "?") +
+                              "'); is the folder on a network file system?");
+    }
+    const std::string pragmas =
+        "PRAGMA synchronous = NORMAL; PRAGMA journal_size_limit = " +
+        std::to_string(kJournalSizeLimit) +
+        "; PRAGMA wal_autocheckpoint = " + std::to_string(kWalAutocheckpointPages) + ";";
+    if (int rc = exec(pragmas.c_str()); rc != SQLITE_OK) return db_error(rc, "opening");
+
+    if (*version == 0) {
+      // Another process may be creating the same cache right now: decide under the write lock.
+      if (int rc = exec("BEGIN IMMEDIATE"); rc != SQLITE_OK)
+        return db_error(rc, "creating the database");
+      auto again = query_int("PRAGMA user_version", "creating the database");
+      auto tables_again = query_int(count_tables, "creating the database");
+      Status s;
+      if (!again)
+        s = std::move(again).error();
+      else if (!tables_again)
+        s = std::move(tables_again).error();
+      else
+        s = check_version(*again, *tables_again);
+      if (s.ok() && *again == 0) {
+        if (int rc = exec(kSchemaSql); rc != SQLITE_OK) s = db_error(rc, "creating the database");
+      }
+      if (s.ok()) {
+        if (int rc = exec("COMMIT"); rc != SQLITE_OK) s = db_error(rc, "creating the database");
+      }
+      if (!s.ok()) {
+        if (!sqlite3_get_autocommit(db())) exec("ROLLBACK");
+        return s;
+      }
+    }
+
+    struct {
+      Statement* stmt;
+      const char* sql;
+    } const statements[] = {
+        {&find_tileset_stmt, "SELECT id FROM tilesets WHERE key = ?1"},
+        {&insert_tileset_stmt, "INSERT INTO tilesets(key) VALUES (?1)"},
+        {&get_stmt,
+         "SELECT rowid, size, checksum, validated, etag, payload FROM tiles "
+         "WHERE " VTS_TILE_KEY_WHERE},
+        {&old_row_stmt, "SELECT rowid, size, pinned FROM tiles WHERE " VTS_TILE_KEY_WHERE},
+        {&totals_stmt, "SELECT bytes, tiles, pinned_bytes, pinned_tiles FROM totals WHERE id = 0"},
+        {&upsert_stmt,
+         "INSERT INTO tiles(tileset_id, z, x, y, size, checksum, atime, validated, pinned, etag, "
+         "payload) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11) "
+         "ON CONFLICT(tileset_id, z, x, y) DO UPDATE SET size = excluded.size, "
+         "checksum = excluded.checksum, atime = excluded.atime, validated = excluded.validated, "
+         "pinned = max(pinned, excluded.pinned), etag = excluded.etag, "
+         "payload = excluded.payload"},
+        {&evict_candidates_stmt,
+         "SELECT rowid, size FROM tiles WHERE pinned = 0 AND rowid <> ?1 "
+         "ORDER BY atime, rowid LIMIT ?2"},
+        {&delete_rowid_stmt, "DELETE FROM tiles WHERE rowid = ?1"},
+        {&delete_corrupt_stmt, "DELETE FROM tiles WHERE rowid = ?1 AND checksum = ?2"},
+        {&touch_stmt, "UPDATE tiles SET atime = ?5 WHERE " VTS_TILE_KEY_WHERE " AND atime < ?5"},
+        {&validated_stmt, "UPDATE tiles SET validated = ?5 WHERE " VTS_TILE_KEY_WHERE},
+        {&pinned_stmt, "UPDATE tiles SET pinned = ?5 WHERE " VTS_TILE_KEY_WHERE},
+        {&remove_stmt, "DELETE FROM tiles WHERE " VTS_TILE_KEY_WHERE},
+        {&freelist_stmt, "PRAGMA freelist_count"},
+    };
+    for (const auto& [stmt, sql] : statements)
+      if (Status s = prepare(*stmt, sql); !s.ok()) return s;
+
+    // A smaller cap than the cache was filled with: shrink now rather than on the next put.
+    auto totals = read_totals("opening");
+    if (!totals) return std::move(totals).error();
+    if (totals->bytes > options.max_bytes)
+      return write_transaction("evicting down to a smaller cap",
+                               [&] { return evict_to_cap(-1, "evicting down to a smaller cap"); });
+    return {};
+  }
+};
+
+DiskCache::DiskCache(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+
+DiskCache::~DiskCache() {
+  std::lock_guard lock(impl_->mutex);
+  if (!impl_->pending_touches.empty())
+    (void)impl_->write_transaction("writing access times", [] { return Status{}; });
+}
+
+Result<std::unique_ptr<DiskCache>> DiskCache::open(DiskCacheOptions options) {
+  if (options.dir.empty()) return make_error(ErrorCode::invalid_argument, "no cache folder given");
+  if (options.max_bytes == 0)
+    return make_error(ErrorCode::invalid_argument,
+                      "cache " + options.dir.string() + ": the byte cap must be more than 0");
+  std::error_code ec;
+  std::filesystem::create_directories(options.dir, ec);
+  if (ec)
+    return make_error(ErrorCode::io,
+                      "cannot create cache folder " + options.dir.string() + ": " + ec.message());
+  if (!std::filesystem::is_directory(options.dir, ec))
+    return make_error(ErrorCode::io, "cache folder " + options.dir.string() + " is not a folder");
+
+  auto impl = std::make_unique<Impl>();
+  impl->path = options.dir / kFileName;
+  impl->path_str = impl->path.string();
+  impl->options = std::move(options);
+  const int flags = SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_NOMUTEX;
+  const char* vfs = impl->options.vfs.empty() ? nullptr : impl->options.vfs.c_str();
+  const int rc = sqlite3_open_v2(impl->path_str.c_str(), &impl->conn.db, flags, vfs);
+  if (rc != SQLITE_OK) {
+    const std::string msg = impl->conn.db ? sqlite3_errmsg(impl->conn.db) : sqlite3_errstr(rc);
+    return make_error(ErrorCode::io, "cannot open cache " + impl->path_str + ": " + msg);
+  }
+  sqlite3_extended_result_codes(impl->db(), 1);
+  sqlite3_busy_timeout(impl->db(), static_cast<int>(std::clamp<std::int64_t>(
+                                       impl->options.busy_timeout.count(), 0, 1 << 30)));
+  std::lock_guard lock(impl->mutex);
+  if (Status s = impl->setup(); !s.ok()) return s.error();
+  return std::unique_ptr<DiskCache>(new DiskCache(std::move(impl)));
+}
+
+const std::filesystem::path& DiskCache::path() const {
+  return impl_->path;
+}
+
+Result<std::optional<CachedTile>> DiskCache::get(std::string_view tileset, TileId id) {
+  std::unique_lock lock(impl_->mutex);
+  return impl_->lookup(lock, tileset, id, true);
+}
+
+Result<bool> DiskCache::contains(std::string_view tileset, TileId id) {
+  std::unique_lock lock(impl_->mutex);
+  auto found = impl_->lookup(lock, tileset, id, false);
+  if (!found) return std::move(found).error();
+  return found->has_value();
+}
+
+Status DiskCache::put(std::string_view tileset, TileId id, const CachedTile& tile, bool pin) {
+  Impl& m = *impl_;
+  const std::uint64_t size = tile.payload.size();
+  if (size > m.options.max_bytes)
+    return make_error(ErrorCode::too_large, tile_name(tileset, id) + " is " + std::to_string(size) +
+                                                " bytes, more than the whole cap of cache " +
+                                                m.path_str + " (" +
+                                                std::to_string(m.options.max_bytes) + " bytes)");
+  const auto checksum = static_cast<std::int64_t>(checksum_of(tile.payload));
+  const std::string doing = "storing " + tile_name(tileset, id);
+
+  std::lock_guard lock(m.mutex);
+  return m.write_transaction(doing, [&]() -> Status {
+    auto tsid = m.tileset_for_write(tileset, doing);
+    if (!tsid) return std::move(tsid).error();
+
+    std::optional<std::int64_t> old_rowid;
+    std::uint64_t old_size = 0;
+    bool old_pinned = false;
+    {
+      sqlite3_stmt* s = m.old_row_stmt.get();
+      ResetGuard guard(s);
+      Impl::bind_key(s, *tsid, id);
+      const int rc = sqlite3_step(s);
+      if (rc == SQLITE_ROW) {
+        old_rowid = sqlite3_column_int64(s, 0);
+        old_size = static_cast<std::uint64_t>(sqlite3_column_int64(s, 1));
+        old_pinned = sqlite3_column_int(s, 2) != 0;
+      } else if (rc != SQLITE_DONE) {
+        return m.db_error(rc, doing);
+      }
+    }
+
+    auto totals = m.read_totals(doing);
+    if (!totals) return std::move(totals).error();
+    const std::uint64_t pinned_elsewhere =
+        totals->pinned_bytes - std::min(totals->pinned_bytes, old_pinned ? old_size : 0);
+    if (pinned_elsewhere + size > m.options.max_bytes)
+      return make_error(ErrorCode::too_large,
+                        "cache " + m.path_str +
+                            " is full of pinned tiles: " + std::to_string(pinned_elsewhere) +
+                            " bytes (" + mib(pinned_elsewhere) + ") pinned of its cap of " +
+                            std::to_string(m.options.max_bytes) + " bytes (" +
+                            mib(m.options.max_bytes) + "), no room for " + tile_name(tileset, id) +
+                            " (" + std::to_string(size) + " bytes); unpin tiles or raise the cap");
+
+    {
+      sqlite3_stmt* s = m.upsert_stmt.get();
+      ResetGuard guard(s);
+      Impl::bind_key(s, *tsid, id);
+      sqlite3_bind_int64(s, 5, static_cast<std::int64_t>(size));
+      sqlite3_bind_int64(s, 6, checksum);
+      sqlite3_bind_int64(s, 7, m.next_time_us());
+      sqlite3_bind_int64(s, 8, tile.validated_unix);
+      sqlite3_bind_int(s, 9, pin ? 1 : 0);
+      sqlite3_bind_text64(s, 10, tile.etag.data(), tile.etag.size(), SQLITE_STATIC, SQLITE_UTF8);
+      // A zero-length blob needs a non-null pointer, or SQLite binds NULL.
+      static const std::uint8_t kEmpty = 0;
+      sqlite3_bind_blob64(s, 11, size ? tile.payload.data() : &kEmpty, size, SQLITE_STATIC);
+      const int rc = Impl::run(s);
+      if (rc != SQLITE_DONE) return m.db_error(rc, doing);
+    }
+    const std::int64_t rowid = old_rowid ? *old_rowid : sqlite3_last_insert_rowid(m.db());
+    return m.evict_to_cap(rowid, doing);
+  });
+}
+
+Status DiskCache::set_validated(std::string_view tileset, TileId id, std::int64_t validated_unix) {
+  Impl& m = *impl_;
+  const std::string doing = "recording the revalidation of " + tile_name(tileset, id);
+  std::lock_guard lock(m.mutex);
+  auto tsid = m.find_tileset(tileset, doing);
+  if (!tsid) return std::move(tsid).error();
+  if (!*tsid)
+    return make_error(ErrorCode::not_found,
+                      tile_name(tileset, id) + " is not in cache " + m.path_str);
+  return m.write_transaction(doing, [&]() -> Status {
+    sqlite3_stmt* s = m.validated_stmt.get();
+    ResetGuard guard(s);
+    Impl::bind_key(s, **tsid, id);
+    sqlite3_bind_int64(s, 5, validated_unix);
+    const int rc = Impl::run(s);
+    if (rc != SQLITE_DONE) return m.db_error(rc, doing);
+    if (sqlite3_changes(m.db()) == 0)
+      return make_error(ErrorCode::not_found,
+                        tile_name(tileset, id) + " is not in cache " + m.path_str);
+    return {};
+  });
+}
+
+Status DiskCache::set_pinned(std::string_view tileset, TileId id, bool pinned) {
+  Impl& m = *impl_;
+  const std::string doing =
+      std::string(pinned ? "pinning " : "unpinning ") + tile_name(tileset, id);
+  std::lock_guard lock(m.mutex);
+  auto tsid = m.find_tileset(tileset, doing);
+  if (!tsid) return std::move(tsid).error();
+  if (!*tsid)
+    return make_error(ErrorCode::not_found,
+                      tile_name(tileset, id) + " is not in cache " + m.path_str);
+  return m.write_transaction(doing, [&]() -> Status {
+    sqlite3_stmt* s = m.pinned_stmt.get();
+    ResetGuard guard(s);
+    Impl::bind_key(s, **tsid, id);
+    sqlite3_bind_int(s, 5, pinned ? 1 : 0);
+    const int rc = Impl::run(s);
+    if (rc != SQLITE_DONE) return m.db_error(rc, doing);
+    if (sqlite3_changes(m.db()) == 0)
+      return make_error(ErrorCode::not_found,
+                        tile_name(tileset, id) + " is not in cache " + m.path_str);
+    return {};
+  });
+}
+
+Status DiskCache::remove(std::string_view tileset, TileId id) {
+  Impl& m = *impl_;
+  const std::string doing = "removing " + tile_name(tileset, id);
+  std::lock_guard lock(m.mutex);
+  auto tsid = m.find_tileset(tileset, doing);
+  if (!tsid) return std::move(tsid).error();
+  if (!*tsid) return {};
+  return m.write_transaction(doing, [&]() -> Status {
+    sqlite3_stmt* s = m.remove_stmt.get();
+    ResetGuard guard(s);
+    Impl::bind_key(s, **tsid, id);
+    const int rc = Impl::run(s);
+    if (rc != SQLITE_DONE) return m.db_error(rc, doing);
+    return sqlite3_changes(m.db()) > 0 ? m.vacuum_if_needed(doing) : Status{};
+  });
+}
+
+Status DiskCache::flush() {
+  std::lock_guard lock(impl_->mutex);
+  if (impl_->pending_touches.empty()) return {};
+  return impl_->write_transaction("writing access times", [] { return Status{}; });
+}
+
+DiskCacheStats DiskCache::stats() {
+  Impl& m = *impl_;
+  std::lock_guard lock(m.mutex);
+  DiskCacheStats out;
+  if (auto totals = m.read_totals("reading totals")) {
+    out.bytes = totals->bytes;
+    out.tiles = totals->tiles;
+    out.pinned_bytes = totals->pinned_bytes;
+    out.pinned_tiles = totals->pinned_tiles;
+  }
+  out.max_bytes = m.options.max_bytes;
+  out.hits = m.hits;
+  out.misses = m.misses;
+  out.corrupt_dropped = m.corrupt_dropped;
+  out.evicted = m.evicted;
+  out.write_transactions = m.write_transactions;
+  return out;
+}
+
+Result<VerifyReport> DiskCache::verify() {
+  Impl& m = *impl_;
+  const std::string_view doing = "verifying";
+  std::lock_guard lock(m.mutex);
+  VerifyReport report;
+  {
+    Statement stmt;
+    int rc = sqlite3_prepare_v2(m.db(), "PRAGMA integrity_check", -1, stmt.out(), nullptr);
+    if (rc != SQLITE_OK) return m.db_error(rc, doing);
+    while ((rc = sqlite3_step(stmt.get())) == SQLITE_ROW) {
+      const auto* line = reinterpret_cast<const char*>(sqlite3_column_text(stmt.get(), 0));
+      if (!report.integrity.empty()) report.integrity += "; ";
+      report.integrity += line ? line : "?";
+    }
+    if (rc != SQLITE_DONE) return m.db_error(rc, doing);
+  }
+  std::vector<std::pair<std::int64_t, std::int64_t>> bad;  // rowid, stored checksum
+  {
+    Statement stmt;
+    int rc = sqlite3_prepare_v2(m.db(), "SELECT rowid, size, checksum, payload FROM tiles", -1,
+                                stmt.out(), nullptr);
+    if (rc != SQLITE_OK) return m.db_error(rc, doing);
+    sqlite3_stmt* s = stmt.get();
+    while ((rc = sqlite3_step(s)) == SQLITE_ROW) {
+      ++report.rows_checked;
+      const auto* blob = static_cast<const std::uint8_t*>(sqlite3_column_blob(s, 3));
+      const auto n = static_cast<std::size_t>(sqlite3_column_bytes(s, 3));
+      const std::span<const std::uint8_t> payload(blob, blob ? n : 0);
+      const bool good =
+          payload.size() == static_cast<std::uint64_t>(sqlite3_column_int64(s, 1)) &&
+          static_cast<std::int64_t>(checksum_of(payload)) == sqlite3_column_int64(s, 2);
+      if (!good) bad.emplace_back(sqlite3_column_int64(s, 0), sqlite3_column_int64(s, 2));
+    }
+    if (rc != SQLITE_DONE) return m.db_error(rc, doing);
+  }
+  if (!bad.empty()) {
+    Status s = m.write_transaction("dropping corrupt tiles", [&]() -> Status {
+      for (const auto& [rowid, checksum] : bad) {
+        sqlite3_stmt* st = m.delete_corrupt_stmt.get();
+        ResetGuard guard(st);
+        sqlite3_bind_int64(st, 1, rowid);
+        sqlite3_bind_int64(st, 2, checksum);
+        const int rc = Impl::run(st);
+        if (rc != SQLITE_DONE) return m.db_error(rc, "dropping corrupt tiles");
+      }
+      return m.vacuum_if_needed("dropping corrupt tiles");
+    });
+    if (!s.ok()) return s.error();
+    report.rows_dropped = bad.size();
+    m.corrupt_dropped += bad.size();
+  }
+  return report;
+}
+
+}  // namespace vts::client
