@@ -1,0 +1,95 @@
+// The payload level of the client stack: a TileSource decorated with a RAM cache, a disk cache
+// and a negative cache, behind one asynchronous get(). Used directly by the cache daemon
+// (`vts cache serve`) and `vts warm`, and by TileClient (which adds ancestors and decoding).
+//
+// A get() looks in RAM (inline, on the caller's thread), then on disk (on the cache's own disk
+// thread), then asks the source (on the source's network thread). Each stage has its own thread
+// and queue, so a RAM or disk hit never waits behind the network, and the network never waits
+// behind SQLite: a tile found on disk is delivered even while every network slot is stuck on a
+// dead server.
+//
+// What the caches hand out is always verified: a payload from the network is checked (tile
+// header + XXH3 checksum of its body) before it is cached or delivered, and re-fetched when it
+// fails (up to `corrupt_retries` times); rows read from disk are checked by the disk cache's own
+// checksum and again here. A tile older than `revalidate_after` is delivered at once and then
+// revalidated at the lowest priority (If-None-Match; 304 refreshes its age). Tiles the source
+// says are absent are remembered for the session and never asked for again.
+//
+// Concurrent gets of one tile are merged: one disk read, one network fetch. Cancelling a get
+// removes its callback; when a tile's last waiter is cancelled its network fetch is cancelled.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <optional>
+
+#include "vts/client/disk_cache.hpp"
+#include "vts/client/ram_cache.hpp"
+#include "vts/client/source.hpp"
+#include "vts/protocol/result.hpp"
+
+namespace vts::client {
+
+struct TileCacheOptions {
+  std::size_t ram_bytes = 256u << 20;           // 0 = no RAM cache
+  std::optional<DiskCacheOptions> disk;         // none = no disk cache
+  std::chrono::seconds revalidate_after{3600};  // 0 = revalidate on every disk/RAM hit
+  int corrupt_retries = 2;                      // re-fetches of a payload that failed its checksum
+};
+
+struct GetOptions {
+  int level = -1;          // fetch order (lower first); -1 = the tile's z
+  double urgency = 0;      // within a level, higher first
+  bool pin = false;        // pin the tile in the caches (warm; the roots)
+  bool revalidate = true;  // revalidate a stale hit in the background
+};
+
+struct PayloadResult {
+  enum class Kind { ok, absent, error, cancelled };
+  enum class From { ram, disk, network };
+  Kind kind = Kind::error;
+  From from = From::network;
+  std::shared_ptr<const CachedTile> tile;  // Kind::ok
+  std::optional<Error> error;              // Kind::error
+};
+
+// Runs on the caller's thread (RAM hits, absent tiles: before get() returns), on the disk
+// thread or on the source's thread. Must not block.
+using PayloadCallback = std::function<void(PayloadResult&&)>;
+
+class TileCache {
+ public:
+  static Result<std::unique_ptr<TileCache>> create(std::shared_ptr<TileSource> source,
+                                                   TileCacheOptions options);
+  ~TileCache();  // cancels pending gets (their callbacks run with Kind::cancelled)
+  TileCache(const TileCache&) = delete;
+  TileCache& operator=(const TileCache&) = delete;
+
+  const SourceInfo& info() const;
+  // 0 when the get completed before returning (RAM hit, known-absent tile).
+  using Handle = std::uint64_t;
+  Handle get(TileId id, const GetOptions& options, PayloadCallback callback);
+  void cancel(Handle h);
+  // Writes what is batched (disk access times) and waits for queued disk writes.
+  Status flush();
+
+  struct Stats {
+    std::uint64_t gets = 0, ram_hits = 0, disk_hits = 0, network_fetches = 0, absent = 0,
+                  errors = 0, corrupt_rejected = 0, revalidations = 0, not_modified = 0,
+                  disk_write_errors = 0, cancelled = 0;
+  };
+  Stats stats() const;
+  RamCache* ram();    // nullptr when disabled
+  DiskCache* disk();  // nullptr when disabled
+  // The last disk write error (e.g. disk full), for reporting; empty when none.
+  std::optional<Error> last_disk_error() const;
+
+ private:
+  class Impl;
+  explicit TileCache(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace vts::client
