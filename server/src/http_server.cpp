@@ -266,7 +266,8 @@ class Session : public std::enable_shared_from_this<Session> {
   bool reading_ = false;      // a read (wait or header) is outstanding
   bool read_paused_ = false;  // stopped reading because the pipeline is full
   bool read_done_ = false;    // no more requests will be read (close requested / error / EOF)
-  bool writing_ = false;
+  bool writing_ = false;      // waiting for the socket to accept more
+  bool in_write_ = false;     // inside write_next()
   bool closed_ = false;
   std::string remote_;
 };
@@ -772,20 +773,46 @@ void Session::wait_for_request() {
                           });
 }
 
+// Parses the next request from what is buffered, synchronously; reads more only when the header is
+// incomplete. (http::async_read would post its completion even when the whole request is already
+// buffered, sending every request once around the scheduler queue: a pipelined or busy connection
+// would wait behind every other ready connection for each request.)
 void Session::read_request() {
   const auto& limits = server_.options().limits;
-  parser_.emplace();
-  parser_->header_limit(std::uint32_t(limits.max_header_bytes));
-  parser_->body_limit(0);
+  if (!parser_) {
+    parser_.emplace();
+    parser_->header_limit(std::uint32_t(limits.max_header_bytes));
+    parser_->body_limit(0);
+    parser_->eager(true);
+    set_read_deadline(limits.header_timeout);
+  }
+  beast::error_code ec;
+  while (buffer_.size() > 0 && !parser_->is_done()) {
+    const std::size_t n = parser_->put(buffer_.data(), ec);
+    buffer_.consume(n);
+    if (ec || n == 0) break;
+  }
+  if (ec == http::error::need_more) ec = {};
+  if (ec || parser_->is_done()) {
+    clear_read_deadline();
+    return on_read(ec);
+  }
+  if (buffer_.size() >= limits.max_header_bytes + 4096) {  // never: the parser stops first
+    clear_read_deadline();
+    return on_read(http::error::header_limit);
+  }
   reading_ = true;
-  set_read_deadline(limits.header_timeout);
-  http::async_read(socket_, buffer_, *parser_,
-                   [self = shared_from_this()](beast::error_code ec, std::size_t) {
-                     self->reading_ = false;
-                     if (self->closed_) return;
-                     self->clear_read_deadline();
-                     self->on_read(ec);
-                   });
+  socket_.async_read_some(buffer_.prepare(4096),
+                          [self = shared_from_this()](beast::error_code e, std::size_t n) {
+                            self->reading_ = false;
+                            if (self->closed_) return;
+                            if (e || n == 0) {
+                              self->clear_read_deadline();
+                              return self->on_read(e ? e : http::error::end_of_stream);
+                            }
+                            self->buffer_.commit(n);
+                            self->read_request();
+                          });
 }
 
 void Session::fail_parse(int status, const char* message) {
@@ -862,8 +889,9 @@ void Session::on_read(beast::error_code ec) {
     if (out->response.hold) out->tileset = out->response.hold->name;
   }
   if (out->close) read_done_ = true;
-  enqueue(std::move(out));
+  // Done with the request (its views end here): writing may parse the next one (see write_next).
   parser_.reset();
+  enqueue(std::move(out));
   wait_for_request();
 }
 
@@ -917,7 +945,7 @@ void Session::enqueue(std::unique_ptr<Outgoing> out) {
     assert(out->body.size() == r.content_length);
   }
   queue_.push_back(std::move(out));
-  if (!writing_) write_next();
+  if (!writing_ && !in_write_) write_next();
 }
 
 // One non-blocking send of what is left of `o` (one syscall). Sets would_block when the socket
@@ -964,6 +992,14 @@ std::size_t Session::write_some(Outgoing& o, beast::error_code& ec) {
 // it to drain. Each response must be completely written by its deadline: `write_timeout` plus its
 // size at `min_send_rate`, so a client reading a trickle cannot hold a connection for ever.
 void Session::write_next() {
+  // Completing a response can resume reading, which can parse and enqueue the next response:
+  // that one is written by this loop, never by a nested call.
+  if (in_write_) return;
+  in_write_ = true;
+  struct Reset {
+    bool& flag;
+    ~Reset() { flag = false; }
+  } reset{in_write_};
   const auto& limits = server_.options().limits;
   while (!closed_ && !queue_.empty()) {
     Outgoing& o = *queue_.front();
