@@ -702,8 +702,9 @@ Result<bool> DiskCache::contains(std::string_view tileset, TileId id) {
   return found->has_value();
 }
 
-Status DiskCache::put(std::string_view tileset, TileId id, const CachedTile& tile, bool pin) {
-  Impl& m = *impl_;
+// One tile's insert or replace, inside the caller's write transaction.
+Status DiskCache::put_row(Impl& m, std::string_view tileset, TileId id, const CachedTile& tile,
+                          bool pin, const std::string& doing) {
   const std::uint64_t size = tile.payload.size();
   if (size > m.options.max_bytes)
     return make_error(ErrorCode::too_large, tile_name(tileset, id) + " is " + std::to_string(size) +
@@ -711,61 +712,78 @@ Status DiskCache::put(std::string_view tileset, TileId id, const CachedTile& til
                                                 m.path_str + " (" +
                                                 std::to_string(m.options.max_bytes) + " bytes)");
   const auto checksum = static_cast<std::int64_t>(checksum_of(tile.payload));
-  const std::string doing = "storing " + tile_name(tileset, id);
+  auto tsid = m.tileset_for_write(tileset, doing);
+  if (!tsid) return std::move(tsid).error();
 
+  std::optional<std::int64_t> old_rowid;
+  std::uint64_t old_size = 0;
+  bool old_pinned = false;
+  {
+    sqlite3_stmt* s = m.old_row_stmt.get();
+    ResetGuard guard(s);
+    DiskCache::Impl::bind_key(s, *tsid, id);
+    const int rc = sqlite3_step(s);
+    if (rc == SQLITE_ROW) {
+      old_rowid = sqlite3_column_int64(s, 0);
+      old_size = static_cast<std::uint64_t>(sqlite3_column_int64(s, 1));
+      old_pinned = sqlite3_column_int(s, 2) != 0;
+    } else if (rc != SQLITE_DONE) {
+      return m.db_error(rc, doing);
+    }
+  }
+
+  auto totals = m.read_totals(doing);
+  if (!totals) return std::move(totals).error();
+  const std::uint64_t pinned_elsewhere =
+      totals->pinned_bytes - std::min(totals->pinned_bytes, old_pinned ? old_size : 0);
+  if (pinned_elsewhere + size > m.options.max_bytes)
+    return make_error(ErrorCode::too_large,
+                      "cache " + m.path_str +
+                          " is full of pinned tiles: " + std::to_string(pinned_elsewhere) +
+                          " bytes (" + mib(pinned_elsewhere) + ") pinned of its cap of " +
+                          std::to_string(m.options.max_bytes) + " bytes (" +
+                          mib(m.options.max_bytes) + "), no room for " + tile_name(tileset, id) +
+                          " (" + std::to_string(size) + " bytes); unpin tiles or raise the cap");
+
+  {
+    sqlite3_stmt* s = m.upsert_stmt.get();
+    ResetGuard guard(s);
+    DiskCache::Impl::bind_key(s, *tsid, id);
+    sqlite3_bind_int64(s, 5, static_cast<std::int64_t>(size));
+    sqlite3_bind_int64(s, 6, checksum);
+    sqlite3_bind_int64(s, 7, m.next_time_us());
+    sqlite3_bind_int64(s, 8, tile.validated_unix);
+    sqlite3_bind_int(s, 9, pin ? 1 : 0);
+    sqlite3_bind_text64(s, 10, tile.etag.data(), tile.etag.size(), SQLITE_STATIC, SQLITE_UTF8);
+    // A zero-length blob needs a non-null pointer, or SQLite binds NULL.
+    static const std::uint8_t kEmpty = 0;
+    sqlite3_bind_blob64(s, 11, size ? tile.payload.data() : &kEmpty, size, SQLITE_STATIC);
+    const int rc = DiskCache::Impl::run(s);
+    if (rc != SQLITE_DONE) return m.db_error(rc, doing);
+  }
+  const std::int64_t rowid = old_rowid ? *old_rowid : sqlite3_last_insert_rowid(m.db());
+  return m.evict_to_cap(rowid, doing);
+}
+
+Status DiskCache::put(std::string_view tileset, TileId id, const CachedTile& tile, bool pin) {
+  Impl& m = *impl_;
+  const std::string doing = "storing " + tile_name(tileset, id);
+  std::lock_guard lock(m.mutex);
+  return m.write_transaction(doing,
+                             [&]() -> Status { return put_row(m, tileset, id, tile, pin, doing); });
+}
+
+Status DiskCache::put_batch(std::string_view tileset, std::span<const BatchItem> items) {
+  if (items.empty()) return {};
+  Impl& m = *impl_;
+  const std::string doing = "storing " + std::to_string(items.size()) + " tiles of " +
+                            std::string(tileset) + " (from " + tile_name(tileset, items[0].id) +
+                            ")";
   std::lock_guard lock(m.mutex);
   return m.write_transaction(doing, [&]() -> Status {
-    auto tsid = m.tileset_for_write(tileset, doing);
-    if (!tsid) return std::move(tsid).error();
-
-    std::optional<std::int64_t> old_rowid;
-    std::uint64_t old_size = 0;
-    bool old_pinned = false;
-    {
-      sqlite3_stmt* s = m.old_row_stmt.get();
-      ResetGuard guard(s);
-      Impl::bind_key(s, *tsid, id);
-      const int rc = sqlite3_step(s);
-      if (rc == SQLITE_ROW) {
-        old_rowid = sqlite3_column_int64(s, 0);
-        old_size = static_cast<std::uint64_t>(sqlite3_column_int64(s, 1));
-        old_pinned = sqlite3_column_int(s, 2) != 0;
-      } else if (rc != SQLITE_DONE) {
-        return m.db_error(rc, doing);
-      }
-    }
-
-    auto totals = m.read_totals(doing);
-    if (!totals) return std::move(totals).error();
-    const std::uint64_t pinned_elsewhere =
-        totals->pinned_bytes - std::min(totals->pinned_bytes, old_pinned ? old_size : 0);
-    if (pinned_elsewhere + size > m.options.max_bytes)
-      return make_error(ErrorCode::too_large,
-                        "cache " + m.path_str +
-                            " is full of pinned tiles: " + std::to_string(pinned_elsewhere) +
-                            " bytes (" + mib(pinned_elsewhere) + ") pinned of its cap of " +
-                            std::to_string(m.options.max_bytes) + " bytes (" +
-                            mib(m.options.max_bytes) + "), no room for " + tile_name(tileset, id) +
-                            " (" + std::to_string(size) + " bytes); unpin tiles or raise the cap");
-
-    {
-      sqlite3_stmt* s = m.upsert_stmt.get();
-      ResetGuard guard(s);
-      Impl::bind_key(s, *tsid, id);
-      sqlite3_bind_int64(s, 5, static_cast<std::int64_t>(size));
-      sqlite3_bind_int64(s, 6, checksum);
-      sqlite3_bind_int64(s, 7, m.next_time_us());
-      sqlite3_bind_int64(s, 8, tile.validated_unix);
-      sqlite3_bind_int(s, 9, pin ? 1 : 0);
-      sqlite3_bind_text64(s, 10, tile.etag.data(), tile.etag.size(), SQLITE_STATIC, SQLITE_UTF8);
-      // A zero-length blob needs a non-null pointer, or SQLite binds NULL.
-      static const std::uint8_t kEmpty = 0;
-      sqlite3_bind_blob64(s, 11, size ? tile.payload.data() : &kEmpty, size, SQLITE_STATIC);
-      const int rc = Impl::run(s);
-      if (rc != SQLITE_DONE) return m.db_error(rc, doing);
-    }
-    const std::int64_t rowid = old_rowid ? *old_rowid : sqlite3_last_insert_rowid(m.db());
-    return m.evict_to_cap(rowid, doing);
+    for (const auto& item : items)
+      if (Status s = put_row(m, tileset, item.id, *item.tile, item.pin, doing); !s) return s;
+    return {};
   });
 }
 

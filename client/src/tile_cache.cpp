@@ -179,8 +179,7 @@ class TileCache::Impl {
     if (!disk_) return {};
     {
       std::unique_lock lock(disk_mutex_);
-      disk_idle_cv_.wait(
-          lock, [this] { return disk_reads_.empty() && disk_writes_.empty() && !disk_busy_; });
+      disk_idle_cv_.wait(lock, [this] { return disk_idle() && !disk_busy_; });
     }
     std::lock_guard lock(disk_use_mutex_);
     return disk_->flush();
@@ -213,6 +212,11 @@ class TileCache::Impl {
   struct Waiter {
     Handle handle = 0;
     PayloadCallback callback;
+  };
+  struct Put {
+    TileId id;
+    std::shared_ptr<const CachedTile> tile;
+    bool pin = false;
   };
   struct Pending {
     std::uint64_t serial = 0;  // tells this request from a later one for the same tile
@@ -281,26 +285,41 @@ class TileCache::Impl {
 
   // Reads first: a viewer waits for them; writes only make the next run faster.
   void disk_loop() {
+    constexpr std::size_t kMaxBatch = 128;
+    constexpr std::size_t kMaxBatchBytes = 8u << 20;
+    std::vector<Put> batch;
     std::unique_lock lock(disk_mutex_);
     for (;;) {
-      disk_cv_.wait(lock,
-                    [this] { return disk_stop_ || !disk_reads_.empty() || !disk_writes_.empty(); });
-      if (disk_reads_.empty() && disk_writes_.empty()) {
+      disk_cv_.wait(lock, [this] { return disk_stop_ || !disk_idle(); });
+      if (disk_idle()) {
         if (disk_stop_) return;
         continue;
       }
-      auto& q = disk_reads_.empty() ? disk_writes_ : disk_reads_;
-      auto job = std::move(q.front());
-      q.pop_front();
+      std::function<void()> job;
+      if (!disk_reads_.empty() || !disk_writes_.empty()) {
+        auto& q = disk_reads_.empty() ? disk_writes_ : disk_reads_;
+        job = std::move(q.front());
+        q.pop_front();
+      } else {
+        std::size_t bytes = 0;
+        while (!disk_puts_.empty() && batch.size() < kMaxBatch && bytes < kMaxBatchBytes) {
+          bytes += disk_puts_.front().tile->payload.size();
+          batch.push_back(std::move(disk_puts_.front()));
+          disk_puts_.pop_front();
+        }
+      }
       disk_busy_ = true;
       lock.unlock();
       {
         std::lock_guard use(disk_use_mutex_);
-        job();
+        if (job)
+          job();
+        else
+          write_puts(batch);
       }
       lock.lock();
       disk_busy_ = false;
-      if (disk_reads_.empty() && disk_writes_.empty()) disk_idle_cv_.notify_all();
+      if (disk_idle()) disk_idle_cv_.notify_all();
     }
   }
 
@@ -342,11 +361,33 @@ class TileCache::Impl {
     last_disk_error_ = s.error();
   }
 
+  // Queued, then written in batches of many tiles per transaction by the disk thread.
   void store_on_disk(TileId id, std::shared_ptr<const CachedTile> tile, bool pin) {
     if (!disk_) return;
-    post_disk(/*read=*/false, [this, id, tile = std::move(tile), pin] {
-      note_disk(disk_->put(key_, id, *tile, pin));
-    });
+    {
+      std::lock_guard lock(disk_mutex_);
+      disk_puts_.push_back(Put{id, std::move(tile), pin});
+    }
+    disk_cv_.notify_one();
+  }
+
+  // On the disk thread: many tiles in one transaction (one commit, not one per tile).
+  void write_puts(std::vector<Put>& batch) {
+    std::vector<DiskCache::BatchItem> items;
+    items.reserve(batch.size());
+    for (const auto& p : batch) items.push_back({p.id, p.tile.get(), p.pin});
+    Status s = disk_->put_batch(key_, items);
+    if (!s && batch.size() > 1) {
+      // One bad tile (too large, no room for a pin) must not cost the others: one by one.
+      for (const auto& p : batch) note_disk(disk_->put(key_, p.id, *p.tile, p.pin));
+    } else {
+      note_disk(s);
+    }
+    batch.clear();
+  }
+
+  bool disk_idle() const {
+    return disk_reads_.empty() && disk_writes_.empty() && disk_puts_.empty();
   }
 
   // ---- network stage (source thread) ----
@@ -545,6 +586,7 @@ class TileCache::Impl {
   std::mutex disk_mutex_, disk_use_mutex_;
   std::condition_variable disk_cv_, disk_idle_cv_;
   std::deque<std::function<void()>> disk_reads_, disk_writes_;
+  std::deque<Put> disk_puts_;
   bool disk_busy_ = false, disk_stop_ = false;
 
   struct {

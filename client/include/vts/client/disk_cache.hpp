@@ -32,6 +32,7 @@
 #include <filesystem>
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
 #include <string_view>
 
@@ -105,6 +106,14 @@ class DiskCache {
   // row's pin (a refresh does not unpin). Fails, storing nothing, with too_large when the payload
   // alone exceeds max_bytes or when pinned tiles leave no room for it, and with io on a full disk.
   Status put(std::string_view tileset, TileId id, const CachedTile& tile, bool pin = false);
+  // Several puts in one transaction (one commit instead of one per tile: what makes a cold fetch
+  // keep up with the network). All or nothing: on error nothing of the batch is stored.
+  struct BatchItem {
+    TileId id;
+    const CachedTile* tile = nullptr;
+    bool pin = false;
+  };
+  Status put_batch(std::string_view tileset, std::span<const BatchItem> items);
   // Records a successful revalidation (HTTP 304). not_found when the tile is not cached.
   Status set_validated(std::string_view tileset, TileId id, std::int64_t validated_unix);
   // Pins (never evicted) or unpins a cached tile. not_found when the tile is not cached.
@@ -123,6 +132,8 @@ class DiskCache {
 
  private:
   struct Impl;
+  static Status put_row(Impl& m, std::string_view tileset, TileId id, const CachedTile& tile,
+                        bool pin, const std::string& doing);
   explicit DiskCache(std::unique_ptr<Impl> impl);
   std::unique_ptr<Impl> impl_;
 };
