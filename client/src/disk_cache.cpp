@@ -490,6 +490,7 @@ struct DiskCache::Impl {
       const auto* blob = static_cast<const std::uint8_t*>(sqlite3_column_blob(s, 5));
       const auto n = static_cast<std::size_t>(sqlite3_column_bytes(s, 5));
       if (blob) tile.payload.assign(blob, blob + n);
+      tile.pinned = sqlite3_column_int(s, 6) != 0;
     }
     // Hash without the lock: other threads may use the connection meanwhile.
     lock.unlock();
@@ -611,7 +612,7 @@ struct DiskCache::Impl {
         {&find_tileset_stmt, "SELECT id FROM tilesets WHERE key = ?1"},
         {&insert_tileset_stmt, "INSERT INTO tilesets(key) VALUES (?1)"},
         {&get_stmt,
-         "SELECT rowid, size, checksum, validated, etag, payload FROM tiles "
+         "SELECT rowid, size, checksum, validated, etag, payload, pinned FROM tiles "
          "WHERE " VTS_TILE_KEY_WHERE},
         {&old_row_stmt, "SELECT rowid, size, pinned FROM tiles WHERE " VTS_TILE_KEY_WHERE},
         {&totals_stmt, "SELECT bytes, tiles, pinned_bytes, pinned_tiles FROM totals WHERE id = 0"},

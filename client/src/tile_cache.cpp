@@ -332,7 +332,7 @@ class TileCache::Impl {
       // The disk cache checked its row checksum; the payload's own is checked too, so that not
       // even a tile stored by an older or buggy writer is handed out unverified.
       if (verify_tile(t.payload)) {
-        if (p->pin) note_disk(disk_->set_pinned(key_, id, true));
+        if (p->pin && !t.pinned) note_disk(disk_->set_pinned(key_, id, true));
         auto tile = std::make_shared<const CachedTile>(std::move(t));
         stats_.disk_hits.fetch_add(1, std::memory_order_relaxed);
         remember(id, tile, p->pin);

@@ -28,6 +28,7 @@ struct CachedTile {
   std::vector<std::uint8_t> payload;
   std::string etag;
   std::int64_t validated_unix = 0;  // seconds since the epoch
+  bool pinned = false;  // as read from the disk cache (its row is pinned); not used by RamCache
 };
 
 // A snapshot of the cache's counters. The fields are read one by one without a common lock, so
