@@ -70,8 +70,11 @@ class TileSource {
   // remote sources, or a remote source's own delivery thread for answers it knows without the
   // network; a local source runs it before fetch() returns). It must not block. A remote source
   // never runs it inside fetch() or cancel(). Payloads are not verified here (the client
-  // verifies checksums when decoding); the ETag, though, is read from the payload's tile header,
-  // so a payload without a valid header frame is an error (corrupt), as `vts serve` answers 500.
+  // verifies checksums when decoding). The archive sources (local and remote) read the ETag from
+  // the payload's tile header, as `vts serve` does, so for them a payload without a valid header
+  // frame is an error (corrupt) where the server answers 500; the TileJSON source reports the
+  // server's ETag. A remote archive judges If-None-Match itself after reading the tile's bytes:
+  // not_modified there saves the copy and the decode, not the range read.
   using Handle = std::uint64_t;
   virtual Handle fetch(const SourceRequest& request, SourceCallback callback) = 0;
   // The callback then runs with Kind::cancelled unless it has already run. Thread-safe.
@@ -88,8 +91,18 @@ struct SourceOptions {
 //   - an http(s) URL ending in .pmtiles                           → remote archive, range reads;
 //   - an http(s) URL ending in .json                              → TileJSON;
 //   - any other http(s) URL (e.g. http://host:8080/earth)         → TileJSON at URL + ".json".
-// Blocks while it fetches the TileJSON or the archive header and root directory. Errors name the
-// location and what was wrong (unreachable, not an archive, not our tileset, bad TileJSON...).
+// The suffix is judged on the URL's path (a query such as an object store's signature is kept and
+// sent). file: URLs are file:///path or file://localhost/path, percent-encoded; another scheme
+// ("s3://") is invalid_argument. Blocks while it fetches the TileJSON or the archive header and
+// root directory. Errors name the location and what was wrong (unreachable, not an archive, not
+// our tileset, bad TileJSON...): not_found for a missing file, tileset or archive (HTTP 404), io
+// for an unreachable server or another HTTP status, corrupt for bytes that are not TileJSON or
+// PMTiles, unsupported for an archive or TileJSON without our "vtstream" metadata.
+//
+// A TileJSON source follows a rebuilt tileset: when a versioned tile URL answers 404 "not
+// current", it refetches the TileJSON, moves to its new tile URLs and retries the tile. info()
+// keeps describing the tileset as opened; a rebuild that changed the geometry or codec makes
+// tiles fail (unsupported) until the tileset is opened again.
 Result<std::unique_ptr<TileSource>> open_source(std::string_view location,
                                                 SourceOptions options = {});
 
@@ -109,7 +122,8 @@ Result<std::string> tile_etag(std::span<const std::uint8_t> payload);
 bool etag_matches(std::string_view header, std::string_view etag);
 
 // A source rebuilt from a SourceInfo a cache kept, for when the network is gone: every fetch
-// answers Kind::error (offline) at once. Lets the client serve what its caches hold.
+// answers Kind::error (io, "offline: ...") before fetch() returns, and local() is true (it costs
+// no network). Lets the client serve what its caches hold.
 std::unique_ptr<TileSource> offline_source(SourceInfo info);
 
 }  // namespace vts::client

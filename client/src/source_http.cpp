@@ -1,0 +1,421 @@
+// The TileJSON source: a tile server described by TileJSON 3.0 with our "vtstream" object
+// (docs/PROTOCOL.md §5) — `vts serve`, or any server or CDN holding our tiles under a URL template.
+//
+// Tiles are fetched from "tiles"[0]. `vts serve` puts the archive version in that template
+// (/{ts}@{version}/{z}/{x}/{y}), and answers 404 "... is not current ..." once the archive has been
+// rebuilt. Such a 404 makes the source fetch the TileJSON again (once per tile request; the
+// fetcher merges concurrent refetches into one transfer), switch every later request to the new
+// template, and retry the tile. The rebuilt tileset must keep its geometry and codec: SourceInfo
+// is immutable for the source's life, so a tileset that changed those fails with an error that
+// says to reopen it.
+//
+// Every callback runs on the fetcher's thread.
+#include <cstdint>
+#include <future>
+#include <limits>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <unordered_map>
+#include <utility>
+
+#include "vts/client/source.hpp"
+
+namespace vts::client {
+namespace {
+
+using nlohmann::json;
+
+constexpr std::size_t kMaxTileJsonBytes = 4u << 20;
+// What `vts serve` says in the 404 for a stale versioned URL (router.cpp tile_route).
+constexpr std::string_view kNotCurrent = "is not current";
+
+char lower(char c) {
+  return c >= 'A' && c <= 'Z' ? static_cast<char>(c - 'A' + 'a') : c;
+}
+
+bool starts_with_nocase(std::string_view s, std::string_view prefix) {
+  if (s.size() < prefix.size()) return false;
+  for (std::size_t i = 0; i < prefix.size(); ++i) {
+    if (lower(s[i]) != prefix[i]) return false;
+  }
+  return true;
+}
+
+// The first line of a (text) error body, at most 200 bytes, for messages.
+std::string first_line(const std::vector<std::uint8_t>& body) {
+  std::string s;
+  for (std::uint8_t b : body) {
+    if (b == '\n' || b == '\r' || s.size() >= 200) break;
+    s.push_back(b >= 0x20 && b < 0x7f ? static_cast<char>(b) : '?');
+  }
+  return s;
+}
+
+std::string http_failure(std::string_view what, const std::string& url, const FetchResult& r) {
+  std::string m = std::string(what) + " " + url + ": HTTP " + std::to_string(r.status);
+  const std::string line = first_line(r.body);
+  if (!line.empty()) m += " (" + line + ")";
+  return m;
+}
+
+// Resolves a "tiles" entry against the TileJSON's URL (RFC 3986 §5.2, for the forms that
+// occur: absolute, scheme-relative, absolute-path and relative-path references).
+std::string resolve(const std::string& base, const std::string& ref) {
+  if (starts_with_nocase(ref, "http://") || starts_with_nocase(ref, "https://")) return ref;
+  const std::size_t scheme_end = base.find("://");
+  if (scheme_end == std::string::npos) return ref;
+  if (ref.substr(0, 2) == "//") return base.substr(0, scheme_end + 1) + ref;
+  const std::size_t authority_end = base.find_first_of("/?#", scheme_end + 3);
+  const std::string origin = base.substr(0, authority_end);
+  if (!ref.empty() && ref.front() == '/') return origin + ref;
+  if (authority_end == std::string::npos || base[authority_end] != '/') return origin + "/" + ref;
+  const std::string path = base.substr(0, base.find_first_of("?#", authority_end));
+  return path.substr(0, path.rfind('/') + 1) + ref;
+}
+
+void replace_all(std::string& s, std::string_view from, const std::string& to) {
+  for (std::size_t pos = s.find(from); pos != std::string::npos; pos = s.find(from, pos)) {
+    s.replace(pos, from.size(), to);
+    pos += to.size();
+  }
+}
+
+struct TileJson {
+  TilesetInfo info;
+  std::string tiles;    // resolved URL template
+  std::string version;  // "" when the TileJSON has none
+};
+
+Result<TileJson> parse_tilejson(const std::vector<std::uint8_t>& body, const std::string& url) {
+  const json j = json::parse(body.begin(), body.end(), nullptr, /*allow_exceptions=*/false);
+  if (j.is_discarded() || !j.is_object()) {
+    return make_error(ErrorCode::corrupt, url + " is not TileJSON (not a JSON object)");
+  }
+  auto tiles = j.find("tiles");
+  if (tiles == j.end() || !tiles->is_array() || tiles->empty() || !(*tiles)[0].is_string() ||
+      (*tiles)[0].get_ref<const std::string&>().empty()) {
+    return make_error(ErrorCode::corrupt,
+                      url + " is not TileJSON (no \"tiles\" array of URL templates)");
+  }
+  TileJson t;
+  t.tiles = resolve(url, (*tiles)[0].get<std::string>());
+  for (const char* p : {"{z}", "{x}", "{y}"}) {
+    if (t.tiles.find(p) == std::string::npos) {
+      return make_error(ErrorCode::corrupt,
+                        url + ": tile URL template \"" + t.tiles + "\" lacks " + p);
+    }
+  }
+  auto v = j.find("vtstream");
+  if (v == j.end() || !v->is_object()) {
+    return make_error(ErrorCode::unsupported,
+                      url + " is TileJSON but not a vtstream tileset (no \"vtstream\" object)");
+  }
+  // The "vtstream" object is the archive metadata's (plus "archive", which from_json ignores);
+  // name and description are TileJSON's own keys.
+  json meta = json::object();
+  for (const char* k : {"name", "description"}) {
+    if (auto it = j.find(k); it != j.end() && it->is_string()) meta[k] = *it;
+  }
+  meta["vtstream"] = *v;
+  Result<TilesetInfo> info =
+      TilesetInfo::from_json(meta.dump(-1, ' ', false, json::error_handler_t::replace));
+  if (!info) return make_error(info.error().code, url + ": " + info.error().message);
+  t.info = std::move(*info);
+  if (auto it = j.find("version"); it != j.end() && it->is_string()) t.version = *it;
+  return t;
+}
+
+FetchResult fetch_blocking(Fetcher& fetcher, FetchRequest request) {
+  std::promise<FetchResult> promise;
+  std::future<FetchResult> future = promise.get_future();
+  fetcher.submit(std::move(request),
+                 [&promise](FetchResult&& r) { promise.set_value(std::move(r)); });
+  return future.get();
+}
+
+bool same_tileset_shape(const TilesetInfo& a, const TilesetInfo& b) {
+  const Geometry &ga = a.geometry, &gb = b.geometry;
+  return ga.width() == gb.width() && ga.height() == gb.height() &&
+         ga.tile_size() == gb.tile_size() && ga.border() == gb.border() && a.codec == b.codec;
+}
+
+class TileJsonSource final : public TileSource {
+ public:
+  TileJsonSource(std::unique_ptr<Fetcher> fetcher, SourceInfo info, std::string json_url,
+                 TileJson tilejson)
+      : fetcher_(std::move(fetcher)), info_(std::move(info)), json_url_(std::move(json_url)) {
+    template_ = std::move(tilejson.tiles);
+    version_ = std::move(tilejson.version);
+  }
+
+  ~TileJsonSource() override {
+    std::unique_ptr<Fetcher> fetcher;
+    {
+      std::lock_guard lock(mutex_);
+      closing_ = true;
+      fetcher = std::move(fetcher_);
+    }
+    // Cancels every transfer; their callbacks run now, each finishing its request.
+    fetcher.reset();
+  }
+
+  const SourceInfo& info() const override { return info_; }
+  bool local() const override { return false; }
+
+  Handle fetch(const SourceRequest& request, SourceCallback callback) override {
+    auto p = std::make_shared<Pending>();
+    p->request = request;
+    p->callback = std::move(callback);
+    std::lock_guard lock(mutex_);
+    const Handle h = ++next_handle_;
+    pending_.emplace(h, p);
+    submit_tile(h, *p);
+    return h;
+  }
+
+  void cancel(Handle h) override {
+    Fetcher* fetcher = nullptr;
+    Fetcher::Handle fh = 0;
+    {
+      std::lock_guard lock(mutex_);
+      auto it = pending_.find(h);
+      if (it == pending_.end() || fetcher_ == nullptr) return;  // done, or closing
+      it->second->cancelled = true;
+      fetcher = fetcher_.get();
+      fh = it->second->fetch;
+    }
+    // The fetcher's callback for fh then finishes the request with Kind::cancelled; if it is
+    // already running, it sees `cancelled` before starting another step.
+    fetcher->cancel(fh);
+  }
+
+ private:
+  struct Pending {
+    SourceRequest request;
+    SourceCallback callback;
+    Fetcher::Handle fetch = 0;
+    std::uint64_t generation = 0;  // of the template the current attempt used
+    bool refetched = false;        // TileJSON already refetched for this request
+    bool cancelled = false;
+  };
+
+  // Caller holds mutex_. Starts the tile transfer with the current template.
+  void submit_tile(Handle h, Pending& p) {
+    std::string url = template_;
+    replace_all(url, "{z}", std::to_string(p.request.id.z));
+    replace_all(url, "{x}", std::to_string(p.request.id.x));
+    replace_all(url, "{y}", std::to_string(p.request.id.y));
+    p.generation = generation_;
+    FetchRequest r;
+    r.url = url;
+    r.if_none_match = p.request.if_none_match;
+    r.level = p.request.level;
+    r.urgency = p.request.urgency;
+    p.fetch = fetcher_->submit(
+        std::move(r), [this, h, url](FetchResult&& res) { on_tile(h, url, std::move(res)); });
+  }
+
+  // Removes the request and runs its callback (outside the lock).
+  void finish(Handle h, SourceTile&& tile) {
+    std::shared_ptr<Pending> p;
+    {
+      std::lock_guard lock(mutex_);
+      auto it = pending_.find(h);
+      if (it == pending_.end()) return;
+      p = std::move(it->second);
+      pending_.erase(it);
+    }
+    // A cancel() that came in before this point wins over whatever the transfer brought.
+    if (p->cancelled && tile.kind != SourceTile::Kind::cancelled) {
+      tile = SourceTile{};
+      tile.kind = SourceTile::Kind::cancelled;
+    }
+    p->callback(std::move(tile));
+  }
+
+  void finish_kind(Handle h, SourceTile::Kind kind) {
+    SourceTile t;
+    t.kind = kind;
+    finish(h, std::move(t));
+  }
+
+  void finish_error(Handle h, Error e) {
+    SourceTile t;
+    t.kind = SourceTile::Kind::error;
+    t.error = std::move(e);
+    finish(h, std::move(t));
+  }
+
+  // Continues a request after a step, under the lock: nullptr when it was cancelled (or the
+  // source is closing), in which case the caller finishes it with Kind::cancelled.
+  Pending* resume(Handle h) {
+    auto it = pending_.find(h);
+    if (it == pending_.end()) return nullptr;
+    if (it->second->cancelled || closing_) return nullptr;
+    return it->second.get();
+  }
+
+  void on_tile(Handle h, const std::string& url, FetchResult&& r) {
+    if (r.cancelled) return finish_kind(h, SourceTile::Kind::cancelled);
+    if (r.error) return finish_error(h, std::move(*r.error));
+    SourceTile t;
+    switch (r.status) {
+      case 200: {
+        t.kind = SourceTile::Kind::ok;
+        t.etag = std::move(r.etag);
+        if (t.etag.empty()) {
+          // Not `vts serve` (it always sends one): make the tag every source would give.
+          if (Result<std::string> e = tile_etag(r.body)) t.etag = std::move(*e);
+        }
+        t.payload = std::move(r.body);
+        return finish(h, std::move(t));
+      }
+      case 304: {
+        t.kind = SourceTile::Kind::not_modified;
+        t.etag = std::move(r.etag);
+        if (t.etag.empty()) {
+          std::lock_guard lock(mutex_);
+          if (auto it = pending_.find(h); it != pending_.end()) {
+            t.etag = it->second->request.if_none_match;
+          }
+        }
+        return finish(h, std::move(t));
+      }
+      case 204:
+        return finish_kind(h, SourceTile::Kind::absent);
+      case 404: {
+        const std::string line = first_line(r.body);
+        if (line.find(kNotCurrent) == std::string::npos) {
+          return finish_kind(h, SourceTile::Kind::absent);
+        }
+        return on_not_current(h, url, line);
+      }
+      default:
+        return finish_error(h, make_error(ErrorCode::io, http_failure("GET", url, r)));
+    }
+  }
+
+  // The archive behind the template was rebuilt: move to the new template (refetching the
+  // TileJSON unless another request already did) and retry, once.
+  void on_not_current(Handle h, const std::string& url, const std::string& message) {
+    std::unique_lock lock(mutex_);
+    Pending* p = resume(h);
+    if (p == nullptr) {
+      lock.unlock();
+      return finish_kind(h, SourceTile::Kind::cancelled);
+    }
+    if (p->refetched) {
+      lock.unlock();
+      return finish_error(h, make_error(ErrorCode::io, "GET " + url + ": HTTP 404 (" + message +
+                                                           ") even after refetching " + json_url_));
+    }
+    p->refetched = true;
+    if (generation_ != p->generation) return submit_tile(h, *p);
+    FetchRequest r;
+    r.url = json_url_;
+    r.level = std::numeric_limits<int>::min();  // before any tile: every tile waits for it
+    p->fetch = fetcher_->submit(std::move(r),
+                                [this, h](FetchResult&& res) { on_tilejson(h, std::move(res)); });
+  }
+
+  void on_tilejson(Handle h, FetchResult&& r) {
+    if (r.cancelled) return finish_kind(h, SourceTile::Kind::cancelled);
+    if (r.error) {
+      Error e = std::move(*r.error);
+      e.message = "refetching TileJSON: " + e.message;
+      return finish_error(h, std::move(e));
+    }
+    if (r.status != 200) {
+      return finish_error(
+          h, make_error(ErrorCode::io, http_failure("refetching TileJSON", json_url_, r)));
+    }
+    Result<TileJson> tj = parse_tilejson(r.body, json_url_);
+    if (!tj) return finish_error(h, std::move(tj).error());
+    if (!same_tileset_shape(tj->info, info_.info)) {
+      return finish_error(
+          h, make_error(ErrorCode::unsupported,
+                        json_url_ + ": the tileset was rebuilt with a different geometry "
+                                    "or codec; open it again"));
+    }
+    std::unique_lock lock(mutex_);
+    Pending* p = resume(h);
+    if (p == nullptr) {
+      lock.unlock();
+      return finish_kind(h, SourceTile::Kind::cancelled);
+    }
+    // Several requests may bring the same new TileJSON; only a new version moves the template.
+    if (tj->version != version_ || tj->tiles != template_) {
+      template_ = std::move(tj->tiles);
+      version_ = std::move(tj->version);
+      ++generation_;
+    }
+    submit_tile(h, *p);
+  }
+
+  std::unique_ptr<Fetcher> fetcher_;  // null once closing
+  const SourceInfo info_;
+  const std::string json_url_;
+
+  std::mutex mutex_;
+  std::unordered_map<Handle, std::shared_ptr<Pending>> pending_;
+  Handle next_handle_ = 0;
+  std::string template_;
+  std::string version_;
+  std::uint64_t generation_ = 0;
+  bool closing_ = false;
+};
+
+}  // namespace
+
+Result<std::unique_ptr<TileSource>> open_tilejson(std::string_view url, SourceOptions options) {
+  // Fragments are never sent; the key drops the query too (it may hold expiring credentials).
+  std::string location(url.substr(0, url.find('#')));
+  const std::size_t q = location.find('?');
+  std::string path = location.substr(0, q);
+  const std::string query = q == std::string::npos ? "" : location.substr(q);
+  if (!starts_with_nocase(path, "http://") && !starts_with_nocase(path, "https://")) {
+    return make_error(ErrorCode::invalid_argument,
+                      "TileJSON location " + location + " is not an http(s) URL");
+  }
+  std::string key = path;
+  if (path.ends_with(".json")) {
+    key.resize(key.size() - 5);
+  } else {
+    path += ".json";
+  }
+  const std::string json_url = path + query;
+
+  Result<std::unique_ptr<Fetcher>> fetcher = Fetcher::create(options.fetcher);
+  if (!fetcher) return std::move(fetcher).error();
+  FetchRequest request;
+  request.url = json_url;
+  FetchResult r = fetch_blocking(**fetcher, std::move(request));
+  if (r.error) {
+    Error e = std::move(*r.error);
+    e.message = "cannot open tileset " + json_url + ": " + e.message;
+    return e;
+  }
+  if (r.status == 404) {
+    return make_error(ErrorCode::not_found, http_failure("no tileset at", json_url, r));
+  }
+  if (r.status != 200) {
+    return make_error(ErrorCode::io, http_failure("cannot open tileset", json_url, r));
+  }
+  if (r.body.size() > kMaxTileJsonBytes) {
+    return make_error(
+        ErrorCode::too_large,
+        json_url + ": TileJSON of " + std::to_string(r.body.size()) + " bytes is too large");
+  }
+  Result<TileJson> tj = parse_tilejson(r.body, json_url);
+  if (!tj) return std::move(tj).error();
+
+  SourceInfo info;
+  info.info = tj->info;
+  info.key = std::move(key);
+  info.version = tj->version;
+  info.description_json.assign(r.body.begin(), r.body.end());
+  return std::unique_ptr<TileSource>(std::make_unique<TileJsonSource>(
+      std::move(*fetcher), std::move(info), json_url, std::move(*tj)));
+}
+
+}  // namespace vts::client

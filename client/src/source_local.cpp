@@ -1,0 +1,126 @@
+// The local-archive source: a pmtiles::Reader over a read-only mapping of the file. Every fetch is
+// answered synchronously, inside fetch(), with a copy of the stored payload — the mapping is the
+// reader's, and the caller keeps the payload beyond the source's lifetime. The answers mirror what
+// `vts serve` would send for the same archive (docs/PROTOCOL.md §3): the same bytes, the same
+// ETag, absent where the server answers 204 or 404, an error where it answers 500.
+#include <xxhash.h>
+
+#include <atomic>
+#include <cstdio>
+#include <system_error>
+#include <utility>
+
+#include "vts/client/source.hpp"
+#include "vts/protocol/pmtiles.hpp"
+
+namespace vts::client {
+namespace {
+
+// The archive version exactly as `vts serve` computes it (docs/PROTOCOL.md §6): XXH3-64 of the
+// header, root directory and metadata bytes as stored. The reader has checked that these sections
+// lie inside the file.
+std::string archive_version(const pmtiles::Reader& reader) {
+  const auto bytes = reader.bytes();
+  const pmtiles::Header& h = reader.header();
+  XXH3_state_t* state = XXH3_createState();
+  if (state == nullptr) return {};
+  XXH3_64bits_reset(state);
+  XXH3_64bits_update(state, bytes.data(), pmtiles::kHeaderSize);
+  XXH3_64bits_update(state, bytes.data() + h.root_dir_offset, h.root_dir_length);
+  XXH3_64bits_update(state, bytes.data() + h.metadata_offset, h.metadata_length);
+  const XXH64_hash_t hash = XXH3_64bits_digest(state);
+  XXH3_freeState(state);
+  char hex[17];
+  std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(hash));
+  return hex;
+}
+
+class LocalSource final : public TileSource {
+ public:
+  LocalSource(std::shared_ptr<pmtiles::Reader> reader, SourceInfo info, std::string path)
+      : reader_(std::move(reader)), info_(std::move(info)), path_(std::move(path)) {}
+
+  const SourceInfo& info() const override { return info_; }
+  bool local() const override { return true; }
+
+  // Thread-safe: the reader's lookups are, and nothing else here changes after construction.
+  Handle fetch(const SourceRequest& request, SourceCallback callback) override {
+    const Handle h = next_handle_.fetch_add(1, std::memory_order_relaxed) + 1;
+    callback(read(request));
+    return h;
+  }
+
+  // Every callback has run by the time fetch() returns: nothing to cancel.
+  void cancel(Handle) override {}
+
+ private:
+  SourceTile read(const SourceRequest& request) const {
+    SourceTile t;
+    const TileId id = request.id;
+    const Geometry& g = info_.info.geometry;
+    // Outside the pyramid: `vts serve` answers 404 before looking at the archive.
+    if (id.z > g.max_zoom() || id.x >= g.tiles_x(id.z) || id.y >= g.tiles_y(id.z)) {
+      t.kind = SourceTile::Kind::absent;
+      return t;
+    }
+    Result<std::span<const std::uint8_t>> payload = reader_->get(id);
+    if (!payload) {
+      if (payload.error().code == ErrorCode::not_found) {
+        t.kind = SourceTile::Kind::absent;
+        return t;
+      }
+      t.error = make_error(payload.error().code,
+                           path_ + ": tile " + id.to_string() + ": " + payload.error().message);
+      return t;
+    }
+    Result<std::string> etag = tile_etag(*payload);
+    if (!etag) {
+      t.error = make_error(etag.error().code, path_ + ": tile " + id.to_string() +
+                                                  " is damaged: " + etag.error().message);
+      return t;
+    }
+    t.etag = std::move(*etag);
+    if (etag_matches(request.if_none_match, t.etag)) {
+      t.kind = SourceTile::Kind::not_modified;
+      return t;
+    }
+    t.kind = SourceTile::Kind::ok;
+    t.payload.assign(payload->begin(), payload->end());
+    return t;
+  }
+
+  std::shared_ptr<pmtiles::Reader> reader_;
+  SourceInfo info_;
+  std::string path_;
+  std::atomic<Handle> next_handle_{0};
+};
+
+}  // namespace
+
+Result<std::unique_ptr<TileSource>> open_local_archive(const std::filesystem::path& path) {
+  if (path.empty()) return make_error(ErrorCode::invalid_argument, "empty archive path");
+  std::error_code ec;
+  std::filesystem::path absolute = std::filesystem::absolute(path, ec);
+  if (ec) {
+    return make_error(ErrorCode::io,
+                      "cannot resolve archive path " + path.string() + ": " + ec.message());
+  }
+  absolute = absolute.lexically_normal();
+
+  // Reader errors already name the path.
+  Result<std::shared_ptr<pmtiles::Reader>> reader = pmtiles::Reader::open(absolute);
+  if (!reader) return std::move(reader).error();
+  Result<TilesetInfo> info = TilesetInfo::from_json((*reader)->metadata_json());
+  if (!info) {
+    return make_error(info.error().code, absolute.string() + ": " + info.error().message);
+  }
+  SourceInfo si;
+  si.info = std::move(*info);
+  si.key = "file:" + absolute.string();
+  si.version = archive_version(**reader);
+  si.description_json = (*reader)->metadata_json();
+  return std::unique_ptr<TileSource>(
+      std::make_unique<LocalSource>(std::move(*reader), std::move(si), absolute.string()));
+}
+
+}  // namespace vts::client

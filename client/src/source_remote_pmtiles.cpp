@@ -1,0 +1,645 @@
+// The remote-archive source: a PMTiles v3 archive read with HTTP range requests from any server
+// that honours Range (`vts serve`'s /{ts}.pmtiles, nginx, an object store), no tile server needed.
+//
+// Opening costs one range read of bytes 0..16383 (header, root directory and, for our archives,
+// the metadata right after it), plus one more when the metadata lies beyond. A tile then costs
+// one range read of its bytes, preceded by one per leaf directory on its path that is not in the
+// source's small LRU of decoded leaves. Concurrent requests for the same leaf (or the same tile
+// bytes) send identical range requests, which the fetcher merges into one transfer; the first
+// callback to arrive decodes the leaf and the others find it in the LRU.
+//
+// Trust model: the server is hostile. Every section, leaf pointer and tile entry is checked
+// against the header before it is read; lengths are bounded before anything is requested;
+// directories are decompressed under a size limit and parsed with the protocol's checked parser;
+// directory chains are cut at pmtiles::kMaxDirectoryDepth; a short body is an error. The archive's
+// total size is not known (the fetcher does not report Content-Range totals), so a section that
+// lies past the end of the file shows up as a short read (truncated) when it is read.
+//
+// ETags are computed from each payload's tile header, as `vts serve` and the local source do, so
+// a cache revalidates the same way whichever source filled it. If-None-Match is therefore judged
+// here, after the tile's bytes have been read: not_modified saves the caller a copy and a decode,
+// not the range read. Should the archive be replaced on the server between two reads, offsets
+// from the old directories point into the new file; such bytes fail the tile-header check (an
+// error) or the client's checksum, and reopening the source picks up the new archive.
+//
+// Callbacks run on the fetcher's thread, or on the source's delivery thread for answers found
+// without the network (a tile outside the pyramid or missing from a cached directory).
+#include <xxhash.h>
+
+#include <algorithm>
+#include <condition_variable>
+#include <cstdio>
+#include <deque>
+#include <functional>
+#include <future>
+#include <limits>
+#include <list>
+#include <map>
+#include <mutex>
+#include <thread>
+#include <unordered_map>
+#include <utility>
+
+#include "vts/client/source.hpp"
+#include "vts/protocol/pmtiles.hpp"
+
+namespace vts::client {
+namespace {
+
+constexpr std::uint64_t kFirstRead = 16384;              // header + root, per the spec
+constexpr std::uint64_t kMaxMetadataBytes = 16u << 20;   // stored (compressed) metadata
+constexpr std::size_t kMaxMetadataDecoded = 16u << 20;   // decompressed metadata
+constexpr std::uint64_t kMaxLeafBytes = 16u << 20;       // one stored leaf directory
+constexpr std::size_t kMaxDirectoryDecoded = 64u << 20;  // one decompressed directory
+constexpr std::size_t kLeafCacheEntries = 64;
+
+using Directory = std::shared_ptr<const std::vector<pmtiles::Entry>>;
+
+// True when [offset, offset + length) lies within [0, size); no overflow for any inputs.
+bool within(std::uint64_t offset, std::uint64_t length, std::uint64_t size) {
+  return offset <= size && length <= size - offset;
+}
+
+bool fits_u64(std::uint64_t offset, std::uint64_t length) {
+  return length <= std::numeric_limits<std::uint64_t>::max() - offset;
+}
+
+std::string range_text(std::uint64_t offset, std::uint64_t length) {
+  return "bytes " + std::to_string(offset) + "-" + std::to_string(offset + length - 1);
+}
+
+FetchResult fetch_blocking(Fetcher& fetcher, FetchRequest request) {
+  std::promise<FetchResult> promise;
+  std::future<FetchResult> future = promise.get_future();
+  fetcher.submit(std::move(request),
+                 [&promise](FetchResult&& r) { promise.set_value(std::move(r)); });
+  return future.get();
+}
+
+// A range read's answer as a Status: the fetch went through, the server answered 200/206 and the
+// body holds exactly `length` bytes. `what` names the section ("root directory", "tile 3/1/2").
+Status check_range_result(const FetchResult& r, const std::string& url, const std::string& what,
+                          std::uint64_t offset, std::uint64_t length) {
+  if (r.error) {
+    Error e = *r.error;
+    e.message = what + ": " + e.message;
+    return e;
+  }
+  if (r.status != 200 && r.status != 206) {
+    return make_error(r.status == 404 ? ErrorCode::not_found : ErrorCode::io,
+                      what + ": GET " + url + " (" + range_text(offset, length) + "): HTTP " +
+                          std::to_string(r.status));
+  }
+  if (r.body.size() != length) {
+    return make_error(ErrorCode::truncated,
+                      what + ": GET " + url + " (" + range_text(offset, length) + ") returned " +
+                          std::to_string(r.body.size()) + " bytes; the archive ends early");
+  }
+  return {};
+}
+
+Result<Directory> decode_directory(std::span<const std::uint8_t> stored,
+                                   pmtiles::Compression compression) {
+  Result<std::vector<std::uint8_t>> raw =
+      pmtiles::decompress(stored, compression, kMaxDirectoryDecoded);
+  if (!raw) return std::move(raw).error();
+  Result<std::vector<pmtiles::Entry>> entries = pmtiles::parse_directory(*raw);
+  if (!entries) return std::move(entries).error();
+  return std::make_shared<const std::vector<pmtiles::Entry>>(std::move(*entries));
+}
+
+// Runs callbacks on one thread of the source's own, in order. The destructor runs what is queued,
+// then joins.
+class Deliverer {
+ public:
+  Deliverer() : thread_([this] { run(); }) {}
+  ~Deliverer() {
+    {
+      std::lock_guard lock(mutex_);
+      stop_ = true;
+    }
+    cv_.notify_one();
+    thread_.join();
+  }
+  void post(std::function<void()> fn) {
+    {
+      std::lock_guard lock(mutex_);
+      queue_.push_back(std::move(fn));
+    }
+    cv_.notify_one();
+  }
+
+ private:
+  void run() {
+    std::unique_lock lock(mutex_);
+    for (;;) {
+      cv_.wait(lock, [this] { return stop_ || !queue_.empty(); });
+      if (queue_.empty()) return;  // stop_ and drained
+      std::function<void()> fn = std::move(queue_.front());
+      queue_.pop_front();
+      lock.unlock();
+      fn();
+      lock.lock();
+    }
+  }
+
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  std::deque<std::function<void()>> queue_;
+  bool stop_ = false;
+  std::thread thread_;  // last: starts once the rest is constructed
+};
+
+struct Opened {
+  pmtiles::Header header;
+  Directory root;
+  SourceInfo info;
+};
+
+class RemoteArchiveSource final : public TileSource {
+ public:
+  RemoteArchiveSource(std::unique_ptr<Fetcher> fetcher, std::string url, Opened opened,
+                      std::size_t max_tile_bytes)
+      : fetcher_(std::move(fetcher)),
+        url_(std::move(url)),
+        header_(opened.header),
+        root_(std::move(opened.root)),
+        info_(std::move(opened.info)),
+        max_tile_bytes_(max_tile_bytes) {}
+
+  ~RemoteArchiveSource() override {
+    std::unique_ptr<Fetcher> fetcher;
+    {
+      std::lock_guard lock(mutex_);
+      closing_ = true;
+      fetcher = std::move(fetcher_);
+    }
+    // Cancels every transfer: their callbacks finish their requests now. Then deliverer_'s
+    // destructor (a member) runs the answers still queued.
+    fetcher.reset();
+  }
+
+  const SourceInfo& info() const override { return info_; }
+  bool local() const override { return false; }
+
+  Handle fetch(const SourceRequest& request, SourceCallback callback) override {
+    auto p = std::make_shared<Pending>();
+    p->request = request;
+    p->callback = std::move(callback);
+    Handle h = 0;
+    {
+      std::lock_guard lock(mutex_);
+      h = ++next_handle_;
+      pending_.emplace(h, p);
+    }
+    const TileId id = request.id;
+    const Geometry& g = info_.info.geometry;
+    if (id.z > g.max_zoom() || id.x >= g.tiles_x(id.z) || id.y >= g.tiles_y(id.z)) {
+      // Outside the pyramid, as `vts serve` answers 404.
+      post_kind(h, SourceTile::Kind::absent);
+      return h;
+    }
+    p->tile_id = pmtiles::zxy_to_tile_id(id.z, id.x, id.y);
+    walk(h, root_, 0, /*on_fetcher_thread=*/false);
+    return h;
+  }
+
+  void cancel(Handle h) override {
+    Fetcher* fetcher = nullptr;
+    Fetcher::Handle fh = 0;
+    {
+      std::lock_guard lock(mutex_);
+      auto it = pending_.find(h);
+      if (it == pending_.end() || fetcher_ == nullptr) return;  // done, or closing
+      it->second->cancelled = true;
+      fetcher = fetcher_.get();
+      fh = it->second->fetch;
+    }
+    // fh == 0: the answer is queued on the delivery thread, which reports the cancellation.
+    // Otherwise the fetcher's callback for fh finishes the request with Kind::cancelled; if it
+    // is already running, it sees `cancelled` before starting another step.
+    if (fh != 0) fetcher->cancel(fh);
+  }
+
+ private:
+  struct Pending {
+    SourceRequest request;
+    SourceCallback callback;
+    std::uint64_t tile_id = 0;
+    Fetcher::Handle fetch = 0;  // the transfer in progress; 0 when none
+    bool cancelled = false;
+  };
+
+  // ---- finishing a request (exactly once) ------------------------------------------------
+
+  // Removes the request and runs its callback (outside the lock), on the calling thread.
+  void finish(Handle h, SourceTile&& tile) {
+    std::shared_ptr<Pending> p;
+    {
+      std::lock_guard lock(mutex_);
+      auto it = pending_.find(h);
+      if (it == pending_.end()) return;
+      p = std::move(it->second);
+      pending_.erase(it);
+    }
+    if (p->cancelled && tile.kind != SourceTile::Kind::cancelled) {
+      tile = SourceTile{};
+      tile.kind = SourceTile::Kind::cancelled;
+    }
+    p->callback(std::move(tile));
+  }
+
+  // finish() on the fetcher thread (we are in one of its callbacks) or the delivery thread.
+  void deliver(Handle h, SourceTile&& tile, bool on_fetcher_thread) {
+    if (on_fetcher_thread) return finish(h, std::move(tile));
+    // std::function needs a copyable callable: hold the tile by shared_ptr.
+    auto t = std::make_shared<SourceTile>(std::move(tile));
+    deliverer_.post([this, h, t] { finish(h, std::move(*t)); });
+  }
+
+  void post_kind(Handle h, SourceTile::Kind kind) {
+    SourceTile t;
+    t.kind = kind;
+    deliver(h, std::move(t), false);
+  }
+
+  void fail(Handle h, Error e, bool on_fetcher_thread) {
+    SourceTile t;
+    t.kind = SourceTile::Kind::error;
+    t.error = std::move(e);
+    deliver(h, std::move(t), on_fetcher_thread);
+  }
+
+  // ---- directory walk --------------------------------------------------------------------
+
+  std::string tile_name(Handle h) {
+    std::lock_guard lock(mutex_);
+    auto it = pending_.find(h);
+    return it == pending_.end() ? std::string("?") : it->second->request.id.to_string();
+  }
+
+  // Looks the request's tile up in `dir` (at depth `depth`, 0 = root) and the directories below
+  // it, reading leaves from the LRU while they are there; starts a transfer for the first leaf
+  // that is not, or for the tile's bytes.
+  void walk(Handle h, Directory dir, int depth, bool on_fetcher_thread) {
+    std::uint64_t tile_id = 0;
+    {
+      std::lock_guard lock(mutex_);
+      auto it = pending_.find(h);
+      if (it == pending_.end()) return;
+      tile_id = it->second->tile_id;
+    }
+    for (;;) {
+      // The last entry with tile_id <= the wanted id is the only one that can hold it.
+      const auto it = std::upper_bound(
+          dir->begin(), dir->end(), tile_id,
+          [](std::uint64_t id, const pmtiles::Entry& e) { return id < e.tile_id; });
+      if (it == dir->begin()) {
+        SourceTile t;
+        t.kind = SourceTile::Kind::absent;
+        return deliver(h, std::move(t), on_fetcher_thread);
+      }
+      const pmtiles::Entry e = *(it - 1);
+      if (e.run_length > 0) {
+        if (tile_id - e.tile_id >= e.run_length) {
+          SourceTile t;
+          t.kind = SourceTile::Kind::absent;
+          return deliver(h, std::move(t), on_fetcher_thread);
+        }
+        return read_tile(h, e, on_fetcher_thread);
+      }
+      if (depth + 1 >= pmtiles::kMaxDirectoryDepth) {
+        return fail(h,
+                    make_error(ErrorCode::corrupt,
+                               url_ + ": directory cycle or too deep: tile " + tile_name(h) +
+                                   " still leads to a leaf directory after " +
+                                   std::to_string(pmtiles::kMaxDirectoryDepth) + " levels"),
+                    on_fetcher_thread);
+      }
+      const std::string where = url_ + ": leaf directory at offset " + std::to_string(e.offset) +
+                                " length " + std::to_string(e.length);
+      if (e.length == 0 || !within(e.offset, e.length, header_.leaf_dirs_length)) {
+        return fail(h,
+                    make_error(ErrorCode::corrupt,
+                               where + " is empty or extends past the leaf section (size " +
+                                   std::to_string(header_.leaf_dirs_length) + ")"),
+                    on_fetcher_thread);
+      }
+      if (e.length > kMaxLeafBytes) {
+        return fail(h,
+                    make_error(ErrorCode::too_large, where + " is over the limit of " +
+                                                         std::to_string(kMaxLeafBytes) + " bytes"),
+                    on_fetcher_thread);
+      }
+      if (Directory leaf = cached_leaf(e)) {
+        dir = std::move(leaf);
+        ++depth;
+        continue;
+      }
+      return read_leaf(h, e, depth + 1, on_fetcher_thread);
+    }
+  }
+
+  Directory cached_leaf(const pmtiles::Entry& pointer) {
+    std::lock_guard lock(mutex_);
+    auto it = leaf_index_.find({pointer.offset, pointer.length});
+    if (it == leaf_index_.end()) return nullptr;
+    leaf_lru_.splice(leaf_lru_.begin(), leaf_lru_, it->second);
+    return it->second->second;
+  }
+
+  void cache_leaf(const pmtiles::Entry& pointer, Directory leaf) {
+    std::lock_guard lock(mutex_);
+    const LeafKey key{pointer.offset, pointer.length};
+    if (leaf_index_.count(key) != 0) return;
+    leaf_lru_.emplace_front(key, std::move(leaf));
+    leaf_index_.emplace(key, leaf_lru_.begin());
+    if (leaf_lru_.size() > kLeafCacheEntries) {
+      leaf_index_.erase(leaf_lru_.back().first);
+      leaf_lru_.pop_back();
+    }
+  }
+
+  // Starts a range transfer for request h, unless it was cancelled meanwhile (then finishes it).
+  void submit(Handle h, std::uint64_t offset, std::uint64_t length, bool on_fetcher_thread,
+              FetchCallback callback) {
+    std::unique_lock lock(mutex_);
+    auto it = pending_.find(h);
+    if (it == pending_.end()) return;
+    Pending& p = *it->second;
+    if (p.cancelled || closing_) {
+      lock.unlock();
+      SourceTile t;
+      t.kind = SourceTile::Kind::cancelled;
+      return deliver(h, std::move(t), on_fetcher_thread);
+    }
+    FetchRequest r;
+    r.url = url_;
+    r.range = std::make_pair(offset, offset + length - 1);
+    r.level = p.request.level;
+    r.urgency = p.request.urgency;
+    // The default merge key (URL + range) merges identical reads of a leaf or a shared payload.
+    p.fetch = fetcher_->submit(std::move(r), std::move(callback));
+  }
+
+  void read_leaf(Handle h, const pmtiles::Entry& pointer, int depth, bool on_fetcher_thread) {
+    const std::uint64_t offset = header_.leaf_dirs_offset + pointer.offset;
+    submit(h, offset, pointer.length, on_fetcher_thread,
+           [this, h, pointer, offset, depth](FetchResult&& r) {
+             if (r.cancelled) {
+               SourceTile t;
+               t.kind = SourceTile::Kind::cancelled;
+               return finish(h, std::move(t));
+             }
+             const std::string what = "leaf directory at offset " + std::to_string(pointer.offset) +
+                                      " length " + std::to_string(pointer.length);
+             Directory leaf = cached_leaf(pointer);  // a merged twin may have decoded it already
+             if (!leaf) {
+               if (Status s = check_range_result(r, url_, what, offset, pointer.length); !s) {
+                 return fail(h, s.error(), true);
+               }
+               Result<Directory> d = decode_directory(r.body, header_.internal_compression);
+               if (!d) {
+                 Error e = std::move(d).error();
+                 e.message = url_ + ": " + what + ": " + e.message;
+                 return fail(h, std::move(e), true);
+               }
+               leaf = std::move(*d);
+               cache_leaf(pointer, leaf);
+             }
+             walk(h, std::move(leaf), depth, true);
+           });
+  }
+
+  void read_tile(Handle h, const pmtiles::Entry& e, bool on_fetcher_thread) {
+    const std::string name = tile_name(h);
+    if (e.length == 0 || !within(e.offset, e.length, header_.tile_data_length)) {
+      return fail(h,
+                  make_error(ErrorCode::corrupt,
+                             url_ + ": tile " + name + " (offset " + std::to_string(e.offset) +
+                                 ", length " + std::to_string(e.length) +
+                                 ") is empty or extends past the tile data section (size " +
+                                 std::to_string(header_.tile_data_length) + ")"),
+                  on_fetcher_thread);
+    }
+    if (e.length > max_tile_bytes_) {
+      return fail(h,
+                  make_error(ErrorCode::too_large,
+                             url_ + ": tile " + name + " of " + std::to_string(e.length) +
+                                 " bytes is over the limit of " + std::to_string(max_tile_bytes_)),
+                  on_fetcher_thread);
+    }
+    const std::uint64_t offset = header_.tile_data_offset + e.offset;
+    const std::uint64_t length = e.length;
+    submit(h, offset, length, on_fetcher_thread, [this, h, name, offset, length](FetchResult&& r) {
+      SourceTile t;
+      if (r.cancelled) {
+        t.kind = SourceTile::Kind::cancelled;
+        return finish(h, std::move(t));
+      }
+      if (Status s = check_range_result(r, url_, "tile " + name, offset, length); !s) {
+        return fail(h, s.error(), true);
+      }
+      Result<std::string> etag = tile_etag(r.body);
+      if (!etag) {
+        return fail(h,
+                    make_error(ErrorCode::corrupt,
+                               url_ + ": tile " + name + " (" + range_text(offset, length) +
+                                   ") has no valid tile header: " + etag.error().message),
+                    true);
+      }
+      t.etag = std::move(*etag);
+      std::string if_none_match;
+      {
+        std::lock_guard lock(mutex_);
+        if (auto it = pending_.find(h); it != pending_.end()) {
+          if_none_match = it->second->request.if_none_match;
+        }
+      }
+      if (etag_matches(if_none_match, t.etag)) {
+        t.kind = SourceTile::Kind::not_modified;
+      } else {
+        t.kind = SourceTile::Kind::ok;
+        t.payload = std::move(r.body);
+      }
+      finish(h, std::move(t));
+    });
+  }
+
+  struct LeafKey {
+    std::uint64_t offset;
+    std::uint32_t length;
+    auto operator<=>(const LeafKey&) const = default;
+  };
+
+  std::unique_ptr<Fetcher> fetcher_;  // null once closing
+  const std::string url_;
+  const pmtiles::Header header_;
+  const Directory root_;
+  const SourceInfo info_;
+  const std::size_t max_tile_bytes_;
+
+  std::mutex mutex_;
+  std::unordered_map<Handle, std::shared_ptr<Pending>> pending_;
+  Handle next_handle_ = 0;
+  bool closing_ = false;
+  std::list<std::pair<LeafKey, Directory>> leaf_lru_;  // most recently used first
+  std::map<LeafKey, std::list<std::pair<LeafKey, Directory>>::iterator> leaf_index_;
+
+  Deliverer deliverer_;  // last: destroyed first, after the fetcher is gone
+};
+
+// Checks the header's sections are well-formed and lie where we can read them.
+Status check_header(const pmtiles::Header& h, std::uint64_t first_read_size) {
+  switch (h.internal_compression) {
+    case pmtiles::Compression::none:
+    case pmtiles::Compression::gzip:
+    case pmtiles::Compression::zstd:
+      break;
+    default:
+      return make_error(ErrorCode::unsupported,
+                        "internal compression " +
+                            std::to_string(static_cast<int>(h.internal_compression)) +
+                            " (this build reads none, gzip and zstd)");
+  }
+  struct Section {
+    const char* name;
+    std::uint64_t offset, length;
+  };
+  for (const Section& s : {Section{"root directory", h.root_dir_offset, h.root_dir_length},
+                           Section{"metadata", h.metadata_offset, h.metadata_length},
+                           Section{"leaf directories", h.leaf_dirs_offset, h.leaf_dirs_length},
+                           Section{"tile data", h.tile_data_offset, h.tile_data_length}}) {
+    if (!fits_u64(s.offset, s.length)) {
+      return make_error(ErrorCode::corrupt, std::string(s.name) + " section (offset " +
+                                                std::to_string(s.offset) + ", length " +
+                                                std::to_string(s.length) + ") overflows");
+    }
+    if (s.length > 0 && s.offset < pmtiles::kHeaderSize) {
+      return make_error(ErrorCode::corrupt, std::string(s.name) + " section (offset " +
+                                                std::to_string(s.offset) +
+                                                ") overlaps the 127-byte header");
+    }
+  }
+  if (h.root_dir_length == 0) return make_error(ErrorCode::corrupt, "root directory has length 0");
+  // The spec puts the root directory in the first 16 KiB, which is all we read for it.
+  if (!within(h.root_dir_offset, h.root_dir_length, first_read_size)) {
+    return make_error(first_read_size < kFirstRead ? ErrorCode::truncated : ErrorCode::corrupt,
+                      "root directory (offset " + std::to_string(h.root_dir_offset) + ", length " +
+                          std::to_string(h.root_dir_length) + ") is not within the first " +
+                          std::to_string(first_read_size) + " bytes of the archive");
+  }
+  if (h.metadata_length > kMaxMetadataBytes) {
+    return make_error(ErrorCode::too_large, "metadata of " + std::to_string(h.metadata_length) +
+                                                " bytes is over the limit of " +
+                                                std::to_string(kMaxMetadataBytes));
+  }
+  return {};
+}
+
+std::string archive_version(std::span<const std::uint8_t> header,
+                            std::span<const std::uint8_t> root,
+                            std::span<const std::uint8_t> metadata) {
+  // As `vts serve` computes it (docs/PROTOCOL.md §6), so every source of one archive agrees.
+  XXH3_state_t* state = XXH3_createState();
+  if (state == nullptr) return {};
+  XXH3_64bits_reset(state);
+  XXH3_64bits_update(state, header.data(), header.size());
+  XXH3_64bits_update(state, root.data(), root.size());
+  XXH3_64bits_update(state, metadata.data(), metadata.size());
+  const XXH64_hash_t hash = XXH3_64bits_digest(state);
+  XXH3_freeState(state);
+  char hex[17];
+  std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(hash));
+  return hex;
+}
+
+Error in_archive(const std::string& url, Error e) {
+  e.message = url + ": " + e.message;
+  return e;
+}
+
+}  // namespace
+
+Result<std::unique_ptr<TileSource>> open_remote_archive(std::string_view url_view,
+                                                        SourceOptions options) {
+  const std::string url(url_view.substr(0, url_view.find('#')));
+  Result<std::unique_ptr<Fetcher>> fetcher = Fetcher::create(options.fetcher);
+  if (!fetcher) return std::move(fetcher).error();
+
+  FetchRequest first;
+  first.url = url;
+  first.range = std::make_pair(std::uint64_t{0}, kFirstRead - 1);
+  const FetchResult head = fetch_blocking(**fetcher, std::move(first));
+  if (head.error) {
+    Error e = *head.error;
+    e.message = "cannot open remote archive " + url + ": " + e.message;
+    return e;
+  }
+  if (head.status == 404) {
+    return make_error(ErrorCode::not_found, "no archive at " + url + " (HTTP 404)");
+  }
+  if (head.status != 200 && head.status != 206) {
+    return make_error(ErrorCode::io, "cannot open remote archive " + url + ": HTTP " +
+                                         std::to_string(head.status));
+  }
+  const std::span<const std::uint8_t> bytes(head.body);
+  Result<pmtiles::Header> header = pmtiles::parse_header(bytes);
+  if (!header) {
+    return make_error(ErrorCode::corrupt,
+                      url + " is not a PMTiles v3 archive (" + header.error().message + ")");
+  }
+  const pmtiles::Header& h = *header;
+  if (Status s = check_header(h, bytes.size()); !s) return in_archive(url, s.error());
+
+  const auto root_bytes = bytes.subspan(h.root_dir_offset, h.root_dir_length);
+  Result<Directory> root = decode_directory(root_bytes, h.internal_compression);
+  if (!root) {
+    Error e = std::move(root).error();
+    e.message = url + ": root directory: " + e.message;
+    return e;
+  }
+
+  // Metadata: usually right after the root, inside the first read; otherwise one more read.
+  if (h.metadata_length == 0) {
+    return make_error(ErrorCode::unsupported,
+                      url + " is a PMTiles archive without metadata, not a vtstream tileset");
+  }
+  std::vector<std::uint8_t> stored_metadata;
+  if (within(h.metadata_offset, h.metadata_length, bytes.size())) {
+    const auto m = bytes.subspan(h.metadata_offset, h.metadata_length);
+    stored_metadata.assign(m.begin(), m.end());
+  } else {
+    FetchRequest r;
+    r.url = url;
+    r.range = std::make_pair(h.metadata_offset, h.metadata_offset + h.metadata_length - 1);
+    FetchResult m = fetch_blocking(**fetcher, std::move(r));
+    if (Status s = check_range_result(m, url, "metadata", h.metadata_offset, h.metadata_length);
+        !s) {
+      return in_archive(url, s.error());
+    }
+    stored_metadata = std::move(m.body);
+  }
+  Result<std::vector<std::uint8_t>> decoded_metadata =
+      pmtiles::decompress(stored_metadata, h.internal_compression, kMaxMetadataDecoded);
+  if (!decoded_metadata) {
+    return in_archive(url, make_error(decoded_metadata.error().code,
+                                      "metadata: " + decoded_metadata.error().message));
+  }
+  std::string metadata_json(decoded_metadata->begin(), decoded_metadata->end());
+  Result<TilesetInfo> info = TilesetInfo::from_json(metadata_json);
+  if (!info) return in_archive(url, std::move(info).error());
+
+  Opened opened;
+  opened.header = h;
+  opened.root = std::move(*root);
+  opened.info.info = std::move(*info);
+  opened.info.key = url;
+  opened.info.version =
+      archive_version(bytes.first(pmtiles::kHeaderSize), root_bytes, stored_metadata);
+  opened.info.description_json = std::move(metadata_json);
+  return std::unique_ptr<TileSource>(std::make_unique<RemoteArchiveSource>(
+      std::move(*fetcher), url, std::move(opened), options.fetcher.max_body_bytes));
+}
+
+}  // namespace vts::client
