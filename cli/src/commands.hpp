@@ -17,6 +17,7 @@ Runner add_verify(CLI::App& app);
 Runner add_extract(CLI::App& app);
 Runner add_serve(CLI::App& app);
 Runner add_sign(CLI::App& app);
+Runner add_cache(CLI::App& app);  // vts cache serve (cmd_cache.cpp)
 Runner add_warm(CLI::App& app);
 
 // Prints "vts: error: <message>" to stderr and returns the mapped exit code.

@@ -31,6 +31,7 @@ int main(int argc, char** argv) {
   add(&vts::cli::add_extract);
   add(&vts::cli::add_serve);
   add(&vts::cli::add_sign);
+  add(&vts::cli::add_cache);
   add(&vts::cli::add_warm);
   try {
     app.parse(argc, argv);

@@ -42,8 +42,8 @@ using Clock = std::chrono::steady_clock;
 
 // ---- metrics ---------------------------------------------------------------------------------
 
-constexpr std::array<int, 16> kStatuses = {200, 204, 206, 304, 400, 401, 403, 404,
-                                           405, 413, 414, 416, 431, 500, 503, 0};
+constexpr std::array<int, 17> kStatuses = {200, 204, 206, 304, 400, 401, 403, 404, 405,
+                                           413, 414, 416, 431, 500, 502, 503, 0};
 constexpr int kRouteCount = 7;  // Route values + admin
 constexpr std::array<double, 16> kBuckets = {0.0001, 0.00025, 0.0005, 0.001, 0.0025, 0.005,
                                              0.01,   0.025,   0.05,   0.1,   0.25,   0.5,
@@ -159,7 +159,9 @@ class Server;
 
 struct Outgoing {
   HttpResponse response;
-  std::string head;            // status line and header fields, CRLF CRLF
+  std::uint64_t seq = 0;  // position in the connection's request order
+  bool ready = true;      // false while a provided tile is awaited (head and body not built yet)
+  std::string head;       // status line and header fields, CRLF CRLF
   std::span<const char> body;  // empty for HEAD, 204 and 304
   int file_fd = -1;            // >= 0: send `body` with sendfile from this file ...
   off_t file_offset = 0;       // ... at this offset (where `body` lies in the mapping)
@@ -229,9 +231,12 @@ class Session : public std::enable_shared_from_this<Session> {
  public:
   Session(Server& server, Sweeper& sweeper, tcp::socket socket, bool admin);
   ~Session();
-  // On the connection's thread: closes the connection when a deadline has passed.
+  // On the connection's thread: closes the connection when a deadline has passed. The idle
+  // deadline does not count while responses are owed (the client waits for us, not idle).
   void check_deadlines(Clock::time_point now) {
-    if (socket_.is_open() && (now >= read_deadline_ || now >= write_deadline_)) close();
+    if (!socket_.is_open()) return;
+    const bool owed = idle_wait_ && !queue_.empty();
+    if ((now >= read_deadline_ && !owed) || now >= write_deadline_) close();
   }
   std::size_t sweep_slot = 0;  // position in the Sweeper's list
   void start();
@@ -243,6 +248,9 @@ class Session : public std::enable_shared_from_this<Session> {
   void read_request();
   void on_read(beast::error_code ec);
   void enqueue(std::unique_ptr<Outgoing> out);
+  void prepare(Outgoing& o);
+  void start_deferred(const Outgoing& o);
+  void finish_deferred(std::uint64_t seq, ProvidedTile tile);
   void write_next();
   std::size_t write_some(Outgoing& o, beast::error_code& ec);
   bool complete_front();
@@ -269,6 +277,8 @@ class Session : public std::enable_shared_from_this<Session> {
   bool writing_ = false;      // waiting for the socket to accept more
   bool in_write_ = false;     // inside write_next()
   bool closed_ = false;
+  bool idle_wait_ = false;      // the outstanding read waits for the first byte of a request
+  std::uint64_t next_seq_ = 0;  // of the next response queued
   std::string remote_;
 };
 
@@ -406,6 +416,7 @@ class Server final : public HttpServer {
   // -- used by sessions --
   const HttpServerOptions& options() const { return options_; }
   const TilesetRegistry& registry() const { return *registry_; }
+  AsyncTileProvider* provider() const { return options_.provider.get(); }
   Metrics& metrics() { return metrics_; }
   bool stopping() const { return stopping_.load(std::memory_order_relaxed); }
   FILE* access_log() const { return log_; }
@@ -622,7 +633,9 @@ std::string Server::metrics_text() const {
   single("vts_http_refused_connections_total", "counter",
          "Connections closed at once because max_connections were open.",
          double(metrics_.refused_connections.load()));
-  single("vts_tilesets_loaded", "gauge", "Tilesets being served.", double(registry_->size()));
+  const std::size_t provided = options_.provider ? options_.provider->all().size() : 0;
+  single("vts_tilesets_loaded", "gauge", "Tilesets being served.",
+         double(registry_->size() + provided));
   std::snprintf(line, sizeof line,
                 "# HELP vts_reloads_total Archive reloads, by result.\n"
                 "# TYPE vts_reloads_total counter\n"
@@ -631,6 +644,7 @@ std::string Server::metrics_text() const {
                 (unsigned long long)metrics_.reloads_swapped.load(),
                 (unsigned long long)metrics_.reloads_refused.load());
   out += line;
+  if (options_.provider) out += options_.provider->metrics_text();
   return out;
 }
 
@@ -750,10 +764,12 @@ void Session::wait_for_request() {
   }
   if (buffer_.size() > 0) return read_request();
   reading_ = true;
+  idle_wait_ = true;
   set_read_deadline(server_.options().limits.idle_timeout);
   socket_.async_read_some(buffer_.prepare(4096),
                           [self = shared_from_this()](beast::error_code ec, std::size_t n) {
                             self->reading_ = false;
+                            self->idle_wait_ = false;
                             if (self->closed_) return;
                             self->clear_read_deadline();
                             if (ec || n == 0) {
@@ -877,7 +893,7 @@ void Session::on_read(beast::error_code ec) {
   } else if (admin_) {
     out->response = server_.admin_route(hr);
   } else {
-    out->response = route(hr, server_.registry(), server_.options().router);
+    out->response = route(hr, server_.registry(), server_.options().router, server_.provider());
   }
   if (!req.keep_alive() || server_.stopping()) out->close = true;
   // HTTP/1.0 keeps a connection open only when both sides say so.
@@ -887,6 +903,7 @@ void Session::on_read(beast::error_code ec) {
     out->method = std::string(hr.method_text);
     out->target = std::string(hr.target);
     if (out->response.hold) out->tileset = out->response.hold->name;
+    if (out->response.deferred) out->tileset = out->response.deferred->tileset->name;
   }
   if (out->close) read_done_ = true;
   // Done with the request (its views end here): writing may parse the next one (see write_next).
@@ -896,6 +913,72 @@ void Session::on_read(beast::error_code ec) {
 }
 
 void Session::enqueue(std::unique_ptr<Outgoing> out) {
+  out->seq = next_seq_++;
+  Outgoing& o = *out;
+  const bool deferred = o.response.deferred != nullptr;
+  if (deferred)
+    o.ready = false;
+  else
+    prepare(o);
+  queue_.push_back(std::move(out));
+  if (deferred)
+    start_deferred(o);  // may finish it at once (a cache hit)
+  else if (!writing_ && !in_write_)
+    write_next();
+}
+
+// Asks the provider for a deferred tile. Its answer comes back through finish_deferred(): at once
+// when `done` runs inside tile() (a RAM hit: no scheduler round trip), else posted to this
+// connection's thread. `state` tells the two apart without a lock: whoever moves it from
+// kCalling first decides.
+void Session::start_deferred(const Outgoing& o) {
+  struct Call {
+    enum : int { kCalling, kReturned, kAnsweredInside };
+    std::atomic<int> state{kCalling};
+    ProvidedTile answer;  // written by `done` before it sets kAnsweredInside
+  };
+  auto call = std::make_shared<Call>();
+  const std::uint64_t seq = o.seq;
+  const DeferredTile& d = *o.response.deferred;
+  server_.provider()->tile(
+      d.tileset, d.id,
+      [self = shared_from_this(), call, seq,
+       executor = socket_.get_executor()](ProvidedTile tile) mutable {
+        auto keep_alive = std::move(self);  // released here or on the connection's thread
+        call->answer = std::move(tile);
+        int expected = Call::kCalling;
+        if (call->state.compare_exchange_strong(expected, Call::kAnsweredInside,
+                                                std::memory_order_acq_rel))
+          return;  // start_deferred() picks the answer up when tile() returns
+        asio::post(executor, [session = std::move(keep_alive), call = std::move(call), seq] {
+          session->finish_deferred(seq, std::move(call->answer));
+        });
+      });
+  int expected = Call::kCalling;
+  if (!call->state.compare_exchange_strong(expected, Call::kReturned, std::memory_order_acq_rel))
+    finish_deferred(seq, std::move(call->answer));
+}
+
+// On the connection's thread: the provider answered response `seq`. Dropped when the
+// connection has closed meanwhile (its queue is gone or going).
+void Session::finish_deferred(std::uint64_t seq, ProvidedTile tile) {
+  if (closed_) return;
+  auto it = std::find_if(queue_.begin(), queue_.end(),
+                         [seq](const std::unique_ptr<Outgoing>& o) { return o->seq == seq; });
+  if (it == queue_.end() || (*it)->ready) return;
+  Outgoing& o = **it;
+  o.response = complete_deferred(std::move(o.response), std::move(tile));
+  o.ready = true;
+  prepare(o);
+  // Inside write_next() (the answer came at once, while completing a response resumed reading),
+  // that loop writes it.
+  if (!writing_ && !in_write_) write_next();
+}
+
+// Serialises the status line and header fields of `o`, and points its body at the bytes to send
+// (an archive's file for sendfile, or memory).
+void Session::prepare(Outgoing& o) {
+  Outgoing* out = &o;
   HttpResponse& r = out->response;
   std::string& h = out->head;
   h.reserve(512);
@@ -944,8 +1027,6 @@ void Session::enqueue(std::unique_ptr<Outgoing> out) {
     }
     assert(out->body.size() == r.content_length);
   }
-  queue_.push_back(std::move(out));
-  if (!writing_ && !in_write_) write_next();
 }
 
 // One non-blocking send of what is left of `o` (one syscall). Sets would_block when the socket
@@ -1003,6 +1084,7 @@ void Session::write_next() {
   const auto& limits = server_.options().limits;
   while (!closed_ && !queue_.empty()) {
     Outgoing& o = *queue_.front();
+    if (!o.ready) return;  // a provided tile not answered yet: finish_deferred() resumes
     if (o.deadline == Clock::time_point{}) {
       o.deadline = Clock::now() + limits.write_timeout;
       if (limits.min_send_rate > 0)
@@ -1073,6 +1155,8 @@ bool Session::complete_front() {
     linger_close();
     return false;
   }
+  // Idle time counts from the last response owed (check_deadlines).
+  if (idle_wait_ && queue_.empty()) set_read_deadline(server_.options().limits.idle_timeout);
   if (read_paused_ && queue_.size() < server_.options().limits.max_pipeline) {
     read_paused_ = false;
     wait_for_request();

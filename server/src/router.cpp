@@ -8,6 +8,7 @@
 #include <openssl/hmac.h>
 
 #include <array>
+#include <cassert>
 #include <cstdio>
 #include <limits>
 #include <nlohmann/json.hpp>
@@ -402,20 +403,36 @@ ordered_json vtstream_object(const Tileset& t) {
   return v;
 }
 
-HttpResponse index_route(const TilesetRegistry& registry, const RouterConfig& config,
-                         const std::string& base) {
-  ordered_json list = ordered_json::array();
-  for (const auto& t : registry.all()) {
-    list.push_back({{"name", t->name},
-                    {"version", t->version},
-                    {"tilejson", base + "/" + t->name + ".json"},
-                    {"archive", base + "/" + t->name + ".pmtiles"},
-                    {"width", t->info.geometry.width()},
-                    {"height", t->info.geometry.height()},
-                    {"max_zoom", t->info.geometry.max_zoom()},
-                    {"codec", codec_name(t->info.codec)},
-                    {"protected", is_protected(config, t->name)}});
+HttpResponse index_route(const TilesetRegistry& registry, const AsyncTileProvider* provider,
+                         const RouterConfig& config, const std::string& base) {
+  std::map<std::string, ordered_json, std::less<>> entries;  // sorted by name
+  if (provider != nullptr) {
+    // Inserted first so that a registry tileset of the same name replaces it, as in lookups.
+    for (const auto& t : provider->all()) {
+      if (!t) continue;
+      entries[t->name] = {{"name", t->name},
+                          {"version", t->version},
+                          {"tilejson", base + "/" + t->name + ".json"},
+                          {"width", t->info.geometry.width()},
+                          {"height", t->info.geometry.height()},
+                          {"max_zoom", t->info.geometry.max_zoom()},
+                          {"codec", codec_name(t->info.codec)},
+                          {"protected", is_protected(config, t->name)}};
+    }
   }
+  for (const auto& t : registry.all()) {
+    entries[t->name] = {{"name", t->name},
+                        {"version", t->version},
+                        {"tilejson", base + "/" + t->name + ".json"},
+                        {"archive", base + "/" + t->name + ".pmtiles"},
+                        {"width", t->info.geometry.width()},
+                        {"height", t->info.geometry.height()},
+                        {"max_zoom", t->info.geometry.max_zoom()},
+                        {"codec", codec_name(t->info.codec)},
+                        {"protected", is_protected(config, t->name)}};
+  }
+  ordered_json list = ordered_json::array();
+  for (auto& [name, entry] : entries) list.push_back(std::move(entry));
   HttpResponse r;
   r.route = Route::index;
   set_owned(r, list.dump(2) + "\n", kJsonType);
@@ -489,6 +506,37 @@ HttpResponse archive_route(const HttpRequest& request, std::shared_ptr<const Til
   return r;
 }
 
+// 200 with the stored payload (a view: the caller keeps its bytes alive) or 304, with the ETag
+// read from the payload's tile header frame; `damaged_status` when that frame does not parse
+// (500 for our own archive, 502 for a provider's origin).
+HttpResponse payload_response(std::span<const std::uint8_t> payload, std::string_view if_none_match,
+                              const std::string& cc, int damaged_status, TileId id,
+                              std::string_view tileset) {
+  auto header = parse_tile_header(payload);
+  if (!header) {
+    HttpResponse r =
+        error(damaged_status, "tile " + id.to_string() + " of " + std::string(tileset) +
+                                  " is damaged: " + header.error().to_string());
+    r.route = Route::tile;
+    return r;
+  }
+  char etag[24];
+  std::snprintf(etag, sizeof etag, "\"%016llx\"",
+                static_cast<unsigned long long>(header->checksum));
+  HttpResponse r;
+  r.route = Route::tile;
+  add(r, "ETag", etag);
+  add(r, "Cache-Control", cc);
+  if (none_match(if_none_match, etag)) {
+    r.status = 304;
+    return r;
+  }
+  add(r, "Content-Type", kTileType);
+  r.view = payload;
+  r.content_length = r.view.size();
+  return r;
+}
+
 HttpResponse tile_route(const HttpRequest& request, std::shared_ptr<const Tileset> t,
                         std::string_view version, std::span<const std::string_view> zxy,
                         const RouterConfig& config, bool priv) {
@@ -535,29 +583,72 @@ HttpResponse tile_route(const HttpRequest& request, std::shared_ptr<const Tilese
     r.route = Route::tile;
     return r;
   }
-  auto header = parse_tile_header(*payload);
-  if (!header) {
-    HttpResponse r = error(500, "tile " + id.to_string() + " of " + t->name +
-                                    " is damaged: " + header.error().to_string());
+  HttpResponse r = payload_response(*payload, request.if_none_match, cc, 500, id, t->name);
+  r.hold = std::move(t);  // keeps the mapping alive; names the tileset in access logs
+  return r;
+}
+
+// Versioned URLs of a provided tileset: the version must be the one the provider reports (the
+// origin's), else 404 "not current" as for archives, so a client refetches the TileJSON. The
+// daemon cannot promise that every tile it holds belongs to that version (tiles are revalidated
+// by ETag), so even a current versioned URL is not answered as immutable.
+HttpResponse provided_tile_route(const HttpRequest& request,
+                                 std::shared_ptr<const ProvidedTileset> t, std::string_view version,
+                                 std::span<const std::string_view> zxy, const RouterConfig& config,
+                                 bool priv) {
+  if (!version.empty() && (t->version.empty() || version != t->version)) {
+    HttpResponse r = error(404, "version " + std::string(version) + " of tileset " + t->name +
+                                    " is not current (current: " +
+                                    (t->version.empty() ? std::string("unknown") : t->version) +
+                                    "); fetch /" + t->name + ".json again");
     r.route = Route::tile;
     return r;
   }
-  char etag[24];
-  std::snprintf(etag, sizeof etag, "\"%016llx\"",
-                static_cast<unsigned long long>(header->checksum));
-  HttpResponse r;
-  r.route = Route::tile;
-  add(r, "ETag", etag);
-  add(r, "Cache-Control", cc);
-  if (none_match(request.if_none_match, etag)) {
-    r.status = 304;
-    r.hold = std::move(t);  // names the tileset in access logs
+  const auto z = parse_u32(zxy[0]), x = parse_u32(zxy[1]), y = parse_u32(zxy[2]);
+  if (!z || !x || !y) return error(400, "tile address must be /{tileset}/{z}/{x}/{y} in decimal");
+  const Geometry& g = t->info.geometry;
+  if (*z > static_cast<std::uint32_t>(g.max_zoom()) ||
+      *x >= g.tiles_x(static_cast<std::uint8_t>(*z)) ||
+      *y >= g.tiles_y(static_cast<std::uint8_t>(*z))) {
+    HttpResponse r = error(404, "tile " + std::to_string(*z) + "/" + std::to_string(*x) + "/" +
+                                    std::to_string(*y) + " is outside the pyramid of " + t->name);
+    r.route = Route::tile;
     return r;
   }
-  add(r, "Content-Type", kTileType);
-  r.view = *payload;
-  r.content_length = r.view.size();
-  r.hold = std::move(t);
+  auto d = std::make_shared<DeferredTile>();
+  d->id = TileId{static_cast<std::uint8_t>(*z), *x, *y};
+  d->if_none_match = std::string(request.if_none_match);
+  d->cache_control = cache_control(priv, config.max_age_seconds, false);
+  d->tileset = std::move(t);
+  HttpResponse r;
+  r.route = Route::tile;
+  r.deferred = std::move(d);
+  return r;
+}
+
+HttpResponse provided_tilejson_route(const ProvidedTileset& t, const std::string& base, bool priv) {
+  ordered_json v = ordered_json::object();
+  auto meta = ordered_json::parse(t.info.to_json(), nullptr, false);
+  if (meta.is_object()) {
+    auto it = meta.find("vtstream");
+    if (it != meta.end() && it->is_object()) v = *it;
+  }
+  ordered_json j = {
+      {"tilejson", "3.0.0"},
+      {"name", t.info.name.empty() ? t.name : t.info.name},
+      {"description", t.info.description},
+      {"version", t.version},
+      {"scheme", "xyz"},
+      {"tiles", {base + "/" + t.name + "/{z}/{x}/{y}"}},
+      {"minzoom", 0},
+      {"maxzoom", t.info.geometry.max_zoom()},
+      {"bounds", {-180, -90, 180, 90}},
+      {"vtstream", std::move(v)},
+  };
+  HttpResponse r;
+  r.route = Route::tilejson;
+  set_owned(r, j.dump(2, ' ', false, ordered_json::error_handler_t::replace) + "\n", kJsonType);
+  add(r, "Cache-Control", cache_control(priv, kMetadataMaxAge, false));
   return r;
 }
 
@@ -575,7 +666,7 @@ HttpResponse preflight(const HttpRequest& request) {
 }
 
 HttpResponse dispatch(const HttpRequest& request, const TilesetRegistry& registry,
-                      const RouterConfig& config) {
+                      const RouterConfig& config, const AsyncTileProvider* provider) {
   if (request.method == HttpMethod::other) {
     HttpResponse r = error(405, "method not allowed; use GET, HEAD or OPTIONS");
     add(r, "Allow", kAllowedMethods);
@@ -605,7 +696,7 @@ HttpResponse dispatch(const HttpRequest& request, const TilesetRegistry& registr
   if (config.public_base_url.empty() && !request.host.empty() && !valid_host(request.host)) {
     return error(400, "malformed Host header");
   }
-  if (*path == "/") return index_route(registry, config, base);
+  if (*path == "/") return index_route(registry, provider, config, base);
 
   std::vector<std::string_view> segments;
   if (!split_segments(*path, segments, why)) return error(400, why);
@@ -646,7 +737,9 @@ HttpResponse dispatch(const HttpRequest& request, const TilesetRegistry& registr
   }
 
   auto t = registry.find(name);
-  if (!t) return error(404, "no tileset named \"" + std::string(name) + "\"");
+  std::shared_ptr<const ProvidedTileset> provided;
+  if (!t && provider != nullptr) provided = provider->find(name);
+  if (!t && !provided) return error(404, "no tileset named \"" + std::string(name) + "\"");
 
   bool priv = false;
   if (auto it = config.access.find(name);
@@ -654,6 +747,25 @@ HttpResponse dispatch(const HttpRequest& request, const TilesetRegistry& registr
       (!it->second.bearer_tokens.empty() || !it->second.hmac_keys.empty())) {
     priv = true;
     if (auto denied = check_access(it->second, request, raw_path, query, config)) return *denied;
+  }
+  if (provided) {
+    switch (kind) {
+      case Kind::tilejson:
+        return provided_tilejson_route(*provided, base, priv);
+      case Kind::archive: {
+        HttpResponse r = error(404, "tileset \"" + provided->name +
+                                        "\" is served from a cache and has no archive here; use "
+                                        "/" +
+                                        provided->name + "/{z}/{x}/{y}");
+        r.route = Route::archive;
+        return r;
+      }
+      case Kind::tile:
+        break;
+    }
+    return provided_tile_route(request, std::move(provided), version,
+                               std::span<const std::string_view>(segments).subspan(1), config,
+                               priv);
   }
   switch (kind) {
     case Kind::tilejson:
@@ -688,8 +800,8 @@ const char* route_name(Route r) noexcept {
 }
 
 HttpResponse route(const HttpRequest& request, const TilesetRegistry& registry,
-                   const RouterConfig& config) {
-  HttpResponse r = dispatch(request, registry, config);
+                   const RouterConfig& config, const AsyncTileProvider* provider) {
+  HttpResponse r = dispatch(request, registry, config, provider);
   if (!config.cors_origin.empty()) {
     add(r, "Access-Control-Allow-Origin", config.cors_origin);
     if (config.cors_origin != "*") add(r, "Vary", "Origin");
@@ -702,6 +814,47 @@ HttpResponse route(const HttpRequest& request, const TilesetRegistry& registry,
   if (r.status == 204 || r.status == 304) {
     r.owned.clear();
     r.view = {};
+    r.content_length = 0;
+  }
+  return r;
+}
+
+HttpResponse complete_deferred(HttpResponse marker, ProvidedTile tile) {
+  assert(marker.deferred);
+  const DeferredTile& d = *marker.deferred;
+  const std::string& name = d.tileset->name;
+  HttpResponse r;
+  switch (tile.kind) {
+    case ProvidedTile::Kind::ok:
+      r = payload_response(tile.payload, d.if_none_match, d.cache_control, 502, d.id, name);
+      if (r.status == 200) r.keep = std::move(tile.keep);
+      break;
+    case ProvidedTile::Kind::absent:
+      if (d.tileset->info.sparse) {
+        r.status = 204;  // known-empty: cacheable like a tile
+        add(r, "Cache-Control", d.cache_control);
+      } else {
+        r = error(404, "tile " + d.id.to_string() + " is missing from the origin of " + name +
+                           " (origin incomplete)");
+      }
+      break;
+    case ProvidedTile::Kind::unavailable:
+      r = error(503, "tile " + d.id.to_string() + " of " + name +
+                         " is not cached and its origin is unavailable" +
+                         (tile.message.empty() ? std::string() : ": " + tile.message));
+      break;
+    case ProvidedTile::Kind::bad_origin:
+      r = error(502, "the origin of " + name + " sent an unusable tile " + d.id.to_string() +
+                         (tile.message.empty() ? std::string() : ": " + tile.message));
+      break;
+  }
+  r.route = Route::tile;
+  for (auto& h : marker.headers) r.headers.push_back(std::move(h));  // CORS, from route()
+  r.head_only = marker.head_only;
+  if (r.status == 204 || r.status == 304) {
+    r.owned.clear();
+    r.view = {};
+    r.keep.reset();
     r.content_length = 0;
   }
   return r;

@@ -23,6 +23,14 @@
 // - stop() (SIGTERM/SIGINT when handle_signals): close the listeners, let every queued response
 //   finish (responses carry `Connection: close` from then on), close idle connections; after
 //   `drain_timeout` whatever is left is cut. run() then returns.
+// - Provided tiles (options.provider): a tile the router defers (router.hpp) holds its place in
+//   the connection's response queue while the provider fetches it; the writer stops at it, so
+//   responses still leave in request order, and later requests keep being read and routed (up to
+//   `max_pipeline`). The provider's `done` may run on any thread, even inside tile(): a call
+//   inside tile() finishes the response at once; a later one is posted to the connection's thread
+//   (the pending call keeps the connection object alive). An answer for a connection that has
+//   closed meanwhile is dropped. While responses are owed, the idle timeout does not run (the
+//   client is waiting for us, not idle); it restarts when the last one is written.
 // - Reload: a background thread calls registry.reload(false) every `reload_interval` (0 = never)
 //   and registry.reload(true) on SIGHUP or reload(); swaps and refusals are logged to stderr.
 #pragma once
@@ -67,6 +75,12 @@ struct HttpServerOptions {
   std::chrono::milliseconds reload_interval{2000};  // 0 = no periodic check
   bool handle_signals = true;  // SIGTERM/SIGINT → stop(), SIGHUP → reload(true)
   std::string access_log;      // "" = off, "-" = stdout, else a file (appended)
+  // Tilesets that are not archives (the cache daemon, `vts cache serve`): looked up when a name
+  // is not in the registry (router.hpp). Null = archives only. Its tile() answers asynchronously;
+  // see "Provided tiles" above for what the server guarantees. It must outlive the server's
+  // run(), and every `done` it was handed must have run (or been destroyed) before the server is
+  // destroyed: destroy the provider's pending work (e.g. the TileCache) first.
+  std::shared_ptr<AsyncTileProvider> provider;
 };
 
 class HttpServer {
