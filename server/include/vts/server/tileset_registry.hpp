@@ -5,6 +5,7 @@
 // joined into a filesystem path.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <filesystem>
 #include <map>
@@ -67,8 +68,21 @@ class TilesetRegistry {
   };
 
  private:
+  using Map = std::map<std::string, std::shared_ptr<const Tileset>, std::less<>>;
+  // Under mutex_: makes the current tilesets_ the snapshot find() reads.
+  void publish();
+
   mutable std::mutex mutex_;
-  std::map<std::string, std::shared_ptr<const Tileset>, std::less<>> tilesets_;
+  Map tilesets_;
+  // find()'s lock-free path: an immutable copy of tilesets_ and a counter bumped on each change.
+  // (A thread's cached snapshot keeps a removed archive mapped until its next lookup.)
+  std::shared_ptr<const Map> snapshot_;
+  std::atomic<std::uint64_t> generation_{0};
+  const std::uint64_t id_ = next_id();  // tells registries apart in the per-thread cache
+  static std::uint64_t next_id() {
+    static std::atomic<std::uint64_t> n{0};
+    return ++n;
+  }
   std::vector<std::filesystem::path> folders_;             // loaded as folders
   std::map<std::filesystem::path, FileIdentity> refused_;  // new archives refused, as seen
 };
