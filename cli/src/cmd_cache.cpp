@@ -50,24 +50,6 @@ struct CacheServeArgs {
 
 // ---- small helpers ---------------------------------------------------------------------------
 
-Result<std::pair<std::string, std::uint16_t>> parse_endpoint(const std::string& s) {
-  const auto colon = s.rfind(':');
-  if (colon == std::string::npos || colon + 1 == s.size())
-    return make_error(ErrorCode::invalid_argument, "'" + s + "' is not HOST:PORT");
-  std::string host = s.substr(0, colon);
-  if (host.size() >= 2 && host.front() == '[' && host.back() == ']')
-    host = host.substr(1, host.size() - 2);
-  unsigned long port = 0;
-  try {
-    std::size_t used = 0;
-    port = std::stoul(s.substr(colon + 1), &used);
-    if (used != s.size() - colon - 1 || port > 65535) throw std::out_of_range("port");
-  } catch (const std::exception&) {
-    return make_error(ErrorCode::invalid_argument, "'" + s + "': bad port");
-  }
-  return std::pair{host.empty() ? std::string("0.0.0.0") : host, std::uint16_t(port)};
-}
-
 // A tileset name as URLs carry it (docs/PROTOCOL.md §1).
 bool valid_name(std::string_view n) {
   if (n.empty() || n.size() > 128 || n.front() == '.') return false;

@@ -10,17 +10,6 @@
 
 namespace vts::cli {
 
-namespace {
-
-struct ServeArgs {
-  std::vector<std::string> paths;
-  std::string listen, admin, config, access_log, cors_origin, public_url;
-  int threads = -1;
-  long long max_age = -1;
-  bool print_ports = false;
-  bool no_admin = false;
-};
-
 Result<std::pair<std::string, std::uint16_t>> parse_endpoint(const std::string& s) {
   const auto colon = s.rfind(':');
   if (colon == std::string::npos || colon + 1 == s.size())
@@ -38,6 +27,17 @@ Result<std::pair<std::string, std::uint16_t>> parse_endpoint(const std::string& 
   }
   return std::pair{host.empty() ? std::string("0.0.0.0") : host, std::uint16_t(port)};
 }
+
+namespace {
+
+struct ServeArgs {
+  std::vector<std::string> paths;
+  std::string listen, admin, config, access_log, cors_origin, public_url;
+  int threads = -1;
+  long long max_age = -1;
+  bool print_ports = false;
+  bool no_admin = false;
+};
 
 Status apply_config(const std::string& file, HttpServerOptions& o) {
   std::ifstream in(file);

@@ -3,7 +3,10 @@
 #pragma once
 
 #include <CLI/CLI.hpp>
+#include <cstdint>
 #include <functional>
+#include <string>
+#include <utility>
 
 #include "vts/protocol/result.hpp"
 
@@ -19,6 +22,9 @@ Runner add_serve(CLI::App& app);
 Runner add_sign(CLI::App& app);
 Runner add_cache(CLI::App& app);  // vts cache serve (cmd_cache.cpp)
 Runner add_warm(CLI::App& app);
+
+// "HOST:PORT" (HOST may be [IPv6] or empty for 0.0.0.0) for --listen / --admin.
+Result<std::pair<std::string, std::uint16_t>> parse_endpoint(const std::string& s);
 
 // Prints "vts: error: <message>" to stderr and returns the mapped exit code.
 int report_error(const vts::Error& e);

@@ -3,10 +3,8 @@
 // reader's, and the caller keeps the payload beyond the source's lifetime. The answers mirror what
 // `vts serve` would send for the same archive (docs/PROTOCOL.md §3): the same bytes, the same
 // ETag, absent where the server answers 204 or 404, an error where it answers 500.
-#include <xxhash.h>
 
 #include <atomic>
-#include <cstdio>
 #include <system_error>
 #include <utility>
 
@@ -15,25 +13,6 @@
 
 namespace vts::client {
 namespace {
-
-// The archive version exactly as `vts serve` computes it (docs/PROTOCOL.md §6): XXH3-64 of the
-// header, root directory and metadata bytes as stored. The reader has checked that these sections
-// lie inside the file.
-std::string archive_version(const pmtiles::Reader& reader) {
-  const auto bytes = reader.bytes();
-  const pmtiles::Header& h = reader.header();
-  XXH3_state_t* state = XXH3_createState();
-  if (state == nullptr) return {};
-  XXH3_64bits_reset(state);
-  XXH3_64bits_update(state, bytes.data(), pmtiles::kHeaderSize);
-  XXH3_64bits_update(state, bytes.data() + h.root_dir_offset, h.root_dir_length);
-  XXH3_64bits_update(state, bytes.data() + h.metadata_offset, h.metadata_length);
-  const XXH64_hash_t hash = XXH3_64bits_digest(state);
-  XXH3_freeState(state);
-  char hex[17];
-  std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(hash));
-  return hex;
-}
 
 class LocalSource final : public TileSource {
  public:
@@ -117,7 +96,7 @@ Result<std::unique_ptr<TileSource>> open_local_archive(const std::filesystem::pa
   SourceInfo si;
   si.info = std::move(*info);
   si.key = "file:" + absolute.string();
-  si.version = archive_version(**reader);
+  si.version = pmtiles::archive_version(**reader);  // as `vts serve` computes it
   si.description_json = (*reader)->metadata_json();
   return std::unique_ptr<TileSource>(
       std::make_unique<LocalSource>(std::move(*reader), std::move(si), absolute.string()));

@@ -9,18 +9,25 @@
 #include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
+#include <xxhash.h>
 
 #include <algorithm>
 #include <cerrno>
+#include <cstdio>
 #include <limits>
 #include <list>
 #include <mutex>
+#include <new>
 #include <set>
 #include <system_error>
 #include <unordered_map>
 #include <utility>
 
 #include "vts/protocol/pmtiles.hpp"
+
+#include <xxhash.h>
+
+#include <cstdio>
 
 namespace vts::pmtiles {
 namespace {
@@ -370,6 +377,23 @@ Result<std::shared_ptr<Reader>> Reader::open(const std::filesystem::path& path,
 Result<std::shared_ptr<Reader>> Reader::open_bytes(std::span<const std::uint8_t> bytes,
                                                    ReaderOptions options) {
   return make_reader(bytes, nullptr, options);
+}
+
+std::string archive_version(const Reader& reader) {
+  const auto bytes = reader.bytes();
+  const Header& h = reader.header();
+  // The reader has checked that these sections lie inside the archive.
+  XXH3_state_t* state = XXH3_createState();
+  if (state == nullptr) throw std::bad_alloc();
+  XXH3_64bits_reset(state);
+  XXH3_64bits_update(state, bytes.data(), kHeaderSize);
+  XXH3_64bits_update(state, bytes.data() + h.root_dir_offset, h.root_dir_length);
+  XXH3_64bits_update(state, bytes.data() + h.metadata_offset, h.metadata_length);
+  const XXH64_hash_t hash = XXH3_64bits_digest(state);
+  XXH3_freeState(state);
+  char hex[17];
+  std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(hash));
+  return hex;
 }
 
 }  // namespace vts::pmtiles

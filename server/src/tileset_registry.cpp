@@ -2,7 +2,6 @@
 #include "vts/server/tileset_registry.hpp"
 
 #include <sys/stat.h>
-#include <xxhash.h>
 
 #include <algorithm>
 #include <cstdio>
@@ -88,27 +87,12 @@ Result<std::shared_ptr<const Tileset>> open_tileset(const fs::path& path) {
   auto info = TilesetInfo::from_json((*reader)->metadata_json());
   if (!info) return make_error(info.error().code, path.string() + ": " + info.error().message);
 
-  // Version: XXH3-64 of the header, root directory and metadata bytes as stored. The reader has
-  // checked these sections lie inside the file.
-  const auto bytes = (*reader)->bytes();
-  const auto& h = (*reader)->header();
-  XXH3_state_t* state = XXH3_createState();
-  if (state == nullptr) return make_error(ErrorCode::internal, "XXH3_createState failed");
-  XXH3_64bits_reset(state);
-  XXH3_64bits_update(state, bytes.data(), pmtiles::kHeaderSize);
-  XXH3_64bits_update(state, bytes.data() + h.root_dir_offset, h.root_dir_length);
-  XXH3_64bits_update(state, bytes.data() + h.metadata_offset, h.metadata_length);
-  const XXH64_hash_t hash = XXH3_64bits_digest(state);
-  XXH3_freeState(state);
-  char hex[17];
-  std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(hash));
-
   auto t = std::make_shared<Tileset>();
   t->name = name;
   t->path = path;
   t->reader = std::move(*reader);
   t->info = std::move(*info);
-  t->version = hex;
+  t->version = pmtiles::archive_version(*t->reader);
   t->file_size = id->size;
   t->file_mtime_ns = id->mtime_ns;
   t->file_inode = id->inode;

@@ -150,4 +150,9 @@ class Reader {
   virtual Result<std::uint64_t> leaf_directory_count() const = 0;
 };
 
+// The archive's version: 16 lowercase hex digits of XXH3-64 (seed 0) over its header, root
+// directory and metadata bytes as stored (docs/PROTOCOL.md §6). Cheap: independent of the
+// archive's size. What `vts serve` puts in versioned URLs and what the client sources report.
+std::string archive_version(const Reader& reader);
+
 }  // namespace vts::pmtiles
