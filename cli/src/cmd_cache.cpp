@@ -27,6 +27,7 @@
 #include <unordered_map>
 
 #include "commands.hpp"
+#include "vts/client/saved_source.hpp"
 #include "vts/client/source.hpp"
 #include "vts/client/tile_cache.hpp"
 #include "vts/server/http_server.hpp"
@@ -76,98 +77,10 @@ std::string default_name(std::string_view location) {
   return std::string(s);
 }
 
-// FNV-1a 64: a stable file name for an upstream location (not a security boundary: the file
-// records the location it belongs to, which is checked on reading).
-std::string location_hash(std::string_view location) {
-  std::uint64_t h = 0xcbf29ce484222325ull;
-  for (unsigned char c : location) {
-    h ^= c;
-    h *= 0x100000001b3ull;
-  }
-  char buf[17];
-  std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(h));
-  return buf;
-}
-
 bool same_shape(const TilesetInfo& a, const TilesetInfo& b) {
   const Geometry &ga = a.geometry, &gb = b.geometry;
   return ga.width() == gb.width() && ga.height() == gb.height() &&
          ga.tile_size() == gb.tile_size() && ga.border() == gb.border() && a.codec == b.codec;
-}
-
-// ---- the saved SourceInfo ----------------------------------------------------------------------
-
-fs::path source_file(const fs::path& cache_dir, std::string_view location) {
-  return cache_dir / "sources" / (location_hash(location) + ".json");
-}
-
-// Writes `info` for `location` atomically (temporary file + rename), so that another daemon or a
-// crash never leaves a half-written file behind.
-Status save_source(const fs::path& cache_dir, std::string_view location,
-                   const client::SourceInfo& info) {
-  const fs::path file = source_file(cache_dir, location);
-  std::error_code ec;
-  fs::create_directories(file.parent_path(), ec);
-  if (ec)
-    return make_error(ErrorCode::io,
-                      "cannot create " + file.parent_path().string() + ": " + ec.message());
-  json j = {
-      {"vtstream_cache_source", 1},
-      {"location", std::string(location)},
-      {"key", info.key},
-      {"version", info.version},
-      {"metadata", json::parse(info.info.to_json(), nullptr, false)},
-      {"description_json", info.description_json},
-      {"saved_unix", std::int64_t(std::time(nullptr))},
-  };
-  const std::string text = j.dump(2, ' ', false, json::error_handler_t::replace) + "\n";
-  const fs::path tmp = file.string() + ".tmp." + std::to_string(::getpid());
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    out.write(text.data(), std::streamsize(text.size()));
-    out.flush();
-    if (!out) {
-      fs::remove(tmp, ec);
-      return make_error(ErrorCode::io, "cannot write " + tmp.string());
-    }
-  }
-  fs::rename(tmp, file, ec);
-  if (ec) {
-    fs::remove(tmp, ec);
-    return make_error(ErrorCode::io, "cannot rename " + tmp.string() + " to " + file.string());
-  }
-  return {};
-}
-
-Result<client::SourceInfo> load_source(const fs::path& cache_dir, std::string_view location) {
-  const fs::path file = source_file(cache_dir, location);
-  std::ifstream in(file, std::ios::binary);
-  if (!in)
-    return make_error(ErrorCode::not_found, "the cache in " + cache_dir.string() +
-                                                " holds no description of " +
-                                                std::string(location) + " (" + file.string() + ")");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  const json j = json::parse(ss.str(), nullptr, false);
-  auto bad = [&](const std::string& why) {
-    return make_error(ErrorCode::corrupt, file.string() + ": " + why);
-  };
-  if (!j.is_object() || !j.contains("vtstream_cache_source")) return bad("not a saved source");
-  try {
-    if (j.at("location").get<std::string>() != location)
-      return bad("describes another upstream (" + j.at("location").get<std::string>() + ")");
-    client::SourceInfo info;
-    info.key = j.at("key").get<std::string>();
-    info.version = j.at("version").get<std::string>();
-    info.description_json = j.at("description_json").get<std::string>();
-    auto meta = TilesetInfo::from_json(j.at("metadata").dump());
-    if (!meta) return bad(meta.error().message);
-    info.info = std::move(*meta);
-    if (info.key.empty()) return bad("empty key");
-    return info;
-  } catch (const json::exception& e) {
-    return bad(e.what());
-  }
 }
 
 // ---- the upstream, online or not -------------------------------------------------------------
@@ -457,17 +370,17 @@ int run_cache_serve(const CacheServeArgs& a) {
   if (auto opened = client::open_source(a.upstream, so)) {
     online = std::move(*opened);
     info = online->info();
-    if (auto saved = load_source(cache_dir, a.upstream);
+    if (auto saved = client::load_source_info(cache_dir, a.upstream);
         saved && (saved->key != info.key || !same_shape(saved->info, info.info)))
       std::fprintf(stderr,
                    "vts cache serve: warning: %s changed geometry or codec since the cache was "
                    "filled; cached tiles of the old tileset may be served until revalidated\n",
                    a.upstream.c_str());
-    if (auto st = save_source(cache_dir, a.upstream, info); !st.ok())
+    if (auto st = client::save_source_info(cache_dir, a.upstream, info); !st.ok())
       std::fprintf(stderr, "vts cache serve: warning: %s (offline starts will not work)\n",
                    st.error().to_string().c_str());
   } else {
-    auto saved = load_source(cache_dir, a.upstream);
+    auto saved = client::load_source_info(cache_dir, a.upstream);
     if (!saved) {
       Error e = opened.error();
       e.message += "; and it cannot be served offline: " + saved.error().message;
@@ -490,7 +403,7 @@ int run_cache_serve(const CacheServeArgs& a) {
   auto upstream = std::make_shared<Upstream>(
       info, std::move(online), a.upstream, so, std::chrono::seconds(a.reconnect_seconds),
       [cache_dir, location](const client::SourceInfo& now) {
-        if (auto st = save_source(cache_dir, location, now); !st.ok())
+        if (auto st = client::save_source_info(cache_dir, location, now); !st.ok())
           std::fprintf(stderr, "vts cache serve: warning: %s\n", st.error().to_string().c_str());
       });
 

@@ -19,6 +19,7 @@
 
 #include "commands.hpp"
 #include "progress.hpp"
+#include "vts/client/saved_source.hpp"
 #include "vts/client/source.hpp"
 #include "vts/client/tile_cache.hpp"
 
@@ -227,6 +228,18 @@ int run_warm(const WarmArgs& a) {
   client::SourceOptions so;
   so.fetcher.max_in_flight = a.concurrency;
   auto opened = client::open_source(a.url, so);
+  bool offline = false;
+  if (!opened && opened.error().code == ErrorCode::io) {
+    // The network is gone, but a cache warmed from this URL before remembers the tileset: check
+    // what it holds (and fail naming the tiles it lacks).
+    auto saved = client::load_source_info(a.cache_dir, a.url);
+    if (saved) {
+      std::fprintf(stderr, "vts warm: %s: %s; checking the cache offline\n", a.url.c_str(),
+                   opened.error().message.c_str());
+      opened = client::offline_source(std::move(*saved));
+      offline = true;
+    }
+  }
   if (!opened) return report_error(opened.error());
   std::shared_ptr<client::TileSource> source = std::move(*opened);
   const client::SourceInfo& info = source->info();
@@ -258,6 +271,11 @@ int run_warm(const WarmArgs& a) {
   auto created = client::TileCache::create(source, co);
   if (!created) return report_error(created.error());
   std::unique_ptr<client::TileCache> cache = std::move(*created);
+  // Remember the tileset in the cache folder, so viewers and `vts cache serve` can open it with
+  // the network gone.
+  if (!offline)
+    if (auto saved = client::save_source_info(a.cache_dir, a.url, info); !saved)
+      return report_error(saved.error());
 
   const bool show = !a.quiet && !a.json;
   const bool tty = ProgressBar::stderr_is_terminal();

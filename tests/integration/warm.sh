@@ -108,7 +108,13 @@ part_fill() {
   [[ $(sql "$dir" 'SELECT key FROM tilesets') == "$url" ]] || fail "tileset key is not $url"
   [[ $(sql "$dir" 'SELECT sum(size) FROM tiles') == "$fetched" ]] ||
     fail "cached bytes differ from the $fetched bytes reported fetched"
-  expect_clean_failure "$VTS" warm "$url" --cache-dir "$dir"
+  note "with the server gone, warm verifies the cache offline (the tileset was remembered)"
+  [[ -n $(ls "$dir/sources/"*.json 2>/dev/null) ]] || fail "no saved source description"
+  warm_json "$url" --cache-dir "$dir"
+  json_check "$LOGS/warm.json" "j.from_network == 0 && j.already_cached == $SYN_TILES &&
+    j.complete" "offline: everything from the cache"
+  # A cache that never saw this URL has nothing to fall back on: a clean failure.
+  expect_clean_failure "$VTS" warm "$url" --cache-dir "$WORK/empty-cache"
   expect_cached "$dir" "$SYN_TILES"
   expect_valid_cache "$dir"
 
