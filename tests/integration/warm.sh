@@ -113,6 +113,23 @@ part_fill() {
   warm_json "$url" --cache-dir "$dir"
   json_check "$LOGS/warm.json" "j.from_network == 0 && j.already_cached == $SYN_TILES &&
     j.complete" "offline: everything from the cache"
+  note "the cache daemon starts offline from a cache that only warm filled"
+  "$VTS" cache serve --upstream "$url" --cache-dir "$dir" --listen 127.0.0.1:0 --no-admin \
+    >"$LOGS/daemon.out" 2>"$LOGS/daemon.err" </dev/null &
+  local daemon_pid=$! dport="" i
+  for ((i = 0; i < 200; i++)); do
+    dport=$(sed -nE 's|.*listening on http://[^ ]*:([0-9]+)[ ,].*|\1|p' "$LOGS/daemon.out")
+    [[ -n $dport ]] && break
+    kill -0 "$daemon_pid" 2>/dev/null || break
+    sleep 0.05
+  done
+  [[ -n $dport ]] || { cat "$LOGS/daemon.err" >&2; fail "vts cache serve did not start offline"; }
+  local name=${url##*/}
+  curl -sf -o "$LOGS/daemon_tile" "http://127.0.0.1:$dport/$name/0/0/0" ||
+    { kill -TERM "$daemon_pid"; fail "the offline daemon did not serve a warmed tile"; }
+  [[ -s $LOGS/daemon_tile ]] || fail "empty tile from the offline daemon"
+  kill -TERM "$daemon_pid"
+  wait "$daemon_pid" || fail "vts cache serve did not exit 0 on SIGTERM"
   # A cache that never saw this URL has nothing to fall back on: a clean failure.
   expect_clean_failure "$VTS" warm "$url" --cache-dir "$WORK/empty-cache"
   expect_cached "$dir" "$SYN_TILES"
