@@ -522,9 +522,17 @@ class FaultServer::Impl {
   Response serve(std::string_view path, const Request& req) const {
     const std::string archive_path = "/" + name_ + ".pmtiles";
     if (path == archive_path) return serve_archive(req);
-    const std::string prefix = "/" + name_ + "/";
-    if (path.substr(0, prefix.size()) == prefix) {
-      auto id = parse_tile_id(path.substr(prefix.size()));
+    // "/NAME/z/x/y", or "/NAME@VERSION/z/x/y" as in the versioned URLs vts serve hands out.
+    std::string_view rest;
+    if (const std::string prefix = "/" + name_ + "/"; path.substr(0, prefix.size()) == prefix) {
+      rest = path.substr(prefix.size());
+    } else if (const std::string versioned = "/" + name_ + "@";
+               path.substr(0, versioned.size()) == versioned) {
+      const auto slash = path.find('/', versioned.size());
+      if (slash != std::string_view::npos) rest = path.substr(slash + 1);
+    }
+    if (!rest.empty()) {
+      auto id = parse_tile_id(rest);
       if (id && id->z <= 31 && (id->x >> id->z) == 0 && (id->y >> id->z) == 0) {
         auto tile = reader_->get(*id);
         if (tile) {

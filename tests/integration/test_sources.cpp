@@ -19,6 +19,7 @@
 
 #include "fault_server.hpp"
 #include "vts/client/source.hpp"
+#include "vts/client/tile_cache.hpp"
 #include "vts/protocol/pmtiles.hpp"
 #include "vts/server/builder.hpp"
 #include "vts/server/http_server.hpp"
@@ -722,4 +723,71 @@ TEST(OpenSource, AllThreeSourcesAgreeOnTheTilesetVersion) {
   EXPECT_EQ((*local)->info().version, tilejson->info().version);
   EXPECT_EQ((*local)->info().version, remote->info().version);
   EXPECT_EQ((*local)->info().key, "file:" + syn_archive().string());
+}
+
+// ---------------------------------------------------------------------------------------------
+// The whole client stack (TileCache over a TileJSON source) against a faulty origin: vts serve
+// hands out tile URLs on the fault server, which corrupts, truncates or refuses them.
+
+TEST(ClientStackOverFaults, TransientFaultsAreRetriedAndBadTilesAreNeverCachedOrDelivered) {
+  FaultServer& faults = static_server(syn_archive(), "syn");
+  auto reader = vts::pmtiles::Reader::open(syn_archive());
+  ASSERT_TRUE(reader.ok());
+  struct Case {
+    std::string spec;
+    bool ok;
+  };
+  const std::vector<Case> cases = {{"corrupt*1", true}, {"truncate*2", true}, {"503ra1*1", true},
+                                   {"500*2", true},     {"corrupt", false},   {"500", false},
+                                   {"drop", false}};
+  int n = 0;
+  for (const auto& c : cases) {
+    SCOPED_TRACE(c.spec);
+    vts::RouterConfig router;
+    router.public_base_url = faults.base_url() + "/fault/" + c.spec;
+    RunningServer server(router);
+    auto o = quick_options();
+    o.fetcher.max_attempts = 4;
+    auto opened = open_ok(server.base() + "/syn", o);
+    ASSERT_TRUE(opened);
+    std::shared_ptr<TileSource> source = std::move(opened);
+    vts::client::TileCacheOptions co;
+    co.disk = vts::client::DiskCacheOptions{};
+    co.disk->dir = dir() / ("client-cache-" + std::to_string(n++));
+    auto cache = vts::client::TileCache::create(source, co);
+    ASSERT_TRUE(cache.ok()) << cache.error().to_string();
+
+    const TileId id{1, 1, 0};
+    std::mutex m;
+    std::condition_variable cv;
+    std::optional<vts::client::PayloadResult> got;
+    (*cache)->get(id, {}, [&](vts::client::PayloadResult&& r) {
+      std::lock_guard lock(m);
+      got = std::move(r);
+      cv.notify_all();
+    });
+    {
+      std::unique_lock lock(m);
+      ASSERT_TRUE(cv.wait_for(lock, 20s, [&] { return got.has_value(); }));
+    }
+    ASSERT_TRUE((*cache)->flush().ok());
+    const auto stored = (*reader)->get(id);
+    ASSERT_TRUE(stored.ok());
+    auto row = (*cache)->disk()->get(source->info().key, id);
+    ASSERT_TRUE(row.ok());
+    if (c.ok) {
+      ASSERT_EQ(got->kind, vts::client::PayloadResult::Kind::ok)
+          << (got->error ? got->error->to_string() : "");
+      EXPECT_TRUE(std::equal(got->tile->payload.begin(), got->tile->payload.end(), stored->begin(),
+                             stored->end()));
+      ASSERT_TRUE(row->has_value());
+      EXPECT_TRUE(std::equal((*row)->payload.begin(), (*row)->payload.end(), stored->begin(),
+                             stored->end()));
+    } else {
+      ASSERT_EQ(got->kind, vts::client::PayloadResult::Kind::error);
+      EXPECT_FALSE(got->error->message.empty());
+      EXPECT_FALSE(row->has_value()) << "a bad tile reached the disk cache";
+      EXPECT_EQ((*cache)->ram()->get({source->info().key, id}), nullptr);
+    }
+  }
 }
