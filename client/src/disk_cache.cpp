@@ -788,51 +788,44 @@ Status DiskCache::put_batch(std::string_view tileset, std::span<const BatchItem>
   });
 }
 
-Status DiskCache::set_validated(std::string_view tileset, TileId id, std::int64_t validated_unix) {
+// One UPDATE of an existing row (`stmt`, with the tile key in ?1-?4 and `bind` setting the rest)
+// in a write transaction; not_found when the cache has no such tile.
+Status DiskCache::update_row(std::string_view tileset, TileId id, const std::string& doing,
+                             sqlite3_stmt* (*stmt)(Impl&),
+                             const std::function<void(sqlite3_stmt*)>& bind) {
   Impl& m = *impl_;
-  const std::string doing = "recording the revalidation of " + tile_name(tileset, id);
   std::lock_guard lock(m.mutex);
   auto tsid = m.find_tileset(tileset, doing);
   if (!tsid) return std::move(tsid).error();
-  if (!*tsid)
+  const auto missing = [&] {
     return make_error(ErrorCode::not_found,
                       tile_name(tileset, id) + " is not in cache " + m.path_str);
+  };
+  if (!*tsid) return missing();
   return m.write_transaction(doing, [&]() -> Status {
-    sqlite3_stmt* s = m.validated_stmt.get();
+    sqlite3_stmt* s = stmt(m);
     ResetGuard guard(s);
     Impl::bind_key(s, **tsid, id);
-    sqlite3_bind_int64(s, 5, validated_unix);
+    bind(s);
     const int rc = Impl::run(s);
     if (rc != SQLITE_DONE) return m.db_error(rc, doing);
-    if (sqlite3_changes(m.db()) == 0)
-      return make_error(ErrorCode::not_found,
-                        tile_name(tileset, id) + " is not in cache " + m.path_str);
+    if (sqlite3_changes(m.db()) == 0) return missing();
     return {};
   });
 }
 
+Status DiskCache::set_validated(std::string_view tileset, TileId id, std::int64_t validated_unix) {
+  return update_row(
+      tileset, id, "recording the revalidation of " + tile_name(tileset, id),
+      [](Impl& m) { return m.validated_stmt.get(); },
+      [&](sqlite3_stmt* s) { sqlite3_bind_int64(s, 5, validated_unix); });
+}
+
 Status DiskCache::set_pinned(std::string_view tileset, TileId id, bool pinned) {
-  Impl& m = *impl_;
-  const std::string doing =
-      std::string(pinned ? "pinning " : "unpinning ") + tile_name(tileset, id);
-  std::lock_guard lock(m.mutex);
-  auto tsid = m.find_tileset(tileset, doing);
-  if (!tsid) return std::move(tsid).error();
-  if (!*tsid)
-    return make_error(ErrorCode::not_found,
-                      tile_name(tileset, id) + " is not in cache " + m.path_str);
-  return m.write_transaction(doing, [&]() -> Status {
-    sqlite3_stmt* s = m.pinned_stmt.get();
-    ResetGuard guard(s);
-    Impl::bind_key(s, **tsid, id);
-    sqlite3_bind_int(s, 5, pinned ? 1 : 0);
-    const int rc = Impl::run(s);
-    if (rc != SQLITE_DONE) return m.db_error(rc, doing);
-    if (sqlite3_changes(m.db()) == 0)
-      return make_error(ErrorCode::not_found,
-                        tile_name(tileset, id) + " is not in cache " + m.path_str);
-    return {};
-  });
+  return update_row(
+      tileset, id, std::string(pinned ? "pinning " : "unpinning ") + tile_name(tileset, id),
+      [](Impl& m) { return m.pinned_stmt.get(); },
+      [&](sqlite3_stmt* s) { sqlite3_bind_int(s, 5, pinned ? 1 : 0); });
 }
 
 Status DiskCache::remove(std::string_view tileset, TileId id) {

@@ -440,26 +440,35 @@ HttpResponse index_route(const TilesetRegistry& registry, const AsyncTileProvide
   return r;
 }
 
-HttpResponse tilejson_route(const Tileset& t, const std::string& base, bool priv) {
-  ordered_json v = vtstream_object(t);
-  v["archive"] = base + "/" + t.name + ".pmtiles";
+// TileJSON 3.0 for a tileset, archive or provided: `tiles_url` is its one URL template.
+HttpResponse tilejson_response(const std::string& name, const TilesetInfo& info,
+                               const std::string& version, std::string tiles_url,
+                               ordered_json vtstream, bool priv) {
   ordered_json j = {
       {"tilejson", "3.0.0"},
-      {"name", t.info.name.empty() ? t.name : t.info.name},
-      {"description", t.info.description},
-      {"version", t.version},
+      {"name", info.name.empty() ? name : info.name},
+      {"description", info.description},
+      {"version", version},
       {"scheme", "xyz"},
-      {"tiles", {base + "/" + t.name + "@" + t.version + "/{z}/{x}/{y}"}},
+      {"tiles", {std::move(tiles_url)}},
       {"minzoom", 0},
-      {"maxzoom", t.info.geometry.max_zoom()},
+      {"maxzoom", info.geometry.max_zoom()},
       {"bounds", {-180, -90, 180, 90}},
-      {"vtstream", std::move(v)},
+      {"vtstream", std::move(vtstream)},
   };
   HttpResponse r;
   r.route = Route::tilejson;
-  set_owned(r, j.dump(2) + "\n", kJsonType);
+  set_owned(r, j.dump(2, ' ', false, ordered_json::error_handler_t::replace) + "\n", kJsonType);
   add(r, "Cache-Control", cache_control(priv, kMetadataMaxAge, false));
   return r;
+}
+
+HttpResponse tilejson_route(const Tileset& t, const std::string& base, bool priv) {
+  ordered_json v = vtstream_object(t);
+  v["archive"] = base + "/" + t.name + ".pmtiles";
+  return tilejson_response(t.name, t.info, t.version,
+                           base + "/" + t.name + "@" + t.version + "/{z}/{x}/{y}", std::move(v),
+                           priv);
 }
 
 HttpResponse archive_route(const HttpRequest& request, std::shared_ptr<const Tileset> t,
@@ -637,23 +646,8 @@ HttpResponse provided_tilejson_route(const ProvidedTileset& t, const std::string
     auto it = meta.find("vtstream");
     if (it != meta.end() && it->is_object()) v = *it;
   }
-  ordered_json j = {
-      {"tilejson", "3.0.0"},
-      {"name", t.info.name.empty() ? t.name : t.info.name},
-      {"description", t.info.description},
-      {"version", t.version},
-      {"scheme", "xyz"},
-      {"tiles", {base + "/" + t.name + "/{z}/{x}/{y}"}},
-      {"minzoom", 0},
-      {"maxzoom", t.info.geometry.max_zoom()},
-      {"bounds", {-180, -90, 180, 90}},
-      {"vtstream", std::move(v)},
-  };
-  HttpResponse r;
-  r.route = Route::tilejson;
-  set_owned(r, j.dump(2, ' ', false, ordered_json::error_handler_t::replace) + "\n", kJsonType);
-  add(r, "Cache-Control", cache_control(priv, kMetadataMaxAge, false));
-  return r;
+  return tilejson_response(t.name, t.info, t.version, base + "/" + t.name + "/{z}/{x}/{y}",
+                           std::move(v), priv);
 }
 
 HttpResponse preflight(const HttpRequest& request) {

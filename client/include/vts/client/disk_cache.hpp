@@ -30,6 +30,7 @@
 #include <chrono>
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <span>
@@ -39,6 +40,8 @@
 #include "vts/client/ram_cache.hpp"
 #include "vts/protocol/geometry.hpp"
 #include "vts/protocol/result.hpp"
+
+struct sqlite3_stmt;
 
 namespace vts::client {
 
@@ -134,6 +137,8 @@ class DiskCache {
   struct Impl;
   static Status put_row(Impl& m, std::string_view tileset, TileId id, const CachedTile& tile,
                         bool pin, const std::string& doing);
+  Status update_row(std::string_view tileset, TileId id, const std::string& doing,
+                    sqlite3_stmt* (*stmt)(Impl&), const std::function<void(sqlite3_stmt*)>& bind);
   explicit DiskCache(std::unique_ptr<Impl> impl);
   std::unique_ptr<Impl> impl_;
 };
