@@ -9,6 +9,7 @@
 
 #include <array>
 #include <cassert>
+#include <charconv>
 #include <cstdio>
 #include <limits>
 #include <nlohmann/json.hpp>
@@ -30,8 +31,10 @@ constexpr std::size_t kMaxTargetBytes = 8192;
 // ---------------------------------------------------------------------------------------------
 // Response helpers
 
-void add(HttpResponse& r, std::string name, std::string value) {
-  r.headers.emplace_back(std::move(name), std::move(value));
+// `name` must be a string literal (HttpResponse::headers keeps a view).
+void add(HttpResponse& r, std::string_view name, std::string value) {
+  if (r.headers.empty()) r.headers.reserve(8);  // one allocation for a typical response
+  r.headers.emplace_back(name, std::move(value));
 }
 
 void set_owned(HttpResponse& r, std::string body, const char* type) {
@@ -51,8 +54,12 @@ HttpResponse error(int status, std::string message) {
 }
 
 std::string cache_control(bool is_private, std::uint32_t max_age, bool immutable) {
-  std::string s = is_private ? "private" : "public";
-  s += ", max-age=" + std::to_string(max_age);
+  char digits[10];
+  const auto end = std::to_chars(digits, digits + sizeof digits, max_age).ptr;
+  std::string s;
+  s.reserve(40);  // one allocation: this runs for every tile
+  s += is_private ? "private, max-age=" : "public, max-age=";
+  s.append(digits, end);
   if (immutable) s += ", immutable";
   return s;
 }

@@ -123,7 +123,9 @@ struct DeferredTile {
 struct HttpResponse {
   int status = 200;
   Route route = Route::error;
-  std::vector<std::pair<std::string, std::string>> headers;  // excluding Content-Length
+  // Excluding Content-Length. Names are string literals (static storage): a response is built
+  // for every request, and a name never needs a copy.
+  std::vector<std::pair<std::string_view, std::string>> headers;
   // The body is either `owned` or `view` (a view into an archive mapping, or into bytes owned by
   // `keep`); never both.
   std::string owned;
