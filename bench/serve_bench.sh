@@ -7,7 +7,11 @@
 #   range  random tile-sized Range reads of /earth.pmtiles (206)
 # Prints a markdown table (req/s, MB/s, p50, p99, ratio vs nginx) with machine, date and commit.
 #
-#   bash bench/serve_bench.sh [--vts PATH] [--duration 10s] [--input IMAGE] [--out FILE]
+#   bash bench/serve_bench.sh [--vts PATH] [--duration 10s] [--workers N] [--input IMAGE] [--out FILE]
+#
+# --workers N (default 1): nginx worker processes and vts serve --threads, the same for both. On
+# this 2-core machine wrk needs about one core: with 2 workers each server's threads contend with
+# wrk's and p99 measures that contention (ticks of preemption); with 1 it measures the server.
 #
 # Input: bench/.cache/earth_16384x8192.tif if present (see build_bench.sh), else the Earth JPEG
 # upscaled 4x (8192x4096) with oiiotool. The archive is built once into bench/.cache.
@@ -16,17 +20,20 @@ source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 
 VTS_ARG=""
 DURATION=10s
+WORKERS=1
 INPUT=""
 OUT_FILE=""
 while (($#)); do
   case $1 in
     --vts) VTS_ARG=$2; shift 2 ;;
     --duration) DURATION=$2; shift 2 ;;
+    --workers) WORKERS=$2; shift 2 ;;
     --input) INPUT=$2; shift 2 ;;
     --out) OUT_FILE=$2; shift 2 ;;
     *) die "unknown argument '$1'" ;;
   esac
 done
+[[ $WORKERS =~ ^[1-9][0-9]*$ ]] || die "--workers must be a positive integer, not '$WORKERS'"
 need wrk nginx curl dd
 VTS=$(find_vts "$VTS_ARG")
 DUMP=${PMTILES_DUMP:-$(dirname "$VTS")/../tests/integration/pmtiles_dump}
@@ -85,7 +92,7 @@ free_port() {
 NGINX_PORT=$(free_port)
 mkdir -p "$T/nginx/logs"
 cat >"$T/nginx/nginx.conf" <<CONF
-worker_processes 2;
+worker_processes $WORKERS;
 daemon off;
 pid $T/nginx/nginx.pid;
 error_log $T/nginx/error.log warn;
@@ -112,7 +119,7 @@ CONF
 nginx -p "$T/nginx" -c "$T/nginx/nginx.conf" 2>"$T/nginx/stderr" &
 NGINX_PID=$!
 
-"$VTS" serve "$ARCHIVE" --listen 127.0.0.1:0 --admin 127.0.0.1:0 --threads 2 \
+"$VTS" serve "$ARCHIVE" --listen 127.0.0.1:0 --admin 127.0.0.1:0 --threads "$WORKERS" \
   >"$T/vts.out" 2>"$T/vts.err" &
 VTS_PID=$!
 for ((i = 0; i < 100; i++)); do
@@ -192,7 +199,7 @@ done
   echo
   machine_info
   echo "- input: $(basename "$INPUT"), $NTILES tiles, $(mb "$TILE_BYTES") MiB of tile payloads (avg $((TILE_BYTES / NTILES)) B)"
-  echo "- wrk -t2 -c64 -d$DURATION --latency, bench/random_tiles.lua; nginx $(nginx -v 2>&1 | sed 's|.*/||') (2 workers, sendfile), vts serve --threads 2"
+  echo "- wrk -t2 -c64 -d$DURATION --latency, bench/random_tiles.lua; nginx $(nginx -v 2>&1 | sed 's|.*/||') ($WORKERS workers, sendfile), vts serve --threads $WORKERS"
   echo
   echo "| workload | server | req/s | MB/s | p50 ms | p99 ms | server CPU µs/req | req/s vs nginx | p99 vs nginx | CPU/req vs nginx |"
   echo "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"
