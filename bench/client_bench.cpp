@@ -4,10 +4,14 @@
 //   disk   a get() of each tile from a new cache over the same folder (RAM off): latency of a
 //          disk hit (SQLite read + checksum), per get, p50/p99
 //   ram    the same gets again from a RAM cache holding every tile: latency of a RAM hit
+//   fetch  (breakdown) every tile fetched through the source alone: no checksum, cache or decode
+//   decode (breakdown) every payload decoded from memory by --decode-threads threads: the floor
+//          the decode step puts under `cold` on this machine
 // Prints one JSON object.
 //
 //   vts_client_bench URL --cache-dir DIR [--in-flight N] [--decode-threads N]
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <condition_variable>
 #include <cstdio>
@@ -15,9 +19,11 @@
 #include <filesystem>
 #include <mutex>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "vts/client/tile_client.hpp"
+#include "vts/protocol/codec.hpp"
 
 using namespace vts::client;
 using Clock = std::chrono::steady_clock;
@@ -69,6 +75,47 @@ int main(int argc, char** argv) {
     for (std::uint32_t y = 0; y < g.tiles_y(std::uint8_t(z)); ++y)
       for (std::uint32_t x = 0; x < g.tiles_x(std::uint8_t(z)); ++x)
         ids.push_back(vts::TileId{std::uint8_t(z), x, y});
+
+  // Breakdown, fetch alone: every tile through the source (the fetcher), nothing else.
+  double fetch_s = 0;
+  std::vector<std::vector<std::uint8_t>> payloads(ids.size());
+  {
+    std::mutex m;
+    std::condition_variable cv;
+    std::size_t done = 0, failed = 0;
+    const auto t0 = Clock::now();
+    for (std::size_t i = 0; i < ids.size(); ++i)
+      source->fetch(SourceRequest{ids[i], {}, ids[i].z, 0}, [&, i](SourceTile&& t) {
+        std::lock_guard lock(m);
+        if (t.kind == SourceTile::Kind::ok)
+          payloads[i] = std::move(t.payload);
+        else
+          ++failed;
+        ++done;
+        cv.notify_one();
+      });
+    std::unique_lock lock(m);
+    if (!cv.wait_for(lock, std::chrono::seconds(120), [&] { return done == ids.size(); }))
+      return fail("fetch-only phase timed out");
+    fetch_s = std::chrono::duration<double>(Clock::now() - t0).count();
+    if (failed) return fail(std::to_string(failed) + " tiles failed in the fetch-only phase");
+  }
+  // Breakdown, decode alone: the payloads above, from memory, on decode_threads threads.
+  double decode_s = 0;
+  {
+    std::atomic<std::size_t> next{0}, bad{0};
+    const auto t0 = Clock::now();
+    std::vector<std::thread> pool;
+    for (int t = 0; t < decode_threads; ++t)
+      pool.emplace_back([&] {
+        for (std::size_t i; (i = next.fetch_add(1)) < payloads.size();)
+          if (!vts::decode_tile(payloads[i])) ++bad;
+      });
+    for (auto& t : pool) t.join();
+    decode_s = std::chrono::duration<double>(Clock::now() - t0).count();
+    if (bad) return fail(std::to_string(bad.load()) + " tiles did not decode");
+  }
+  payloads.clear();
 
   // Cold: every tile through fetch + verify + disk write + decode.
   double cold_s = 0;
@@ -163,9 +210,10 @@ int main(int argc, char** argv) {
       }
   }
   std::printf(
-      "{\"tiles\": %zu, \"bytes\": %llu, \"cold_s\": %.3f, \"disk_hit_p50_us\": %.1f, "
+      "{\"tiles\": %zu, \"bytes\": %llu, \"cold_s\": %.3f, \"fetch_only_s\": %.3f, "
+      "\"decode_only_s\": %.3f, \"disk_hit_p50_us\": %.1f, "
       "\"disk_hit_p99_us\": %.1f, \"ram_hit_p50_us\": %.2f, \"ram_hit_p99_us\": %.2f}\n",
-      ids.size(), (unsigned long long)bytes, cold_s, percentile(disk_us, 0.5),
+      ids.size(), (unsigned long long)bytes, cold_s, fetch_s, decode_s, percentile(disk_us, 0.5),
       percentile(disk_us, 0.99), percentile(ram_us, 0.5), percentile(ram_us, 0.99));
   return 0;
 }

@@ -4,6 +4,7 @@
 #   vts    the same tiles cold through the full client (fetch + checksum + disk cache write +
 #          decode) with 32 requests in flight: bench/client_bench.cpp
 #   disk / RAM hit latency p50/p99 of TileCache::get (same driver)
+#   breakdown: the client's fetch alone, and the decode alone from memory (same driver)
 # Bars: cold <= 1.2x curl's time; disk hit p50 <= 100 us; RAM hit p50 <= 5 us.
 #
 #   bash bench/client_bench.sh [--vts PATH] [--driver PATH] [--out FILE]
@@ -86,6 +87,8 @@ COLD=$(field cold_s)
   echo "|---|---:|---|"
   echo "| curl --parallel, all tiles | ${CURL_S} s | |"
   echo "| client cold (fetch + checksum + disk write + decode) | ${COLD} s ($(ratio "$COLD" "$CURL_S")x curl) | <= 1.2x |"
+  echo "| breakdown: fetch alone (the client's source, nothing else) | $(field fetch_only_s) s ($(ratio "$(field fetch_only_s)" "$CURL_S")x curl) | |"
+  echo "| breakdown: decode alone, from memory, 2 threads | $(field decode_only_s) s ($(ratio "$(field decode_only_s)" "$CURL_S")x curl) | |"
   echo "| disk hit p50 / p99 | $(field disk_hit_p50_us) / $(field disk_hit_p99_us) us | p50 <= 100 us |"
   echo "| RAM hit p50 / p99 | $(field ram_hit_p50_us) / $(field ram_hit_p99_us) us | p50 <= 5 us |"
 } | tee "${OUT_FILE:-/dev/null}"
