@@ -28,6 +28,9 @@ PACKAGES=(
   # libraries
   libopenimageio-dev libzstd-dev libxxhash-dev zlib1g-dev nlohmann-json3-dev libcli11-dev
   libspdlog-dev libfmt-dev libboost1.81-dev libssl-dev libcurl4-openssl-dev libsqlite3-dev
+  # the OpenGL viewer (renderer/): GLFW 3.3, libepoxy (GL loader), GLM; its tests render under
+  # Xvfb with Mesa's llvmpipe (GL 4.5 core, no GPU needed)
+  libglfw3-dev libepoxy-dev libglm-dev xvfb xauth libgl1-mesa-dri
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
   # real peers, sample data and measuring tools for tests and benchmarks

@@ -96,7 +96,7 @@ step "setup" bash scripts/setup.sh
 
 # --- 2. main build: everything ------------------------------------------------------------------
 if step "configure build/" configure build -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-  -DVTS_BUILD_RENDERER="${VTS_BUILD_RENDERER:-OFF}"; then
+  -DVTS_BUILD_RENDERER="${VTS_BUILD_RENDERER:-ON}"; then
   if step "build build/" cmake --build build -j"$JOBS"; then
     ctest_step "ctest build/" build
   else
@@ -114,7 +114,7 @@ else
   export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:check_initialization_order=1:strict_init_order=1:detect_stack_use_after_return=1}
   export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
   if step "configure build-asan/" configure build-asan -DCMAKE_BUILD_TYPE=Debug -DCMAKE_CXX_FLAGS=-O1 \
-    -DVTS_SANITIZE=ON -DVTS_BUILD_RENDERER=OFF -DVTS_BUILD_BENCH=OFF; then
+    -DVTS_SANITIZE=ON -DVTS_BUILD_RENDERER="${VTS_BUILD_RENDERER:-ON}" -DVTS_BUILD_BENCH=OFF; then
     if step "build build-asan/" cmake --build build-asan -j"$JOBS"; then
       ctest_step "ctest build-asan/ -L unit" build-asan -L unit
     else
