@@ -1,0 +1,148 @@
+// The CPU reference renderer of the plane scene: what the GPU renderer's screenshots are judged
+// against. It follows the sampling rules of camera.hpp in double precision, reading texels straight
+// from a PMTiles archive, plus the image metrics and PNG input/output the comparison needs.
+//
+// PyramidSampler reads texels of any level of an archive: it finds the tile holding a texel,
+// decodes it (keeping the last few decoded tiles in an LRU) and reads the texel from the stored
+// tile's content area. render_reference() renders one PlaneCamera view with it:
+//   - (u, v) = camera.hit(px + 0.5, py + 0.5); background (kBackground) when the ray misses the
+//     plane, when (u, v) is not finite, or when it lies outside [0, W) x [0, H);
+//   - derivatives are the fine 2x2-quad differences of (u, v) (columns px & ~1 and px | 1 of the
+//     pixel's row for d/dx, rows py & ~1 and py | 1 of its column for d/dy; a partner beyond the
+//     viewport's edge is still evaluated, as GPU helper invocations are). When a partner's ray
+//     misses the plane, that derivative is the analytic one of the hit mapping at the pixel's own
+//     centre (the limit of the difference; finite whenever the pixel itself hits the plane);
+//   - rho = max(|d(u,v)/dx|, |d(u,v)/dy|), c = max_level - log2(rho) - bias clamped to
+//     [0, max_level]; rho == 0 or NaN, or a NaN c (NaN bias), means the finest level, and
+//     rho == +inf or bias == +inf the coarsest;
+//   - trilinear between floor(c) and floor(c) + 1 (weight frac(c) on the finer), each level
+//     sampled bilinearly at (u, v) / 2^(max_level - L), blended in linear light, encoded to sRGB
+//     with the exact IEC 61966-2-1 formulas, rounded to nearest; alpha is written as 255.
+//
+// Sparse archives: a tile absent from the archive is replaced by its nearest existing ancestor,
+// texel by texel: the texel returned is the ancestor's texel (x >> k, y >> k) k levels up (not a
+// sample filtered at the ancestor's level, as a GPU fallback would take, so images of sparse
+// regions are a guide, not an exact reference); every such texel read is counted in
+// stats().fallback_texels. A tile that is present but unreadable (corrupt, wrong size, a codec
+// not decoding to rgba8) is an error.
+//
+// Errors are returned as Result/Status values and name the archive or image file. Thread safety:
+// a PyramidSampler is not thread-safe (its tile cache mutates on every read); use one per thread.
+// compare_images() and the free functions are pure or touch only their own files.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <list>
+#include <memory>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "vts/protocol/geometry.hpp"
+#include "vts/protocol/pmtiles.hpp"
+#include "vts/protocol/result.hpp"
+#include "vts/renderer/camera.hpp"
+
+namespace vts::renderer {
+
+// An 8-bit RGBA image: rows top to bottom, 4 bytes per pixel, sRGB-encoded colour, straight alpha.
+struct Image {
+  int width = 0, height = 0;
+  std::vector<std::uint8_t> rgba;
+
+  static Image blank(int width, int height) {
+    return Image{width, height, std::vector<std::uint8_t>(std::size_t(width) * height * 4, 0)};
+  }
+  std::uint8_t* at(int x, int y) { return rgba.data() + (std::size_t(y) * width + x) * 4; }
+  const std::uint8_t* at(int x, int y) const {
+    return rgba.data() + (std::size_t(y) * width + x) * 4;
+  }
+};
+
+using Rgba8 = std::array<std::uint8_t, 4>;
+using LinearRgba = std::array<double, 4>;  // linear-light colour, straight alpha, all in [0, 1]
+
+// The exact IEC 61966-2-1 transfer functions (no lookup-table approximation in the encoder).
+double srgb_to_linear(double encoded);  // encoded in [0, 1]
+double linear_to_srgb(double linear);   // linear in [0, 1]
+// linear_to_srgb of the value clamped to [0, 1], times 255, rounded to nearest.
+std::uint8_t encode_srgb8(double linear);
+
+class PyramidSampler {
+ public:
+  struct Stats {
+    std::uint64_t tiles_decoded = 0;    // decode_tile() calls (cache misses on present tiles)
+    std::uint64_t fallback_texels = 0;  // texel reads answered by an ancestor of an absent tile
+  };
+
+  // Opens the archive and reads the geometry from its metadata. `cache_tiles` decoded tiles are
+  // kept (at least 1).
+  static Result<std::unique_ptr<PyramidSampler>> open(const std::filesystem::path& archive,
+                                                      std::size_t cache_tiles = 64);
+
+  const Geometry& geometry() const { return geometry_; }
+  int max_level() const { return geometry_.max_zoom(); }
+  const Stats& stats() const { return stats_; }
+  const std::filesystem::path& path() const { return path_; }
+
+  // The stored sRGB texel of level z at (x, y), clamped to the level's image
+  // ([0, level_width - 1] x [0, level_height - 1]). invalid_argument for a level outside
+  // [0, max_level]; absent tiles fall back on their ancestors (see the top of this file).
+  Result<Rgba8> texel(int z, std::int64_t x, std::int64_t y);
+
+  // Bilinear sample of level z at (tx, ty) in level-z texel units, texel centres at +0.5 (so the
+  // four texels around (tx - 0.5, ty - 0.5)), clamp to the level's edge, colour decoded from sRGB
+  // before weighting. invalid_argument for a bad level or non-finite coordinates.
+  Result<LinearRgba> bilinear(int z, double tx, double ty);
+
+ private:
+  struct Entry {
+    std::shared_ptr<const std::vector<std::uint8_t>> pixels;  // null: absent from the archive
+    std::list<std::uint64_t>::iterator lru;
+  };
+
+  PyramidSampler(std::filesystem::path path, std::shared_ptr<pmtiles::Reader> reader,
+                 Geometry geometry, std::size_t cache_tiles);
+  // The decoded stored tile, or null when the archive does not have it.
+  Result<const std::vector<std::uint8_t>*> tile(TileId id);
+
+  std::filesystem::path path_;
+  std::shared_ptr<pmtiles::Reader> reader_;
+  Geometry geometry_;
+  std::size_t cache_tiles_;
+  std::list<std::uint64_t> lru_;  // most recently used first
+  std::unordered_map<std::uint64_t, Entry> cache_;
+  Stats stats_;
+};
+
+// Renders the plane view `camera` (camera.width x camera.height pixels) by the rules at the top of
+// this file. `bias` is added to the level like the GPU's mip bias (positive = coarser). Fails with
+// invalid_argument for a viewport that is empty or larger than 16384 a side, or with the sampler's
+// error.
+Result<Image> render_reference(PyramidSampler& sampler, const PlaneCamera& camera, double bias = 0);
+
+// Differences between two images of equal size over the R, G and B channels (alpha ignored).
+struct ImageDiff {
+  // 10 log10(255^2 / MSE) over every R, G, B value; +infinity when the images are identical
+  // (including empty images).
+  double psnr_db = 0;
+  int max_abs = 0;                // largest |a - b| of any channel
+  double mean_abs = 0;            // mean |a - b| over every R, G, B value
+  int threshold = 0;              // the threshold pixels_over was counted with
+  std::uint64_t pixels_over = 0;  // pixels whose largest channel difference exceeds threshold
+  std::uint64_t pixels = 0;       // pixels compared
+};
+
+// invalid_argument when the sizes differ or a buffer does not hold width * height * 4 bytes.
+Result<ImageDiff> compare_images(const Image& a, const Image& b, int threshold = 8);
+
+// Writes an 8-bit RGBA PNG (whatever the extension), tagged sRGB.
+Status write_png(const std::filesystem::path& path, const Image& image);
+// Reads an image file (PNG, or any 8-bit format OpenImageIO reads) as RGBA8: grey is replicated,
+// a missing alpha channel becomes 255. not_found when the file does not exist.
+Result<Image> read_png(const std::filesystem::path& path);
+
+}  // namespace vts::renderer

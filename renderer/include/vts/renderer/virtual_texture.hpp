@@ -1,0 +1,104 @@
+// The GPU side of sparse virtual texturing, and the per-frame loop that drives it
+// (docs/RENDERER.md).
+//
+// One VirtualTexture draws one tiled image (a vts::Geometry) on the plane scene. It owns:
+//   - the physical texture: an SRGB8_ALPHA8 atlas of `slots` fixed slots of (T + 2B)^2 texels;
+//   - the page table: an R32UI 2D array texture of kMaxLevels layers of W x W (ClipmapPageTable),
+//     read with texelFetch, updated only where it changed;
+//   - the feedback pass: the scene at 1/k resolution into an RG32UI target, read back through a
+//     ring of pixel-pack buffers guarded by fences (never a stalling glReadPixels);
+//   - the upload queue: decoded tiles from the client's worker pool, copied into slots through a
+//     ring of pixel-unpack buffers under a per-frame budget of tiles and bytes;
+//   - the CPU core: FeedbackProcessor, SlotCache (LRU with guards, root pinned), MipBiasController.
+//
+// render() runs one frame: readback of an older feedback frame -> requests (coarse first) ->
+// uploads within budget -> page-table windows recentred on the view -> dirty page-table spans
+// uploaded -> feedback pass -> colour pass into its own framebuffer (read_image(), or blit()).
+//
+// Thread safety: GL-thread only; create, use and destroy it with its GlContext current.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+
+#include "vts/client/tile_client.hpp"
+#include "vts/protocol/geometry.hpp"
+#include "vts/protocol/result.hpp"
+#include "vts/renderer/camera.hpp"
+#include "vts/renderer/mip_bias.hpp"
+#include "vts/renderer/reference.hpp"
+
+namespace vts::renderer {
+
+enum class DebugView : std::uint8_t {
+  none = 0,
+  levels,      // tint by the level actually sampled (red = coarse ... blue = fine)
+  physical,    // the physical texture (slot atlas), stretched over the screen
+  page_table,  // the page-table layer of the level at the screen centre, one colour per slot
+};
+
+struct VirtualTextureOptions {
+  std::uint32_t slots = 256;  // physical slots, the root's included (>= 2)
+  std::uint32_t window = 64;  // page-table window W per level (power of two)
+  int feedback_divisor = 8;   // k: the feedback pass renders at 1/k resolution (1, 2, 4, 8, 16)
+  int readback_ring = 3;      // feedback frames in flight (>= 1)
+  std::uint32_t upload_tiles = 32;         // per-frame upload budget: tiles ...
+  std::uint64_t upload_bytes = 16u << 20;  // ... and bytes
+  std::uint32_t keep_frames = 8;           // a tile unseen for fewer frames is never evicted
+  bool trilinear = true;                   // false: bilinear at the nearest finer level only
+  double max_bias = 4.0;                   // upper bound of the automatic mip bias
+  DebugView debug = DebugView::none;
+};
+
+// What one frame did; the viewer's HUD and `vts view --json` print these.
+struct FrameStats {
+  std::uint64_t frame = 0;
+  double vt_cpu_ms = 0;      // CPU time in the virtual-texturing system (feedback, table, uploads)
+  double frame_ms = 0;       // the whole render() call, GL submission included
+  std::uint32_t wanted = 0;  // distinct tiles the latest feedback asked for (ancestors included)
+  std::uint32_t wanted_missing = 0;  // of those, not resident
+  std::uint32_t resident = 0;        // tiles in the physical texture
+  std::uint32_t pending = 0;         // tiles asked of the client and not delivered yet
+  std::uint32_t uploads = 0;         // tiles uploaded this frame
+  std::uint64_t upload_bytes = 0;
+  std::uint32_t feedback_frames = 0;  // feedback buffers processed this frame (0 or 1)
+  double mip_bias = 0;
+  double hit_ratio = 0;  // wanted tiles already resident / wanted (1 when nothing wanted)
+  std::uint64_t evictions = 0, refusals = 0;  // cumulative slot-cache counters
+  std::uint64_t absent = 0, errors = 0;       // cumulative: tiles the source lacks / failed
+  bool complete = false;  // the latest feedback's tiles are all resident and nothing is pending
+};
+
+class VirtualTexture {
+ public:
+  // Needs a current GL 4.5 core context. Errors: options out of range, a physical texture larger
+  // than GL_MAX_TEXTURE_SIZE, a geometry with more than kMaxLevels levels, shader build failures
+  // (with the driver's log).
+  static Result<std::unique_ptr<VirtualTexture>> create(std::shared_ptr<client::TileClient> client,
+                                                        const Geometry& geometry,
+                                                        VirtualTextureOptions options = {});
+  ~VirtualTexture();
+  VirtualTexture(const VirtualTexture&) = delete;
+  VirtualTexture& operator=(const VirtualTexture&) = delete;
+
+  // Renders one frame of `view` at width x height into the texture's own framebuffer.
+  FrameStats render(const PlaneView& view, int width, int height);
+  // The last frame, sRGB RGBA8, rows top to bottom (a blocking read: screenshots and tests).
+  Image read_image() const;
+  // Copies the last frame to the window's default framebuffer (0), scaled to width x height.
+  void blit_to_screen(int width, int height) const;
+
+  void set_debug_view(DebugView view);
+  DebugView debug_view() const;
+  const Geometry& geometry() const;
+  const VirtualTextureOptions& options() const;
+  std::uint64_t page_table_gpu_bytes() const;  // the page-table texture, whatever the image size
+  std::uint64_t physical_gpu_bytes() const;    // the slot atlas
+
+ private:
+  class Impl;
+  std::unique_ptr<Impl> impl_;
+  explicit VirtualTexture(std::unique_ptr<Impl> impl);
+};
+
+}  // namespace vts::renderer

@@ -1,0 +1,175 @@
+// GLSL of the plane scene (internal). One fragment source serves the colour pass and the feedback
+// pass (#define FEEDBACK), so both compute the same coordinates and the same level.
+//
+// Precision (docs/RENDERER.md, "Precision"): the CPU sends the eye relative to an integer anchor
+// texel near the view centre, so the ray-plane hit `rel` is a small float whatever the image
+// size; the shader then carries texel positions as integer (uint) texel + float fraction at every
+// level. Derivatives are taken from `rel`, continuous, before any split or wrap.
+#pragma once
+
+namespace vts::renderer::detail {
+
+inline constexpr const char* kFullscreenVertex = R"(#version 450 core
+void main() {
+  // One triangle covering the viewport: (-1,-1), (3,-1), (-1,3).
+  vec2 p = vec2(float((gl_VertexID & 1) << 2) - 1.0, float((gl_VertexID & 2) << 1) - 1.0);
+  gl_Position = vec4(p, 0.0, 1.0);
+}
+)";
+
+// Prepended: "#version 450 core\n" and optionally "#define FEEDBACK\n".
+inline constexpr const char* kPlaneFragment = R"(
+const int kMaxLevels = 24;
+
+uniform vec3 u_eye_rel;  // eye - anchor, finest texels (u right, v down, w into the ground)
+uniform vec3 u_forward;
+uniform vec3 u_right;
+uniform vec3 u_up;
+uniform float u_tan_half_fov;
+uniform float u_aspect;
+uniform vec2 u_viewport;     // this pass's size in pixels
+uniform ivec2 u_anchor;      // integer finest texel the camera works relative to
+uniform ivec2 u_image;       // finest image size in texels
+uniform int u_max_level;
+uniform int u_tile;          // T
+uniform float u_level_offset;  // colour pass: -bias; feedback: +log2(k)
+
+#ifdef FEEDBACK
+layout(location = 0) out uvec2 o_feedback;
+#else
+uniform usampler2DArray u_page_table;
+uniform uvec2 u_origin[kMaxLevels];
+uniform uint u_window;
+uniform sampler2D u_physical;
+uniform int u_slots_per_row;
+uniform float u_slot_size;   // T + 2B
+uniform float u_border;      // B
+uniform vec2 u_atlas_inv;    // 1 / atlas size in texels
+uniform bool u_trilinear;
+uniform int u_debug;         // 0 none, 1 level tint
+layout(location = 0) out vec4 o_color;
+
+const vec3 kLevelTint[8] = vec3[8](vec3(1, 0.2, 0.2), vec3(1, 0.6, 0.1), vec3(0.9, 0.9, 0.1),
+                                   vec3(0.3, 1, 0.3), vec3(0.1, 0.9, 0.9), vec3(0.3, 0.4, 1),
+                                   vec3(0.7, 0.3, 1), vec3(1, 0.3, 0.8));
+
+// Colour of level L at the finest texel anchor + ip + fr, through the page table: one table
+// fetch at the finest level whose window holds the tile, then one bilinear sample in the slot of
+// the nearest resident ancestor-or-self that entry names.
+vec4 sample_level(int L, ivec2 abs_i, vec2 fr, out int mapped_level) {
+  uint s = uint(u_max_level - L);
+  uvec2 ai = uvec2(abs_i);
+  uvec2 ti = ai >> s;                                                    // level-L texel
+  vec2 tf = (vec2(ai & uvec2((1u << s) - 1u)) + fr) / float(1u << s);  // its fraction
+  uvec2 tile = ti / uint(u_tile);
+  int lvl = L;
+  for (; lvl > 0; --lvl) {
+    uvec2 o = u_origin[lvl];
+    if (all(lessThan(tile - o, uvec2(u_window)))) break;  // unsigned: below origin wraps high
+    tile >>= 1u;
+  }
+  uint e = texelFetch(u_page_table, ivec3(tile & uvec2(u_window - 1u), lvl), 0).r;
+  if ((e & 0x80000000u) == 0u) {
+    mapped_level = -1;
+    return vec4(1, 0, 1, 1);  // nothing resident yet, not even the root
+  }
+  int m = int((e >> 26) & 31u);
+  uint slot = e & 0x3ffffffu;
+  uint d = uint(L - m);
+  uvec2 tm = ti >> d;                                                  // texel at level m
+  vec2 fm = (vec2(ti & uvec2((1u << d) - 1u)) + tf) / float(1u << d);  // its fraction
+  vec2 pos = vec2(tm % uint(u_tile)) + fm;                             // inside the tile, [0, T)
+  vec2 slot_xy = vec2(float(slot % uint(u_slots_per_row)), float(slot / uint(u_slots_per_row)));
+  vec2 uv = (slot_xy * u_slot_size + u_border + pos) * u_atlas_inv;
+  mapped_level = m;
+  return textureLod(u_physical, uv, 0.0);
+}
+#endif
+
+void main() {
+  float sx = gl_FragCoord.x;
+  float sy = u_viewport.y - gl_FragCoord.y;  // rows top to bottom, as the camera counts them
+  float nx = (2.0 * sx / u_viewport.x - 1.0) * u_tan_half_fov * u_aspect;
+  float ny = (1.0 - 2.0 * sy / u_viewport.y) * u_tan_half_fov;
+  vec3 d = u_forward + u_right * nx + u_up * ny;
+  float t = -u_eye_rel.z / d.z;
+  vec2 rel = u_eye_rel.xy + t * d.xy;
+  // Derivatives first, in uniform control flow, from the continuous coordinate.
+  vec2 ddx = dFdxFine(rel);
+  vec2 ddy = dFdyFine(rel);
+
+  bool hit = d.z > 0.0 && !any(isnan(rel)) && !any(isinf(rel)) && all(lessThan(abs(rel), vec2(1.0e9)));
+  ivec2 ip = hit ? ivec2(floor(rel)) : ivec2(0);
+  vec2 fr = rel - floor(rel);
+  ivec2 abs_i = u_anchor + ip;
+  hit = hit && all(greaterThanEqual(abs_i, ivec2(0))) && all(lessThan(abs_i, u_image));
+
+  float rho = max(length(ddx), length(ddy));
+  float c = float(u_max_level) - log2(rho) + u_level_offset;  // rho = 0 gives +inf: finest
+  if (isnan(c)) c = float(u_max_level);
+  c = clamp(c, 0.0, float(u_max_level));
+
+#ifdef FEEDBACK
+  if (!hit) {
+    o_feedback = uvec2(0xffffffffu);
+    return;
+  }
+  int L = int(ceil(c));
+  uint f = min(uint((float(L) - c) * 256.0), 255u);
+  uint s = uint(u_max_level - L);
+  uvec2 tile = (uvec2(abs_i) >> s) / uint(u_tile);
+  o_feedback = uvec2(tile.x | (uint(L) << 24), tile.y | (f << 24));
+#else
+  if (!hit) {
+    o_color = vec4(0, 0, 0, 1);
+    return;
+  }
+  int L0 = int(floor(c));
+  float w = c - float(L0);
+  int m0, m1 = -1;
+  vec4 col;
+  if (!u_trilinear) {
+    col = sample_level(int(ceil(c)), abs_i, fr, m0);
+  } else if (L0 >= u_max_level || w == 0.0) {
+    col = sample_level(L0, abs_i, fr, m0);
+  } else {
+    col = mix(sample_level(L0, abs_i, fr, m0), sample_level(L0 + 1, abs_i, fr, m1), w);
+  }
+  if (u_debug == 1) {
+    int m = max(m0, m1);
+    col.rgb = m < 0 ? vec3(1, 0, 1) : mix(col.rgb, kLevelTint[m % 8], 0.5);
+  }
+  o_color = vec4(col.rgb, 1.0);
+#endif
+}
+)";
+
+// The physical texture over the whole screen (DebugView::physical), and the page-table layer
+// (DebugView::page_table) as one colour per slot.
+inline constexpr const char* kDebugFragment = R"(#version 450 core
+uniform sampler2D u_physical;
+uniform usampler2DArray u_page_table;
+uniform int u_mode;   // 2 physical, 3 page table
+uniform int u_layer;
+uniform vec2 u_viewport;
+layout(location = 0) out vec4 o_color;
+void main() {
+  vec2 uv = vec2(gl_FragCoord.x / u_viewport.x, 1.0 - gl_FragCoord.y / u_viewport.y);
+  if (u_mode == 2) {
+    o_color = vec4(textureLod(u_physical, uv, 0.0).rgb, 1.0);
+    return;
+  }
+  ivec3 size = textureSize(u_page_table, 0);
+  uint e = texelFetch(u_page_table, ivec3(uv * vec2(size.xy), u_layer), 0).r;
+  if ((e & 0x80000000u) == 0u) {
+    o_color = vec4(0, 0, 0, 1);
+    return;
+  }
+  uint slot = e & 0x3ffffffu;
+  uint h = slot * 2654435761u;
+  o_color = vec4(float(h & 255u) / 255.0, float((h >> 8) & 255u) / 255.0,
+                 float((e >> 26) & 31u) / 24.0, 1.0);
+}
+)";
+
+}  // namespace vts::renderer::detail

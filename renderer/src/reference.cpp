@@ -1,0 +1,372 @@
+#include "vts/renderer/reference.hpp"
+
+#include <OpenImageIO/imageio.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <optional>
+#include <utility>
+
+#include "vts/protocol/codec.hpp"
+#include "vts/protocol/tileset.hpp"
+#include "vts/renderer/pyramid.hpp"
+
+namespace vts::renderer {
+
+namespace OIIO = OIIO_NAMESPACE;
+
+namespace {
+
+std::string quoted(const std::filesystem::path& p) {
+  return "'" + p.string() + "'";
+}
+
+// srgb_to_linear of every 8-bit code, computed with the exact formula.
+const std::array<double, 256>& decode_table() {
+  static const std::array<double, 256> table = [] {
+    std::array<double, 256> t{};
+    for (int i = 0; i < 256; ++i) t[i] = srgb_to_linear(i / 255.0);
+    return t;
+  }();
+  return table;
+}
+
+}  // namespace
+
+double srgb_to_linear(double e) {
+  return e <= 0.04045 ? e / 12.92 : std::pow((e + 0.055) / 1.055, 2.4);
+}
+
+double linear_to_srgb(double l) {
+  return l <= 0.0031308 ? 12.92 * l : 1.055 * std::pow(l, 1.0 / 2.4) - 0.055;
+}
+
+std::uint8_t encode_srgb8(double linear) {
+  if (!(linear > 0)) return 0;  // also NaN
+  if (linear >= 1) return 255;
+  const double e = std::clamp(linear_to_srgb(linear), 0.0, 1.0);
+  return static_cast<std::uint8_t>(std::lround(e * 255.0));
+}
+
+// ---- PyramidSampler --------------------------------------------------------------------------
+
+PyramidSampler::PyramidSampler(std::filesystem::path path, std::shared_ptr<pmtiles::Reader> reader,
+                               Geometry geometry, std::size_t cache_tiles)
+    : path_(std::move(path)),
+      reader_(std::move(reader)),
+      geometry_(geometry),
+      cache_tiles_(std::max<std::size_t>(cache_tiles, 1)) {}
+
+Result<std::unique_ptr<PyramidSampler>> PyramidSampler::open(const std::filesystem::path& archive,
+                                                             std::size_t cache_tiles) {
+  auto reader = pmtiles::Reader::open(archive);
+  if (!reader) {
+    Error e = std::move(reader).error();
+    if (e.message.find(archive.string()) == std::string::npos)
+      e.message = quoted(archive) + ": " + e.message;
+    return e;
+  }
+  auto info = TilesetInfo::from_json((*reader)->metadata_json());
+  if (!info) {
+    Error e = std::move(info).error();
+    e.message = quoted(archive) + ": metadata: " + e.message;
+    return e;
+  }
+  const Codec* codec = find_codec(info->codec);
+  if (!codec || codec->decoded_format() != PixelFormat::rgba8)
+    return make_error(ErrorCode::unsupported, quoted(archive) + ": codec '" +
+                                                  codec_name(info->codec) +
+                                                  "' does not decode to rgba8 texels");
+  return std::unique_ptr<PyramidSampler>(
+      new PyramidSampler(archive, std::move(*reader), info->geometry, cache_tiles));
+}
+
+Result<const std::vector<std::uint8_t>*> PyramidSampler::tile(TileId id) {
+  const std::uint64_t key = tile_key(id);
+  if (auto it = cache_.find(key); it != cache_.end()) {
+    if (lru_.begin() != it->second.lru) lru_.splice(lru_.begin(), lru_, it->second.lru);
+    return it->second.pixels.get();
+  }
+  std::shared_ptr<const std::vector<std::uint8_t>> pixels;
+  auto bytes = reader_->get(id);
+  if (bytes) {
+    auto img = decode_tile(*bytes);
+    if (!img)
+      return make_error(img.error().code,
+                        quoted(path_) + ": tile " + id.to_string() + ": " + img.error().message);
+    const std::uint32_t s = geometry_.stored_size();
+    if (img->format != PixelFormat::rgba8 || img->width != s || img->height != s)
+      return make_error(ErrorCode::corrupt,
+                        quoted(path_) + ": tile " + id.to_string() + " decodes to " +
+                            std::to_string(img->width) + "x" + std::to_string(img->height) +
+                            (img->format == PixelFormat::rgba8 ? " rgba8" : " non-rgba8") +
+                            ", expected " + std::to_string(s) + "x" + std::to_string(s) + " rgba8");
+    ++stats_.tiles_decoded;
+    pixels = std::make_shared<const std::vector<std::uint8_t>>(std::move(img->pixels));
+  } else if (bytes.error().code != ErrorCode::not_found) {
+    return make_error(bytes.error().code,
+                      quoted(path_) + ": tile " + id.to_string() + ": " + bytes.error().message);
+  }
+  if (cache_.size() >= cache_tiles_) {
+    cache_.erase(lru_.back());
+    lru_.pop_back();
+  }
+  lru_.push_front(key);
+  const std::vector<std::uint8_t>* result = pixels.get();
+  cache_.emplace(key, Entry{std::move(pixels), lru_.begin()});
+  return result;
+}
+
+Result<Rgba8> PyramidSampler::texel(int z, std::int64_t x, std::int64_t y) {
+  if (!geometry_.valid_level(z))
+    return make_error(ErrorCode::invalid_argument, quoted(path_) + ": level " + std::to_string(z) +
+                                                       " is outside [0, " +
+                                                       std::to_string(max_level()) + "]");
+  auto clamp_to = [](std::int64_t v, std::uint64_t extent) {
+    return static_cast<std::uint64_t>(std::clamp<std::int64_t>(v, 0, std::int64_t(extent) - 1));
+  };
+  std::uint64_t px = clamp_to(x, geometry_.level_width(z));
+  std::uint64_t py = clamp_to(y, geometry_.level_height(z));
+  for (int level = z; level >= 0; --level) {
+    const TileId id = geometry_.tile_of_texel(level, px, py);
+    auto pixels = tile(id);
+    if (!pixels) return std::move(pixels).error();
+    if (*pixels) {
+      if (level != z) ++stats_.fallback_texels;
+      const std::uint64_t T = geometry_.tile_size(), B = geometry_.border();
+      const std::uint64_t sx = px - std::uint64_t{id.x} * T + B;
+      const std::uint64_t sy = py - std::uint64_t{id.y} * T + B;
+      const std::uint8_t* p = (*pixels)->data() + (sy * geometry_.stored_size() + sx) * 4;
+      return Rgba8{p[0], p[1], p[2], p[3]};
+    }
+    px >>= 1;
+    py >>= 1;
+  }
+  return make_error(ErrorCode::not_found, quoted(path_) + ": no tile holds level " +
+                                              std::to_string(z) + " texel " + std::to_string(x) +
+                                              "," + std::to_string(y) + " nor any ancestor");
+}
+
+Result<LinearRgba> PyramidSampler::bilinear(int z, double tx, double ty) {
+  if (!geometry_.valid_level(z))
+    return make_error(ErrorCode::invalid_argument, quoted(path_) + ": level " + std::to_string(z) +
+                                                       " is outside [0, " +
+                                                       std::to_string(max_level()) + "]");
+  if (!std::isfinite(tx) || !std::isfinite(ty))
+    return make_error(ErrorCode::invalid_argument, "bilinear sample at a non-finite coordinate");
+  // Beyond one texel past the edge every tap clamps to the edge texel: clamping the coordinate
+  // there first keeps the integer conversion in range without changing the result.
+  const double sx = std::clamp(tx - 0.5, -1.0, static_cast<double>(geometry_.level_width(z)));
+  const double sy = std::clamp(ty - 0.5, -1.0, static_cast<double>(geometry_.level_height(z)));
+  const double fx0 = std::floor(sx), fy0 = std::floor(sy);
+  const double fx = sx - fx0, fy = sy - fy0;
+  const auto x0 = static_cast<std::int64_t>(fx0), y0 = static_cast<std::int64_t>(fy0);
+  const double wx[2] = {1 - fx, fx}, wy[2] = {1 - fy, fy};
+  const auto& lin = decode_table();
+  LinearRgba out{0, 0, 0, 0};
+  for (int j = 0; j < 2; ++j) {
+    for (int i = 0; i < 2; ++i) {
+      const double w = wx[i] * wy[j];
+      if (w == 0) continue;
+      auto t = texel(z, x0 + i, y0 + j);
+      if (!t) return std::move(t).error();
+      for (int c = 0; c < 3; ++c) out[c] += w * lin[(*t)[c]];
+      out[3] += w * ((*t)[3] / 255.0);
+    }
+  }
+  return out;
+}
+
+// ---- render_reference ------------------------------------------------------------------------
+
+namespace {
+
+using Hit = std::optional<std::pair<double, double>>;
+
+// d(u, v)/d(sx) (axis 0) or d(u, v)/d(sy) (axis 1) of camera.hit at screen point (sx, sy), which
+// must hit the plane: p = eye + t d with t = -eye.z / d.z, so dp = t (dd - d dd.z / d.z).
+std::pair<double, double> analytic_derivative(const PlaneCamera& cam, double sx, double sy,
+                                              int axis) {
+  const Vec3d d = cam.ray(sx, sy);
+  const Vec3d dd = axis == 0 ? cam.right * (2.0 / cam.width * cam.tan_half_fov * cam.aspect)
+                             : cam.up * (-2.0 / cam.height * cam.tan_half_fov);
+  const double t = -cam.eye.z / d.z;
+  const Vec3d dp = (dd - d * (dd.z / d.z)) * t;
+  return {dp.x, dp.y};
+}
+
+// The quad difference along one axis: hit(b) - hit(a), where one of a, b is the pixel itself
+// (`self`); the analytic derivative at the pixel when the partner misses the plane.
+std::pair<double, double> quad_difference(const PlaneCamera& cam, const Hit& a, const Hit& b,
+                                          double sx, double sy, int axis) {
+  if (a && b) return {b->first - a->first, b->second - a->second};
+  return analytic_derivative(cam, sx, sy, axis);
+}
+
+}  // namespace
+
+Result<Image> render_reference(PyramidSampler& sampler, const PlaneCamera& camera, double bias) {
+  const int w = camera.width, h = camera.height;
+  constexpr int kMaxSide = 1 << 14;
+  if (w <= 0 || h <= 0 || w > kMaxSide || h > kMaxSide)
+    return make_error(ErrorCode::invalid_argument,
+                      "reference viewport " + std::to_string(w) + "x" + std::to_string(h) +
+                          " is empty or larger than " + std::to_string(kMaxSide) + " a side");
+  const Geometry& g = sampler.geometry();
+  const int max_level = g.max_zoom();
+  const double W = static_cast<double>(g.width()), H = static_cast<double>(g.height());
+  Image img = Image::blank(w, h);
+
+  // Rows are rendered in quad pairs (2k, 2k + 1). The hits of both rows' pixel centres are kept,
+  // plus one column beyond the viewport (the partner of an odd last column); the second row of
+  // an odd last pair lies beyond the viewport too and is only a partner.
+  const int gw = w + 1;
+  std::vector<Hit> rows[2] = {std::vector<Hit>(gw), std::vector<Hit>(gw)};
+  for (int y0 = 0; y0 < h; y0 += 2) {
+    for (int r = 0; r < 2; ++r)
+      for (int x = 0; x < gw; ++x) rows[r][x] = camera.hit(x + 0.5, y0 + r + 0.5);
+    for (int py = y0; py < std::min(y0 + 2, h); ++py) {
+      const std::vector<Hit>& row = rows[py - y0];
+      for (int px = 0; px < w; ++px) {
+        std::uint8_t* out = img.at(px, py);
+        const Hit& self = row[px];
+        if (!self || !(self->first >= 0 && self->first < W && self->second >= 0 &&
+                       self->second < H)) {  // also rejects NaN
+          std::copy(kBackground, kBackground + 4, out);
+          continue;
+        }
+        const double u = self->first, v = self->second;
+        const double sx = px + 0.5, sy = py + 0.5;
+        const auto [dudx, dvdx] = quad_difference(camera, row[px & ~1], row[px | 1], sx, sy, 0);
+        const auto [dudy, dvdy] = quad_difference(camera, rows[0][px], rows[1][px], sx, sy, 1);
+        const double rho = std::max(std::hypot(dudx, dvdx), std::hypot(dudy, dvdy));
+        double c = rho > 0 ? max_level - std::log2(rho) - bias : double(max_level);
+        if (std::isnan(c)) c = max_level;
+        c = std::clamp(c, 0.0, double(max_level));
+
+        const int l0 = static_cast<int>(std::floor(c));
+        const double f = c - l0;
+        LinearRgba colour{0, 0, 0, 0};
+        for (int k = 0; k < 2; ++k) {
+          const int level = l0 + k;
+          const double weight = k == 0 ? 1 - f : f;
+          if (level > max_level || weight == 0) continue;
+          auto s = sampler.bilinear(level, std::ldexp(u, level - max_level),
+                                    std::ldexp(v, level - max_level));
+          if (!s) return std::move(s).error();
+          for (int ch = 0; ch < 4; ++ch) colour[ch] += weight * (*s)[ch];
+        }
+        for (int ch = 0; ch < 3; ++ch) out[ch] = encode_srgb8(colour[ch]);
+        out[3] = 255;
+      }
+    }
+  }
+  return img;
+}
+
+// ---- metrics ---------------------------------------------------------------------------------
+
+Result<ImageDiff> compare_images(const Image& a, const Image& b, int threshold) {
+  if (a.width != b.width || a.height != b.height)
+    return make_error(ErrorCode::invalid_argument, "cannot compare a " + std::to_string(a.width) +
+                                                       "x" + std::to_string(a.height) +
+                                                       " image with a " + std::to_string(b.width) +
+                                                       "x" + std::to_string(b.height) + " one");
+  if (a.width < 0 || a.height < 0)
+    return make_error(ErrorCode::invalid_argument, "negative image size");
+  const std::size_t n = std::size_t(a.width) * std::size_t(a.height);
+  if (a.rgba.size() != n * 4 || b.rgba.size() != n * 4)
+    return make_error(ErrorCode::invalid_argument,
+                      "image buffers of " + std::to_string(a.rgba.size()) + " and " +
+                          std::to_string(b.rgba.size()) + " bytes for " + std::to_string(n) +
+                          " pixels");
+  ImageDiff d;
+  d.threshold = threshold;
+  d.pixels = n;
+  std::uint64_t sum_abs = 0, sum_sq = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    int pixel_max = 0;
+    for (int c = 0; c < 3; ++c) {
+      const int diff = std::abs(int(a.rgba[i * 4 + c]) - int(b.rgba[i * 4 + c]));
+      pixel_max = std::max(pixel_max, diff);
+      sum_abs += std::uint64_t(diff);
+      sum_sq += std::uint64_t(diff) * std::uint64_t(diff);
+    }
+    d.max_abs = std::max(d.max_abs, pixel_max);
+    if (pixel_max > threshold) ++d.pixels_over;
+  }
+  const double values = 3.0 * double(n);
+  d.mean_abs = n ? double(sum_abs) / values : 0.0;
+  d.psnr_db = sum_sq == 0 ? std::numeric_limits<double>::infinity()
+                          : 10.0 * std::log10(255.0 * 255.0 * values / double(sum_sq));
+  return d;
+}
+
+// ---- PNG -------------------------------------------------------------------------------------
+
+Status write_png(const std::filesystem::path& path, const Image& image) {
+  if (image.width <= 0 || image.height <= 0 ||
+      image.rgba.size() != std::size_t(image.width) * std::size_t(image.height) * 4)
+    return make_error(ErrorCode::invalid_argument, "cannot write " + quoted(path) + ": invalid " +
+                                                       std::to_string(image.width) + "x" +
+                                                       std::to_string(image.height) + " image");
+  auto out = OIIO::ImageOutput::create("png");
+  if (!out)
+    return make_error(ErrorCode::unsupported,
+                      "cannot write " + quoted(path) + ": no PNG writer: " + OIIO::geterror());
+  OIIO::ImageSpec spec(image.width, image.height, 4, OIIO::TypeDesc::UINT8);
+  spec.attribute("oiio:ColorSpace", "sRGB");
+  spec.attribute("oiio:UnassociatedAlpha", 1);  // straight alpha as given: no un-premultiplying
+  if (!out->open(path.string(), spec))
+    return make_error(ErrorCode::io, "cannot write " + quoted(path) + ": " + out->geterror());
+  if (!out->write_image(OIIO::TypeDesc::UINT8, image.rgba.data())) {
+    const std::string error = out->geterror();
+    out->close();
+    return make_error(ErrorCode::io, "writing " + quoted(path) + ": " + error);
+  }
+  if (!out->close())
+    return make_error(ErrorCode::io, "writing " + quoted(path) + ": " + out->geterror());
+  return {};
+}
+
+Result<Image> read_png(const std::filesystem::path& path) {
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec))
+    return make_error(ErrorCode::not_found, "cannot read " + quoted(path) + ": no such file");
+  OIIO::ImageSpec config;
+  config.attribute("oiio:UnassociatedAlpha", 1);  // keep straight alpha: no premultiplying
+  auto in = OIIO::ImageInput::open(path.string(), &config);
+  if (!in)
+    return make_error(ErrorCode::corrupt, "cannot read " + quoted(path) + ": " + OIIO::geterror());
+  const OIIO::ImageSpec& spec = in->spec();
+  const int channels = spec.nchannels;
+  if (spec.width <= 0 || spec.height <= 0 || spec.width > (1 << 15) || spec.height > (1 << 15) ||
+      channels < 1 || channels > 4)
+    return make_error(ErrorCode::unsupported, "cannot read " + quoted(path) + ": " +
+                                                  std::to_string(spec.width) + "x" +
+                                                  std::to_string(spec.height) + " with " +
+                                                  std::to_string(channels) + " channels");
+  std::vector<std::uint8_t> raw(std::size_t(spec.width) * spec.height * channels);
+  if (!in->read_image(0, 0, 0, channels, OIIO::TypeDesc::UINT8, raw.data()))
+    return make_error(ErrorCode::corrupt, "reading " + quoted(path) + ": " + in->geterror());
+  in->close();
+  Image img = Image::blank(spec.width, spec.height);
+  const std::size_t n = std::size_t(spec.width) * spec.height;
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::uint8_t* s = raw.data() + i * channels;
+    std::uint8_t* d = img.rgba.data() + i * 4;
+    if (channels <= 2) {
+      d[0] = d[1] = d[2] = s[0];
+      d[3] = channels == 2 ? s[1] : 255;
+    } else {
+      d[0] = s[0];
+      d[1] = s[1];
+      d[2] = s[2];
+      d[3] = channels == 4 ? s[3] : 255;
+    }
+  }
+  return img;
+}
+
+}  // namespace vts::renderer

@@ -1,0 +1,667 @@
+#include "vts/renderer/virtual_texture.hpp"
+
+#include <epoxy/gl.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <deque>
+#include <string>
+#include <unordered_map>
+#include <unordered_set>
+#include <vector>
+
+#include "plane_shader.hpp"
+#include "vts/renderer/feedback.hpp"
+#include "vts/renderer/page_table.hpp"
+#include "vts/renderer/pyramid.hpp"
+#include "vts/renderer/slot_cache.hpp"
+
+namespace vts::renderer {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double ms_since(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+Error gl_error(std::string what) {
+  return Error{ErrorCode::unsupported, std::move(what)};
+}
+
+Result<GLuint> compile(GLenum type, const std::string& source, const char* name) {
+  GLuint s = glCreateShader(type);
+  const char* text = source.c_str();
+  glShaderSource(s, 1, &text, nullptr);
+  glCompileShader(s);
+  GLint ok = 0;
+  glGetShaderiv(s, GL_COMPILE_STATUS, &ok);
+  if (!ok) {
+    GLint len = 0;
+    glGetShaderiv(s, GL_INFO_LOG_LENGTH, &len);
+    std::string log(std::size_t(std::max(len, 1)), '\0');
+    glGetShaderInfoLog(s, len, nullptr, log.data());
+    glDeleteShader(s);
+    return gl_error(std::string("compiling the ") + name + " shader failed: " + log);
+  }
+  return s;
+}
+
+Result<GLuint> link_program(const std::string& vs, const std::string& fs, const char* name) {
+  auto v = compile(GL_VERTEX_SHADER, vs, name);
+  if (!v) return v.error();
+  auto f = compile(GL_FRAGMENT_SHADER, fs, name);
+  if (!f) {
+    glDeleteShader(*v);
+    return f.error();
+  }
+  GLuint p = glCreateProgram();
+  glAttachShader(p, *v);
+  glAttachShader(p, *f);
+  glLinkProgram(p);
+  glDeleteShader(*v);
+  glDeleteShader(*f);
+  GLint ok = 0;
+  glGetProgramiv(p, GL_LINK_STATUS, &ok);
+  if (!ok) {
+    GLint len = 0;
+    glGetProgramiv(p, GL_INFO_LOG_LENGTH, &len);
+    std::string log(std::size_t(std::max(len, 1)), '\0');
+    glGetProgramInfoLog(p, len, nullptr, log.data());
+    glDeleteProgram(p);
+    return gl_error(std::string("linking the ") + name + " program failed: " + log);
+  }
+  return p;
+}
+
+// Waits for a fence; true once signalled (or when there is none).
+bool fence_done(GLsync fence, GLuint64 timeout_ns) {
+  if (!fence) return true;
+  const GLenum r = glClientWaitSync(fence, GL_SYNC_FLUSH_COMMANDS_BIT, timeout_ns);
+  return r == GL_ALREADY_SIGNALED || r == GL_CONDITION_SATISFIED;
+}
+
+void delete_fence(GLsync& fence) {
+  if (fence) glDeleteSync(fence);
+  fence = nullptr;
+}
+
+bool valid_divisor(int k) {
+  return k == 1 || k == 2 || k == 4 || k == 8 || k == 16;
+}
+
+}  // namespace
+
+class VirtualTexture::Impl {
+ public:
+  Impl(std::shared_ptr<client::TileClient> client, const Geometry& geometry, Pyramid pyramid,
+       ClipmapPageTable table, VirtualTextureOptions options)
+      : client_(std::move(client)),
+        geometry_(geometry),
+        pyramid_(pyramid),
+        table_(std::move(table)),
+        slots_({options.slots, options.keep_frames}),
+        bias_({.capacity = options.slots, .max_bias = options.max_bias}),
+        feedback_(pyramid),
+        options_(options) {}
+
+  ~Impl() {
+    for (auto& r : readbacks_) delete_fence(r.fence);
+    for (auto& u : uploads_) delete_fence(u.fence);
+    std::vector<GLuint> buffers;
+    for (auto& r : readbacks_) buffers.push_back(r.buffer);
+    for (auto& u : uploads_) buffers.push_back(u.buffer);
+    glDeleteBuffers(GLsizei(buffers.size()), buffers.data());
+    const GLuint textures[] = {page_tex_, physical_tex_, color_tex_, feedback_tex_};
+    glDeleteTextures(4, textures);
+    const GLuint fbos[] = {color_fbo_, feedback_fbo_};
+    glDeleteFramebuffers(2, fbos);
+    glDeleteVertexArrays(1, &vao_);
+    glDeleteProgram(color_prog_);
+    glDeleteProgram(feedback_prog_);
+    glDeleteProgram(debug_prog_);
+  }
+
+  Status init() {
+    const std::string vs = detail::kFullscreenVertex;
+    auto color = link_program(vs, std::string("#version 450 core\n") + detail::kPlaneFragment,
+                              "plane colour");
+    if (!color) return color.error();
+    color_prog_ = *color;
+    auto fb = link_program(
+        vs, std::string("#version 450 core\n#define FEEDBACK\n") + detail::kPlaneFragment,
+        "plane feedback");
+    if (!fb) return fb.error();
+    feedback_prog_ = *fb;
+    auto dbg = link_program(vs, detail::kDebugFragment, "debug view");
+    if (!dbg) return dbg.error();
+    debug_prog_ = *dbg;
+    glCreateVertexArrays(1, &vao_);
+
+    // Page table: kMaxLevels layers of W x W, R32UI, all zero (invalid).
+    const GLsizei w = GLsizei(table_.window());
+    glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &page_tex_);
+    glTextureStorage3D(page_tex_, 1, GL_R32UI, w, w, kMaxLevels);
+    glTextureParameteri(page_tex_, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+    glTextureParameteri(page_tex_, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+    const GLuint zero = 0;
+    glClearTexImage(page_tex_, 0, GL_RED_INTEGER, GL_UNSIGNED_INT, &zero);
+
+    // Physical texture: a grid of slots_per_row_ x rows slots of (T + 2B)^2 texels.
+    slot_size_ = geometry_.stored_size();
+    slots_per_row_ = std::uint32_t(std::ceil(std::sqrt(double(options_.slots))));
+    const std::uint32_t rows = (options_.slots + slots_per_row_ - 1) / slots_per_row_;
+    atlas_w_ = slots_per_row_ * slot_size_;
+    atlas_h_ = rows * slot_size_;
+    GLint max_size = 0;
+    glGetIntegerv(GL_MAX_TEXTURE_SIZE, &max_size);
+    if (atlas_w_ > std::uint32_t(max_size) || atlas_h_ > std::uint32_t(max_size)) {
+      return Error{ErrorCode::invalid_argument,
+                   std::to_string(options_.slots) + " slots of " + std::to_string(slot_size_) +
+                       " texels need a " + std::to_string(atlas_w_) + " x " +
+                       std::to_string(atlas_h_) + " physical texture, above this GL's " +
+                       "GL_MAX_TEXTURE_SIZE of " + std::to_string(max_size)};
+    }
+    glCreateTextures(GL_TEXTURE_2D, 1, &physical_tex_);
+    glTextureStorage2D(physical_tex_, 1, GL_SRGB8_ALPHA8, GLsizei(atlas_w_), GLsizei(atlas_h_));
+    glTextureParameteri(physical_tex_, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
+    glTextureParameteri(physical_tex_, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+    glTextureParameteri(physical_tex_, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+    glTextureParameteri(physical_tex_, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+    const std::uint8_t black[4] = {0, 0, 0, 255};
+    glClearTexImage(physical_tex_, 0, GL_RGBA, GL_UNSIGNED_BYTE, black);
+
+    // Upload ring: pixel-unpack buffers of the per-frame byte budget each.
+    tile_bytes_ = std::uint64_t(slot_size_) * slot_size_ * 4;
+    if (options_.upload_bytes < tile_bytes_) {
+      return Error{ErrorCode::invalid_argument, "the upload budget of " +
+                                                    std::to_string(options_.upload_bytes) +
+                                                    " bytes per frame is below one tile (" +
+                                                    std::to_string(tile_bytes_) + " bytes)"};
+    }
+    uploads_.resize(3);
+    for (auto& u : uploads_) {
+      glCreateBuffers(1, &u.buffer);
+      glNamedBufferStorage(u.buffer, GLsizeiptr(options_.upload_bytes), nullptr, GL_MAP_WRITE_BIT);
+    }
+    readbacks_.resize(std::size_t(options_.readback_ring));
+    glCreateFramebuffers(1, &color_fbo_);
+    glCreateFramebuffers(1, &feedback_fbo_);
+
+    // The root first: everything falls back on it.
+    client_->request(TileId{}, 1e18);
+    pending_[tile_key(TileId{})] = 0;
+    return Status{};
+  }
+
+  FrameStats render(const PlaneView& view, int width, int height) {
+    const auto t_frame = Clock::now();
+    FrameStats st;
+    st.frame = ++frame_;
+    resize(std::max(width, 1), std::max(height, 1));
+    const PlaneCamera cam = PlaneCamera::from_view(view, width_, height_);
+
+    const auto t_vt = Clock::now();
+    slots_.begin_frame(frame_);
+    st.feedback_frames = collect_feedback();
+    touch_wanted();
+    st.uploads = upload_tiles(st.upload_bytes);
+    recenter(view);
+    upload_page_table();
+    st.vt_cpu_ms = ms_since(t_vt);
+
+    // Anchor: the integer texel at the view centre, so every float the GPU sees is small.
+    const double au = std::clamp(std::floor(view.center_u), -1073741824.0, 1073741824.0);
+    const double av = std::clamp(std::floor(view.center_v), -1073741824.0, 1073741824.0);
+    const Vec3d eye_rel = cam.eye - Vec3d{au, av, 0};
+
+    const auto set_common = [&](GLuint p, int vw, int vh, float level_offset) {
+      glProgramUniform3f(p, glGetUniformLocation(p, "u_eye_rel"), float(eye_rel.x),
+                         float(eye_rel.y), float(eye_rel.z));
+      glProgramUniform3f(p, glGetUniformLocation(p, "u_forward"), float(cam.forward.x),
+                         float(cam.forward.y), float(cam.forward.z));
+      glProgramUniform3f(p, glGetUniformLocation(p, "u_right"), float(cam.right.x),
+                         float(cam.right.y), float(cam.right.z));
+      glProgramUniform3f(p, glGetUniformLocation(p, "u_up"), float(cam.up.x), float(cam.up.y),
+                         float(cam.up.z));
+      glProgramUniform1f(p, glGetUniformLocation(p, "u_tan_half_fov"), float(cam.tan_half_fov));
+      glProgramUniform1f(p, glGetUniformLocation(p, "u_aspect"), float(cam.aspect));
+      glProgramUniform2f(p, glGetUniformLocation(p, "u_viewport"), float(vw), float(vh));
+      glProgramUniform2i(p, glGetUniformLocation(p, "u_anchor"), GLint(au), GLint(av));
+      glProgramUniform2i(p, glGetUniformLocation(p, "u_image"), GLint(geometry_.width()),
+                         GLint(geometry_.height()));
+      glProgramUniform1i(p, glGetUniformLocation(p, "u_max_level"), geometry_.max_zoom());
+      glProgramUniform1i(p, glGetUniformLocation(p, "u_tile"), GLint(geometry_.tile_size()));
+      glProgramUniform1f(p, glGetUniformLocation(p, "u_level_offset"), level_offset);
+    };
+
+    glBindVertexArray(vao_);
+    glDisable(GL_DEPTH_TEST);
+    glDisable(GL_BLEND);
+
+    // Feedback pass at 1/k, read back later through the ring.
+    if (!readbacks_[ring_pos_].fence) {
+      set_common(feedback_prog_, fb_w_, fb_h_, float(std::log2(double(width_) / fb_w_)));
+      glBindFramebuffer(GL_FRAMEBUFFER, feedback_fbo_);
+      glViewport(0, 0, fb_w_, fb_h_);
+      glDisable(GL_FRAMEBUFFER_SRGB);
+      glUseProgram(feedback_prog_);
+      glDrawArrays(GL_TRIANGLES, 0, 3);
+      auto& rb = readbacks_[ring_pos_];
+      glBindBuffer(GL_PIXEL_PACK_BUFFER, rb.buffer);
+      glPixelStorei(GL_PACK_ALIGNMENT, 4);
+      glReadPixels(0, 0, fb_w_, fb_h_, GL_RG_INTEGER, GL_UNSIGNED_INT, nullptr);
+      glBindBuffer(GL_PIXEL_PACK_BUFFER, 0);
+      rb.fence = glFenceSync(GL_SYNC_GPU_COMMANDS_COMPLETE, 0);
+      rb.frame = frame_;
+      ring_pos_ = (ring_pos_ + 1) % readbacks_.size();
+    }
+
+    // Colour pass.
+    glBindFramebuffer(GL_FRAMEBUFFER, color_fbo_);
+    glViewport(0, 0, width_, height_);
+    glEnable(GL_FRAMEBUFFER_SRGB);
+    if (options_.debug == DebugView::physical || options_.debug == DebugView::page_table) {
+      const GLuint p = debug_prog_;
+      glProgramUniform1i(p, glGetUniformLocation(p, "u_mode"), int(options_.debug));
+      const int centre_level = std::clamp(
+          int(std::lround(geometry_.max_zoom() - std::log2(std::max(view.texels_per_pixel, 1e-9)))),
+          0, geometry_.max_zoom());
+      glProgramUniform1i(p, glGetUniformLocation(p, "u_layer"), centre_level);
+      glProgramUniform2f(p, glGetUniformLocation(p, "u_viewport"), float(width_), float(height_));
+      glProgramUniform1i(p, glGetUniformLocation(p, "u_physical"), 0);
+      glProgramUniform1i(p, glGetUniformLocation(p, "u_page_table"), 1);
+      glUseProgram(p);
+    } else {
+      const GLuint p = color_prog_;
+      set_common(p, width_, height_, float(-bias_.bias()));
+      std::uint32_t origins[2 * kMaxLevels];
+      for (int z = 0; z < kMaxLevels; ++z) {
+        origins[2 * z] = table_.origin_x(z);
+        origins[2 * z + 1] = table_.origin_y(z);
+      }
+      glProgramUniform2uiv(p, glGetUniformLocation(p, "u_origin"), kMaxLevels, origins);
+      glProgramUniform1ui(p, glGetUniformLocation(p, "u_window"), table_.window());
+      glProgramUniform1i(p, glGetUniformLocation(p, "u_slots_per_row"), GLint(slots_per_row_));
+      glProgramUniform1f(p, glGetUniformLocation(p, "u_slot_size"), float(slot_size_));
+      glProgramUniform1f(p, glGetUniformLocation(p, "u_border"), float(geometry_.border()));
+      glProgramUniform2f(p, glGetUniformLocation(p, "u_atlas_inv"), 1.0f / float(atlas_w_),
+                         1.0f / float(atlas_h_));
+      glProgramUniform1i(p, glGetUniformLocation(p, "u_trilinear"), options_.trilinear ? 1 : 0);
+      glProgramUniform1i(p, glGetUniformLocation(p, "u_debug"),
+                         options_.debug == DebugView::levels ? 1 : 0);
+      glProgramUniform1i(p, glGetUniformLocation(p, "u_physical"), 0);
+      glProgramUniform1i(p, glGetUniformLocation(p, "u_page_table"), 1);
+      glUseProgram(p);
+    }
+    glBindTextureUnit(0, physical_tex_);
+    glBindTextureUnit(1, page_tex_);
+    glDrawArrays(GL_TRIANGLES, 0, 3);
+    glDisable(GL_FRAMEBUFFER_SRGB);
+    glBindFramebuffer(GL_FRAMEBUFFER, 0);
+
+    fill_stats(st);
+    st.frame_ms = ms_since(t_frame);
+    return st;
+  }
+
+  Image read_image() const {
+    Image img;
+    img.width = width_;
+    img.height = height_;
+    const std::size_t row = std::size_t(width_) * 4;
+    std::vector<std::uint8_t> raw(row * std::size_t(height_));
+    glPixelStorei(GL_PACK_ALIGNMENT, 1);
+    glGetTextureImage(color_tex_, 0, GL_RGBA, GL_UNSIGNED_BYTE, GLsizei(raw.size()), raw.data());
+    img.rgba.resize(raw.size());
+    for (int y = 0; y < height_; ++y) {  // GL rows go bottom to top
+      std::memcpy(img.rgba.data() + std::size_t(y) * row,
+                  raw.data() + std::size_t(height_ - 1 - y) * row, row);
+    }
+    return img;
+  }
+
+  void blit_to_screen(int width, int height) const {
+    glDisable(GL_FRAMEBUFFER_SRGB);
+    glBlitNamedFramebuffer(color_fbo_, 0, 0, 0, width_, height_, 0, 0, width, height,
+                           GL_COLOR_BUFFER_BIT, GL_LINEAR);
+  }
+
+  const Geometry& geometry() const { return geometry_; }
+  VirtualTextureOptions& options() { return options_; }
+  std::uint64_t page_table_gpu_bytes() const { return table_.gpu_bytes(); }
+  std::uint64_t physical_gpu_bytes() const { return std::uint64_t(atlas_w_) * atlas_h_ * 4; }
+
+ private:
+  struct Readback {
+    GLuint buffer = 0;
+    GLsync fence = nullptr;
+    std::uint64_t frame = 0;
+    std::size_t bytes = 0;
+  };
+  struct Upload {
+    GLuint buffer = 0;
+    GLsync fence = nullptr;
+  };
+
+  void resize(int width, int height) {
+    if (width == width_ && height == height_) return;
+    width_ = width;
+    height_ = height;
+    const int k = options_.feedback_divisor;
+    fb_w_ = std::max(1, (width + k - 1) / k);
+    fb_h_ = std::max(1, (height + k - 1) / k);
+    if (color_tex_) glDeleteTextures(1, &color_tex_);
+    glCreateTextures(GL_TEXTURE_2D, 1, &color_tex_);
+    glTextureStorage2D(color_tex_, 1, GL_SRGB8_ALPHA8, width, height);
+    glNamedFramebufferTexture(color_fbo_, GL_COLOR_ATTACHMENT0, color_tex_, 0);
+    if (feedback_tex_) glDeleteTextures(1, &feedback_tex_);
+    glCreateTextures(GL_TEXTURE_2D, 1, &feedback_tex_);
+    glTextureStorage2D(feedback_tex_, 1, GL_RG32UI, fb_w_, fb_h_);
+    glNamedFramebufferTexture(feedback_fbo_, GL_COLOR_ATTACHMENT0, feedback_tex_, 0);
+    // Feedback in flight was for the old size: drop it.
+    const std::size_t bytes = std::size_t(fb_w_) * std::size_t(fb_h_) * 8;
+    for (auto& r : readbacks_) {
+      delete_fence(r.fence);
+      if (r.buffer) glDeleteBuffers(1, &r.buffer);
+      glCreateBuffers(1, &r.buffer);
+      glNamedBufferStorage(r.buffer, GLsizeiptr(bytes), nullptr, GL_MAP_READ_BIT);
+      r.bytes = bytes;
+    }
+    ring_pos_ = 0;
+  }
+
+  // Processes the oldest feedback buffer whose fence has signalled (without waiting); returns 1
+  // when one was processed. Each ring entry is reused only after it was read.
+  std::uint32_t collect_feedback() {
+    auto& rb = readbacks_[ring_pos_];  // the oldest in flight is the next one to be written
+    if (!rb.fence) return 0;
+    // The ring is full: the oldest frame is readback_ring frames old, so this rarely waits.
+    if (!fence_done(rb.fence, 1'000'000'000ull)) return 0;
+    delete_fence(rb.fence);
+    const auto* words = static_cast<const std::uint32_t*>(
+        glMapNamedBufferRange(rb.buffer, 0, GLsizeiptr(rb.bytes), GL_MAP_READ_BIT));
+    if (!words) return 0;
+    auto requests = feedback_.process(std::span(words, rb.bytes / 4), bias_.bias());
+    glUnmapNamedBuffer(rb.buffer);
+    if (!requests) return 0;
+    wanted_ = std::move(*requests);
+    bias_.update(wanted_.size());
+    ask_for_wanted();
+    return 1;
+  }
+
+  void ask_for_wanted() {
+    wanted_keys_.clear();
+    for (const auto& r : wanted_) {
+      const std::uint64_t key = tile_key(r.tile);
+      wanted_keys_.insert(key);
+      if (slots_.slot_of(r.tile) || absent_.count(key) || pending_.count(key)) continue;
+      client_->request(r.tile, double(r.coverage));
+      pending_[key] = frame_;
+    }
+    // Pending tiles that the view no longer wants are cancelled (never the root).
+    for (auto it = pending_.begin(); it != pending_.end();) {
+      if (it->first != tile_key(TileId{}) && !wanted_keys_.count(it->first)) {
+        client_->cancel(key_tile(it->first));
+        it = pending_.erase(it);
+      } else {
+        ++it;
+      }
+    }
+  }
+
+  static TileId key_tile(std::uint64_t key) {
+    return TileId{std::uint8_t(key >> 56), std::uint32_t((key >> 28) & ((1u << 28) - 1)),
+                  std::uint32_t(key & ((1u << 28) - 1))};
+  }
+
+  void touch_wanted() {
+    for (const auto& r : wanted_) slots_.touch(r.tile);
+  }
+
+  // Moves decoded tiles into slots, within the per-frame budget. Returns the tiles uploaded.
+  std::uint32_t upload_tiles(std::uint64_t& bytes_out) {
+    // Take no more from the client than a frame can upload (its queue is the back-pressure),
+    // except until the root arrives: everything waits for it.
+    std::vector<client::TileEvent> fresh;
+    const std::size_t room =
+        inbox_.size() < options_.upload_tiles ? options_.upload_tiles - inbox_.size() : 0;
+    client_->poll(fresh, root_mapped_ ? room : 1u << 20);
+    for (auto& e : fresh) inbox_.push_back(std::move(e));
+    if (inbox_.empty()) return 0;
+
+    auto& ring = uploads_[upload_pos_];
+    upload_pos_ = (upload_pos_ + 1) % uploads_.size();
+    fence_done(ring.fence, 1'000'000'000ull);
+    delete_fence(ring.fence);
+    std::uint8_t* mapped = nullptr;
+    std::uint64_t used = 0;
+    std::uint32_t count = 0;
+    const TileId root{};
+
+    for (std::size_t i = 0; i < inbox_.size();) {
+      if (count >= options_.upload_tiles || used + tile_bytes_ > options_.upload_bytes) break;
+      client::TileEvent& e = inbox_[i];
+      const std::uint64_t key = tile_key(e.id);
+      if (!root_mapped_ && !(e.id == root)) {  // nothing maps before the root
+        ++i;
+        continue;
+      }
+      if (e.kind != client::TileEvent::Kind::decoded) {
+        pending_.erase(key);
+        if (e.kind == client::TileEvent::Kind::absent) {
+          absent_.insert(key);
+          ++absent_count_;
+        } else {
+          ++error_count_;
+        }
+        inbox_.erase(inbox_.begin() + std::ptrdiff_t(i));
+        continue;
+      }
+      const bool well_formed = e.image.format == PixelFormat::rgba8 &&
+                               e.image.width == slot_size_ && e.image.height == slot_size_ &&
+                               e.image.pixels.size() == tile_bytes_;
+      std::optional<SlotCache::Acquired> got;
+      if (well_formed && !slots_.slot_of(e.id)) got = slots_.acquire(e.id);
+      if (!well_formed) ++error_count_;
+      if (!got) {  // malformed, already resident, or no slot may be taken this frame
+        pending_.erase(key);
+        client_->release(e.id);
+        inbox_.erase(inbox_.begin() + std::ptrdiff_t(i));
+        continue;
+      }
+      if (got->evicted) {
+        (void)table_.unmap(*got->evicted);
+        client_->release(*got->evicted);
+      }
+      if (!mapped) {
+        mapped = static_cast<std::uint8_t*>(
+            glMapNamedBufferRange(ring.buffer, 0, GLsizeiptr(options_.upload_bytes),
+                                  GL_MAP_WRITE_BIT | GL_MAP_INVALIDATE_BUFFER_BIT));
+        if (!mapped) break;
+      }
+      const bool e_is_root = e.id == root;
+      std::memcpy(mapped + used, e.image.pixels.data(), tile_bytes_);
+      staged_.push_back({got->slot, used});
+      used += tile_bytes_;
+      ++count;
+      (void)table_.map(e.id, got->slot);
+      if (e.id == root) {
+        root_mapped_ = true;
+        slots_.pin(root);
+      }
+      pending_.erase(key);
+      inbox_.erase(inbox_.begin() + std::ptrdiff_t(i));
+      if (e_is_root) i = 0;  // the tiles held back for the root may go now
+    }
+    if (mapped) {
+      glUnmapNamedBuffer(ring.buffer);
+      glBindBuffer(GL_PIXEL_UNPACK_BUFFER, ring.buffer);
+      glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
+      glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
+      for (const auto& s : staged_) {
+        const GLint x = GLint((s.slot % slots_per_row_) * slot_size_);
+        const GLint y = GLint((s.slot / slots_per_row_) * slot_size_);
+        glTextureSubImage2D(physical_tex_, 0, x, y, GLsizei(slot_size_), GLsizei(slot_size_),
+                            GL_RGBA, GL_UNSIGNED_BYTE, reinterpret_cast<const void*>(s.offset));
+      }
+      glBindBuffer(GL_PIXEL_UNPACK_BUFFER, 0);
+      ring.fence = glFenceSync(GL_SYNC_GPU_COMMANDS_COMPLETE, 0);
+    }
+    staged_.clear();
+    bytes_out = used;
+    uploads_total_ += count;
+    return count;
+  }
+
+  void recenter(const PlaneView& view) {
+    const int maxz = geometry_.max_zoom();
+    const double t = geometry_.tile_size();
+    for (int z = 0; z <= maxz; ++z) {
+      const double scale = std::ldexp(1.0, maxz - z) * t;
+      const double cx = std::clamp(std::floor(view.center_u / scale), 0.0, 4294967295.0);
+      const double cy = std::clamp(std::floor(view.center_v / scale), 0.0, 4294967295.0);
+      table_.recenter(z, std::uint32_t(cx), std::uint32_t(cy));
+    }
+  }
+
+  void upload_page_table() {
+    const auto spans = table_.take_dirty();
+    if (spans.empty()) return;
+    glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
+    glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
+    const std::uint32_t w = table_.window();
+    for (const auto& s : spans) {
+      const auto layer = table_.layer(s.layer);
+      glTextureSubImage3D(page_tex_, 0, GLint(s.x0), GLint(s.row), s.layer, GLsizei(s.x1 - s.x0), 1,
+                          1, GL_RED_INTEGER, GL_UNSIGNED_INT,
+                          layer.data() + std::size_t(s.row) * w + s.x0);
+    }
+    page_spans_total_ += spans.size();
+  }
+
+  void fill_stats(FrameStats& st) const {
+    std::uint32_t missing = 0;
+    for (const auto& r : wanted_) {
+      if (!slots_.slot_of(r.tile) && !absent_.count(tile_key(r.tile))) ++missing;
+    }
+    const auto ss = slots_.stats();
+    st.wanted = std::uint32_t(wanted_.size());
+    st.wanted_missing = missing;
+    st.resident = std::uint32_t(ss.resident);
+    st.pending = std::uint32_t(pending_.size());
+    st.mip_bias = bias_.bias();
+    st.hit_ratio = wanted_.empty() ? 1.0 : double(wanted_.size() - missing) / wanted_.size();
+    st.evictions = ss.evictions;
+    st.refusals = ss.refusals;
+    st.absent = absent_count_;
+    st.errors = error_count_;
+    st.complete =
+        root_mapped_ && !wanted_.empty() && missing == 0 && pending_.empty() && inbox_.empty();
+  }
+
+  std::shared_ptr<client::TileClient> client_;
+  Geometry geometry_;
+  Pyramid pyramid_;
+  ClipmapPageTable table_;
+  SlotCache slots_;
+  MipBiasController bias_;
+  FeedbackProcessor feedback_;
+  VirtualTextureOptions options_;
+
+  GLuint color_prog_ = 0, feedback_prog_ = 0, debug_prog_ = 0, vao_ = 0;
+  GLuint page_tex_ = 0, physical_tex_ = 0, color_tex_ = 0, feedback_tex_ = 0;
+  GLuint color_fbo_ = 0, feedback_fbo_ = 0;
+  std::uint32_t slot_size_ = 0, slots_per_row_ = 0, atlas_w_ = 0, atlas_h_ = 0;
+  std::uint64_t tile_bytes_ = 0;
+  int width_ = 0, height_ = 0, fb_w_ = 0, fb_h_ = 0;
+
+  std::vector<Readback> readbacks_;
+  std::size_t ring_pos_ = 0;
+  std::vector<Upload> uploads_;
+  std::size_t upload_pos_ = 0;
+  struct Staged {
+    std::uint32_t slot;
+    std::uint64_t offset;
+  };
+  std::vector<Staged> staged_;
+
+  std::uint64_t frame_ = 0;
+  bool root_mapped_ = false;
+  std::vector<TileRequest> wanted_;
+  std::unordered_set<std::uint64_t> wanted_keys_;
+  std::unordered_map<std::uint64_t, std::uint64_t> pending_;  // tile key -> frame asked
+  std::unordered_set<std::uint64_t> absent_;
+  std::deque<client::TileEvent> inbox_;
+  std::uint64_t absent_count_ = 0, error_count_ = 0, uploads_total_ = 0, page_spans_total_ = 0;
+};
+
+Result<std::unique_ptr<VirtualTexture>> VirtualTexture::create(
+    std::shared_ptr<client::TileClient> client, const Geometry& geometry,
+    VirtualTextureOptions options) {
+  if (!client) return Error{ErrorCode::invalid_argument, "no tile client"};
+  if (options.slots < 2) {
+    return Error{ErrorCode::invalid_argument, "the physical texture needs at least 2 slots"};
+  }
+  if (!valid_divisor(options.feedback_divisor)) {
+    return Error{ErrorCode::invalid_argument, "feedback divisor " +
+                                                  std::to_string(options.feedback_divisor) +
+                                                  " is not one of 1, 2, 4, 8, 16"};
+  }
+  if (options.readback_ring < 1 || options.readback_ring > 16) {
+    return Error{ErrorCode::invalid_argument, "readback ring must hold 1 to 16 frames"};
+  }
+  if (options.upload_tiles < 1) {
+    return Error{ErrorCode::invalid_argument, "the upload budget must allow one tile a frame"};
+  }
+  if (geometry.width() > (1u << 30) || geometry.height() > (1u << 30)) {
+    return Error{ErrorCode::unsupported, "images wider or taller than 2^30 texels"};
+  }
+  auto pyramid = Pyramid::from_geometry(geometry);
+  if (!pyramid) return pyramid.error();
+  auto table = ClipmapPageTable::create(*pyramid, {options.window});
+  if (!table) return table.error();
+  if (epoxy_gl_version() < 45) {
+    return Error{ErrorCode::unsupported, "the virtual texture needs a current OpenGL 4.5 context"};
+  }
+  auto impl =
+      std::make_unique<Impl>(std::move(client), geometry, *pyramid, std::move(*table), options);
+  if (auto s = impl->init(); !s) return s.error();
+  return std::unique_ptr<VirtualTexture>(new VirtualTexture(std::move(impl)));
+}
+
+VirtualTexture::VirtualTexture(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+VirtualTexture::~VirtualTexture() = default;
+
+FrameStats VirtualTexture::render(const PlaneView& view, int width, int height) {
+  return impl_->render(view, width, height);
+}
+Image VirtualTexture::read_image() const {
+  return impl_->read_image();
+}
+void VirtualTexture::blit_to_screen(int width, int height) const {
+  impl_->blit_to_screen(width, height);
+}
+void VirtualTexture::set_debug_view(DebugView view) {
+  impl_->options().debug = view;
+}
+DebugView VirtualTexture::debug_view() const {
+  return const_cast<Impl&>(*impl_).options().debug;
+}
+const Geometry& VirtualTexture::geometry() const {
+  return impl_->geometry();
+}
+const VirtualTextureOptions& VirtualTexture::options() const {
+  return const_cast<Impl&>(*impl_).options();
+}
+std::uint64_t VirtualTexture::page_table_gpu_bytes() const {
+  return impl_->page_table_gpu_bytes();
+}
+std::uint64_t VirtualTexture::physical_gpu_bytes() const {
+  return impl_->physical_gpu_bytes();
+}
+
+}  // namespace vts::renderer
