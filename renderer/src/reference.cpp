@@ -196,18 +196,34 @@ std::pair<double, double> analytic_derivative(const PlaneCamera& cam, double sx,
   return {dp.x, dp.y};
 }
 
-// The quad difference along one axis: hit(b) - hit(a), where one of a, b is the pixel itself
-// (`self`); the analytic derivative at the pixel when the partner misses the plane.
-std::pair<double, double> quad_difference(const PlaneCamera& cam, const Hit& a, const Hit& b,
-                                          double sx, double sy, int axis) {
-  if (a && b) return {b->first - a->first, b->second - a->second};
-  return analytic_derivative(cam, sx, sy, axis);
+// A scene's derivative at a pixel whose quad partner misses the surface: a central difference
+// of a thousandth of a pixel (in double, far below any level's texel), or zero when that misses
+// too (the finest level, like a zero footprint).
+std::pair<double, double> numeric_derivative(const Scene& scene, double sx, double sy, int w,
+                                             int h, int axis) {
+  constexpr double e = 1e-3;
+  const Hit a = axis == 0 ? scene.hit(sx - e, sy, w, h) : scene.hit(sx, sy - e, w, h);
+  const Hit b = axis == 0 ? scene.hit(sx + e, sy, w, h) : scene.hit(sx, sy + e, w, h);
+  if (!a || !b) return {0, 0};
+  return {(b->first - a->first) / (2 * e), (b->second - a->second) / (2 * e)};
 }
 
-}  // namespace
+// Brings a u difference back into [-period/2, period/2] for a surface that wraps in u.
+double unwrap(double du, double period) {
+  return period > 0 ? du - period * std::round(du / period) : du;
+}
 
-Result<Image> render_reference(PyramidSampler& sampler, const PlaneCamera& camera, double bias) {
-  const int w = camera.width, h = camera.height;
+// The shared body: `hit_at(sx, sy)` gives the absolute (u, v) at a screen point; `fallback(sx,
+// sy, axis)` the derivative where the quad partner misses.
+template <typename HitFn, typename FallbackFn>
+Result<Image> render_with(PyramidSampler& sampler, int w, int h, double bias, double period,
+                          HitFn&& hit_at, FallbackFn&& fallback) {
+  const auto quad_difference = [&](const Hit& a, const Hit& b, double sx, double sy, int axis) {
+    std::pair<double, double> d =
+        a && b ? std::pair{b->first - a->first, b->second - a->second} : fallback(sx, sy, axis);
+    d.first = unwrap(d.first, period);
+    return d;
+  };
   constexpr int kMaxSide = 1 << 14;
   if (w <= 0 || h <= 0 || w > kMaxSide || h > kMaxSide)
     return make_error(ErrorCode::invalid_argument,
@@ -225,7 +241,7 @@ Result<Image> render_reference(PyramidSampler& sampler, const PlaneCamera& camer
   std::vector<Hit> rows[2] = {std::vector<Hit>(gw), std::vector<Hit>(gw)};
   for (int y0 = 0; y0 < h; y0 += 2) {
     for (int r = 0; r < 2; ++r)
-      for (int x = 0; x < gw; ++x) rows[r][x] = camera.hit(x + 0.5, y0 + r + 0.5);
+      for (int x = 0; x < gw; ++x) rows[r][x] = hit_at(x + 0.5, y0 + r + 0.5);
     for (int py = y0; py < std::min(y0 + 2, h); ++py) {
       const std::vector<Hit>& row = rows[py - y0];
       for (int px = 0; px < w; ++px) {
@@ -238,8 +254,8 @@ Result<Image> render_reference(PyramidSampler& sampler, const PlaneCamera& camer
         }
         const double u = self->first, v = self->second;
         const double sx = px + 0.5, sy = py + 0.5;
-        const auto [dudx, dvdx] = quad_difference(camera, row[px & ~1], row[px | 1], sx, sy, 0);
-        const auto [dudy, dvdy] = quad_difference(camera, rows[0][px], rows[1][px], sx, sy, 1);
+        const auto [dudx, dvdx] = quad_difference(row[px & ~1], row[px | 1], sx, sy, 0);
+        const auto [dudy, dvdy] = quad_difference(rows[0][px], rows[1][px], sx, sy, 1);
         const double rho = std::max(std::hypot(dudx, dvdx), std::hypot(dudy, dvdy));
         double c = rho > 0 ? max_level - std::log2(rho) - bias : double(max_level);
         if (std::isnan(c)) c = max_level;
@@ -263,6 +279,25 @@ Result<Image> render_reference(PyramidSampler& sampler, const PlaneCamera& camer
     }
   }
   return img;
+}
+
+}  // namespace
+
+Result<Image> render_reference(PyramidSampler& sampler, const PlaneCamera& camera, double bias) {
+  return render_with(
+      sampler, camera.width, camera.height, bias, 0,
+      [&](double sx, double sy) { return camera.hit(sx, sy); },
+      [&](double sx, double sy, int axis) { return analytic_derivative(camera, sx, sy, axis); });
+}
+
+Result<Image> render_reference(PyramidSampler& sampler, const Scene& scene, int width, int height,
+                               double bias) {
+  return render_with(
+      sampler, width, height, bias, scene.u_period(),
+      [&](double sx, double sy) { return scene.hit(sx, sy, width, height); },
+      [&](double sx, double sy, int axis) {
+        return numeric_derivative(scene, sx, sy, width, height, axis);
+      });
 }
 
 // ---- metrics ---------------------------------------------------------------------------------

@@ -12,7 +12,7 @@
 #include <unordered_set>
 #include <vector>
 
-#include "plane_shader.hpp"
+#include "shaders.hpp"
 #include "vts/renderer/feedback.hpp"
 #include "vts/renderer/page_table.hpp"
 #include "vts/renderer/pyramid.hpp"
@@ -119,23 +119,17 @@ class VirtualTexture::Impl {
     const GLuint fbos[] = {color_fbo_, feedback_fbo_};
     glDeleteFramebuffers(2, fbos);
     glDeleteVertexArrays(1, &vao_);
-    glDeleteProgram(color_prog_);
-    glDeleteProgram(feedback_prog_);
+    for (auto& [glsl, p] : programs_) {
+      glDeleteProgram(p.color);
+      glDeleteProgram(p.feedback);
+    }
     glDeleteProgram(debug_prog_);
   }
 
   Status init() {
-    const std::string vs = detail::kFullscreenVertex;
-    auto color = link_program(vs, std::string("#version 450 core\n") + detail::kPlaneFragment,
-                              "plane colour");
-    if (!color) return color.error();
-    color_prog_ = *color;
-    auto fb = link_program(
-        vs, std::string("#version 450 core\n#define FEEDBACK\n") + detail::kPlaneFragment,
-        "plane feedback");
-    if (!fb) return fb.error();
-    feedback_prog_ = *fb;
-    auto dbg = link_program(vs, detail::kDebugFragment, "debug view");
+    // The plane's programs are built now so that a broken driver fails here, not at a frame.
+    if (auto p = programs_for(PlaneScene(PlaneView{})); !p) return p.error();
+    auto dbg = link_program(detail::kFullscreenVertex, detail::kDebugFragment, "debug view");
     if (!dbg) return dbg.error();
     debug_prog_ = *dbg;
     glCreateVertexArrays(1, &vao_);
@@ -196,40 +190,56 @@ class VirtualTexture::Impl {
     return Status{};
   }
 
-  FrameStats render(const PlaneView& view, int width, int height) {
+  // The colour and feedback programs of a scene's shader variant, built on first use.
+  struct Programs {
+    GLuint color = 0, feedback = 0;
+  };
+  Result<Programs> programs_for(const Scene& scene) {
+    const std::string glsl = scene.glsl();
+    if (auto it = programs_.find(glsl); it != programs_.end()) return it->second;
+    const std::string head = "#version 450 core\n";
+    const std::string body = "uniform vec2 u_viewport;\n" + glsl + detail::kVirtualTextureFragment;
+    const std::string name(scene.name());
+    auto color = link_program(detail::kFullscreenVertex, head + body, (name + " colour").c_str());
+    if (!color) return color.error();
+    auto fb = link_program(detail::kFullscreenVertex, head + "#define FEEDBACK\n" + body,
+                           (name + " feedback").c_str());
+    if (!fb) {
+      glDeleteProgram(*color);
+      return fb.error();
+    }
+    return programs_[glsl] = Programs{*color, *fb};
+  }
+
+  FrameStats render(const Scene& scene, int width, int height) {
     const auto t_frame = Clock::now();
     FrameStats st;
     st.frame = ++frame_;
     resize(std::max(width, 1), std::max(height, 1));
-    const PlaneCamera cam = PlaneCamera::from_view(view, width_, height_);
+    auto programs = programs_for(scene);
+    if (!programs) {
+      last_error_ = programs.error();
+      ++error_count_;
+      return st;
+    }
 
     const auto t_vt = Clock::now();
     slots_.begin_frame(frame_);
     st.feedback_frames = collect_feedback();
     touch_wanted();
     st.uploads = upload_tiles(st.upload_bytes);
-    recenter(view);
+    recenter(scene.focus());
     upload_page_table();
     st.vt_cpu_ms = ms_since(t_vt);
 
-    // Anchor: the integer texel at the view centre, so every float the GPU sees is small.
-    const double au = std::clamp(std::floor(view.center_u), -1073741824.0, 1073741824.0);
-    const double av = std::clamp(std::floor(view.center_v), -1073741824.0, 1073741824.0);
-    const Vec3d eye_rel = cam.eye - Vec3d{au, av, 0};
-
+    // The anchor: an integer texel near the view, so every float the GPU sees is small.
+    const auto anchor = scene.anchor();
     const auto set_common = [&](GLuint p, int vw, int vh, float level_offset) {
-      glProgramUniform3f(p, glGetUniformLocation(p, "u_eye_rel"), float(eye_rel.x),
-                         float(eye_rel.y), float(eye_rel.z));
-      glProgramUniform3f(p, glGetUniformLocation(p, "u_forward"), float(cam.forward.x),
-                         float(cam.forward.y), float(cam.forward.z));
-      glProgramUniform3f(p, glGetUniformLocation(p, "u_right"), float(cam.right.x),
-                         float(cam.right.y), float(cam.right.z));
-      glProgramUniform3f(p, glGetUniformLocation(p, "u_up"), float(cam.up.x), float(cam.up.y),
-                         float(cam.up.z));
-      glProgramUniform1f(p, glGetUniformLocation(p, "u_tan_half_fov"), float(cam.tan_half_fov));
-      glProgramUniform1f(p, glGetUniformLocation(p, "u_aspect"), float(cam.aspect));
+      scene.set_uniforms(p, width_, height_);  // the camera is the full view's in every pass
       glProgramUniform2f(p, glGetUniformLocation(p, "u_viewport"), float(vw), float(vh));
-      glProgramUniform2i(p, glGetUniformLocation(p, "u_anchor"), GLint(au), GLint(av));
+      glProgramUniform2i(p, glGetUniformLocation(p, "u_anchor"), GLint(anchor[0]),
+                         GLint(anchor[1]));
+      glProgramUniform1f(p, glGetUniformLocation(p, "u_period"), float(scene.u_period()));
       glProgramUniform2i(p, glGetUniformLocation(p, "u_image"), GLint(geometry_.width()),
                          GLint(geometry_.height()));
       glProgramUniform1i(p, glGetUniformLocation(p, "u_max_level"), geometry_.max_zoom());
@@ -243,11 +253,11 @@ class VirtualTexture::Impl {
 
     // Feedback pass at 1/k, read back later through the ring.
     if (!readbacks_[ring_pos_].fence) {
-      set_common(feedback_prog_, fb_w_, fb_h_, float(std::log2(double(width_) / fb_w_)));
+      set_common(programs->feedback, fb_w_, fb_h_, float(std::log2(double(width_) / fb_w_)));
       glBindFramebuffer(GL_FRAMEBUFFER, feedback_fbo_);
       glViewport(0, 0, fb_w_, fb_h_);
       glDisable(GL_FRAMEBUFFER_SRGB);
-      glUseProgram(feedback_prog_);
+      glUseProgram(programs->feedback);
       glDrawArrays(GL_TRIANGLES, 0, 3);
       auto& rb = readbacks_[ring_pos_];
       glBindBuffer(GL_PIXEL_PACK_BUFFER, rb.buffer);
@@ -267,7 +277,8 @@ class VirtualTexture::Impl {
       const GLuint p = debug_prog_;
       glProgramUniform1i(p, glGetUniformLocation(p, "u_mode"), int(options_.debug));
       const int centre_level = std::clamp(
-          int(std::lround(geometry_.max_zoom() - std::log2(std::max(view.texels_per_pixel, 1e-9)))),
+          int(std::lround(geometry_.max_zoom() -
+                          std::log2(std::max(scene.texels_per_pixel(), 1e-9)))),
           0, geometry_.max_zoom());
       glProgramUniform1i(p, glGetUniformLocation(p, "u_layer"), centre_level);
       glProgramUniform2f(p, glGetUniformLocation(p, "u_viewport"), float(width_), float(height_));
@@ -275,7 +286,7 @@ class VirtualTexture::Impl {
       glProgramUniform1i(p, glGetUniformLocation(p, "u_page_table"), 1);
       glUseProgram(p);
     } else {
-      const GLuint p = color_prog_;
+      const GLuint p = programs->color;
       set_common(p, width_, height_, float(-bias_.bias()));
       std::uint32_t origins[2 * kMaxLevels];
       for (int z = 0; z < kMaxLevels; ++z) {
@@ -330,6 +341,7 @@ class VirtualTexture::Impl {
   }
 
   const Geometry& geometry() const { return geometry_; }
+  std::optional<Error> last_error() const { return last_error_; }
   VirtualTextureOptions& options() { return options_; }
   std::uint64_t page_table_gpu_bytes() const { return table_.gpu_bytes(); }
   std::uint64_t physical_gpu_bytes() const { return std::uint64_t(atlas_w_) * atlas_h_ * 4; }
@@ -517,13 +529,13 @@ class VirtualTexture::Impl {
     return count;
   }
 
-  void recenter(const PlaneView& view) {
+  void recenter(std::pair<double, double> focus) {
     const int maxz = geometry_.max_zoom();
     const double t = geometry_.tile_size();
     for (int z = 0; z <= maxz; ++z) {
       const double scale = std::ldexp(1.0, maxz - z) * t;
-      const double cx = std::clamp(std::floor(view.center_u / scale), 0.0, 4294967295.0);
-      const double cy = std::clamp(std::floor(view.center_v / scale), 0.0, 4294967295.0);
+      const double cx = std::clamp(std::floor(focus.first / scale), 0.0, 4294967295.0);
+      const double cy = std::clamp(std::floor(focus.second / scale), 0.0, 4294967295.0);
       table_.recenter(z, std::uint32_t(cx), std::uint32_t(cy));
     }
   }
@@ -572,7 +584,9 @@ class VirtualTexture::Impl {
   FeedbackProcessor feedback_;
   VirtualTextureOptions options_;
 
-  GLuint color_prog_ = 0, feedback_prog_ = 0, debug_prog_ = 0, vao_ = 0;
+  std::unordered_map<std::string, Programs> programs_;  // by scene GLSL
+  std::optional<Error> last_error_;
+  GLuint debug_prog_ = 0, vao_ = 0;
   GLuint page_tex_ = 0, physical_tex_ = 0, color_tex_ = 0, feedback_tex_ = 0;
   GLuint color_fbo_ = 0, feedback_fbo_ = 0;
   std::uint32_t slot_size_ = 0, slots_per_row_ = 0, atlas_w_ = 0, atlas_h_ = 0;
@@ -636,8 +650,11 @@ Result<std::unique_ptr<VirtualTexture>> VirtualTexture::create(
 VirtualTexture::VirtualTexture(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 VirtualTexture::~VirtualTexture() = default;
 
+FrameStats VirtualTexture::render(const Scene& scene, int width, int height) {
+  return impl_->render(scene, width, height);
+}
 FrameStats VirtualTexture::render(const PlaneView& view, int width, int height) {
-  return impl_->render(view, width, height);
+  return impl_->render(PlaneScene(view), width, height);
 }
 Image VirtualTexture::read_image() const {
   return impl_->read_image();

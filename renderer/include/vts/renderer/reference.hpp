@@ -45,6 +45,7 @@
 #include "vts/protocol/pmtiles.hpp"
 #include "vts/protocol/result.hpp"
 #include "vts/renderer/camera.hpp"
+#include "vts/renderer/scene.hpp"
 
 namespace vts::renderer {
 
@@ -123,6 +124,11 @@ class PyramidSampler {
 // invalid_argument for a viewport that is empty or larger than 16384 a side, or with the sampler's
 // error.
 Result<Image> render_reference(PyramidSampler& sampler, const PlaneCamera& camera, double bias = 0);
+// The same for any scene (Scene::hit in double), width x height pixels. Where a quad partner
+// misses the surface the derivative is a central difference of 1/1000 pixel; u differences are
+// unwrapped by Scene::u_period().
+Result<Image> render_reference(PyramidSampler& sampler, const Scene& scene, int width, int height,
+                               double bias = 0);
 
 // Differences between two images of equal size over the R, G and B channels (alpha ignored).
 struct ImageDiff {

@@ -27,6 +27,7 @@
 #include "vts/renderer/camera.hpp"
 #include "vts/renderer/mip_bias.hpp"
 #include "vts/renderer/reference.hpp"
+#include "vts/renderer/scene.hpp"
 
 namespace vts::renderer {
 
@@ -81,8 +82,12 @@ class VirtualTexture {
   VirtualTexture(const VirtualTexture&) = delete;
   VirtualTexture& operator=(const VirtualTexture&) = delete;
 
-  // Renders one frame of `view` at width x height into the texture's own framebuffer.
-  FrameStats render(const PlaneView& view, int width, int height);
+  // Renders one frame of `scene` at width x height into the texture's own framebuffer. A scene's
+  // shader variant is compiled the first time it is drawn; if that fails the frame is empty,
+  // counted in FrameStats::errors, and the driver's log is in last_error().
+  FrameStats render(const Scene& scene, int width, int height);
+  FrameStats render(const PlaneView& view, int width, int height);  // a PlaneScene
+  std::optional<Error> last_error() const;
   // The last frame, sRGB RGBA8, rows top to bottom (a blocking read: screenshots and tests).
   Image read_image() const;
   // Copies the last frame to the window's default framebuffer (0), scaled to width x height.

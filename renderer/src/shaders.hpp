@@ -1,5 +1,6 @@
-// GLSL of the plane scene (internal). One fragment source serves the colour pass and the feedback
-// pass (#define FEEDBACK), so both compute the same coordinates and the same level.
+// GLSL of the virtual-texturing passes (internal). One fragment source serves the colour pass and
+// the feedback pass (#define FEEDBACK), so both compute the same coordinates and the same level;
+// the scene (Scene::glsl()) answers which texel each pixel sees.
 //
 // Precision (docs/RENDERER.md, "Precision"): the CPU sends the eye relative to an integer anchor
 // texel near the view centre, so the ray-plane hit `rel` is a small float whatever the image
@@ -17,20 +18,15 @@ void main() {
 }
 )";
 
-// Prepended: "#version 450 core\n" and optionally "#define FEEDBACK\n".
-inline constexpr const char* kPlaneFragment = R"(
+// The virtual-texturing fragment code. Prepended: "#version 450 core", optionally
+// "#define FEEDBACK", "uniform vec2 u_viewport;" and the scene's GLSL (Scene::glsl()).
+inline constexpr const char* kVirtualTextureFragment = R"(
 const int kMaxLevels = 24;
 
-uniform vec3 u_eye_rel;  // eye - anchor, finest texels (u right, v down, w into the ground)
-uniform vec3 u_forward;
-uniform vec3 u_right;
-uniform vec3 u_up;
-uniform float u_tan_half_fov;
-uniform float u_aspect;
-uniform vec2 u_viewport;     // this pass's size in pixels
 uniform ivec2 u_anchor;      // integer finest texel the camera works relative to
 uniform ivec2 u_image;       // finest image size in texels
 uniform int u_max_level;
+uniform float u_period;      // u period in finest texels (0: u does not wrap)
 uniform int u_tile;          // T
 uniform float u_level_offset;  // colour pass: -bias; feedback: +log2(k)
 
@@ -87,18 +83,20 @@ vec4 sample_level(int L, ivec2 abs_i, vec2 fr, out int mapped_level) {
 #endif
 
 void main() {
-  float sx = gl_FragCoord.x;
-  float sy = u_viewport.y - gl_FragCoord.y;  // rows top to bottom, as the camera counts them
-  float nx = (2.0 * sx / u_viewport.x - 1.0) * u_tan_half_fov * u_aspect;
-  float ny = (1.0 - 2.0 * sy / u_viewport.y) * u_tan_half_fov;
-  vec3 d = u_forward + u_right * nx + u_up * ny;
-  float t = -u_eye_rel.z / d.z;
-  vec2 rel = u_eye_rel.xy + t * d.xy;
-  // Derivatives first, in uniform control flow, from the continuous coordinate.
+  // Rows top to bottom, as the scene's camera counts them.
+  vec2 px = vec2(gl_FragCoord.x, u_viewport.y - gl_FragCoord.y);
+  vec2 rel;
+  bool hit = scene_hit(px, rel);
+  // Derivatives first, in uniform control flow, from the continuous coordinate; a surface that
+  // wraps in u (the globe's date line) is unwrapped so the seam does not look like a huge step.
   vec2 ddx = dFdxFine(rel);
   vec2 ddy = dFdyFine(rel);
+  if (u_period > 0.0) {
+    ddx.x -= u_period * round(ddx.x / u_period);
+    ddy.x -= u_period * round(ddy.x / u_period);
+  }
 
-  bool hit = d.z > 0.0 && !any(isnan(rel)) && !any(isinf(rel)) && all(lessThan(abs(rel), vec2(1.0e9)));
+  hit = hit && !any(isnan(rel)) && !any(isinf(rel)) && all(lessThan(abs(rel), vec2(1.0e9)));
   ivec2 ip = hit ? ivec2(floor(rel)) : ivec2(0);
   vec2 fr = rel - floor(rel);
   ivec2 abs_i = u_anchor + ip;
@@ -169,6 +167,25 @@ void main() {
   uint h = slot * 2654435761u;
   o_color = vec4(float(h & 255u) / 255.0, float((h >> 8) & 255u) / 255.0,
                  float((e >> 26) & 31u) / 24.0, 1.0);
+}
+)";
+
+// The plane scene (PlaneScene::glsl()): a ray from the eye through the pixel meets w = 0.
+inline constexpr const char* kPlaneScene = R"(
+uniform vec3 u_eye_rel;  // eye - anchor, finest texels (u right, v down, w into the ground)
+uniform vec3 u_forward;
+uniform vec3 u_right;
+uniform vec3 u_up;
+uniform float u_tan_half_fov;
+uniform float u_aspect;
+
+bool scene_hit(vec2 px, out vec2 rel) {
+  float nx = (2.0 * px.x / u_viewport.x - 1.0) * u_tan_half_fov * u_aspect;
+  float ny = (1.0 - 2.0 * px.y / u_viewport.y) * u_tan_half_fov;
+  vec3 d = u_forward + u_right * nx + u_up * ny;
+  float t = -u_eye_rel.z / d.z;
+  rel = u_eye_rel.xy + t * d.xy;
+  return d.z > 0.0;
 }
 )";
 

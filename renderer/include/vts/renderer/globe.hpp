@@ -1,0 +1,50 @@
+// The globe scene: the virtual texture as an equirectangular image wrapped on a sphere of the
+// Earth's radius, seen from a camera placed by longitude, latitude and altitude.
+//
+// Mapping: the image's W x H finest texels cover longitude [-180, 180) left to right and latitude
+// [90, -90] top to bottom: u = (lon + 180) / 360 * W, v = (90 - lat) / 180 * H. u wraps with
+// period W (u_period()), so derivatives across the date line are unwrapped.
+//
+// Precision (docs/RENDERER.md, "Precision"): everything that involves the sphere's radius is done
+// on the CPU in double and reaches the GPU relative to the eye or to the anchor, so a camera 1 m
+// above the surface neither jitters nor loses texels.
+#pragma once
+
+#include <cstdint>
+
+#include "vts/renderer/scene.hpp"
+
+namespace vts::renderer {
+
+inline constexpr double kEarthRadiusM = 6371008.8;  // mean Earth radius (IUGG)
+
+struct GlobeView {
+  double lon_deg = 0, lat_deg = 0;  // the camera's nadir
+  double altitude_m = 2e7;          // above the sphere (> 0)
+  double heading = 0;  // radians: where screen-up points; 0 = north, pi/2 = east
+  double tilt = 0;     // radians: 0 looks straight down, towards pi/2 at the horizon
+  double fov_y = 0.8;  // vertical field of view, radians
+  double radius_m = kEarthRadiusM;
+};
+
+class GlobeScene final : public Scene {
+ public:
+  // image_width x image_height: the finest level's size (Geometry::width/height).
+  GlobeScene(const GlobeView& view, std::uint64_t image_width, std::uint64_t image_height);
+  const GlobeView& view() const { return view_; }
+
+  std::string_view name() const override { return "globe"; }
+  std::string glsl() const override;
+  void set_uniforms(unsigned program, int width, int height) const override;
+  std::array<std::int64_t, 2> anchor() const override;
+  std::pair<double, double> focus() const override;
+  double texels_per_pixel() const override;
+  UvHit hit(double sx, double sy, int width, int height) const override;
+  double u_period() const override { return double(width_); }
+
+ private:
+  GlobeView view_;
+  std::uint64_t width_ = 1, height_ = 1;
+};
+
+}  // namespace vts::renderer
