@@ -199,8 +199,8 @@ std::pair<double, double> analytic_derivative(const PlaneCamera& cam, double sx,
 // A scene's derivative at a pixel whose quad partner misses the surface: a central difference
 // of a thousandth of a pixel (in double, far below any level's texel), or zero when that misses
 // too (the finest level, like a zero footprint).
-std::pair<double, double> numeric_derivative(const Scene& scene, double sx, double sy, int w,
-                                             int h, int axis) {
+std::pair<double, double> numeric_derivative(const Scene& scene, double sx, double sy, int w, int h,
+                                             int axis) {
   constexpr double e = 1e-3;
   const Hit a = axis == 0 ? scene.hit(sx - e, sy, w, h) : scene.hit(sx, sy - e, w, h);
   const Hit b = axis == 0 ? scene.hit(sx + e, sy, w, h) : scene.hit(sx, sy + e, w, h);

@@ -16,7 +16,9 @@ std::int64_t anchor_coord(double c) {
 }
 }  // namespace
 
-std::string PlaneScene::glsl() const { return detail::kPlaneScene; }
+std::string PlaneScene::glsl() const {
+  return detail::kPlaneScene;
+}
 
 std::array<std::int64_t, 2> PlaneScene::anchor() const {
   return {anchor_coord(view_.center_u), anchor_coord(view_.center_v)};

@@ -223,6 +223,7 @@ class VirtualTexture::Impl {
       return st;
     }
 
+    note_view(scene);
     const auto t_vt = Clock::now();
     slots_.begin_frame(frame_);
     st.feedback_frames = collect_feedback();
@@ -266,6 +267,7 @@ class VirtualTexture::Impl {
       glBindBuffer(GL_PIXEL_PACK_BUFFER, 0);
       rb.fence = glFenceSync(GL_SYNC_GPU_COMMANDS_COMPLETE, 0);
       rb.frame = frame_;
+      rb.view_generation = view_generation_;
       ring_pos_ = (ring_pos_ + 1) % readbacks_.size();
     }
 
@@ -276,10 +278,10 @@ class VirtualTexture::Impl {
     if (options_.debug == DebugView::physical || options_.debug == DebugView::page_table) {
       const GLuint p = debug_prog_;
       glProgramUniform1i(p, glGetUniformLocation(p, "u_mode"), int(options_.debug));
-      const int centre_level = std::clamp(
-          int(std::lround(geometry_.max_zoom() -
-                          std::log2(std::max(scene.texels_per_pixel(), 1e-9)))),
-          0, geometry_.max_zoom());
+      const int centre_level =
+          std::clamp(int(std::lround(geometry_.max_zoom() -
+                                     std::log2(std::max(scene.texels_per_pixel(), 1e-9)))),
+                     0, geometry_.max_zoom());
       glProgramUniform1i(p, glGetUniformLocation(p, "u_layer"), centre_level);
       glProgramUniform2f(p, glGetUniformLocation(p, "u_viewport"), float(width_), float(height_));
       glProgramUniform1i(p, glGetUniformLocation(p, "u_physical"), 0);
@@ -351,8 +353,30 @@ class VirtualTexture::Impl {
     GLuint buffer = 0;
     GLsync fence = nullptr;
     std::uint64_t frame = 0;
+    std::uint64_t view_generation = 0;  // the view the feedback was rendered from
     std::size_t bytes = 0;
   };
+
+  // A view differs from the last one when the scene, the size, the footprint or what the
+  // corners and the centre see changed: "complete" then waits for feedback of the new view.
+  void note_view(const Scene& scene) {
+    std::vector<double> sig{double(width_), double(height_), scene.texels_per_pixel()};
+    const double xs[] = {0.5, width_ * 0.5, width_ - 0.5};
+    const double ys[] = {0.5, height_ * 0.5, height_ - 0.5};
+    for (double y : ys) {
+      for (double x : xs) {
+        const UvHit h = scene.hit(x, y, width_, height_);
+        sig.push_back(h ? h->first : -1e300);
+        sig.push_back(h ? h->second : -1e300);
+      }
+    }
+    const std::string name(scene.name());
+    if (sig != view_signature_ || name != view_name_) {
+      view_signature_ = std::move(sig);
+      view_name_ = name;
+      ++view_generation_;
+    }
+  }
   struct Upload {
     GLuint buffer = 0;
     GLsync fence = nullptr;
@@ -397,6 +421,7 @@ class VirtualTexture::Impl {
         glMapNamedBufferRange(rb.buffer, 0, GLsizeiptr(rb.bytes), GL_MAP_READ_BIT));
     if (!words) return 0;
     auto requests = feedback_.process(std::span(words, rb.bytes / 4), bias_.bias());
+    wanted_generation_ = rb.view_generation;
     glUnmapNamedBuffer(rb.buffer);
     if (!requests) return 0;
     wanted_ = std::move(*requests);
@@ -571,8 +596,8 @@ class VirtualTexture::Impl {
     st.refusals = ss.refusals;
     st.absent = absent_count_;
     st.errors = error_count_;
-    st.complete =
-        root_mapped_ && !wanted_.empty() && missing == 0 && pending_.empty() && inbox_.empty();
+    st.complete = root_mapped_ && wanted_generation_ == view_generation_ && !wanted_.empty() &&
+                  missing == 0 && pending_.empty() && inbox_.empty();
   }
 
   std::shared_ptr<client::TileClient> client_;
@@ -606,6 +631,10 @@ class VirtualTexture::Impl {
   std::uint64_t frame_ = 0;
   bool root_mapped_ = false;
   std::vector<TileRequest> wanted_;
+  std::uint64_t wanted_generation_ = 0;  // view generation of the feedback wanted_ came from
+  std::uint64_t view_generation_ = 0;
+  std::vector<double> view_signature_;
+  std::string view_name_;
   std::unordered_set<std::uint64_t> wanted_keys_;
   std::unordered_map<std::uint64_t, std::uint64_t> pending_;  // tile key -> frame asked
   std::unordered_set<std::uint64_t> absent_;
@@ -658,6 +687,9 @@ FrameStats VirtualTexture::render(const PlaneView& view, int width, int height) 
 }
 Image VirtualTexture::read_image() const {
   return impl_->read_image();
+}
+std::optional<Error> VirtualTexture::last_error() const {
+  return impl_->last_error();
 }
 void VirtualTexture::blit_to_screen(int width, int height) const {
   impl_->blit_to_screen(width, height);

@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <limits>
 #include <memory>
 #include <numbers>
 #include <string>
@@ -207,6 +208,129 @@ TEST_F(VirtualTextureTest, TooFewSlotsRaisesTheBiasAndStillDrawsEverything) {
     }
   }
   EXPECT_EQ(magenta, 0);
+}
+
+TEST_F(VirtualTextureTest, NoSeamsAcrossTileBordersBilinearOrTrilinear) {
+  // The synthetic source changes every texel, so a wrong border or slot offset shows at once.
+  const fs::path path = archive("synth64", 64, 4, vts::SyntheticSpec{1000, 600, std::nullopt, 6});
+  auto vt = open(path);
+  ASSERT_TRUE(vt);
+  // Centred on a tile corner of the finest level (512 = 8 tiles of 64), magnified (bilinear
+  // inside one level) and minified between levels (trilinear), straight and tilted.
+  const PlaneView views[] = {
+      {.center_u = 512.2, .center_v = 256.3, .texels_per_pixel = 0.37},
+      {.center_u = 512.2, .center_v = 256.3, .texels_per_pixel = 1.5},
+      {.center_u = 512.2, .center_v = 256.3, .texels_per_pixel = 0.6, .heading = 0.3, .tilt = 0.9},
+  };
+  int i = 0;
+  for (const PlaneView& view : views) {
+    ASSERT_GT(converge(*vt, view, 160, 120, 300), 0);
+    const ImageDiff d = against_reference(*vt, path, view, 160, 120, "seams" + std::to_string(i++));
+    EXPECT_GE(d.psnr_db, 40.0) << "view " << i;
+    EXPECT_LE(d.max_abs, 24) << "view " << i;
+  }
+}
+
+TEST_F(VirtualTextureTest, ConvergesWithinAFewFramesAfterAJumpWithAWarmCache) {
+  const fs::path path = archive("earth64", 64, 4);
+  VirtualTextureOptions o;
+  o.slots = 64;  // too few to keep both views: the return trip re-uploads from the client's RAM
+  auto vt = open(path, o);
+  ASSERT_TRUE(vt);
+  const PlaneView a{.center_u = 300, .center_v = 300, .texels_per_pixel = 0.5};
+  const PlaneView b{.center_u = 1700, .center_v = 700, .texels_per_pixel = 0.5};
+  ASSERT_GT(converge(*vt, a, 256, 192, 300), 0);
+  ASSERT_GT(converge(*vt, b, 256, 192, 300), 0);
+  // Back to a: every tile is in the client's RAM cache. The feedback ring (3 frames) and the
+  // upload budget bound the frames to full resolution.
+  const int frames = converge(*vt, a, 256, 192, 300);
+  std::printf("  frames to full resolution after a jump (warm RAM): %d\n", frames);
+  EXPECT_GT(frames, 0);
+  EXPECT_LE(frames, 12);
+}
+
+TEST_F(VirtualTextureTest, BiasFallsBackWhenThePhysicalTextureIsLargeEnough) {
+  const fs::path path = archive("earth64", 64, 4);
+  VirtualTextureOptions o;
+  o.slots = 24;
+  auto vt = open(path, o);
+  ASSERT_TRUE(vt);
+  // A wide view wants about 60 tiles (with ancestors), far more than 24; a 32 x 32 close view
+  // wants one tile and its ancestors (and predicts fewer than 0.9 x 24 a level finer), so the
+  // bias must come back to 0.
+  const PlaneView wide{.center_u = 1024, .center_v = 512, .texels_per_pixel = 1.5};
+  const PlaneView close{.center_u = 1000, .center_v = 500, .texels_per_pixel = 0.5};
+  FrameStats st;
+  double peak = 0;
+  std::uint32_t peak_wanted = 0;
+  for (int i = 0; i < 120; ++i) {
+    st = vt->render(wide, 256, 256);
+    peak = std::max(peak, st.mip_bias);
+    peak_wanted = std::max(peak_wanted, st.wanted);
+    if (st.pending > 0) ::usleep(2000);
+  }
+  EXPECT_GT(peak, 0.0) << "the wide view wanted at most " << peak_wanted << " tiles";
+  for (int i = 0; i < 400 && st.mip_bias > 0; ++i) {
+    st = vt->render(close, 32, 32);
+    if (st.pending > 0) ::usleep(2000);
+  }
+  EXPECT_EQ(st.mip_bias, 0.0) << "the close view wants " << st.wanted << " tiles";
+  ASSERT_GT(converge(*vt, close, 32, 32, 300), 0);
+  const ImageDiff d = against_reference(*vt, path, close, 32, 32, "recovered");
+  EXPECT_GE(d.psnr_db, 40.0);
+}
+
+TEST_F(VirtualTextureTest, HardCasesNeitherCrashNorDrawGarbage) {
+  const fs::path path = archive("earth64", 64, 4);
+  auto vt = open(path);
+  ASSERT_TRUE(vt);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const double W = 2048, H = 1024;
+  struct Case {
+    const char* name;
+    PlaneView view;
+    bool compare;
+  };
+  const Case cases[] = {
+      // The image's corners: u, v at 0, just below W / H (the last representable double below
+      // them) and exactly W / H.
+      {"corner0", {.center_u = 0, .center_v = 0, .texels_per_pixel = 0.3}, true},
+      {"corner1ulp",
+       {.center_u = std::nextafter(W, 0.0),
+        .center_v = std::nextafter(H, 0.0),
+        .texels_per_pixel = 0.3},
+       true},
+      {"corner1", {.center_u = W, .center_v = H, .texels_per_pixel = 0.3}, true},
+      // Zero footprint (finest level, deep magnification) and a huge one (whole image in a pixel).
+      {"tiny", {.center_u = 1000.5, .center_v = 500.5, .texels_per_pixel = 1e-7}, true},
+      {"huge", {.center_u = 1000, .center_v = 500, .texels_per_pixel = 1e6}, true},
+      // Grazing: most of the screen above the horizon, derivatives explode near it.
+      {"horizon", {.center_u = 1000, .center_v = 500, .texels_per_pixel = 1, .tilt = 1.5}, true},
+      // NaN in the view: nothing sensible to draw, but no crash and no stray colour.
+      {"nan", {.center_u = nan, .center_v = 500, .texels_per_pixel = 1}, false},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    int frames = 0;
+    for (; frames < 300; ++frames) {
+      const FrameStats st = vt->render(c.view, 128, 96);
+      if (st.complete || (!c.compare && frames > 10)) break;
+      if (st.pending > 0) ::usleep(2000);
+    }
+    const Image img = vt->read_image();
+    int magenta = 0;
+    for (int y = 0; y < img.height; ++y) {
+      for (int x = 0; x < img.width; ++x) {
+        const auto* p = img.at(x, y);
+        if (p[0] == 255 && p[1] == 0 && p[2] == 255) ++magenta;
+      }
+    }
+    EXPECT_EQ(magenta, 0);
+    if (c.compare) {
+      const ImageDiff d = against_reference(*vt, path, c.view, 128, 96, c.name);
+      EXPECT_GE(d.psnr_db, 35.0);
+    }
+  }
 }
 
 }  // namespace

@@ -38,6 +38,8 @@ class GlobeScene final : public Scene {
   void set_uniforms(unsigned program, int width, int height) const override;
   std::array<std::int64_t, 2> anchor() const override;
   std::pair<double, double> focus() const override;
+  // For a 1024-row viewport (the interface has no viewport): the pixel's angular size there, times
+  // the distance to the focus, times W / (2 pi R).
   double texels_per_pixel() const override;
   UvHit hit(double sx, double sy, int width, int height) const override;
   double u_period() const override { return double(width_); }

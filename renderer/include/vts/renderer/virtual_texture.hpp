@@ -67,7 +67,9 @@ struct FrameStats {
   double hit_ratio = 0;  // wanted tiles already resident / wanted (1 when nothing wanted)
   std::uint64_t evictions = 0, refusals = 0;  // cumulative slot-cache counters
   std::uint64_t absent = 0, errors = 0;       // cumulative: tiles the source lacks / failed
-  bool complete = false;  // the latest feedback's tiles are all resident and nothing is pending
+  // The feedback of the current view (not an older one still in the readback ring) has been read
+  // and every tile it wants is resident: the frame is at full resolution (at the current bias).
+  bool complete = false;
 };
 
 class VirtualTexture {
