@@ -2,6 +2,10 @@
 
 // clang-format off
 #include <epoxy/gl.h>  // before GLFW, which must not include a GL header of its own
+
+#include <chrono>
+#include <cstdlib>
+#include <thread>
 #include <GLFW/glfw3.h>
 // clang-format on
 
@@ -49,7 +53,17 @@ Result<std::unique_ptr<GlContext>> GlContext::create(const GlContextOptions& o) 
   std::lock_guard lock(g_mutex);
   if (g_users == 0) {
     glfwSetErrorCallback(on_glfw_error);
-    if (glfwInit() != GLFW_TRUE)
+    // A display that is named but refuses the connection is retried briefly: an X server under
+    // load (Xvfb in CI included) turns a connection away now and then. No display at all fails
+    // at once.
+    const bool display_named = std::getenv("DISPLAY") || std::getenv("WAYLAND_DISPLAY");
+    bool ok = glfwInit() == GLFW_TRUE;
+    for (int attempt = 0; !ok && display_named && attempt < 5; ++attempt) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(20 << attempt));
+      take_glfw_error();
+      ok = glfwInit() == GLFW_TRUE;
+    }
+    if (!ok)
       return make_error(ErrorCode::unsupported,
                         "cannot open a display for OpenGL: " + take_glfw_error() +
                             "; without a screen, run under xvfb-run");

@@ -100,6 +100,10 @@ void main() {
   ivec2 ip = hit ? ivec2(floor(rel)) : ivec2(0);
   vec2 fr = rel - floor(rel);
   ivec2 abs_i = u_anchor + ip;
+  if (u_period > 0.0) {  // a surface that wraps in u: back into [0, W)
+    int period = int(u_period);
+    abs_i.x = ((abs_i.x % period) + period) % period;
+  }
   hit = hit && all(greaterThanEqual(abs_i, ivec2(0))) && all(lessThan(abs_i, u_image));
 
   float rho = max(length(ddx), length(ddy));

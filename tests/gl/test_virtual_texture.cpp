@@ -13,6 +13,7 @@
 #include <numbers>
 #include <string>
 
+#include "gl_fixture.hpp"
 #include "vts/client/source.hpp"
 #include "vts/client/tile_client.hpp"
 #include "vts/renderer/camera.hpp"
@@ -60,14 +61,9 @@ class VirtualTextureTest : public ::testing::Test {
   }
 
   void SetUp() override {
-    GlContextOptions o;
-    o.width = 64;
-    o.height = 64;
-    o.visible = false;
-    o.vsync = false;
-    auto c = GlContext::create(o);
-    ASSERT_TRUE(c.ok()) << c.error().to_string();
-    gl_ = std::move(*c);
+    std::string error;
+    gl_ = vts::test::shared_gl_context(&error);
+    ASSERT_NE(gl_, nullptr) << error;
   }
 
   std::unique_ptr<VirtualTexture> open(const fs::path& path, VirtualTextureOptions options = {}) {
@@ -121,7 +117,7 @@ class VirtualTextureTest : public ::testing::Test {
   }
 
   static inline fs::path* dir_ = nullptr;
-  std::unique_ptr<GlContext> gl_;
+  GlContext* gl_ = nullptr;
 };
 
 TEST_F(VirtualTextureTest, PlaneStraightDownMatchesTheReference) {

@@ -21,9 +21,9 @@ inline constexpr double kEarthRadiusM = 6371008.8;  // mean Earth radius (IUGG)
 struct GlobeView {
   double lon_deg = 0, lat_deg = 0;  // the camera's nadir
   double altitude_m = 2e7;          // above the sphere (> 0)
-  double heading = 0;  // radians: where screen-up points; 0 = north, pi/2 = east
-  double tilt = 0;     // radians: 0 looks straight down, towards pi/2 at the horizon
-  double fov_y = 0.8;  // vertical field of view, radians
+  double heading = 0;               // radians: where screen-up points; 0 = north, pi/2 = east
+  double tilt = 0;                  // radians: 0 looks straight down, towards pi/2 at the horizon
+  double fov_y = 0.8;               // vertical field of view, radians
   double radius_m = kEarthRadiusM;
 };
 
