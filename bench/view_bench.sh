@@ -1,0 +1,80 @@
+#!/usr/bin/env bash
+# Renderer benchmark (issue 5), under Xvfb with Mesa llvmpipe (all this machine has), in one run:
+#   - CPU time per frame in the virtual-texturing system (feedback reduction, requests, uploads,
+#     page table) at 1920x1080 with 1/8 feedback;
+#   - render time of the same tilted view through the virtual texture vs an ordinary mipmapped
+#     texture of the whole image (the peer: what a texture that fits costs), as a ratio;
+#   - time to full resolution after a jump: cold from `vts serve` over loopback, warm RAM (the
+#     client's RAM cache holds the tiles), warm disk (a new client over a filled disk cache).
+# The image is the Earth at 8192x4096 (it must fit one texture for the mipmapped peer).
+#
+#   bash bench/view_bench.sh [--vts PATH] [--driver PATH] [--frames N] [--out FILE]
+# shellcheck source=lib.sh
+source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
+
+VTS_ARG="" DRIVER="" OUT_FILE="" FRAMES=60
+while (($#)); do
+  case $1 in
+    --vts) VTS_ARG=$2; shift 2 ;;
+    --driver) DRIVER=$2; shift 2 ;;
+    --frames) FRAMES=$2; shift 2 ;;
+    --out) OUT_FILE=$2; shift 2 ;;
+    *) die "unknown argument '$1'" ;;
+  esac
+done
+need xvfb-run
+VTS=$(find_vts "$VTS_ARG")
+DRIVER=${DRIVER:-$(dirname "$VTS")/../bench/vts_view_bench}
+[[ -x $DRIVER ]] || die "no vts_view_bench at $DRIVER (build with VTS_BUILD_BENCH=ON and the renderer)"
+
+mkdir -p "$CACHE"
+INPUT=$CACHE/earth_8192x4096.tif
+if [[ ! -r $INPUT ]]; then
+  need oiiotool
+  oiiotool "$EARTH" --resize:filter=lanczos3 8192x4096 -d uint8 -o "$INPUT"
+fi
+ARCHIVE=$CACHE/view_earth_8192x4096.pmtiles
+if [[ ! -s $ARCHIVE || $INPUT -nt $ARCHIVE ]]; then
+  "$VTS" build "$INPUT" -o "$ARCHIVE" >/dev/null
+fi
+NAME=$(basename "${ARCHIVE%.pmtiles}")
+
+T=$(mktemp -d "${TMPDIR:-/tmp}/vts-view-bench.XXXXXX")
+VTS_PID=""
+finish() {
+  [[ -n $VTS_PID ]] && kill -TERM "$VTS_PID" 2>/dev/null && wait "$VTS_PID" 2>/dev/null
+  rm -rf "$T"
+}
+trap finish EXIT
+"$VTS" serve "$ARCHIVE" --listen 127.0.0.1:0 --no-admin --threads 1 >"$T/vts.out" 2>"$T/vts.err" &
+VTS_PID=$!
+for ((i = 0; i < 100; i++)); do
+  grep -q 'listening on' "$T/vts.out" 2>/dev/null && break
+  sleep 0.05
+done
+PORT=$(sed -nE 's|.*listening on http://[^ ]*:([0-9]+)[ ,].*|\1|p' "$T/vts.out")
+[[ -n $PORT ]] || die "vts serve did not start: $(cat "$T/vts.err")"
+
+xvfb-run -a -s "-screen 0 1920x1080x24" "$DRIVER" "http://127.0.0.1:$PORT/$NAME" \
+  --image "$INPUT" --frames "$FRAMES" --cache-dir "$T/cache" >"$T/view.json" ||
+  die "driver failed"
+J=$(cat "$T/view.json")
+field() { python3 -c "import json,sys; print(json.loads(sys.argv[1])[sys.argv[2]])" "$J" "$1"; }
+{
+  echo "### Renderer: virtual texture vs mipmapped texture, llvmpipe ($(date -u '+%Y-%m-%d'))"
+  echo
+  machine_info
+  echo "- GL: $(field gl_renderer); view: 1920x1080, tilt 0.9 rad, ~1.2 texels/pixel at the centre"
+  echo "- command: \`bash bench/view_bench.sh --frames $FRAMES\` (image: Earth 8192x4096, 256-texel tiles)"
+  echo
+  echo "| measure | result |"
+  echo "|---|---|"
+  echo "| VT system CPU per frame (median; feedback 1/8) | $(field vt_cpu_ms) ms |"
+  echo "| frame through the virtual texture (GPU-finished, median) | $(field vt_frame_ms) ms |"
+  echo "| frame through one mipmapped texture (median) | $(field mip_frame_ms) ms |"
+  echo "| ratio VT / mipmapped | $(field vt_over_mip)x |"
+  echo "| full resolution, cold over loopback | $(field first_full_ms) ms |"
+  echo "| full resolution after a jump, warm RAM | $(field jump_warm_ram_ms) ms |"
+  echo "| full resolution, new client over a warm disk cache | $(field jump_warm_disk_ms) ms |"
+  echo "| page table / physical texture GPU memory | $(field page_table_bytes) B / $(field physical_bytes) B |"
+} | tee "${OUT_FILE:-/dev/null}"
