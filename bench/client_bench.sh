@@ -25,16 +25,10 @@ VTS=$(find_vts "$VTS_ARG")
 DRIVER=${DRIVER:-$(dirname "$VTS")/../bench/vts_client_bench}
 [[ -x $DRIVER ]] || die "no vts_client_bench at $DRIVER (build with VTS_BUILD_BENCH=ON)"
 
-mkdir -p "$CACHE"
-INPUT=$CACHE/earth_16384x8192.tif
-[[ -r $INPUT ]] || INPUT=$CACHE/earth_8192x4096.tif
-if [[ ! -r $INPUT ]]; then
-  need oiiotool
-  oiiotool "$EARTH" --resize:filter=lanczos3 8192x4096 -d uint8 -o "$INPUT"
-fi
-ARCHIVE=$CACHE/serve_$(basename "${INPUT%.*}").pmtiles
-if [[ ! -s $ARCHIVE || $INPUT -nt $ARCHIVE ]]; then
-  "$VTS" build "$INPUT" -o "$ARCHIVE" >/dev/null
+if [[ -r $CACHE/earth_16384x8192.tif ]]; then
+  ARCHIVE=$(earth_archive serve_earth_16384x8192 16384x8192)
+else
+  ARCHIVE=$(earth_archive serve_earth_8192x4096 8192x4096)
 fi
 NAME=$(basename "${ARCHIVE%.pmtiles}")
 
@@ -45,14 +39,7 @@ finish() {
   rm -rf "$T"
 }
 trap finish EXIT
-"$VTS" serve "$ARCHIVE" --listen 127.0.0.1:0 --no-admin --threads 2 >"$T/vts.out" 2>"$T/vts.err" &
-VTS_PID=$!
-for ((i = 0; i < 100; i++)); do
-  grep -q 'listening on' "$T/vts.out" 2>/dev/null && break
-  sleep 0.05
-done
-PORT=$(sed -nE 's|.*listening on http://[^ ]*:([0-9]+)[ ,].*|\1|p' "$T/vts.out")
-[[ -n $PORT ]] || die "vts serve did not start: $(cat "$T/vts.err")"
+start_vts_serve "$ARCHIVE" "$T" 2
 BASE="http://127.0.0.1:$PORT/$NAME"
 
 # Every tile URL of the pyramid, as the client will ask for them.

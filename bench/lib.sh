@@ -62,3 +62,35 @@ ratio() { # A B: A/B to 2 decimals, or "-" when B is 0/empty
   awk -v a="$1" -v b="$2" 'BEGIN { if (b + 0 == 0) print "-"; else printf "%.2f", a / b }'
 }
 mb() { awk -v b="$1" 'BEGIN { printf "%.1f", b / 1048576 }'; }
+
+# earth_archive NAME [WxH]: the Earth resized to WxH (default 8192x4096) as a TIFF in $CACHE, and
+# its archive $CACHE/NAME.pmtiles built by $VTS; both reused while current. Prints the archive.
+earth_archive() {
+  local name=$1 size=${2:-8192x4096} input archive
+  mkdir -p "$CACHE"
+  input=$CACHE/earth_$size.tif
+  if [[ ! -r $input ]]; then
+    need oiiotool
+    oiiotool "$EARTH" --resize:filter=lanczos3 "$size" -d uint8 -o "$input" || die "resize failed"
+  fi
+  archive=$CACHE/$name.pmtiles
+  if [[ ! -s $archive || $input -nt $archive ]]; then
+    "$VTS" build "$input" -o "$archive" >/dev/null || die "vts build $input failed"
+  fi
+  echo "$archive"
+}
+
+# start_vts_serve ARCHIVE DIR [THREADS]: `$VTS serve` on a free loopback port, logs in DIR; sets
+# VTS_PID and PORT (the caller's EXIT trap stops VTS_PID).
+start_vts_serve() {
+  "$VTS" serve "$1" --listen 127.0.0.1:0 --no-admin --threads "${3:-2}" >"$2/vts.out" \
+    2>"$2/vts.err" &
+  VTS_PID=$!
+  local i
+  for ((i = 0; i < 100; i++)); do
+    grep -q 'listening on' "$2/vts.out" 2>/dev/null && break
+    sleep 0.05
+  done
+  PORT=$(sed -nE 's|.*listening on http://[^ ]*:([0-9]+)[ ,].*|\1|p' "$2/vts.out")
+  [[ -n $PORT ]] || die "vts serve did not start: $(cat "$2/vts.err")"
+}

@@ -27,16 +27,8 @@ VTS=$(find_vts "$VTS_ARG")
 DRIVER=${DRIVER:-$(dirname "$VTS")/../bench/vts_view_bench}
 [[ -x $DRIVER ]] || die "no vts_view_bench at $DRIVER (build with VTS_BUILD_BENCH=ON and the renderer)"
 
-mkdir -p "$CACHE"
+ARCHIVE=$(earth_archive view_earth_8192x4096 8192x4096)
 INPUT=$CACHE/earth_8192x4096.tif
-if [[ ! -r $INPUT ]]; then
-  need oiiotool
-  oiiotool "$EARTH" --resize:filter=lanczos3 8192x4096 -d uint8 -o "$INPUT"
-fi
-ARCHIVE=$CACHE/view_earth_8192x4096.pmtiles
-if [[ ! -s $ARCHIVE || $INPUT -nt $ARCHIVE ]]; then
-  "$VTS" build "$INPUT" -o "$ARCHIVE" >/dev/null
-fi
 NAME=$(basename "${ARCHIVE%.pmtiles}")
 
 T=$(mktemp -d "${TMPDIR:-/tmp}/vts-view-bench.XXXXXX")
@@ -46,14 +38,7 @@ finish() {
   rm -rf "$T"
 }
 trap finish EXIT
-"$VTS" serve "$ARCHIVE" --listen 127.0.0.1:0 --no-admin --threads 1 >"$T/vts.out" 2>"$T/vts.err" &
-VTS_PID=$!
-for ((i = 0; i < 100; i++)); do
-  grep -q 'listening on' "$T/vts.out" 2>/dev/null && break
-  sleep 0.05
-done
-PORT=$(sed -nE 's|.*listening on http://[^ ]*:([0-9]+)[ ,].*|\1|p' "$T/vts.out")
-[[ -n $PORT ]] || die "vts serve did not start: $(cat "$T/vts.err")"
+start_vts_serve "$ARCHIVE" "$T" 1
 
 xvfb-run -a -s "-screen 0 1920x1080x24" "$DRIVER" "http://127.0.0.1:$PORT/$NAME" \
   --image "$INPUT" --frames "$FRAMES" --cache-dir "$T/cache" >"$T/view.json" ||

@@ -33,59 +33,11 @@ constexpr double kDeg = 180 / std::numbers::pi;
 constexpr std::uint64_t kBigW = 1ull << 25, kBigH = 1ull << 24;
 const vts::TexelRect kRegion{1u << 24, 1u << 23, (1u << 24) + 2048, (1u << 23) + 2048};
 
-class GlobeTest : public ::testing::Test {
+class GlobeTest : public vts::test::VirtualTextureFixture {
  protected:
-  static void SetUpTestSuite() {
-    dir_ =
-        new fs::path(fs::temp_directory_path() / ("vts-globe-test-" + std::to_string(::getpid())));
-    fs::create_directories(*dir_);
-  }
-  static void TearDownTestSuite() {
-    std::error_code ec;
-    fs::remove_all(*dir_, ec);
-    delete dir_;
-  }
-
-  static fs::path archive(const std::string& name, std::uint32_t tile, std::uint32_t border,
-                          std::optional<vts::SyntheticSpec> synthetic = std::nullopt) {
-    const fs::path out = *dir_ / (name + ".pmtiles");
-    if (fs::exists(out)) return out;
-    vts::BuildOptions o;
-    if (synthetic) {
-      o.synthetic = synthetic;
-    } else {
-      o.inputs = {"/usr/share/xplanet/images/earth.jpg"};
-    }
-    o.output = out;
-    o.tile_size = tile;
-    o.border = border;
-    o.threads = 2;
-    auto r = vts::build_pyramid(o);
-    EXPECT_TRUE(r.ok()) << r.error().to_string();
-    return out;
-  }
   static fs::path earth() { return archive("earth64", 64, 4); }
   static fs::path big() {
     return archive("g25", 256, 4, vts::SyntheticSpec{kBigW, kBigH, kRegion, 6});
-  }
-
-  void SetUp() override {
-    std::string error;
-    gl_ = vts::test::shared_gl_context(&error);
-    ASSERT_NE(gl_, nullptr) << error;
-  }
-
-  std::unique_ptr<VirtualTexture> open(const fs::path& path) {
-    auto src = vts::client::open_local_archive(path);
-    EXPECT_TRUE(src.ok()) << src.error().to_string();
-    if (!src.ok()) return nullptr;
-    auto client = vts::client::TileClient::create(std::shared_ptr(std::move(*src)));
-    EXPECT_TRUE(client.ok()) << client.error().to_string();
-    if (!client.ok()) return nullptr;
-    auto geometry = (*client)->info().info.geometry;
-    auto vt = VirtualTexture::create(std::shared_ptr(std::move(*client)), geometry);
-    EXPECT_TRUE(vt.ok()) << vt.error().to_string();
-    return vt.ok() ? std::move(*vt) : nullptr;
   }
 
   static GlobeScene scene_for(const VirtualTexture& vt, const GlobeView& view) {
@@ -130,16 +82,6 @@ class GlobeTest : public ::testing::Test {
     return *d;
   }
 
-  static int magenta(const Image& img) {
-    int n = 0;
-    for (int y = 0; y < img.height; ++y) {
-      for (int x = 0; x < img.width; ++x) {
-        const auto* p = img.at(x, y);
-        if (p[0] == 255 && p[1] == 0 && p[2] == 255) ++n;
-      }
-    }
-    return n;
-  }
   static int lit(const Image& img) {  // pixels that are not the black background
     int n = 0;
     for (int y = 0; y < img.height; ++y) {
@@ -150,9 +92,6 @@ class GlobeTest : public ::testing::Test {
     }
     return n;
   }
-
-  static inline fs::path* dir_ = nullptr;
-  GlContext* gl_ = nullptr;
 };
 
 TEST_F(GlobeTest, WholeEarthMatchesTheReference) {

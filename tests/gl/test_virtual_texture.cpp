@@ -28,57 +28,8 @@ using namespace vts::renderer;
 
 namespace {
 
-class VirtualTextureTest : public ::testing::Test {
+class VirtualTextureTest : public vts::test::VirtualTextureFixture {
  protected:
-  static void SetUpTestSuite() {
-    dir_ = new fs::path(fs::temp_directory_path() / ("vts-vt-test-" + std::to_string(::getpid())));
-    fs::create_directories(*dir_);
-  }
-  static void TearDownTestSuite() {
-    std::error_code ec;
-    fs::remove_all(*dir_, ec);
-    delete dir_;
-  }
-
-  // Builds (once per name) an archive of the Earth image or of a synthetic source.
-  static fs::path archive(const std::string& name, std::uint32_t tile, std::uint32_t border,
-                          std::optional<vts::SyntheticSpec> synthetic = std::nullopt) {
-    const fs::path out = *dir_ / (name + ".pmtiles");
-    if (fs::exists(out)) return out;
-    vts::BuildOptions o;
-    if (synthetic) {
-      o.synthetic = synthetic;
-    } else {
-      o.inputs = {"/usr/share/xplanet/images/earth.jpg"};
-    }
-    o.output = out;
-    o.tile_size = tile;
-    o.border = border;
-    o.threads = 2;
-    auto r = vts::build_pyramid(o);
-    EXPECT_TRUE(r.ok()) << r.error().to_string();
-    return out;
-  }
-
-  void SetUp() override {
-    std::string error;
-    gl_ = vts::test::shared_gl_context(&error);
-    ASSERT_NE(gl_, nullptr) << error;
-  }
-
-  std::unique_ptr<VirtualTexture> open(const fs::path& path, VirtualTextureOptions options = {}) {
-    auto src = vts::client::open_local_archive(path);
-    EXPECT_TRUE(src.ok()) << src.error().to_string();
-    if (!src.ok()) return nullptr;
-    auto client = vts::client::TileClient::create(std::shared_ptr(std::move(*src)));
-    EXPECT_TRUE(client.ok()) << client.error().to_string();
-    if (!client.ok()) return nullptr;
-    auto geometry = (*client)->info().info.geometry;
-    auto vt = VirtualTexture::create(std::shared_ptr(std::move(*client)), geometry, options);
-    EXPECT_TRUE(vt.ok()) << vt.error().to_string();
-    return vt.ok() ? std::move(*vt) : nullptr;
-  }
-
   // Renders until the frame reports complete (or max_frames); returns the frames it took.
   static int converge(VirtualTexture& vt, const PlaneView& view, int w, int h, int max_frames,
                       FrameStats* last = nullptr) {
@@ -115,9 +66,6 @@ class VirtualTextureTest : public ::testing::Test {
     }
     return diff.ok() ? *diff : ImageDiff{};
   }
-
-  static inline fs::path* dir_ = nullptr;
-  GlContext* gl_ = nullptr;
 };
 
 TEST_F(VirtualTextureTest, PlaneStraightDownMatchesTheReference) {
@@ -195,15 +143,7 @@ TEST_F(VirtualTextureTest, TooFewSlotsRaisesTheBiasAndStillDrawsEverything) {
   EXPECT_GT(max_bias, 0.0);
   EXPECT_LE(st.resident, 12u);
   // Complete at a coarser level: nothing magenta (unmapped) on screen.
-  const Image img = vt->read_image();
-  int magenta = 0;
-  for (int y = 0; y < img.height; ++y) {
-    for (int x = 0; x < img.width; ++x) {
-      const auto* p = img.at(x, y);
-      if (p[0] == 255 && p[1] == 0 && p[2] == 255) ++magenta;
-    }
-  }
-  EXPECT_EQ(magenta, 0);
+  EXPECT_EQ(magenta(vt->read_image()), 0);
 }
 
 TEST_F(VirtualTextureTest, NoSeamsAcrossTileBordersBilinearOrTrilinear) {
@@ -313,15 +253,7 @@ TEST_F(VirtualTextureTest, HardCasesNeitherCrashNorDrawGarbage) {
       if (st.complete || (!c.compare && frames > 10)) break;
       if (st.pending > 0) ::usleep(2000);
     }
-    const Image img = vt->read_image();
-    int magenta = 0;
-    for (int y = 0; y < img.height; ++y) {
-      for (int x = 0; x < img.width; ++x) {
-        const auto* p = img.at(x, y);
-        if (p[0] == 255 && p[1] == 0 && p[2] == 255) ++magenta;
-      }
-    }
-    EXPECT_EQ(magenta, 0);
+    EXPECT_EQ(magenta(vt->read_image()), 0);
     if (c.compare) {
       const ImageDiff d = against_reference(*vt, path, c.view, 128, 96, c.name);
       EXPECT_GE(d.psnr_db, 35.0);
