@@ -27,7 +27,8 @@ uniform ivec2 u_anchor;      // integer finest texel the camera works relative t
 uniform ivec2 u_image;       // finest image size in texels
 uniform int u_max_level;
 uniform float u_period;      // u period in finest texels (0: u does not wrap)
-uniform int u_tile;          // T
+uniform int u_tile_shift;    // log2 T (tiles are powers of two: shifts, no integer division,
+                             // which software rasterisers cannot vectorise)
 uniform float u_level_offset;  // colour pass: -bias; feedback: +log2(k)
 
 #ifdef FEEDBACK
@@ -57,7 +58,7 @@ vec4 sample_level(int L, ivec2 abs_i, vec2 fr, out int mapped_level) {
   uvec2 ai = uvec2(abs_i);
   uvec2 ti = ai >> s;                                                    // level-L texel
   vec2 tf = (vec2(ai & uvec2((1u << s) - 1u)) + fr) / float(1u << s);  // its fraction
-  uvec2 tile = ti / uint(u_tile);
+  uvec2 tile = ti >> uint(u_tile_shift);
   int lvl = L;
   for (; lvl > 0; --lvl) {
     uvec2 o = u_origin[lvl];
@@ -74,8 +75,10 @@ vec4 sample_level(int L, ivec2 abs_i, vec2 fr, out int mapped_level) {
   uint d = uint(L - m);
   uvec2 tm = ti >> d;                                                  // texel at level m
   vec2 fm = (vec2(ti & uvec2((1u << d) - 1u)) + tf) / float(1u << d);  // its fraction
-  vec2 pos = vec2(tm % uint(u_tile)) + fm;                             // inside the tile, [0, T)
-  vec2 slot_xy = vec2(float(slot % uint(u_slots_per_row)), float(slot / uint(u_slots_per_row)));
+  vec2 pos = vec2(tm & ((1u << uint(u_tile_shift)) - 1u)) + fm;                             // inside the tile, [0, T)
+  // slot < 2^24: exact in float, so row = floor((slot + 0.5) / per_row) needs no integer division.
+  float row = floor((float(slot) + 0.5) / float(u_slots_per_row));
+  vec2 slot_xy = vec2(float(slot) - row * float(u_slots_per_row), row);
   vec2 uv = (slot_xy * u_slot_size + u_border + pos) * u_atlas_inv;
   mapped_level = m;
   return textureLod(u_physical, uv, 0.0);
@@ -102,7 +105,8 @@ void main() {
   ivec2 abs_i = u_anchor + ip;
   if (u_period > 0.0) {  // a surface that wraps in u: back into [0, W)
     int period = int(u_period);
-    abs_i.x = ((abs_i.x % period) + period) % period;
+    abs_i.x -= period * int(floor(float(abs_i.x) / u_period));  // exact: |abs_i.x| << 2^24 here
+    abs_i.x = abs_i.x < 0 ? abs_i.x + period : (abs_i.x >= period ? abs_i.x - period : abs_i.x);
   }
   hit = hit && all(greaterThanEqual(abs_i, ivec2(0))) && all(lessThan(abs_i, u_image));
 
@@ -119,7 +123,7 @@ void main() {
   int L = int(ceil(c));
   uint f = min(uint((float(L) - c) * 256.0), 255u);
   uint s = uint(u_max_level - L);
-  uvec2 tile = (uvec2(abs_i) >> s) / uint(u_tile);
+  uvec2 tile = (uvec2(abs_i) >> s) >> uint(u_tile_shift);
   o_feedback = uvec2(tile.x | (uint(L) << 24), tile.y | (f << 24));
 #else
   if (!hit) {

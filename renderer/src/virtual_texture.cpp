@@ -3,6 +3,7 @@
 #include <epoxy/gl.h>
 
 #include <algorithm>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -244,7 +245,8 @@ class VirtualTexture::Impl {
       glProgramUniform2i(p, glGetUniformLocation(p, "u_image"), GLint(geometry_.width()),
                          GLint(geometry_.height()));
       glProgramUniform1i(p, glGetUniformLocation(p, "u_max_level"), geometry_.max_zoom());
-      glProgramUniform1i(p, glGetUniformLocation(p, "u_tile"), GLint(geometry_.tile_size()));
+      glProgramUniform1i(p, glGetUniformLocation(p, "u_tile_shift"),
+                         std::countr_zero(geometry_.tile_size()));
       glProgramUniform1f(p, glGetUniformLocation(p, "u_level_offset"), level_offset);
     };
 
