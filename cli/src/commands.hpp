@@ -22,6 +22,9 @@ Runner add_serve(CLI::App& app);
 Runner add_sign(CLI::App& app);
 Runner add_cache(CLI::App& app);  // vts cache serve (cmd_cache.cpp)
 Runner add_warm(CLI::App& app);
+#ifdef VTS_HAVE_VIEWER
+Runner add_view(CLI::App& app);  // vts view (cmd_view.cpp): only when the renderer is built
+#endif
 
 // "HOST:PORT" (HOST may be [IPv6] or empty for 0.0.0.0) for --listen / --admin.
 Result<std::pair<std::string, std::uint16_t>> parse_endpoint(const std::string& s);

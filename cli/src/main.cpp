@@ -33,6 +33,9 @@ int main(int argc, char** argv) {
   add(&vts::cli::add_sign);
   add(&vts::cli::add_cache);
   add(&vts::cli::add_warm);
+#ifdef VTS_HAVE_VIEWER
+  add(&vts::cli::add_view);
+#endif
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -1,0 +1,564 @@
+// vts view: the sparse-virtual-texture viewer. Thin glue over the libraries: a source (any
+// location open_source accepts) -> TileClient (RAM cache, optional disk cache, decode pool) ->
+// VirtualTexture -> a plane or globe scene, driven by the mouse, a camera path, or nothing.
+//
+// Interactive (default): a visible window; the title and stderr carry the HUD (resident, pending,
+// uploads per frame, hit ratio, mip bias, frame time).
+// Headless (--headless --frames N): a hidden window renders N frames (optionally stopping at the
+// first complete one), writes the last as a PNG and prints per-frame stats (JSON with --json).
+#include <GLFW/glfw3.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <csignal>
+#include <cstdio>
+#include <fstream>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <numbers>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "commands.hpp"
+#include "vts/client/saved_source.hpp"
+#include "vts/client/source.hpp"
+#include "vts/client/tile_client.hpp"
+#include "vts/renderer/camera.hpp"
+#include "vts/renderer/camera_path.hpp"
+#include "vts/renderer/gl_context.hpp"
+#include "vts/renderer/globe.hpp"
+#include "vts/renderer/reference.hpp"
+#include "vts/renderer/scene.hpp"
+#include "vts/renderer/virtual_texture.hpp"
+
+namespace vts::cli {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using namespace vts::renderer;
+
+std::atomic<bool> g_view_quit{false};
+
+extern "C" void on_view_signal(int) {
+  g_view_quit.store(true);
+}
+
+// SIGINT/SIGTERM end the viewer like Esc (GL objects freed, --screenshot written); a second
+// signal kills.
+void install_view_quit_handlers() {
+  struct sigaction sa {};
+  sa.sa_handler = on_view_signal;
+  sa.sa_flags = SA_RESETHAND;
+  sigemptyset(&sa.sa_mask);
+  sigaction(SIGINT, &sa, nullptr);
+  sigaction(SIGTERM, &sa, nullptr);
+}
+
+struct ViewArgs {
+  std::string source, cache_dir, scene = "plane", camera_path, debug = "none", screenshot;
+  std::uint64_t ram_mb = 256;
+  int width = 1280, height = 720;
+  std::uint32_t slots = 256, window = 64, upload_tiles = 32;
+  int feedback = 8;
+  bool headless = false, json = false, until_complete = false;
+  int frames = 0;
+};
+
+DebugView debug_from_name(const std::string& s) {
+  if (s == "levels") return DebugView::levels;
+  if (s == "physical") return DebugView::physical;
+  if (s == "page-table") return DebugView::page_table;
+  return DebugView::none;
+}
+
+const char* debug_name(DebugView v) {
+  switch (v) {
+    case DebugView::levels:
+      return "levels";
+    case DebugView::physical:
+      return "physical";
+    case DebugView::page_table:
+      return "page-table";
+    case DebugView::none:
+      break;
+  }
+  return "none";
+}
+
+Result<std::string> read_text(const std::string& path, const char* what) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in)
+    return make_error(ErrorCode::not_found, std::string(what) + " " + path + ": cannot be read");
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+// The default views: the whole image in the window (plane), the Earth from 20 000 km (globe).
+CameraKey default_camera(const Geometry& g, int width, int height) {
+  CameraKey k;
+  k.plane.center_u = double(g.width()) / 2;
+  k.plane.center_v = double(g.height()) / 2;
+  k.plane.texels_per_pixel =
+      std::max(double(g.width()) / width, double(g.height()) / height) * 1.05;
+  k.globe.lon_deg = 0;
+  k.globe.lat_deg = 20;
+  k.globe.altitude_m = 2e7;
+  return k;
+}
+
+// --scene: "plane", "globe" or a JSON file {"scene": "plane"|"globe", "camera": {view fields}}.
+// Sets `globe` and overrides `camera` with the file's camera.
+Status parse_scene(const std::string& spec, bool& globe, CameraKey& camera) {
+  if (spec == "plane" || spec == "globe") {
+    globe = spec == "globe";
+    return {};
+  }
+  auto text = read_text(spec, "--scene file");
+  if (!text) {
+    return make_error(ErrorCode::invalid_argument,
+                      "--scene '" + spec + "' is neither plane, globe nor a readable JSON file");
+  }
+  auto doc = nlohmann::json::parse(*text, nullptr, false);
+  auto bad = [&](const std::string& why) {
+    return make_error(ErrorCode::invalid_argument, "--scene " + spec + ": " + why);
+  };
+  if (doc.is_discarded() || !doc.is_object()) return bad("not a JSON object");
+  auto s = doc.find("scene");
+  if (s == doc.end() || !s->is_string() || (*s != "plane" && *s != "globe"))
+    return bad("\"scene\" must be \"plane\" or \"globe\"");
+  globe = *s == "globe";
+  if (auto c = doc.find("camera"); c != doc.end()) {
+    if (!c->is_object()) return bad("\"camera\" is not a JSON object");
+    nlohmann::json key = *c;
+    key["frame"] = 0;
+    auto path = CameraPath::parse(nlohmann::json{{"keys", {key}}}.dump(), camera);
+    if (!path) {
+      std::string msg = path.error().message;
+      const std::string prefix = "camera path: key 0: ";
+      if (msg.rfind(prefix, 0) == 0) msg = msg.substr(prefix.size());
+      return bad("\"camera\": " + msg);
+    }
+    camera = path->keys().front();
+  }
+  return {};
+}
+
+nlohmann::json stats_json(const FrameStats& s) {
+  return {{"frame", s.frame},
+          {"vt_cpu_ms", s.vt_cpu_ms},
+          {"frame_ms", s.frame_ms},
+          {"wanted", s.wanted},
+          {"wanted_missing", s.wanted_missing},
+          {"resident", s.resident},
+          {"pending", s.pending},
+          {"uploads", s.uploads},
+          {"upload_bytes", s.upload_bytes},
+          {"feedback_frames", s.feedback_frames},
+          {"mip_bias", s.mip_bias},
+          {"hit_ratio", s.hit_ratio},
+          {"evictions", s.evictions},
+          {"refusals", s.refusals},
+          {"absent", s.absent},
+          {"errors", s.errors},
+          {"complete", s.complete}};
+}
+
+// The interactive camera: what the mouse and keys change.
+struct Controls {
+  bool globe = false;
+  PlaneView plane;
+  GlobeView globe_view;
+  std::uint64_t image_w = 1, image_h = 1;
+  bool left = false, right = false;
+  double last_x = 0, last_y = 0;
+  bool touched = false;  // the user moved the camera (a camera path stops driving it)
+  std::optional<DebugView> debug_request;
+
+  // Window coordinates -> framebuffer pixels.
+  double scale(GLFWwindow* w) const {
+    int ww = 0, wh = 0, fw = 0, fh = 0;
+    glfwGetWindowSize(w, &ww, &wh);
+    glfwGetFramebufferSize(w, &fw, &fh);
+    return ww > 0 ? double(fw) / ww : 1.0;
+  }
+  void fb_size(GLFWwindow* w, int& fw, int& fh) const { glfwGetFramebufferSize(w, &fw, &fh); }
+};
+
+Controls* controls_of(GLFWwindow* w) {
+  return static_cast<Controls*>(glfwGetWindowUserPointer(w));
+}
+
+void on_mouse_button(GLFWwindow* w, int button, int action, int) {
+  Controls& c = *controls_of(w);
+  const bool down = action == GLFW_PRESS;
+  if (button == GLFW_MOUSE_BUTTON_LEFT) c.left = down;
+  if (button == GLFW_MOUSE_BUTTON_RIGHT) c.right = down;
+  glfwGetCursorPos(w, &c.last_x, &c.last_y);
+}
+
+void on_cursor(GLFWwindow* w, double x, double y) {
+  Controls& c = *controls_of(w);
+  const double k = c.scale(w);
+  const double dx = (x - c.last_x) * k, dy = (y - c.last_y) * k;
+  const double px = c.last_x * k, py = c.last_y * k;
+  c.last_x = x;
+  c.last_y = y;
+  if (!c.left && !c.right) return;
+  c.touched = true;
+  int fw = 1, fh = 1;
+  c.fb_size(w, fw, fh);
+  fh = std::max(fh, 1);
+  if (c.globe) {
+    GlobeView& g = c.globe_view;
+    if (c.left) {
+      // Degrees per pixel near the nadir: the ground a pixel covers at this altitude.
+      const double deg =
+          g.altitude_m * 2 * std::tan(g.fov_y / 2) / fh / g.radius_m * 180 / std::numbers::pi;
+      const double ch = std::cos(g.heading), sh = std::sin(g.heading);
+      // Screen right/up rotated by the heading into east/north.
+      const double east = -(dx * ch + dy * sh) * deg, north = (dy * ch - dx * sh) * deg;
+      g.lon_deg = std::remainder(
+          g.lon_deg + east / std::max(std::cos(g.lat_deg * std::numbers::pi / 180), 0.05), 360.0);
+      g.lat_deg = std::clamp(g.lat_deg + north, -89.0, 89.0);
+    } else {
+      g.heading += dx * 0.005;
+      g.tilt = std::clamp(g.tilt + dy * 0.005, 0.0, 1.4);
+    }
+    return;
+  }
+  PlaneView& v = c.plane;
+  if (c.left) {
+    // Keep the texel under the cursor under the cursor.
+    const PlaneCamera cam = PlaneCamera::from_view(v, fw, fh);
+    auto a = cam.hit(px, py), b = cam.hit(px + dx, py + dy);
+    if (a && b) {
+      v.center_u += a->first - b->first;
+      v.center_v += a->second - b->second;
+    } else {
+      const double ch = std::cos(v.heading), sh = std::sin(v.heading);
+      v.center_u -= (dx * ch - dy * sh) * v.texels_per_pixel;
+      v.center_v -= (dx * sh + dy * ch) * v.texels_per_pixel;
+    }
+  } else {
+    v.heading += dx * 0.005;
+    v.tilt = std::clamp(v.tilt + dy * 0.005, 0.0, 1.4);
+  }
+}
+
+void on_scroll(GLFWwindow* w, double, double yoff) {
+  Controls& c = *controls_of(w);
+  c.touched = true;
+  const double f = std::pow(1.25, -yoff);  // scroll up: closer
+  if (c.globe) {
+    c.globe_view.altitude_m = std::clamp(c.globe_view.altitude_m * f, 1.0, 1e9);
+    return;
+  }
+  int fw = 1, fh = 1;
+  c.fb_size(w, fw, fh);
+  double x = 0, y = 0;
+  glfwGetCursorPos(w, &x, &y);
+  const double k = c.scale(w);
+  PlaneView& v = c.plane;
+  const auto before = PlaneCamera::from_view(v, fw, std::max(fh, 1)).hit(x * k, y * k);
+  const double max_tpp = 4.0 * double(std::max(c.image_w, c.image_h));
+  v.texels_per_pixel = std::clamp(v.texels_per_pixel * f, 1.0 / 64, max_tpp);
+  const auto after = PlaneCamera::from_view(v, fw, std::max(fh, 1)).hit(x * k, y * k);
+  if (before && after) {
+    v.center_u += before->first - after->first;
+    v.center_v += before->second - after->second;
+  }
+}
+
+void on_key(GLFWwindow* w, int key, int, int action, int) {
+  if (action != GLFW_PRESS && action != GLFW_REPEAT) return;
+  Controls& c = *controls_of(w);
+  double& heading = c.globe ? c.globe_view.heading : c.plane.heading;
+  double& tilt = c.globe ? c.globe_view.tilt : c.plane.tilt;
+  switch (key) {
+    case GLFW_KEY_ESCAPE:
+      glfwSetWindowShouldClose(w, GLFW_TRUE);
+      break;
+    case GLFW_KEY_1:
+      c.debug_request = DebugView::none;
+      break;
+    case GLFW_KEY_2:
+      c.debug_request = DebugView::levels;
+      break;
+    case GLFW_KEY_3:
+      c.debug_request = DebugView::physical;
+      break;
+    case GLFW_KEY_4:
+      c.debug_request = DebugView::page_table;
+      break;
+    case GLFW_KEY_Q:
+      heading -= 0.05;
+      c.touched = true;
+      break;
+    case GLFW_KEY_E:
+      heading += 0.05;
+      c.touched = true;
+      break;
+    case GLFW_KEY_R:
+      tilt = std::clamp(tilt + 0.05, 0.0, 1.4);
+      c.touched = true;
+      break;
+    case GLFW_KEY_F:
+      tilt = std::clamp(tilt - 0.05, 0.0, 1.4);
+      c.touched = true;
+      break;
+    default:
+      break;
+  }
+}
+
+int run_view(const ViewArgs& a) {
+  // Options first: nothing opens before they are known to be good.
+  if (a.width < 1 || a.height < 1 || a.width > 16384 || a.height > 16384)
+    return report_error(
+        make_error(ErrorCode::invalid_argument, "--width/--height must be between 1 and 16384"));
+  if (a.headless && a.frames < 1)
+    return report_error(
+        make_error(ErrorCode::invalid_argument, "--headless needs --frames N (N >= 1)"));
+  std::optional<std::string> path_text;
+  if (!a.camera_path.empty()) {
+    auto t = read_text(a.camera_path, "--camera-path");
+    if (!t) return report_error(t.error());
+    path_text = std::move(*t);
+  }
+
+  // The source, the tile client with its caches.
+  client::SourceOptions so;
+  auto opened = client::open_source(a.source, so);
+  if (!opened && opened.error().code == ErrorCode::io && !a.cache_dir.empty()) {
+    // Offline: a cache that saw this source before still knows the tileset.
+    if (auto saved = client::load_source_info(a.cache_dir, a.source)) {
+      std::fprintf(stderr, "vts view: %s: %s; showing what the cache holds\n", a.source.c_str(),
+                   opened.error().message.c_str());
+      opened = client::offline_source(std::move(*saved));
+    }
+  }
+  if (!opened) return report_error(opened.error());
+  std::shared_ptr<client::TileSource> source = std::move(*opened);
+  const Geometry geometry = source->info().info.geometry;
+
+  CameraKey camera = default_camera(geometry, a.width, a.height);
+  bool globe = false;
+  if (auto s = parse_scene(a.scene, globe, camera); !s) return report_error(s.error());
+  std::optional<CameraPath> path;
+  if (path_text) {
+    auto p = CameraPath::parse(*path_text, camera);
+    if (!p)
+      return report_error(make_error(p.error().code, a.camera_path + ": " + p.error().message));
+    path = std::move(*p);
+    if (globe ? !path->has_globe() && path->has_plane() : !path->has_plane() && path->has_globe())
+      std::fprintf(stderr,
+                   "vts view: warning: %s has only %s fields; the %s camera stays where it is\n",
+                   a.camera_path.c_str(), globe ? "plane" : "globe", globe ? "globe" : "plane");
+  }
+
+  client::TileClientOptions co;
+  co.cache.ram_bytes = std::size_t(a.ram_mb) << 20;
+  if (!a.cache_dir.empty()) {
+    co.cache.disk = client::DiskCacheOptions{};
+    co.cache.disk->dir = a.cache_dir;
+  }
+  auto created = client::TileClient::create(source, co);
+  if (!created) return report_error(created.error());
+  std::shared_ptr<client::TileClient> tiles = std::move(*created);
+  if (!a.cache_dir.empty() && !source->local())
+    if (auto saved = client::save_source_info(a.cache_dir, a.source, source->info()); !saved)
+      std::fprintf(stderr, "vts view: warning: %s\n", saved.error().message.c_str());
+
+  // The window and the virtual texture.
+  GlContextOptions go;
+  go.width = a.width;
+  go.height = a.height;
+  go.visible = !a.headless;
+  go.vsync = !a.headless;
+  go.title = "vts view " + a.source;
+  auto gl_made = GlContext::create(go);
+  if (!gl_made) return report_error(gl_made.error());
+  std::unique_ptr<GlContext> gl = std::move(*gl_made);
+
+  VirtualTextureOptions vo;
+  vo.slots = a.slots;
+  vo.window = a.window;
+  vo.feedback_divisor = a.feedback;
+  vo.upload_tiles = a.upload_tiles;
+  vo.debug = debug_from_name(a.debug);
+  auto vt_made = VirtualTexture::create(tiles, geometry, vo);
+  if (!vt_made) return report_error(vt_made.error());
+  std::unique_ptr<VirtualTexture> vt = std::move(*vt_made);
+
+  Controls ctl;
+  ctl.globe = globe;
+  ctl.plane = camera.plane;
+  ctl.globe_view = camera.globe;
+  ctl.image_w = geometry.width();
+  ctl.image_h = geometry.height();
+
+  // One frame of the current camera at w x h.
+  auto render = [&](double frame, int w, int h, bool follow_path) {
+    if (path && follow_path) {
+      ctl.plane = path->plane_at(frame);
+      ctl.globe_view = path->globe_at(frame);
+    }
+    if (ctl.globe) {
+      return vt->render(GlobeScene(ctl.globe_view, geometry.width(), geometry.height()), w, h);
+    }
+    return vt->render(PlaneScene(ctl.plane), w, h);
+  };
+  const std::string scene_name = globe ? "globe" : "plane";
+  int rc = 0;
+
+  if (a.headless) {
+    std::vector<FrameStats> frames;
+    std::optional<std::uint64_t> complete_at;
+    for (int i = 0; i < a.frames; ++i) {
+      const FrameStats st = render(double(i), a.width, a.height, true);
+      frames.push_back(st);
+      if (st.complete && !complete_at) complete_at = st.frame;
+      if (st.complete && a.until_complete) break;
+      if (st.pending > 0) ::usleep(2000);  // the decode pool works on its own threads
+    }
+    if (!a.screenshot.empty()) {
+      if (auto w = write_png(a.screenshot, vt->read_image()); !w) rc = report_error(w.error());
+    }
+    const FrameStats& last = frames.back();
+    if (a.json) {
+      nlohmann::json j;
+      j["source"] = a.source;
+      j["scene"] = scene_name;
+      j["width"] = a.width;
+      j["height"] = a.height;
+      j["debug"] = debug_name(vo.debug);
+      j["frames"] = nlohmann::json::array();
+      for (const auto& f : frames) j["frames"].push_back(stats_json(f));
+      j["complete_at"] = complete_at ? nlohmann::json(*complete_at) : nlohmann::json(nullptr);
+      j["screenshot"] =
+          a.screenshot.empty() ? nlohmann::json(nullptr) : nlohmann::json(a.screenshot);
+      j["page_table_bytes"] = vt->page_table_gpu_bytes();
+      j["physical_bytes"] = vt->physical_gpu_bytes();
+      j["gl_renderer"] = gl->info().renderer;
+      std::printf("%s\n", j.dump(2).c_str());
+    } else {
+      std::printf("%s %s %dx%d: %zu frames, %s; %u resident, %u pending, hit %.1f%%%s%s\n",
+                  scene_name.c_str(), a.source.c_str(), a.width, a.height, frames.size(),
+                  complete_at ? ("complete at frame " + std::to_string(*complete_at)).c_str()
+                              : "never complete",
+                  last.resident, last.pending, last.hit_ratio * 100,
+                  a.screenshot.empty() ? "" : "; screenshot ", a.screenshot.c_str());
+    }
+    std::fflush(stdout);
+  } else {
+    GLFWwindow* win = gl->window();
+    glfwSetWindowUserPointer(win, &ctl);
+    glfwSetMouseButtonCallback(win, on_mouse_button);
+    glfwSetCursorPosCallback(win, on_cursor);
+    glfwSetScrollCallback(win, on_scroll);
+    glfwSetKeyCallback(win, on_key);
+    std::fprintf(stderr,
+                 "vts view: %s — drag: %s, scroll: zoom, right-drag or Q/E R/F: heading/tilt, "
+                 "1-4: debug view, Esc: quit\n",
+                 scene_name.c_str(), globe ? "orbit" : "pan");
+    auto last_title = Clock::now(), last_line = last_title, last_frame = last_title;
+    std::uint64_t uploads = 0, n = 0;
+    double wall_ms = 0;
+    double frame = 0;
+    install_view_quit_handlers();
+    while (!gl->should_close() && !g_view_quit.load()) {
+      gl->poll_events();
+      if (ctl.debug_request) {
+        vt->set_debug_view(*ctl.debug_request);
+        ctl.debug_request.reset();
+      }
+      int w = 0, h = 0;
+      gl->framebuffer_size(w, h);
+      if (w < 1 || h < 1) {  // minimised
+        ::usleep(20000);
+        continue;
+      }
+      const FrameStats st = render(frame, w, h, !ctl.touched);
+      frame += 1;
+      vt->blit_to_screen(w, h);
+      gl->swap_buffers();
+      const auto now = Clock::now();
+      wall_ms += std::chrono::duration<double, std::milli>(now - last_frame).count();
+      last_frame = now;
+      uploads += st.uploads;
+      ++n;
+      if (now - last_title >= std::chrono::milliseconds(250)) {
+        char hud[256];
+        std::snprintf(hud, sizeof hud,
+                      "resident %u | pending %u | uploads %.1f/frame | hit %.1f%% | bias %.2f | "
+                      "%.1f ms/frame%s%s",
+                      st.resident, st.pending, double(uploads) / double(n), st.hit_ratio * 100,
+                      st.mip_bias, wall_ms / double(n),
+                      vt->debug_view() == DebugView::none ? "" : " | debug ",
+                      vt->debug_view() == DebugView::none ? "" : debug_name(vt->debug_view()));
+        glfwSetWindowTitle(win, ("vts view — " + std::string(hud)).c_str());
+        if (now - last_line >= std::chrono::seconds(1)) {
+          std::fprintf(stderr, "vts view: %s\n", hud);
+          last_line = now;
+        }
+        last_title = now;
+        uploads = n = 0;
+        wall_ms = 0;
+      }
+    }
+    if (!a.screenshot.empty())
+      if (auto s = write_png(a.screenshot, vt->read_image()); !s) rc = report_error(s.error());
+  }
+  vt.reset();  // GL objects go while the context is current
+  gl.reset();
+  return rc;
+}
+
+}  // namespace
+
+Runner add_view(CLI::App& app) {
+  auto a = std::make_shared<ViewArgs>();
+  CLI::App* c = app.add_subcommand(
+      "view", "View a tileset through the sparse virtual texture (window, or --headless)");
+  c->add_option("source", a->source,
+                "Tileset: a local archive, http://host:port/NAME (vts serve or vts cache serve), "
+                "a TileJSON URL or a remote .pmtiles URL")
+      ->required();
+  c->add_option("--cache-dir", a->cache_dir, "Disk cache folder (as vts warm fills it)");
+  c->add_option("--ram-mb", a->ram_mb, "RAM tile cache, MiB")
+      ->check(CLI::Range(std::uint64_t{0}, std::uint64_t{1} << 20))
+      ->capture_default_str();
+  c->add_option("--scene", a->scene, "plane, globe, or FILE.json {\"scene\":..., \"camera\":{...}}")
+      ->capture_default_str();
+  c->add_option("--camera-path", a->camera_path, "Keyframes FILE.json {\"keys\":[...]}");
+  c->add_option("--width", a->width, "Frame width, pixels")->capture_default_str();
+  c->add_option("--height", a->height, "Frame height, pixels")->capture_default_str();
+  c->add_option("--slots", a->slots, "Physical texture slots")->capture_default_str();
+  c->add_option("--window", a->window, "Page-table window per level (power of two)")
+      ->capture_default_str();
+  c->add_option("--feedback", a->feedback, "Feedback pass divisor")
+      ->check(CLI::IsMember({1, 2, 4, 8, 16}))
+      ->capture_default_str();
+  c->add_option("--upload-tiles", a->upload_tiles, "Tile uploads per frame at most")
+      ->capture_default_str();
+  c->add_option("--debug", a->debug, "Debug view")
+      ->check(CLI::IsMember({"none", "levels", "physical", "page-table"}))
+      ->capture_default_str();
+  auto* headless = c->add_flag("--headless", a->headless, "Hidden window: render --frames frames");
+  c->add_option("--frames", a->frames, "Frames to render (--headless)")->needs(headless);
+  c->add_option("--screenshot", a->screenshot, "Write the last frame to this PNG");
+  c->add_flag("--json", a->json, "Print the frames' stats as JSON (--headless)")->needs(headless);
+  c->add_flag("--until-complete", a->until_complete,
+              "Stop at the first complete frame (--headless)")
+      ->needs(headless);
+  return [a] { return run_view(*a); };
+}
+
+}  // namespace vts::cli

@@ -1,0 +1,114 @@
+#!/usr/bin/env bash
+# `vts view --headless` end to end under Xvfb (xvfb-run -a) with Mesa llvmpipe: a real archive
+# built by `vts build`, viewed from the file and through a real `vts serve` on 127.0.0.1; the
+# JSON report checked with python3, the screenshot with python3 (PNG header) and oiiotool; bad
+# sources and a missing display must fail cleanly with a message that says why.
+# Environment (besides lib.sh's): XVFB_RUN, the xvfb-run script.
+# shellcheck source=lib.sh
+source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
+# shellcheck source=serve_lib.sh
+source "$(dirname "${BASH_SOURCE[0]}")/serve_lib.sh"
+
+XVFB_RUN=${XVFB_RUN:-xvfb-run}
+require_tool "$XVFB_RUN"
+require_tool python3
+require_tool "$OIIOTOOL"
+
+W=320
+H=200
+XVFB=("$XVFB_RUN" -a -s "-screen 0 1280x1024x24")
+
+# check_view_json FILE PNG: the report of a run that must have converged, and its screenshot.
+check_view_json() {
+  local json=$1 png=$2
+  python3 - "$json" "$png" "$W" "$H" <<'EOF' || fail "bad vts view --json report in $1 (kept in logs)"
+import json, struct, sys
+path, png, w, h = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
+j = json.load(open(path))
+def need(cond, what):
+    if not cond:
+        print("FAIL:", what, file=sys.stderr)
+        print(json.dumps({k: v for k, v in j.items() if k != "frames"}, indent=1), file=sys.stderr)
+        sys.exit(1)
+for k in ("source", "scene", "width", "height", "frames", "complete_at", "screenshot",
+          "page_table_bytes", "physical_bytes", "gl_renderer"):
+    need(k in j, "no %r in the report" % k)
+need(j["scene"] == "plane", "scene is %r" % j["scene"])
+need(j["width"] == w and j["height"] == h, "size %rx%r" % (j["width"], j["height"]))
+need(isinstance(j["complete_at"], int) and not isinstance(j["complete_at"], bool),
+     "complete_at is %r, expected a frame number" % j["complete_at"])
+frames = j["frames"]
+need(isinstance(frames, list) and 0 < len(frames) <= 200, "%d frames" % len(frames))
+last = frames[-1]
+need(last["complete"] is True, "the last frame is not complete (--until-complete)")
+need(last["frame"] == j["complete_at"], "stopped at frame %r, complete_at %r" %
+     (last["frame"], j["complete_at"]))
+need(not any(f["complete"] for f in frames[:-1]), "an earlier frame was complete already")
+need(last["pending"] == 0 and last["resident"] > 0 and last["errors"] == 0,
+     "last frame: %r" % last)
+for f in ("vt_cpu_ms", "frame_ms", "wanted", "wanted_missing", "uploads", "upload_bytes",
+          "feedback_frames", "mip_bias", "hit_ratio", "evictions", "refusals", "absent"):
+    need(f in last, "frame stats lack %r" % f)
+need(sum(f["uploads"] for f in frames) >= last["resident"] - 1, "fewer uploads than resident tiles")
+need(j["page_table_bytes"] > 0 and j["physical_bytes"] > 0, "GPU byte counts")
+need(j["screenshot"] == png, "screenshot %r" % j["screenshot"])
+with open(png, "rb") as f:
+    head = f.read(24)
+need(head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR", "%s is not a PNG" % png)
+pw, ph = struct.unpack(">II", head[16:24])
+need((pw, ph) == (w, h), "the PNG header says %dx%d" % (pw, ph))
+EOF
+  local dims
+  dims=$(image_dims "$png")
+  [[ $dims == "$W $H 4" ]] || fail "oiiotool reads $png as '$dims', expected '$W $H 4'"
+  # Not uniform: the Earth has oceans and continents; every colour channel must vary.
+  "$OIIOTOOL" --stats "$png" >"$LOGS/stats.txt" 2>&1 || fail "oiiotool --stats $png failed"
+  grep -q 'Constant: No' "$LOGS/stats.txt" || { cat "$LOGS/stats.txt" >&2; fail "$png is uniform"; }
+  python3 - "$LOGS/stats.txt" <<'EOF' || { cat "$LOGS/stats.txt" >&2; fail "$png is nearly uniform"; }
+import re, sys
+sd = [float(x) for x in re.search(r"StdDev: ([0-9. ]+)", open(sys.argv[1]).read()).group(1).split()]
+sys.exit(0 if min(sd[:3]) > 10 else 1)
+EOF
+}
+
+ARCHIVE="$WORK/earth.pmtiles"
+note "vts build earth.jpg --tile 64"
+build_earth "$ARCHIVE" --tile 64
+
+note "vts view ARCHIVE --headless --until-complete"
+expect_ok "${XVFB[@]}" "$VTS" view "$ARCHIVE" --headless --frames 200 --until-complete \
+  --screenshot "$WORK/local.png" --json --width "$W" --height "$H"
+cp "$OUT" "$LOGS/local.json"
+check_view_json "$LOGS/local.json" "$WORK/local.png"
+
+note "vts view http://127.0.0.1:PORT/earth (vts serve) --headless --until-complete"
+start_server "$ARCHIVE"
+expect_ok "${XVFB[@]}" "$VTS" view "$BASE/earth" --headless --frames 200 --until-complete \
+  --screenshot "$WORK/served.png" --json --width "$W" --height "$H"
+cp "$OUT" "$LOGS/served.json"
+check_view_json "$LOGS/served.json" "$WORK/served.png"
+# The same tiles through the network draw the same picture.
+"$IDIFF" -fail 0.01 -failpercent 0.1 "$WORK/local.png" "$WORK/served.png" >"$LOGS/idiff.txt" 2>&1 ||
+  { cat "$LOGS/idiff.txt" >&2; fail "the served view differs from the local one"; }
+
+note "a missing tileset (served) and a missing archive fail naming the source"
+expect_clean_failure "${XVFB[@]}" "$VTS" view "$BASE/nosuch" --headless --frames 5
+grep -q "nosuch" "$ERR" || { show_output; fail "the error does not name $BASE/nosuch"; }
+stop_server
+expect_clean_failure "${XVFB[@]}" "$VTS" view "$WORK/missing.pmtiles" --headless --frames 5
+grep -q "missing.pmtiles" "$ERR" || { show_output; fail "the error does not name the archive"; }
+[[ ! -e $WORK/missing.pmtiles ]] || fail "vts view created $WORK/missing.pmtiles"
+
+note "a bad option fails cleanly"
+expect_clean_failure "${XVFB[@]}" "$VTS" view "$ARCHIVE" --headless --frames 5 --feedback 3
+expect_clean_failure "${XVFB[@]}" "$VTS" view "$ARCHIVE" --headless --frames 5 --debug sideways
+echo '{"keys":[{"frame":0},{"frame":"later"}]}' >"$WORK/path.json"
+expect_clean_failure "${XVFB[@]}" "$VTS" view "$ARCHIVE" --headless --frames 5 --camera-path "$WORK/path.json"
+grep -q 'key 1' "$ERR" || { show_output; fail "the camera path error does not name key 1"; }
+
+note "no display: the error says to use xvfb-run"
+expect_clean_failure env -u DISPLAY -u WAYLAND_DISPLAY "$VTS" view "$ARCHIVE" --headless --frames 5
+grep -q 'xvfb-run' "$ERR" || { show_output; fail "the no-display error does not mention xvfb-run"; }
+[[ ! -s $OUT ]] || { show_output; fail "vts view printed a report without a display"; }
+
+note "ok"
