@@ -43,23 +43,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 using namespace vts::renderer;
 
-std::atomic<bool> g_view_quit{false};
-
-extern "C" void on_view_signal(int) {
-  g_view_quit.store(true);
-}
-
-// SIGINT/SIGTERM end the viewer like Esc (GL objects freed, --screenshot written); a second
-// signal kills.
-void install_view_quit_handlers() {
-  struct sigaction sa {};
-  sa.sa_handler = on_view_signal;
-  sa.sa_flags = SA_RESETHAND;
-  sigemptyset(&sa.sa_mask);
-  sigaction(SIGINT, &sa, nullptr);
-  sigaction(SIGTERM, &sa, nullptr);
-}
-
 struct ViewArgs {
   std::string source, cache_dir, scene = "plane", camera_path, debug = "none", screenshot;
   std::uint64_t ram_mb = 256;
@@ -472,8 +455,8 @@ int run_view(const ViewArgs& a) {
     std::uint64_t uploads = 0, n = 0;
     double wall_ms = 0;
     double frame = 0;
-    install_view_quit_handlers();
-    while (!gl->should_close() && !g_view_quit.load()) {
+    const std::atomic<bool>& quit_requested = install_stop_signals();
+    while (!gl->should_close() && !quit_requested.load()) {
       gl->poll_events();
       if (ctl.debug_request) {
         vt->set_debug_view(*ctl.debug_request);

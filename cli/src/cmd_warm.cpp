@@ -29,22 +29,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-std::atomic<bool> g_warm_cancel{false};
-
-extern "C" void on_warm_signal(int) {
-  g_warm_cancel.store(true);
-}
-
-// SIGINT/SIGTERM stop the warm cleanly (gets cancelled, cache flushed); a second signal kills.
-void install_warm_cancel_handlers() {
-  struct sigaction sa {};
-  sa.sa_handler = on_warm_signal;
-  sa.sa_flags = SA_RESETHAND;
-  sigemptyset(&sa.sa_mask);
-  sigaction(SIGINT, &sa, nullptr);
-  sigaction(SIGTERM, &sa, nullptr);
-}
-
 struct WarmArgs {
   std::string url, cache_dir, levels, region, cache_size = "10G";
   unsigned concurrency = 32;
@@ -220,7 +204,7 @@ int run_warm(const WarmArgs& a) {
   if (!cache_size) return report_error(cache_size.error());
   if (a.cache_dir.empty())
     return report_error(make_error(ErrorCode::invalid_argument, "--cache-dir is empty"));
-  install_warm_cancel_handlers();
+  const std::atomic<bool>& stop_requested = install_stop_signals();
   auto interrupted_early = [] {
     return report_error(make_error(ErrorCode::cancelled, "interrupted before warming began"));
   };
@@ -266,7 +250,7 @@ int run_warm(const WarmArgs& a) {
   co.disk = client::DiskCacheOptions{};
   co.disk->dir = a.cache_dir;
   co.disk->max_bytes = *cache_size;
-  if (g_warm_cancel.load()) return interrupted_early();
+  if (stop_requested.load()) return interrupted_early();
   WarmState st;  // outlives the cache: the cache's destructor may still run callbacks
   auto created = client::TileCache::create(source, co);
   if (!created) return report_error(created.error());
@@ -375,7 +359,7 @@ int run_warm(const WarmArgs& a) {
 
   // Issue gets, at most `concurrency` outstanding, until the walk ends or something stops it.
   for (;;) {
-    if (g_warm_cancel.load()) break;
+    if (stop_requested.load()) break;
     if (auto e = cache->last_disk_error()) {
       stop_error = e;
       break;
@@ -406,7 +390,7 @@ int run_warm(const WarmArgs& a) {
       (void)cache->flush();  // errors surface through last_disk_error()
     }
   }
-  const bool stopped = g_warm_cancel.load() || stop_error || too_many_errors;
+  const bool stopped = stop_requested.load() || stop_error || too_many_errors;
   if (stopped) cancel_live();
   // Drain: wait for the gets still outstanding (a Ctrl-C meanwhile cancels them).
   for (bool cancelled = stopped;;) {
@@ -415,7 +399,7 @@ int run_warm(const WarmArgs& a) {
       if (st.cv.wait_for(lock, std::chrono::milliseconds(100), [&] { return st.outstanding == 0; }))
         break;
     }
-    if (!cancelled && g_warm_cancel.load()) {
+    if (!cancelled && stop_requested.load()) {
       cancelled = true;
       cancel_live();
     }
@@ -429,7 +413,7 @@ int run_warm(const WarmArgs& a) {
   const client::DiskCacheStats ds = cache->disk()->stats();
   cache.reset();  // joins the cache's threads; no callback runs after this
 
-  const bool interrupted = g_warm_cancel.load();
+  const bool interrupted = stop_requested.load();
   const std::uint64_t done = st.done();
   const bool complete = !interrupted && !stop_error && st.failed == 0 && done == total;
   const double tps = elapsed > 0 ? double(done) / elapsed : 0.0;

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <CLI/CLI.hpp>
+#include <atomic>
 #include <cstdint>
 #include <functional>
 #include <string>
@@ -28,6 +29,10 @@ Runner add_view(CLI::App& app);  // vts view (cmd_view.cpp): only when the rende
 
 // "HOST:PORT" (HOST may be [IPv6] or empty for 0.0.0.0) for --listen / --admin.
 Result<std::pair<std::string, std::uint16_t>> parse_endpoint(const std::string& s);
+
+// Makes SIGINT and SIGTERM set the returned flag instead of killing the process, so a long
+// command can stop cleanly (flush, write its output); a second signal kills as usual.
+const std::atomic<bool>& install_stop_signals();
 
 // Prints "vts: error: <message>" to stderr and returns the mapped exit code.
 int report_error(const vts::Error& e);

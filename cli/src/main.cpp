@@ -1,4 +1,5 @@
 // vts — the vtstream command line: one subcommand per user journey.
+#include <csignal>
 #include <cstdio>
 #include <exception>
 
@@ -13,6 +14,23 @@ int report_error(const Error& e) {
 }
 
 }  // namespace vts::cli
+
+namespace {
+std::atomic<bool> g_stop{false};
+extern "C" void on_stop_signal(int) {
+  g_stop.store(true);
+}
+}  // namespace
+
+const std::atomic<bool>& vts::cli::install_stop_signals() {
+  struct sigaction sa {};
+  sa.sa_handler = on_stop_signal;
+  sa.sa_flags = SA_RESETHAND;
+  sigemptyset(&sa.sa_mask);
+  sigaction(SIGINT, &sa, nullptr);
+  sigaction(SIGTERM, &sa, nullptr);
+  return g_stop;
+}
 
 int main(int argc, char** argv) {
   CLI::App app{"vtstream: build, serve and view planet-scale textures as streamed tile pyramids",
