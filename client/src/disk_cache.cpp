@@ -42,11 +42,13 @@
 #include <algorithm>
 #include <cassert>
 #include <cerrno>
+#include <chrono>
 #include <cstring>
 #include <functional>
 #include <mutex>
 #include <span>
 #include <system_error>
+#include <thread>
 #include <unordered_map>
 #include <utility>
 #include <vector>
@@ -125,6 +127,10 @@ class Statement {
   ~Statement() { sqlite3_finalize(stmt_); }
   sqlite3_stmt* get() const { return stmt_; }
   sqlite3_stmt** out() { return &stmt_; }
+  void finalize() {
+    sqlite3_finalize(stmt_);
+    stmt_ = nullptr;
+  }
 
  private:
   sqlite3_stmt* stmt_ = nullptr;
@@ -522,15 +528,6 @@ struct DiskCache::Impl {
 
   // ---- opening ----------------------------------------------------------------------------
 
-  Result<std::int64_t> query_int(const char* sql, std::string_view doing) {
-    Statement stmt;
-    int rc = sqlite3_prepare_v2(db(), sql, -1, stmt.out(), nullptr);
-    if (rc != SQLITE_OK) return db_error(rc, doing);
-    rc = sqlite3_step(stmt.get());
-    if (rc != SQLITE_ROW) return db_error(rc, doing);
-    return sqlite3_column_int64(stmt.get(), 0);
-  }
-
   Status check_version(std::int64_t version, std::int64_t tables) {
     if (version > kSchemaVersion)
       return make_error(ErrorCode::unsupported,
@@ -546,14 +543,29 @@ struct DiskCache::Impl {
     return {};
   }
 
+  // The schema version and the number of tables, read in one statement so both come from one
+  // snapshot: read separately, another process creating the cache could commit in between and
+  // the pair would look like a foreign database (version 0 with tables).
+  Status read_version(std::string_view doing, std::int64_t& version, std::int64_t& tables) {
+    Statement stmt;
+    int rc = sqlite3_prepare_v2(db(),
+                                "SELECT (SELECT user_version FROM pragma_user_version), "
+                                "(SELECT count(*) FROM sqlite_schema WHERE type = 'table')",
+                                -1, stmt.out(), nullptr);
+    if (rc != SQLITE_OK) return db_error(rc, doing);
+    rc = sqlite3_step(stmt.get());
+    if (rc != SQLITE_ROW) return db_error(rc, doing);
+    version = sqlite3_column_int64(stmt.get(), 0);
+    tables = sqlite3_column_int64(stmt.get(), 1);
+    return {};
+  }
+
   Status setup() {
-    const char* count_tables = "SELECT count(*) FROM sqlite_schema WHERE type = 'table'";
     // The first read of the header tells a non-SQLite file apart.
-    auto version = query_int("PRAGMA user_version", "opening");
-    if (!version) return std::move(version).error();
-    auto tables = query_int(count_tables, "opening");
-    if (!tables) return std::move(tables).error();
-    if (Status s = check_version(*version, *tables); !s.ok()) return s;
+    std::int64_t version_value = 0, tables_value = 0;
+    if (Status s = read_version("opening", version_value, tables_value); !s.ok()) return s;
+    const std::int64_t* version = &version_value;
+    if (Status s = check_version(version_value, tables_value); !s.ok()) return s;
 
     if (*version == 0) {
       // Both take effect only before the first table is created (ignored otherwise). The page
@@ -563,9 +575,21 @@ struct DiskCache::Impl {
         return db_error(rc, "creating the database");
     }
     {
+      // Switching a new file to WAL needs the file to itself; SQLite answers SQLITE_BUSY without
+      // calling the busy handler when another process is creating or filling it at that
+      // moment, so the switch is retried here for up to the busy timeout.
       Statement stmt;
-      int rc = sqlite3_prepare_v2(db(), "PRAGMA journal_mode = WAL", -1, stmt.out(), nullptr);
-      if (rc == SQLITE_OK) rc = sqlite3_step(stmt.get());
+      int rc = SQLITE_BUSY;
+      const auto deadline = std::chrono::steady_clock::now() + options.busy_timeout;
+      for (;;) {
+        stmt.finalize();
+        rc = sqlite3_prepare_v2(db(), "PRAGMA journal_mode = WAL", -1, stmt.out(), nullptr);
+        if (rc == SQLITE_OK) rc = sqlite3_step(stmt.get());
+        if ((rc != SQLITE_BUSY && rc != SQLITE_LOCKED) ||
+            std::chrono::steady_clock::now() >= deadline)
+          break;
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+      }
       if (rc != SQLITE_ROW) return db_error(rc, "switching to WAL");
       const auto* mode = reinterpret_cast<const char*>(sqlite3_column_text(stmt.get(), 0));
       if (!mode || std::string_view(mode) != "wal")
@@ -584,16 +608,10 @@ struct DiskCache::Impl {
       // Another process may be creating the same cache right now: decide under the write lock.
       if (int rc = exec("BEGIN IMMEDIATE"); rc != SQLITE_OK)
         return db_error(rc, "creating the database");
-      auto again = query_int("PRAGMA user_version", "creating the database");
-      auto tables_again = query_int(count_tables, "creating the database");
-      Status s;
-      if (!again)
-        s = std::move(again).error();
-      else if (!tables_again)
-        s = std::move(tables_again).error();
-      else
-        s = check_version(*again, *tables_again);
-      if (s.ok() && *again == 0) {
+      std::int64_t again = 0, tables_again = 0;
+      Status s = read_version("creating the database", again, tables_again);
+      if (s.ok()) s = check_version(again, tables_again);
+      if (s.ok() && again == 0) {
         if (int rc = exec(kSchemaSql); rc != SQLITE_OK) s = db_error(rc, "creating the database");
       }
       if (s.ok()) {
