@@ -411,6 +411,8 @@ int run_view(const ViewArgs& a) {
       if (st.complete && a.until_complete) break;
       if (st.pending > 0) ::usleep(2000);  // the decode pool works on its own threads
     }
+    // A shader variant the driver refused leaves empty frames: say why instead of a black image.
+    if (auto e = vt->last_error()) return report_error(*e);
     if (!a.screenshot.empty()) {
       if (auto w = write_png(a.screenshot, vt->read_image()); !w) rc = report_error(w.error());
     }
