@@ -268,7 +268,6 @@ class VirtualTexture::Impl {
       glReadPixels(0, 0, fb_w_, fb_h_, GL_RG_INTEGER, GL_UNSIGNED_INT, nullptr);
       glBindBuffer(GL_PIXEL_PACK_BUFFER, 0);
       rb.fence = glFenceSync(GL_SYNC_GPU_COMMANDS_COMPLETE, 0);
-      rb.frame = frame_;
       rb.view_generation = view_generation_;
       ring_pos_ = (ring_pos_ + 1) % readbacks_.size();
     }
@@ -347,14 +346,21 @@ class VirtualTexture::Impl {
   const Geometry& geometry() const { return geometry_; }
   std::optional<Error> last_error() const { return last_error_; }
   VirtualTextureOptions& options() { return options_; }
-  std::uint64_t page_table_gpu_bytes() const { return table_.gpu_bytes(); }
-  std::uint64_t physical_gpu_bytes() const { return std::uint64_t(atlas_w_) * atlas_h_ * 4; }
+  // Read back from GL (what the driver was asked to allocate), not from the CPU-side table.
+  std::uint64_t page_table_gpu_bytes() const { return texture_bytes(page_tex_, 4); }
+  std::uint64_t physical_gpu_bytes() const { return texture_bytes(physical_tex_, 4); }
+  static std::uint64_t texture_bytes(GLuint tex, std::uint64_t texel_bytes) {
+    GLint w = 0, h = 0, d = 0;
+    glGetTextureLevelParameteriv(tex, 0, GL_TEXTURE_WIDTH, &w);
+    glGetTextureLevelParameteriv(tex, 0, GL_TEXTURE_HEIGHT, &h);
+    glGetTextureLevelParameteriv(tex, 0, GL_TEXTURE_DEPTH, &d);
+    return std::uint64_t(w) * std::uint64_t(h) * std::uint64_t(std::max(d, 1)) * texel_bytes;
+  }
 
  private:
   struct Readback {
     GLuint buffer = 0;
     GLsync fence = nullptr;
-    std::uint64_t frame = 0;
     std::uint64_t view_generation = 0;  // the view the feedback was rendered from
     std::size_t bytes = 0;
   };
@@ -552,7 +558,6 @@ class VirtualTexture::Impl {
     }
     staged_.clear();
     bytes_out = used;
-    uploads_total_ += count;
     return count;
   }
 
@@ -579,7 +584,6 @@ class VirtualTexture::Impl {
                           1, GL_RED_INTEGER, GL_UNSIGNED_INT,
                           layer.data() + std::size_t(s.row) * w + s.x0);
     }
-    page_spans_total_ += spans.size();
   }
 
   void fill_stats(FrameStats& st) const {
@@ -641,7 +645,7 @@ class VirtualTexture::Impl {
   std::unordered_map<std::uint64_t, std::uint64_t> pending_;  // tile key -> frame asked
   std::unordered_set<std::uint64_t> absent_;
   std::deque<client::TileEvent> inbox_;
-  std::uint64_t absent_count_ = 0, error_count_ = 0, uploads_total_ = 0, page_spans_total_ = 0;
+  std::uint64_t absent_count_ = 0, error_count_ = 0;
 };
 
 Result<std::unique_ptr<VirtualTexture>> VirtualTexture::create(

@@ -99,8 +99,10 @@ class VirtualTexture {
   DebugView debug_view() const;
   const Geometry& geometry() const;
   const VirtualTextureOptions& options() const;
-  std::uint64_t page_table_gpu_bytes() const;  // the page-table texture, whatever the image size
-  std::uint64_t physical_gpu_bytes() const;    // the slot atlas
+  // GPU memory of the page-table texture (whatever the image size) and of the slot atlas, from
+  // the textures' sizes as GL reports them.
+  std::uint64_t page_table_gpu_bytes() const;
+  std::uint64_t physical_gpu_bytes() const;
 
  private:
   class Impl;
