@@ -1,6 +1,8 @@
 // The renderer's benchmark driver (bench/view_bench.sh runs it under Xvfb with Mesa llvmpipe):
 //   vts_view_bench SOURCE --image FILE [--width 1920 --height 1080] [--frames 60] [--cache-dir DIR]
 //                  [--bilinear]   (one lookup per fragment instead of trilinear's two)
+//                  [--anisotropy N] (N taps at most along the footprint's major axis; the
+//                                   mipmapped peer gets GL_TEXTURE_MAX_ANISOTROPY N)
 // prints one JSON object with
 //   - vt_cpu_ms: CPU time per frame in the virtual-texturing system (feedback reduction, requests,
 //     uploads, page table), median over --frames converged frames, 1/8 feedback;
@@ -50,6 +52,7 @@ double median(std::vector<double> v) {
 }
 
 bool g_trilinear = true;
+int g_anisotropy = 1;
 
 std::unique_ptr<VirtualTexture> open_vt(const std::string& source, const std::string& cache_dir) {
   auto src = vts::client::open_source(source);
@@ -61,6 +64,7 @@ std::unique_ptr<VirtualTexture> open_vt(const std::string& source, const std::st
   const vts::Geometry g = (*client)->info().info.geometry;
   VirtualTextureOptions vo;
   vo.trilinear = g_trilinear;
+  vo.anisotropy = g_anisotropy;
   auto vt = VirtualTexture::create(std::shared_ptr(std::move(*client)), g, vo);
   if (!vt) fail(vt.error().to_string());
   return std::move(*vt);
@@ -108,6 +112,7 @@ struct MipmappedRenderer {
     glTextureParameteri(tex, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
     glTextureParameteri(tex, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
     glTextureParameteri(tex, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+    if (g_anisotropy > 1) glTextureParameterf(tex, GL_TEXTURE_MAX_ANISOTROPY, float(g_anisotropy));
 
     const std::string vs = R"(#version 450 core
 void main() {
@@ -194,6 +199,8 @@ int main(int argc, char** argv) {
       cache_dir = next();
     else if (a == "--bilinear")
       g_trilinear = false;
+    else if (a == "--anisotropy")
+      g_anisotropy = std::stoi(next());
     else if (!a.empty() && a[0] != '-' && source.empty())
       source = a;
     else
@@ -251,11 +258,12 @@ int main(int argc, char** argv) {
 
   const double vt_med = median(frame_ms), mip_med = median(mip_ms);
   std::printf(
-      "{\"width\": %d, \"height\": %d, \"frames\": %d, \"gl_renderer\": \"%s\", "
+      "{\"width\": %d, \"height\": %d, \"frames\": %d, \"anisotropy\": %d, "
+      "\"gl_renderer\": \"%s\", "
       "\"vt_cpu_ms\": %.3f, \"vt_frame_ms\": %.2f, \"mip_frame_ms\": %.2f, "
       "\"vt_over_mip\": %.2f, \"first_full_ms\": %.1f, \"jump_warm_ram_ms\": %.1f, "
       "\"jump_warm_disk_ms\": %.1f, \"page_table_bytes\": %llu, \"physical_bytes\": %llu}\n",
-      w, h, frames, (*gl)->info().renderer.c_str(), median(cpu), vt_med, mip_med,
+      w, h, frames, g_anisotropy, (*gl)->info().renderer.c_str(), median(cpu), vt_med, mip_med,
       mip_med > 0 ? vt_med / mip_med : 0.0, first_full, jump_ram, jump_disk,
       static_cast<unsigned long long>(vt->page_table_gpu_bytes()),
       static_cast<unsigned long long>(vt->physical_gpu_bytes()));

@@ -4,6 +4,7 @@
 #     page table) at 1920x1080 with 1/8 feedback;
 #   - render time of the same tilted view through the virtual texture vs an ordinary mipmapped
 #     texture of the whole image (the peer: what a texture that fits costs), as a ratio;
+#   - the same two frame times with anisotropic filtering (8 taps; the peer: hardware anisotropy 8);
 #   - time to full resolution after a jump: cold from `vts serve` over loopback, warm RAM (the
 #     client's RAM cache holds the tiles), warm disk (a new client over a filled disk cache).
 # The image is the Earth at 8192x4096 (it must fit one texture for the mipmapped peer).
@@ -43,8 +44,14 @@ start_vts_serve "$ARCHIVE" "$T" 1
 xvfb-run -a -s "-screen 0 1920x1080x24" "$DRIVER" "http://127.0.0.1:$PORT/$NAME" \
   --image "$INPUT" --frames "$FRAMES" --cache-dir "$T/cache" >"$T/view.json" ||
   die "driver failed"
+# The same view with 8-tap anisotropic filtering against the peer's hardware anisotropy 8.
+xvfb-run -a -s "-screen 0 1920x1080x24" "$DRIVER" "http://127.0.0.1:$PORT/$NAME" \
+  --image "$INPUT" --frames "$FRAMES" --anisotropy 8 >"$T/view-aniso.json" ||
+  die "driver failed (anisotropy 8)"
 J=$(cat "$T/view.json")
+JA=$(cat "$T/view-aniso.json")
 field() { python3 -c "import json,sys; print(json.loads(sys.argv[1])[sys.argv[2]])" "$J" "$1"; }
+afield() { python3 -c "import json,sys; print(json.loads(sys.argv[1])[sys.argv[2]])" "$JA" "$1"; }
 {
   echo "### Renderer: virtual texture vs mipmapped texture, llvmpipe ($(date -u '+%Y-%m-%d'))"
   echo
@@ -58,6 +65,9 @@ field() { python3 -c "import json,sys; print(json.loads(sys.argv[1])[sys.argv[2]
   echo "| frame through the virtual texture (GPU-finished, median) | $(field vt_frame_ms) ms |"
   echo "| frame through one mipmapped texture (median) | $(field mip_frame_ms) ms |"
   echo "| ratio VT / mipmapped | $(field vt_over_mip)x |"
+  echo "| anisotropic 8: frame through the virtual texture (8 taps) | $(afield vt_frame_ms) ms |"
+  echo "| anisotropic 8: frame through the mipmapped texture (hardware, max 8) | $(afield mip_frame_ms) ms |"
+  echo "| anisotropic 8: ratio VT / mipmapped | $(afield vt_over_mip)x |"
   echo "| full resolution, cold over loopback | $(field first_full_ms) ms |"
   echo "| full resolution after a jump, warm RAM | $(field jump_warm_ram_ms) ms |"
   echo "| full resolution, new client over a warm disk cache | $(field jump_warm_disk_ms) ms |"

@@ -180,6 +180,13 @@ Result<LinearRgba> PyramidSampler::bilinear(int z, double tx, double ty) {
 
 // ---- render_reference ------------------------------------------------------------------------
 
+int anisotropic_taps(double lx, double ly, int max_taps) {
+  const double major = std::max(lx, ly), minor = std::min(lx, ly);
+  if (max_taps <= 1 || !(major > 0) || !std::isfinite(major)) return 1;
+  const double ratio = minor > 0 ? major / minor : double(max_taps);
+  return static_cast<int>(std::clamp(std::ceil(ratio), 1.0, double(max_taps)));
+}
+
 namespace {
 
 using Hit = std::optional<std::pair<double, double>>;
@@ -216,8 +223,8 @@ double unwrap(double du, double period) {
 // The shared body: `hit_at(sx, sy)` gives the absolute (u, v) at a screen point; `fallback(sx,
 // sy, axis)` the derivative where the quad partner misses.
 template <typename HitFn, typename FallbackFn>
-Result<Image> render_with(PyramidSampler& sampler, int w, int h, double bias, double period,
-                          HitFn&& hit_at, FallbackFn&& fallback) {
+Result<Image> render_with(PyramidSampler& sampler, int w, int h, double bias, int anisotropy,
+                          double period, HitFn&& hit_at, FallbackFn&& fallback) {
   const auto quad_difference = [&](const Hit& a, const Hit& b, double sx, double sy, int axis) {
     std::pair<double, double> d =
         a && b ? std::pair{b->first - a->first, b->second - a->second} : fallback(sx, sy, axis);
@@ -256,22 +263,40 @@ Result<Image> render_with(PyramidSampler& sampler, int w, int h, double bias, do
         const double sx = px + 0.5, sy = py + 0.5;
         const auto [dudx, dvdx] = quad_difference(row[px & ~1], row[px | 1], sx, sy, 0);
         const auto [dudy, dvdy] = quad_difference(rows[0][px], rows[1][px], sx, sy, 1);
-        const double rho = std::max(std::hypot(dudx, dvdx), std::hypot(dudy, dvdy));
+        const double lx = std::hypot(dudx, dvdx), ly = std::hypot(dudy, dvdy);
+        const int taps = anisotropic_taps(lx, ly, anisotropy);
+        const double rho =
+            taps == 1 ? std::max(lx, ly) : std::max(std::max(lx, ly) / taps, std::min(lx, ly));
         double c = rho > 0 ? max_level - std::log2(rho) - bias : double(max_level);
         if (std::isnan(c)) c = max_level;
         c = std::clamp(c, 0.0, double(max_level));
 
         const int l0 = static_cast<int>(std::floor(c));
         const double f = c - l0;
+        const double ax = lx >= ly ? dudx : dudy, ay = lx >= ly ? dvdx : dvdy;
         LinearRgba colour{0, 0, 0, 0};
-        for (int k = 0; k < 2; ++k) {
-          const int level = l0 + k;
-          const double weight = k == 0 ? 1 - f : f;
-          if (level > max_level || weight == 0) continue;
-          auto s = sampler.bilinear(level, std::ldexp(u, level - max_level),
-                                    std::ldexp(v, level - max_level));
-          if (!s) return std::move(s).error();
-          for (int ch = 0; ch < 4; ++ch) colour[ch] += weight * (*s)[ch];
+        for (int i = 0; i < taps; ++i) {
+          double tu = u, tv = v;
+          if (taps > 1) {
+            const double t = (i + 0.5) / taps - 0.5;
+            tu = u + ax * t;
+            tv = v + ay * t;
+            if (period > 0) {
+              tu -= period * std::floor(tu / period);
+            } else if (!(tu >= 0 && tu < W)) {
+              tu = tu < 0 ? 0.5 : W - 0.5;
+            }
+            if (!(tv >= 0 && tv < H)) tv = tv < 0 ? 0.5 : H - 0.5;
+          }
+          for (int k = 0; k < 2; ++k) {
+            const int level = l0 + k;
+            const double weight = (k == 0 ? 1 - f : f) / taps;
+            if (level > max_level || weight == 0) continue;
+            auto s = sampler.bilinear(level, std::ldexp(tu, level - max_level),
+                                      std::ldexp(tv, level - max_level));
+            if (!s) return std::move(s).error();
+            for (int ch = 0; ch < 4; ++ch) colour[ch] += weight * (*s)[ch];
+          }
         }
         for (int ch = 0; ch < 3; ++ch) out[ch] = encode_srgb8(colour[ch]);
         out[3] = 255;
@@ -283,21 +308,83 @@ Result<Image> render_with(PyramidSampler& sampler, int w, int h, double bias, do
 
 }  // namespace
 
-Result<Image> render_reference(PyramidSampler& sampler, const PlaneCamera& camera, double bias) {
+Result<Image> render_reference(PyramidSampler& sampler, const PlaneCamera& camera, double bias,
+                               int anisotropy) {
   return render_with(
-      sampler, camera.width, camera.height, bias, 0,
+      sampler, camera.width, camera.height, bias, anisotropy, 0,
       [&](double sx, double sy) { return camera.hit(sx, sy); },
       [&](double sx, double sy, int axis) { return analytic_derivative(camera, sx, sy, axis); });
 }
 
 Result<Image> render_reference(PyramidSampler& sampler, const Scene& scene, int width, int height,
-                               double bias) {
+                               double bias, int anisotropy) {
   return render_with(
-      sampler, width, height, bias, scene.u_period(),
+      sampler, width, height, bias, anisotropy, scene.u_period(),
       [&](double sx, double sy) { return scene.hit(sx, sy, width, height); },
       [&](double sx, double sy, int axis) {
         return numeric_derivative(scene, sx, sy, width, height, axis);
       });
+}
+
+namespace {
+
+// A scene seen through a viewport `factor` times finer: sample (sx, sy) of the fine viewport is
+// point (sx, sy) / factor of the original. Only hit() and u_period() are used by the reference.
+class SubpixelScene final : public Scene {
+ public:
+  SubpixelScene(const Scene& inner, int factor) : inner_(inner), factor_(factor) {}
+  std::string_view name() const override { return inner_.name(); }
+  std::string glsl() const override { return inner_.glsl(); }
+  void set_uniforms(unsigned program, int width, int height) const override {
+    inner_.set_uniforms(program, width / factor_, height / factor_);
+  }
+  std::array<std::int64_t, 2> anchor() const override { return inner_.anchor(); }
+  std::pair<double, double> focus() const override { return inner_.focus(); }
+  double texels_per_pixel() const override { return inner_.texels_per_pixel() / factor_; }
+  UvHit hit(double sx, double sy, int width, int height) const override {
+    return inner_.hit(sx / factor_, sy / factor_, width / factor_, height / factor_);
+  }
+  double u_period() const override { return inner_.u_period(); }
+
+ private:
+  const Scene& inner_;
+  int factor_;
+};
+
+}  // namespace
+
+Result<Image> render_supersampled(PyramidSampler& sampler, const Scene& scene, int width,
+                                  int height, int factor) {
+  if (factor < 1 || factor > 16)
+    return make_error(ErrorCode::invalid_argument,
+                      "supersampling factor " + std::to_string(factor) + " is outside 1 to 16");
+  if (width <= 0 || height <= 0 || std::int64_t(width) * factor > (1 << 14) ||
+      std::int64_t(height) * factor > (1 << 14))
+    return make_error(ErrorCode::invalid_argument,
+                      "supersampled viewport " + std::to_string(width) + "x" +
+                          std::to_string(height) + " x" + std::to_string(factor) +
+                          " is empty or larger than 16384 a side");
+  const SubpixelScene fine_scene(scene, factor);
+  auto fine = render_reference(sampler, fine_scene, width * factor, height * factor);
+  if (!fine) return std::move(fine).error();
+  const auto& lin = decode_table();
+  Image out = Image::blank(width, height);
+  const double n = double(factor) * factor;
+  for (int y = 0; y < height; ++y) {
+    for (int x = 0; x < width; ++x) {
+      double sum[3] = {0, 0, 0};
+      for (int j = 0; j < factor; ++j) {
+        for (int i = 0; i < factor; ++i) {
+          const std::uint8_t* p = fine->at(x * factor + i, y * factor + j);
+          for (int c = 0; c < 3; ++c) sum[c] += lin[p[c]];
+        }
+      }
+      std::uint8_t* o = out.at(x, y);
+      for (int c = 0; c < 3; ++c) o[c] = encode_srgb8(sum[c] / n);
+      o[3] = 255;
+    }
+  }
+  return out;
 }
 
 // ---- metrics ---------------------------------------------------------------------------------

@@ -30,6 +30,7 @@ uniform float u_period;      // u period in finest texels (0: u does not wrap)
 uniform int u_tile_shift;    // log2 T (tiles are powers of two: shifts, no integer division,
                              // which software rasterisers cannot vectorise)
 uniform float u_level_offset;  // colour pass: -bias; feedback: +log2(k)
+uniform int u_max_aniso;       // most taps along the footprint's major axis (1: isotropic)
 
 #ifdef FEEDBACK
 layout(location = 0) out uvec2 o_feedback;
@@ -85,6 +86,23 @@ vec4 sample_level(int L, ivec2 abs_i, vec2 fr, out int mapped_level) {
 }
 #endif
 
+// The texel (integer + fraction) a filter tap lands on, brought into the image: u wrapped where
+// the surface wraps, else clamped to the edge texel's centre (clamp-to-edge at every level).
+void tap_into_image(inout ivec2 q, inout vec2 f) {
+  if (u_period > 0.0) {
+    int period = int(u_period);
+    q.x -= period * int(floor(float(q.x) / u_period));
+    q.x = q.x < 0 ? q.x + period : (q.x >= period ? q.x - period : q.x);
+  } else if (q.x < 0 || q.x >= u_image.x) {
+    q.x = clamp(q.x, 0, u_image.x - 1);
+    f.x = 0.5;
+  }
+  if (q.y < 0 || q.y >= u_image.y) {
+    q.y = clamp(q.y, 0, u_image.y - 1);
+    f.y = 0.5;
+  }
+}
+
 void main() {
   // Rows top to bottom, as the scene's camera counts them.
   vec2 px = vec2(gl_FragCoord.x, u_viewport.y - gl_FragCoord.y);
@@ -110,7 +128,16 @@ void main() {
   }
   hit = hit && all(greaterThanEqual(abs_i, ivec2(0))) && all(lessThan(abs_i, u_image));
 
-  float rho = max(length(ddx), length(ddy));
+  // The footprint: its major axis gets up to u_max_aniso taps, and the level is chosen for what
+  // one tap covers, max(major / taps, minor) (reference.hpp states the same rule in double).
+  float lx = length(ddx), ly = length(ddy);
+  float major = max(lx, ly), minor = min(lx, ly);
+  int taps = 1;
+  if (u_max_aniso > 1 && major > 0.0 && !isinf(major)) {
+    float ratio = minor > 0.0 ? major / minor : float(u_max_aniso);
+    taps = int(clamp(ceil(ratio), 1.0, float(u_max_aniso)));
+  }
+  float rho = max(major / float(taps), minor);
   float c = float(u_max_level) - log2(rho) + u_level_offset;  // rho = 0 gives +inf: finest
   if (isnan(c)) c = float(u_max_level);
   c = clamp(c, 0.0, float(u_max_level));
@@ -132,15 +159,29 @@ void main() {
   }
   int L0 = int(floor(c));
   float w = c - float(L0);
-  int m0, m1 = -1;
-  vec4 col;
-  if (!u_trilinear) {
-    col = sample_level(int(ceil(c)), abs_i, fr, m0);
-  } else if (L0 >= u_max_level || w == 0.0) {
-    col = sample_level(L0, abs_i, fr, m0);
-  } else {
-    col = mix(sample_level(L0, abs_i, fr, m0), sample_level(L0 + 1, abs_i, fr, m1), w);
+  vec2 axis = lx >= ly ? ddx : ddy;
+  vec4 col = vec4(0);
+  int m0 = -1, m1 = -1;
+  for (int i = 0; i < taps; ++i) {
+    // Taps spread evenly over the major axis, centred on the pixel (one tap: the pixel itself).
+    vec2 p = fr + axis * ((float(i) + 0.5) / float(taps) - 0.5);
+    p = clamp(p, vec2(-1.0e9), vec2(1.0e9));  // a horizon footprint: keep the int conversion defined
+    vec2 pf = floor(p);
+    ivec2 q = abs_i + ivec2(pf);
+    vec2 qf = p - pf;
+    if (taps > 1) tap_into_image(q, qf);
+    int a = -1, b = -1;
+    if (!u_trilinear) {
+      col += sample_level(int(ceil(c)), q, qf, a);
+    } else if (L0 >= u_max_level || w == 0.0) {
+      col += sample_level(L0, q, qf, a);
+    } else {
+      col += mix(sample_level(L0, q, qf, a), sample_level(L0 + 1, q, qf, b), w);
+    }
+    m0 = max(m0, a);
+    m1 = max(m1, b);
   }
+  col /= float(taps);
   if (u_debug == 1) {
     int m = max(m0, m1);
     col.rgb = m < 0 ? vec3(1, 0, 1) : mix(col.rgb, kLevelTint[m % 8], 0.5);

@@ -248,6 +248,7 @@ class VirtualTexture::Impl {
       glProgramUniform1i(p, glGetUniformLocation(p, "u_tile_shift"),
                          std::countr_zero(geometry_.tile_size()));
       glProgramUniform1f(p, glGetUniformLocation(p, "u_level_offset"), level_offset);
+      glProgramUniform1i(p, glGetUniformLocation(p, "u_max_aniso"), options_.anisotropy);
     };
 
     glBindVertexArray(vao_);
@@ -665,6 +666,10 @@ Result<std::unique_ptr<VirtualTexture>> VirtualTexture::create(
   }
   if (options.upload_tiles < 1) {
     return Error{ErrorCode::invalid_argument, "the upload budget must allow one tile a frame"};
+  }
+  if (options.anisotropy < 1 || options.anisotropy > 16) {
+    return Error{ErrorCode::invalid_argument,
+                 "anisotropy " + std::to_string(options.anisotropy) + " is outside 1 to 16 taps"};
   }
   if (geometry.width() > (1u << 30) || geometry.height() > (1u << 30)) {
     return Error{ErrorCode::unsupported, "images wider or taller than 2^30 texels"};

@@ -440,5 +440,43 @@ TEST(ReferencePng, RoundTripsExactlyAndErrorsNameThePath) {
   fs::remove_all(dir, ec);
 }
 
+TEST(ReferenceAnisotropy, TapsFollowTheFootprintRatioUpToTheLimit) {
+  EXPECT_EQ(anisotropic_taps(4, 1, 8), 4);
+  EXPECT_EQ(anisotropic_taps(1, 4.5, 8), 5);  // either axis may be the major one
+  EXPECT_EQ(anisotropic_taps(100, 1, 8), 8);
+  EXPECT_EQ(anisotropic_taps(2, 2, 8), 1);
+  EXPECT_EQ(anisotropic_taps(3, 0, 8), 8);  // a degenerate footprint: the limit
+  EXPECT_EQ(anisotropic_taps(4, 1, 1), 1);  // isotropic
+  EXPECT_EQ(anisotropic_taps(0, 0, 8), 1);
+  EXPECT_EQ(anisotropic_taps(std::numeric_limits<double>::infinity(), 1, 8), 1);
+  EXPECT_EQ(anisotropic_taps(std::nan(""), 1, 8), 1);
+}
+
+TEST_F(ReferenceRender, AnisotropyOnAStraightDownViewChangesNothing) {
+  auto s = open("wide");
+  ASSERT_TRUE(s);
+  const auto cam = straight_down(500.3, 300.6, 2.7, 64, 48);
+  auto iso = render_reference(*s, cam, 0, 1);
+  auto aniso = render_reference(*s, cam, 0, 16);
+  ASSERT_TRUE(iso.ok() && aniso.ok());
+  EXPECT_EQ(iso->rgba, aniso->rgba);  // a round footprint takes one tap
+}
+
+TEST_F(ReferenceRender, SupersamplingByOneIsTheReferenceAndBadFactorsAreRefused) {
+  auto s = open("wide");
+  ASSERT_TRUE(s);
+  const PlaneView view{.center_u = 500, .center_v = 300, .texels_per_pixel = 1.5, .tilt = 0.8};
+  auto ref = render_reference(*s, PlaneScene(view), 48, 32);
+  auto one = render_supersampled(*s, PlaneScene(view), 48, 32, 1);
+  ASSERT_TRUE(ref.ok() && one.ok());
+  EXPECT_EQ(ref->rgba, one->rgba);
+  for (int bad : {0, 17}) {
+    auto r = render_supersampled(*s, PlaneScene(view), 48, 32, bad);
+    ASSERT_FALSE(r.ok());
+    EXPECT_NE(r.error().message.find("supersampling factor"), std::string::npos);
+  }
+  EXPECT_FALSE(render_supersampled(*s, PlaneScene(view), 4096, 32, 8).ok());
+}
+
 }  // namespace
 }  // namespace vts::renderer

@@ -15,6 +15,12 @@
 //   - rho = max(|d(u,v)/dx|, |d(u,v)/dy|), c = max_level - log2(rho) - bias clamped to
 //     [0, max_level]; rho == 0 or NaN, or a NaN c (NaN bias), means the finest level, and
 //     rho == +inf or bias == +inf the coarsest;
+//   - anisotropic filtering (anisotropy > 1): with lx = |d(u,v)/dx|, ly = |d(u,v)/dy|, major and
+//     minor their larger and smaller, taps = anisotropic_taps(lx, ly, anisotropy) and, when
+//     taps > 1, rho = max(major / taps, minor) instead; tap i of taps is taken at
+//     (u, v) + a ((i + 0.5) / taps - 0.5), a the derivative of the major axis (d/dx on a tie),
+//     u wrapped by the scene's period or else, like v, moved to the edge texel's centre (0.5 or
+//     W - 0.5) when outside the image; the taps' colours are averaged in linear light;
 //   - trilinear between floor(c) and floor(c) + 1 (weight frac(c) on the finer), each level
 //     sampled bilinearly at (u, v) / 2^(max_level - L), blended in linear light, encoded to sRGB
 //     with the exact IEC 61966-2-1 formulas, rounded to nearest; alpha is written as 255.
@@ -123,12 +129,25 @@ class PyramidSampler {
 // this file. `bias` is added to the level like the GPU's mip bias (positive = coarser). Fails with
 // invalid_argument for a viewport that is empty or larger than 16384 a side, or with the sampler's
 // error.
-Result<Image> render_reference(PyramidSampler& sampler, const PlaneCamera& camera, double bias = 0);
+Result<Image> render_reference(PyramidSampler& sampler, const PlaneCamera& camera, double bias = 0,
+                               int anisotropy = 1);
 // The same for any scene (Scene::hit in double), width x height pixels. Where a quad partner
 // misses the surface the derivative is a central difference of 1/1000 pixel; u differences are
 // unwrapped by Scene::u_period().
 Result<Image> render_reference(PyramidSampler& sampler, const Scene& scene, int width, int height,
-                               double bias = 0);
+                               double bias = 0, int anisotropy = 1);
+
+// The ground truth filters are judged against: `scene` rendered by the reference at `factor` times
+// the resolution (each sample at its own, finer, level), every pixel the mean in linear light of
+// its factor x factor samples. factor in [1, 16]; invalid_argument beyond, or when the fine
+// viewport exceeds 16384 a side.
+Result<Image> render_supersampled(PyramidSampler& sampler, const Scene& scene, int width,
+                                  int height, int factor);
+
+// Taps along the major axis for a footprint of derivative lengths lx, ly under a limit of
+// max_taps: ceil(major / minor) clamped to [1, max_taps] (max_taps when minor is 0), and 1 when
+// max_taps <= 1 or the major length is 0, infinite or NaN. The GPU shader follows the same rule.
+int anisotropic_taps(double lx, double ly, int max_taps);
 
 // Differences between two images of equal size over the R, G and B channels (alpha ignored).
 struct ImageDiff {

@@ -47,7 +47,11 @@ struct VirtualTextureOptions {
   std::uint64_t upload_bytes = 16u << 20;  // ... and bytes
   std::uint32_t keep_frames = 8;           // a tile unseen for fewer frames is never evicted
   bool trilinear = true;                   // false: bilinear at the nearest finer level only
-  double max_bias = 4.0;                   // upper bound of the automatic mip bias
+  // Anisotropic filtering: up to this many trilinear taps along the footprint's major axis, each
+  // through its own page-table lookup (so no slot border limits it); 1 = isotropic. The level is
+  // chosen from max(major / taps, minor), as hardware anisotropic filtering does.
+  int anisotropy = 1;
+  double max_bias = 4.0;  // upper bound of the automatic mip bias
   DebugView debug = DebugView::none;
 };
 
