@@ -31,11 +31,16 @@ PACKAGES=(
   # the OpenGL viewer (renderer/): GLFW 3.3, libepoxy (GL loader), GLM; its tests render under
   # Xvfb with Mesa's llvmpipe (GL 4.5 core, no GPU needed)
   libglfw3-dev libepoxy-dev libglm-dev xvfb xauth libgl1-mesa-dri
+  # the viewer's HUD text (stb_easy_font) and real input events in its
+  # interactive test (xdotool)
+  libstb-dev xdotool
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
   # real peers, sample data and measuring tools for tests and benchmarks
   openimageio-tools libvips-tools xplanet-images curl ca-certificates time python3 nginx wrk
   sqlite3
+  # the load-test report is checked by rendering it in a real headless browser
+  chromium
 )
 # Node.js may come from elsewhere (e.g. NodeSource) with its own npm: only ask Debian for what is
 # missing, so the two never fight over /usr/bin/node or /usr/bin/npm.
