@@ -28,6 +28,7 @@
 #include "vts/client/source.hpp"
 #include "vts/client/tile_client.hpp"
 #include "vts/renderer/gl_context.hpp"
+#include "vts/renderer/gl_uniforms.hpp"
 #include "vts/renderer/scene.hpp"
 #include "vts/renderer/virtual_texture.hpp"
 
@@ -159,7 +160,8 @@ void main() {
 
   double frame(const PlaneScene& scene, int w, int h) {
     const auto t0 = Clock::now();
-    scene.set_uniforms(prog, w, h);
+    GlProgramUniforms u(prog);
+    scene.set_uniforms(u, w, h);
     const auto a = scene.anchor();
     glProgramUniform2f(prog, glGetUniformLocation(prog, "u_viewport"), float(w), float(h));
     glProgramUniform2i(prog, glGetUniformLocation(prog, "u_anchor"), GLint(a[0]), GLint(a[1]));

@@ -47,8 +47,6 @@
 // edge. v is clamped to [0, H). At a pole atan(0, 0) is avoided; every path is finite.
 #include "vts/renderer/globe.hpp"
 
-#include <epoxy/gl.h>
-
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -210,7 +208,7 @@ bool scene_hit(vec2 px, out vec2 rel) {
 )";
 }
 
-void GlobeScene::set_uniforms(unsigned program, int width, int height) const {
+void GlobeScene::set_uniforms(UniformSink& sink, int width, int height) const {
   const GlobeCamera cam = camera_of(view_);
   const auto an = anchor();
   const double lon_a = (double(an[0]) / double(width_) - 0.5) * 2 * kPi;
@@ -227,13 +225,10 @@ void GlobeScene::set_uniforms(unsigned program, int width, int height) const {
   const Vec3d du = cam.nadir.up - fa.up;
   const Vec3d eye_rel{cam.rh * dot(cam.nadir.up, fa.east), cam.rh * dot(cam.nadir.up, fa.north),
                       (cam.rh - r) * cos_t - r * 0.5 * dot(du, du)};
-  const auto set3 = [program](const char* name, Vec3d v) {
-    glProgramUniform3f(program, glGetUniformLocation(program, name), float(v.x), float(v.y),
-                       float(v.z));
+  const auto set3 = [&sink](const char* name, Vec3d v) {
+    sink.set(name, float(v.x), float(v.y), float(v.z));
   };
-  const auto set1 = [program](const char* name, double v) {
-    glProgramUniform1f(program, glGetUniformLocation(program, name), float(v));
-  };
+  const auto set1 = [&sink](const char* name, double v) { sink.set(name, float(v)); };
   set3("u_g_eye", eye_rel);
   set3("u_g_forward", local(cam.forward));
   set3("u_g_right", local(cam.right));
@@ -243,20 +238,17 @@ void GlobeScene::set_uniforms(unsigned program, int width, int height) const {
   set1("u_g_c", cam.c);
   set1("u_g_rh", cam.rh);
   set1("u_g_radius", r);
-  glProgramUniform2f(program, glGetUniformLocation(program, "u_g_sincos"), float(std::sin(lat_a)),
-                     float(std::cos(lat_a)));
-  glProgramUniform2f(program, glGetUniformLocation(program, "u_g_scale"),
-                     float(double(width_) / (2 * kPi)), float(double(height_) / kPi));
-  glProgramUniform2i(program, glGetUniformLocation(program, "u_g_wrap"), GLint(-an[0]),
-                     GLint(std::int64_t(width_) - an[0]));
+  sink.set("u_g_sincos", float(std::sin(lat_a)), float(std::cos(lat_a)));
+  sink.set("u_g_scale", float(double(width_) / (2 * kPi)), float(double(height_) / kPi));
+  sink.set_int("u_g_wrap", int(-an[0]), int(std::int64_t(width_) - an[0]));
   set1("u_g_period", double(width_));
   // [-a, n - a) as floats that stay inside it once rounded.
-  const auto set_range = [program](const char* name, std::int64_t a, std::uint64_t n) {
+  const auto set_range = [&sink](const char* name, std::int64_t a, std::uint64_t n) {
     const double lo = -double(a), hi = double(n) - double(a);
     float lo_f = float(lo), hi_f = float(hi);
     if (double(lo_f) < lo) lo_f = std::nextafter(lo_f, std::numeric_limits<float>::infinity());
     if (double(hi_f) >= hi) hi_f = std::nextafter(hi_f, -std::numeric_limits<float>::infinity());
-    glProgramUniform2f(program, glGetUniformLocation(program, name), lo_f, hi_f);
+    sink.set(name, lo_f, hi_f);
   };
   set_range("u_g_urange", an[0], width_);
   set_range("u_g_vrange", an[1], height_);

@@ -335,8 +335,8 @@ class SubpixelScene final : public Scene {
   SubpixelScene(const Scene& inner, int factor) : inner_(inner), factor_(factor) {}
   std::string_view name() const override { return inner_.name(); }
   std::string glsl() const override { return inner_.glsl(); }
-  void set_uniforms(unsigned program, int width, int height) const override {
-    inner_.set_uniforms(program, width / factor_, height / factor_);
+  void set_uniforms(UniformSink& sink, int width, int height) const override {
+    inner_.set_uniforms(sink, width / factor_, height / factor_);
   }
   std::array<std::int64_t, 2> anchor() const override { return inner_.anchor(); }
   std::pair<double, double> focus() const override { return inner_.focus(); }

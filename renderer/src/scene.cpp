@@ -1,7 +1,5 @@
 #include "vts/renderer/scene.hpp"
 
-#include <epoxy/gl.h>
-
 #include <algorithm>
 #include <cmath>
 
@@ -24,22 +22,20 @@ std::array<std::int64_t, 2> PlaneScene::anchor() const {
   return {anchor_coord(view_.center_u), anchor_coord(view_.center_v)};
 }
 
-void PlaneScene::set_uniforms(unsigned program, int width, int height) const {
+void PlaneScene::set_uniforms(UniformSink& sink, int width, int height) const {
   const PlaneCamera cam = PlaneCamera::from_view(view_, width, height);
   const auto a = anchor();
   // The only place the eye meets the anchor: in double, before anything becomes a float.
   const Vec3d eye_rel = cam.eye - Vec3d{double(a[0]), double(a[1]), 0};
-  const auto set3 = [program](const char* name, Vec3d v) {
-    glProgramUniform3f(program, glGetUniformLocation(program, name), float(v.x), float(v.y),
-                       float(v.z));
+  const auto set3 = [&sink](const char* name, Vec3d v) {
+    sink.set(name, float(v.x), float(v.y), float(v.z));
   };
   set3("u_eye_rel", eye_rel);
   set3("u_forward", cam.forward);
   set3("u_right", cam.right);
   set3("u_up", cam.up);
-  glProgramUniform1f(program, glGetUniformLocation(program, "u_tan_half_fov"),
-                     float(cam.tan_half_fov));
-  glProgramUniform1f(program, glGetUniformLocation(program, "u_aspect"), float(cam.aspect));
+  sink.set("u_tan_half_fov", float(cam.tan_half_fov));
+  sink.set("u_aspect", float(cam.aspect));
 }
 
 }  // namespace vts::renderer

@@ -15,6 +15,7 @@
 
 #include "shaders.hpp"
 #include "vts/renderer/feedback.hpp"
+#include "vts/renderer/gl_uniforms.hpp"
 #include "vts/renderer/page_table.hpp"
 #include "vts/renderer/pyramid.hpp"
 #include "vts/renderer/slot_cache.hpp"
@@ -121,8 +122,8 @@ class VirtualTexture::Impl {
     glDeleteFramebuffers(2, fbos);
     glDeleteVertexArrays(1, &vao_);
     for (auto& [glsl, p] : programs_) {
-      glDeleteProgram(p.color);
-      glDeleteProgram(p.feedback);
+      glDeleteProgram(p.color.program());
+      glDeleteProgram(p.feedback.program());
     }
     glDeleteProgram(debug_prog_);
   }
@@ -193,11 +194,11 @@ class VirtualTexture::Impl {
 
   // The colour and feedback programs of a scene's shader variant, built on first use.
   struct Programs {
-    GLuint color = 0, feedback = 0;
+    GlProgramUniforms color, feedback;  // the programs, with their uniform locations
   };
-  Result<Programs> programs_for(const Scene& scene) {
+  Result<Programs*> programs_for(const Scene& scene) {
     const std::string glsl = scene.glsl();
-    if (auto it = programs_.find(glsl); it != programs_.end()) return it->second;
+    if (auto it = programs_.find(glsl); it != programs_.end()) return &it->second;
     const std::string head = "#version 450 core\n";
     const std::string body = "uniform vec2 u_viewport;\n" + glsl + detail::kVirtualTextureFragment;
     const std::string name(scene.name());
@@ -209,7 +210,8 @@ class VirtualTexture::Impl {
       glDeleteProgram(*color);
       return fb.error();
     }
-    return programs_[glsl] = Programs{*color, *fb};
+    return &programs_.emplace(glsl, Programs{GlProgramUniforms(*color), GlProgramUniforms(*fb)})
+                .first->second;
   }
 
   FrameStats render(const Scene& scene, int width, int height) {
@@ -236,19 +238,16 @@ class VirtualTexture::Impl {
 
     // The anchor: an integer texel near the view, so every float the GPU sees is small.
     const auto anchor = scene.anchor();
-    const auto set_common = [&](GLuint p, int vw, int vh, float level_offset) {
-      scene.set_uniforms(p, width_, height_);  // the camera is the full view's in every pass
-      glProgramUniform2f(p, glGetUniformLocation(p, "u_viewport"), float(vw), float(vh));
-      glProgramUniform2i(p, glGetUniformLocation(p, "u_anchor"), GLint(anchor[0]),
-                         GLint(anchor[1]));
-      glProgramUniform1f(p, glGetUniformLocation(p, "u_period"), float(scene.u_period()));
-      glProgramUniform2i(p, glGetUniformLocation(p, "u_image"), GLint(geometry_.width()),
-                         GLint(geometry_.height()));
-      glProgramUniform1i(p, glGetUniformLocation(p, "u_max_level"), geometry_.max_zoom());
-      glProgramUniform1i(p, glGetUniformLocation(p, "u_tile_shift"),
-                         std::countr_zero(geometry_.tile_size()));
-      glProgramUniform1f(p, glGetUniformLocation(p, "u_level_offset"), level_offset);
-      glProgramUniform1i(p, glGetUniformLocation(p, "u_max_aniso"), options_.anisotropy);
+    const auto set_common = [&](GlProgramUniforms& u, int vw, int vh, float level_offset) {
+      scene.set_uniforms(u, width_, height_);  // the camera is the full view's in every pass
+      u.set("u_viewport", float(vw), float(vh));
+      u.set_int("u_anchor", int(anchor[0]), int(anchor[1]));
+      u.set("u_period", float(scene.u_period()));
+      u.set_int("u_image", int(geometry_.width()), int(geometry_.height()));
+      u.set_int("u_max_level", geometry_.max_zoom());
+      u.set_int("u_tile_shift", std::countr_zero(geometry_.tile_size()));
+      u.set("u_level_offset", level_offset);
+      u.set_int("u_max_aniso", options_.anisotropy);
     };
 
     glBindVertexArray(vao_);
@@ -257,11 +256,11 @@ class VirtualTexture::Impl {
 
     // Feedback pass at 1/k, read back later through the ring.
     if (!readbacks_[ring_pos_].fence) {
-      set_common(programs->feedback, fb_w_, fb_h_, float(std::log2(double(width_) / fb_w_)));
+      set_common((*programs)->feedback, fb_w_, fb_h_, float(std::log2(double(width_) / fb_w_)));
       glBindFramebuffer(GL_FRAMEBUFFER, feedback_fbo_);
       glViewport(0, 0, fb_w_, fb_h_);
       glDisable(GL_FRAMEBUFFER_SRGB);
-      glUseProgram(programs->feedback);
+      glUseProgram(programs.value()->feedback.program());
       glDrawArrays(GL_TRIANGLES, 0, 3);
       auto& rb = readbacks_[ring_pos_];
       glBindBuffer(GL_PIXEL_PACK_BUFFER, rb.buffer);
@@ -290,26 +289,24 @@ class VirtualTexture::Impl {
       glProgramUniform1i(p, glGetUniformLocation(p, "u_page_table"), 1);
       glUseProgram(p);
     } else {
-      const GLuint p = programs->color;
-      set_common(p, width_, height_, float(-bias_.bias()));
+      GlProgramUniforms& u = (*programs)->color;
+      set_common(u, width_, height_, float(-bias_.bias()));
       std::uint32_t origins[2 * kMaxLevels];
       for (int z = 0; z < kMaxLevels; ++z) {
         origins[2 * z] = table_.origin_x(z);
         origins[2 * z + 1] = table_.origin_y(z);
       }
-      glProgramUniform2uiv(p, glGetUniformLocation(p, "u_origin"), kMaxLevels, origins);
-      glProgramUniform1ui(p, glGetUniformLocation(p, "u_window"), table_.window());
-      glProgramUniform1i(p, glGetUniformLocation(p, "u_slots_per_row"), GLint(slots_per_row_));
-      glProgramUniform1f(p, glGetUniformLocation(p, "u_slot_size"), float(slot_size_));
-      glProgramUniform1f(p, glGetUniformLocation(p, "u_border"), float(geometry_.border()));
-      glProgramUniform2f(p, glGetUniformLocation(p, "u_atlas_inv"), 1.0f / float(atlas_w_),
-                         1.0f / float(atlas_h_));
-      glProgramUniform1i(p, glGetUniformLocation(p, "u_trilinear"), options_.trilinear ? 1 : 0);
-      glProgramUniform1i(p, glGetUniformLocation(p, "u_debug"),
-                         options_.debug == DebugView::levels ? 1 : 0);
-      glProgramUniform1i(p, glGetUniformLocation(p, "u_physical"), 0);
-      glProgramUniform1i(p, glGetUniformLocation(p, "u_page_table"), 1);
-      glUseProgram(p);
+      glProgramUniform2uiv(u.program(), u.location("u_origin"), kMaxLevels, origins);
+      u.set_uint("u_window", table_.window());
+      u.set_int("u_slots_per_row", int(slots_per_row_));
+      u.set("u_slot_size", float(slot_size_));
+      u.set("u_border", float(geometry_.border()));
+      u.set("u_atlas_inv", 1.0f / float(atlas_w_), 1.0f / float(atlas_h_));
+      u.set_int("u_trilinear", options_.trilinear ? 1 : 0);
+      u.set_int("u_debug", options_.debug == DebugView::levels ? 1 : 0);
+      u.set_int("u_physical", 0);
+      u.set_int("u_page_table", 1);
+      glUseProgram(u.program());
     }
     glBindTextureUnit(0, physical_tex_);
     glBindTextureUnit(1, page_tex_);

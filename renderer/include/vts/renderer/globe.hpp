@@ -35,7 +35,7 @@ class GlobeScene final : public Scene {
 
   std::string_view name() const override { return "globe"; }
   std::string glsl() const override;
-  void set_uniforms(unsigned program, int width, int height) const override;
+  void set_uniforms(UniformSink& sink, int width, int height) const override;
   std::array<std::int64_t, 2> anchor() const override;
   std::pair<double, double> focus() const override;
   // For a 1024-row viewport (the interface has no viewport): the pixel's angular size there, times

@@ -25,6 +25,18 @@ namespace vts::renderer {
 
 using UvHit = std::optional<std::pair<double, double>>;
 
+// Where a scene writes the uniforms its GLSL declares. The GL renderer passes one bound to a
+// program (gl_uniforms.hpp); scenes themselves never call GL, so they work where there is no GL
+// at all (the load test's demand simulator, headless builds).
+class UniformSink {
+ public:
+  virtual ~UniformSink() = default;
+  virtual void set(const char* name, float x) = 0;
+  virtual void set(const char* name, float x, float y) = 0;
+  virtual void set(const char* name, float x, float y, float z) = 0;
+  virtual void set_int(const char* name, int x, int y) = 0;  // an ivec2
+};
+
 class Scene {
  public:
   virtual ~Scene() = default;
@@ -38,9 +50,9 @@ class Scene {
   // texels; false for background. Derivatives of rel are taken by the caller after the call; a
   // scene whose u wraps (a globe's date line) sets u_period() so the caller unwraps them.
   virtual std::string glsl() const = 0;
-  // Sets the uniforms glsl() declared, on GL program `program`, for the camera of a width x height
-  // view (the feedback pass renders the same view with fewer pixels: it gets the full size).
-  virtual void set_uniforms(unsigned program, int width, int height) const = 0;
+  // Sets the uniforms glsl() declared, through `sink`, for the camera of a width x height view
+  // (the feedback pass renders the same view with fewer pixels: it gets the full size).
+  virtual void set_uniforms(UniformSink& sink, int width, int height) const = 0;
   // The integer finest texel rel is measured from.
   virtual std::array<std::int64_t, 2> anchor() const = 0;
   // The (u, v) the view is centred on: the page table's windows follow it.
@@ -62,7 +74,7 @@ class PlaneScene final : public Scene {
 
   std::string_view name() const override { return "plane"; }
   std::string glsl() const override;
-  void set_uniforms(unsigned program, int width, int height) const override;
+  void set_uniforms(UniformSink& sink, int width, int height) const override;
   std::array<std::int64_t, 2> anchor() const override;
   std::pair<double, double> focus() const override { return {view_.center_u, view_.center_v}; }
   double texels_per_pixel() const override { return view_.texels_per_pixel; }
