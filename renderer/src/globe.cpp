@@ -114,11 +114,9 @@ GlobeScene::GlobeScene(const GlobeView& view, std::uint64_t image_width, std::ui
 
 namespace {
 
-// (u, v) of the direction d from the eye, absolute, u in [0, W), v in [0, H).
-UvHit hit_dir(const GlobeCamera& cam, Vec3d d, double w, double h) {
-  const auto s = ray_param(cam, d);
-  if (!s) return std::nullopt;
-  const Vec3d p = cam.nadir.up * cam.rh + d * (*s * cam.rh);
+// (u, v) of the point eye + d s (R + h), absolute, u in [0, W), v in [0, H).
+UvHit uv_at(const GlobeCamera& cam, Vec3d d, double s, double w, double h) {
+  const Vec3d p = cam.nadir.up * cam.rh + d * (s * cam.rh);
   const double lon = std::atan2(p.y, p.x);
   const double lat = std::atan2(p.z, std::hypot(p.x, p.y));
   double u = (lon / (2 * kPi) + 0.5) * w;
@@ -131,14 +129,34 @@ UvHit hit_dir(const GlobeCamera& cam, Vec3d d, double w, double h) {
   return std::pair<double, double>{u, v};
 }
 
+// (u, v) of the direction d from the eye, absolute, u in [0, W), v in [0, H).
+UvHit hit_dir(const GlobeCamera& cam, Vec3d d, double w, double h) {
+  const auto s = ray_param(cam, d);
+  if (!s) return std::nullopt;
+  return uv_at(cam, d, *s, w, h);
+}
+
+Vec3d pixel_dir(const GlobeCamera& cam, double sx, double sy, int width, int height) {
+  const double aspect = double(width) / double(height);
+  const double nx = (2.0 * sx / width - 1.0) * cam.tan_half_fov * aspect;
+  const double ny = (1.0 - 2.0 * sy / height) * cam.tan_half_fov;
+  return cam.forward + cam.right * nx + cam.up * ny;
+}
+
 }  // namespace
 
 UvHit GlobeScene::hit(double sx, double sy, int width, int height) const {
   const GlobeCamera cam = camera_of(view_);
-  const double aspect = double(width) / double(height);
-  const double nx = (2.0 * sx / width - 1.0) * cam.tan_half_fov * aspect;
-  const double ny = (1.0 - 2.0 * sy / height) * cam.tan_half_fov;
-  return hit_dir(cam, cam.forward + cam.right * nx + cam.up * ny, double(width_), double(height_));
+  return hit_dir(cam, pixel_dir(cam, sx, sy, width, height), double(width_), double(height_));
+}
+
+UvHit GlobeScene::miss_uv(double sx, double sy, int width, int height) const {
+  const GlobeCamera cam = camera_of(view_);
+  const Vec3d d = pixel_dir(cam, sx, sy, width, height);
+  const double a = dot(d, d), b = dot(cam.nadir.up, d);
+  const double disc = b * b - a * cam.c;
+  const double s = b < 0 ? cam.c / (-b + std::sqrt(std::max(disc, 0.0))) : 0.0;
+  return uv_at(cam, d, s, double(width_), double(height_));
 }
 
 std::pair<double, double> GlobeScene::focus() const {

@@ -10,6 +10,7 @@
 
 #include "vts/protocol/codec.hpp"
 #include "vts/protocol/tileset.hpp"
+#include "vts/renderer/footprint.hpp"
 #include "vts/renderer/pyramid.hpp"
 
 namespace vts::renderer {
@@ -180,16 +181,7 @@ Result<LinearRgba> PyramidSampler::bilinear(int z, double tx, double ty) {
 
 // ---- render_reference ------------------------------------------------------------------------
 
-int anisotropic_taps(double lx, double ly, int max_taps) {
-  const double major = std::max(lx, ly), minor = std::min(lx, ly);
-  if (max_taps <= 1 || !(major > 0) || !std::isfinite(major)) return 1;
-  const double ratio = minor > 0 ? major / minor : double(max_taps);
-  return static_cast<int>(std::clamp(std::ceil(ratio), 1.0, double(max_taps)));
-}
-
 namespace {
-
-using Hit = std::optional<std::pair<double, double>>;
 
 // d(u, v)/d(sx) (axis 0) or d(u, v)/d(sy) (axis 1) of camera.hit at screen point (sx, sy), which
 // must hit the plane: p = eye + t d with t = -eye.z / d.z, so dp = t (dd - d dd.z / d.z).
@@ -203,34 +195,11 @@ std::pair<double, double> analytic_derivative(const PlaneCamera& cam, double sx,
   return {dp.x, dp.y};
 }
 
-// A scene's derivative at a pixel whose quad partner misses the surface: a central difference
-// of a thousandth of a pixel (in double, far below any level's texel), or zero when that misses
-// too (the finest level, like a zero footprint).
-std::pair<double, double> numeric_derivative(const Scene& scene, double sx, double sy, int w, int h,
-                                             int axis) {
-  constexpr double e = 1e-3;
-  const Hit a = axis == 0 ? scene.hit(sx - e, sy, w, h) : scene.hit(sx, sy - e, w, h);
-  const Hit b = axis == 0 ? scene.hit(sx + e, sy, w, h) : scene.hit(sx, sy + e, w, h);
-  if (!a || !b) return {0, 0};
-  return {(b->first - a->first) / (2 * e), (b->second - a->second) / (2 * e)};
-}
-
-// Brings a u difference back into [-period/2, period/2] for a surface that wraps in u.
-double unwrap(double du, double period) {
-  return period > 0 ? du - period * std::round(du / period) : du;
-}
-
 // The shared body: `hit_at(sx, sy)` gives the absolute (u, v) at a screen point; `fallback(sx,
 // sy, axis)` the derivative where the quad partner misses.
 template <typename HitFn, typename FallbackFn>
 Result<Image> render_with(PyramidSampler& sampler, int w, int h, double bias, int anisotropy,
                           double period, HitFn&& hit_at, FallbackFn&& fallback) {
-  const auto quad_difference = [&](const Hit& a, const Hit& b, double sx, double sy, int axis) {
-    std::pair<double, double> d =
-        a && b ? std::pair{b->first - a->first, b->second - a->second} : fallback(sx, sy, axis);
-    d.first = unwrap(d.first, period);
-    return d;
-  };
   constexpr int kMaxSide = 1 << 14;
   if (w <= 0 || h <= 0 || w > kMaxSide || h > kMaxSide)
     return make_error(ErrorCode::invalid_argument,
@@ -240,69 +209,53 @@ Result<Image> render_with(PyramidSampler& sampler, int w, int h, double bias, in
   const int max_level = g.max_zoom();
   const double W = static_cast<double>(g.width()), H = static_cast<double>(g.height());
   Image img = Image::blank(w, h);
+  std::optional<Error> failure;
 
-  // Rows are rendered in quad pairs (2k, 2k + 1). The hits of both rows' pixel centres are kept,
-  // plus one column beyond the viewport (the partner of an odd last column); the second row of
-  // an odd last pair lies beyond the viewport too and is only a partner.
-  const int gw = w + 1;
-  std::vector<Hit> rows[2] = {std::vector<Hit>(gw), std::vector<Hit>(gw)};
-  for (int y0 = 0; y0 < h; y0 += 2) {
-    for (int r = 0; r < 2; ++r)
-      for (int x = 0; x < gw; ++x) rows[r][x] = hit_at(x + 0.5, y0 + r + 0.5);
-    for (int py = y0; py < std::min(y0 + 2, h); ++py) {
-      const std::vector<Hit>& row = rows[py - y0];
-      for (int px = 0; px < w; ++px) {
-        std::uint8_t* out = img.at(px, py);
-        const Hit& self = row[px];
-        if (!self || !(self->first >= 0 && self->first < W && self->second >= 0 &&
-                       self->second < H)) {  // also rejects NaN
-          std::copy(kBackground, kBackground + 4, out);
-          continue;
+  const auto shade = [&](const PixelFootprint& p) {
+    const double lx = std::hypot(p.dudx, p.dvdx), ly = std::hypot(p.dudy, p.dvdy);
+    const FootprintLevel fl = footprint_level(lx, ly, max_level, -bias, anisotropy);
+    const int taps = fl.taps;
+    const int l0 = static_cast<int>(std::floor(fl.c));
+    const double f = fl.c - l0;
+    const double ax = lx >= ly ? p.dudx : p.dudy, ay = lx >= ly ? p.dvdx : p.dvdy;
+    LinearRgba colour{0, 0, 0, 0};
+    for (int i = 0; i < taps; ++i) {
+      double tu = p.u, tv = p.v;
+      if (taps > 1) {
+        const double t = (i + 0.5) / taps - 0.5;
+        tu = p.u + ax * t;
+        tv = p.v + ay * t;
+        if (period > 0) {
+          tu -= period * std::floor(tu / period);
+        } else if (!(tu >= 0 && tu < W)) {
+          tu = tu < 0 ? 0.5 : W - 0.5;
         }
-        const double u = self->first, v = self->second;
-        const double sx = px + 0.5, sy = py + 0.5;
-        const auto [dudx, dvdx] = quad_difference(row[px & ~1], row[px | 1], sx, sy, 0);
-        const auto [dudy, dvdy] = quad_difference(rows[0][px], rows[1][px], sx, sy, 1);
-        const double lx = std::hypot(dudx, dvdx), ly = std::hypot(dudy, dvdy);
-        const int taps = anisotropic_taps(lx, ly, anisotropy);
-        const double rho =
-            taps == 1 ? std::max(lx, ly) : std::max(std::max(lx, ly) / taps, std::min(lx, ly));
-        double c = rho > 0 ? max_level - std::log2(rho) - bias : double(max_level);
-        if (std::isnan(c)) c = max_level;
-        c = std::clamp(c, 0.0, double(max_level));
-
-        const int l0 = static_cast<int>(std::floor(c));
-        const double f = c - l0;
-        const double ax = lx >= ly ? dudx : dudy, ay = lx >= ly ? dvdx : dvdy;
-        LinearRgba colour{0, 0, 0, 0};
-        for (int i = 0; i < taps; ++i) {
-          double tu = u, tv = v;
-          if (taps > 1) {
-            const double t = (i + 0.5) / taps - 0.5;
-            tu = u + ax * t;
-            tv = v + ay * t;
-            if (period > 0) {
-              tu -= period * std::floor(tu / period);
-            } else if (!(tu >= 0 && tu < W)) {
-              tu = tu < 0 ? 0.5 : W - 0.5;
-            }
-            if (!(tv >= 0 && tv < H)) tv = tv < 0 ? 0.5 : H - 0.5;
-          }
-          for (int k = 0; k < 2; ++k) {
-            const int level = l0 + k;
-            const double weight = (k == 0 ? 1 - f : f) / taps;
-            if (level > max_level || weight == 0) continue;
-            auto s = sampler.bilinear(level, std::ldexp(tu, level - max_level),
-                                      std::ldexp(tv, level - max_level));
-            if (!s) return std::move(s).error();
-            for (int ch = 0; ch < 4; ++ch) colour[ch] += weight * (*s)[ch];
-          }
+        if (!(tv >= 0 && tv < H)) tv = tv < 0 ? 0.5 : H - 0.5;
+      }
+      for (int k = 0; k < 2; ++k) {
+        const int level = l0 + k;
+        const double weight = (k == 0 ? 1 - f : f) / taps;
+        if (level > max_level || weight == 0) continue;
+        auto s = sampler.bilinear(level, std::ldexp(tu, level - max_level),
+                                  std::ldexp(tv, level - max_level));
+        if (!s) {
+          failure = std::move(s).error();
+          return false;
         }
-        for (int ch = 0; ch < 3; ++ch) out[ch] = encode_srgb8(colour[ch]);
-        out[3] = 255;
+        for (int ch = 0; ch < 4; ++ch) colour[ch] += weight * (*s)[ch];
       }
     }
-  }
+    std::uint8_t* out = img.at(p.x, p.y);
+    for (int ch = 0; ch < 3; ++ch) out[ch] = encode_srgb8(colour[ch]);
+    out[3] = 255;
+    return true;
+  };
+  const auto background = [&](int x, int y) {
+    std::copy(kBackground, kBackground + 4, img.at(x, y));
+    return true;
+  };
+  if (!for_each_footprint(w, h, W, H, period, hit_at, fallback, shade, background))
+    return std::move(*failure);
   return img;
 }
 
@@ -312,7 +265,10 @@ Result<Image> render_reference(PyramidSampler& sampler, const PlaneCamera& camer
                                int anisotropy) {
   return render_with(
       sampler, camera.width, camera.height, bias, anisotropy, 0,
-      [&](double sx, double sy) { return camera.hit(sx, sy); },
+      [&](double sx, double sy) {
+        const SurfaceHit h = camera.hit(sx, sy);
+        return GridPoint{h, h};
+      },
       [&](double sx, double sy, int axis) { return analytic_derivative(camera, sx, sy, axis); });
 }
 
@@ -320,9 +276,9 @@ Result<Image> render_reference(PyramidSampler& sampler, const Scene& scene, int 
                                double bias, int anisotropy) {
   return render_with(
       sampler, width, height, bias, anisotropy, scene.u_period(),
-      [&](double sx, double sy) { return scene.hit(sx, sy, width, height); },
+      [&](double sx, double sy) { return scene_point(scene, sx, sy, width, height); },
       [&](double sx, double sy, int axis) {
-        return numeric_derivative(scene, sx, sy, width, height, axis);
+        return scene_derivative(scene, sx, sy, width, height, axis);
       });
 }
 

@@ -355,6 +355,9 @@ class VirtualTexture::Impl {
     return std::uint64_t(w) * std::uint64_t(h) * std::uint64_t(std::max(d, 1)) * texel_bytes;
   }
 
+  const std::vector<TileRequest>& wanted() const { return wanted_; }
+  double bias() const { return bias_.bias(); }
+
  private:
   struct Readback {
     GLuint buffer = 0;
@@ -702,6 +705,14 @@ std::optional<Error> VirtualTexture::last_error() const {
 void VirtualTexture::blit_to_screen(int width, int height) const {
   impl_->blit_to_screen(width, height);
 }
+const std::vector<TileRequest>& VirtualTexture::last_wanted() const {
+  return impl_->wanted();
+}
+
+double VirtualTexture::mip_bias() const {
+  return impl_->bias();
+}
+
 void VirtualTexture::set_debug_view(DebugView view) {
   impl_->options().debug = view;
 }

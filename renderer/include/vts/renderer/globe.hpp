@@ -42,6 +42,9 @@ class GlobeScene final : public Scene {
   // the distance to the focus, times W / (2 pi R).
   double texels_per_pixel() const override;
   UvHit hit(double sx, double sy, int width, int height) const override;
+  // Past the limb, the point the ray's parameter s = c / (-b + sqrt(max(disc, 0))) reaches (the
+  // eye's nadir when the ray points away), as scene_hit computes it.
+  UvHit miss_uv(double sx, double sy, int width, int height) const override;
   double u_period() const override { return double(width_); }
 
  private:

@@ -51,6 +51,7 @@
 #include "vts/protocol/pmtiles.hpp"
 #include "vts/protocol/result.hpp"
 #include "vts/renderer/camera.hpp"
+#include "vts/renderer/footprint.hpp"
 #include "vts/renderer/scene.hpp"
 
 namespace vts::renderer {
@@ -132,8 +133,9 @@ class PyramidSampler {
 Result<Image> render_reference(PyramidSampler& sampler, const PlaneCamera& camera, double bias = 0,
                                int anisotropy = 1);
 // The same for any scene (Scene::hit in double), width x height pixels. Where a quad partner
-// misses the surface the derivative is a central difference of 1/1000 pixel; u differences are
-// unwrapped by Scene::u_period().
+// misses the surface its (u, v) is Scene::miss_uv (what the GPU computes there) or, when the scene
+// has none, the derivative is a central difference of 1/1000 pixel; u differences are unwrapped
+// by Scene::u_period() (footprint.hpp).
 Result<Image> render_reference(PyramidSampler& sampler, const Scene& scene, int width, int height,
                                double bias = 0, int anisotropy = 1);
 
@@ -143,11 +145,6 @@ Result<Image> render_reference(PyramidSampler& sampler, const Scene& scene, int 
 // viewport exceeds 16384 a side.
 Result<Image> render_supersampled(PyramidSampler& sampler, const Scene& scene, int width,
                                   int height, int factor);
-
-// Taps along the major axis for a footprint of derivative lengths lx, ly under a limit of
-// max_taps: ceil(major / minor) clamped to [1, max_taps] (max_taps when minor is 0), and 1 when
-// max_taps <= 1 or the major length is 0, infinite or NaN. The GPU shader follows the same rule.
-int anisotropic_taps(double lx, double ly, int max_taps);
 
 // Differences between two images of equal size over the R, G and B channels (alpha ignored).
 struct ImageDiff {

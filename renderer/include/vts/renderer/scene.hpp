@@ -62,6 +62,13 @@ class Scene {
   // The CPU twin of scene_hit, in double precision and absolute: the (u, v) seen through point
   // (sx, sy) (pixels from the top-left; pixel centres at +0.5) of a width x height viewport.
   virtual UvHit hit(double sx, double sy, int width, int height) const = 0;
+  // For a point where hit() misses: the (u, v) the GLSL scene_hit still writes to rel (absolute),
+  // which the GPU's quad derivatives of a pixel next to the edge use; nullopt when the scene has no
+  // meaningful value there (the CPU then takes a numeric derivative of the pixel itself).
+  virtual UvHit miss_uv(double sx, double sy, int width, int height) const {
+    (void)sx, (void)sy, (void)width, (void)height;
+    return std::nullopt;
+  }
   // The period of u when the surface wraps around (a globe: the image width), else 0.
   virtual double u_period() const { return 0; }
 };

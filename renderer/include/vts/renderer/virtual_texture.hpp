@@ -20,11 +20,13 @@
 
 #include <cstdint>
 #include <memory>
+#include <vector>
 
 #include "vts/client/tile_client.hpp"
 #include "vts/protocol/geometry.hpp"
 #include "vts/protocol/result.hpp"
 #include "vts/renderer/camera.hpp"
+#include "vts/renderer/feedback.hpp"
 #include "vts/renderer/mip_bias.hpp"
 #include "vts/renderer/reference.hpp"
 #include "vts/renderer/scene.hpp"
@@ -98,6 +100,12 @@ class VirtualTexture {
   Image read_image() const;
   // Copies the last frame to the window's default framebuffer (0), scaled to width x height.
   void blit_to_screen(int width, int height) const;
+
+  // The tiles the latest processed feedback frame asked for (ancestors included, coarse first), as
+  // they were requested: what the load test's demand simulator is checked against.
+  const std::vector<TileRequest>& last_wanted() const;
+  // The mip bias in effect (what the latest feedback was reduced with).
+  double mip_bias() const;
 
   void set_debug_view(DebugView view);
   DebugView debug_view() const;
