@@ -2,10 +2,15 @@
 // location open_source accepts) -> TileClient (RAM cache, optional disk cache, decode pool) ->
 // VirtualTexture -> a plane or globe scene, driven by the mouse, a camera path, or nothing.
 //
-// Interactive (default): a visible window; the title and stderr carry the HUD (resident, pending,
-// uploads per frame, hit ratio, mip bias, frame time).
+// Interactive (default): a visible window with the HUD (resident, pending, uploads per frame, hit
+// ratio, mip bias, frame time, camera) drawn in its top-left corner (key H hides it); the title
+// and stderr carry the same numbers.
 // Headless (--headless --frames N): a hidden window renders N frames (optionally stopping at the
 // first complete one), writes the last as a PNG and prints per-frame stats (JSON with --json).
+// Screenshots are the virtual texture's frame alone, comparable with the reference renderer,
+// unless --hud asks for the HUD in them too.
+// --print-camera prints the final camera as a one-key camera path: "record a view" for
+// --camera-path to replay.
 #include <GLFW/glfw3.h>
 #include <unistd.h>
 
@@ -32,6 +37,7 @@
 #include "vts/renderer/camera_path.hpp"
 #include "vts/renderer/gl_context.hpp"
 #include "vts/renderer/globe.hpp"
+#include "vts/renderer/hud.hpp"
 #include "vts/renderer/reference.hpp"
 #include "vts/renderer/scene.hpp"
 #include "vts/renderer/virtual_texture.hpp"
@@ -48,8 +54,8 @@ struct ViewArgs {
   std::uint64_t ram_mb = 256;
   int width = 1280, height = 720;
   std::uint32_t slots = 256, window = 64, upload_tiles = 32;
-  int feedback = 8;
-  bool headless = false, json = false, until_complete = false;
+  int feedback = 8, anisotropy = 8;
+  bool headless = false, json = false, until_complete = false, hud = false, print_camera = false;
   int frames = 0;
 };
 
@@ -153,6 +159,52 @@ nlohmann::json stats_json(const FrameStats& s) {
           {"complete", s.complete}};
 }
 
+// The camera as a one-key camera path (camera_path.hpp) that --camera-path replays: the fields of
+// the scene's own view; "scene" and "debug" say what else was on screen (CameraPath ignores them).
+nlohmann::json camera_json(bool globe, const PlaneView& p, const GlobeView& g, DebugView debug) {
+  nlohmann::json key = {{"frame", 0}};
+  if (globe) {
+    key["lon"] = g.lon_deg;
+    key["lat"] = g.lat_deg;
+    key["altitude_m"] = g.altitude_m;
+    key["heading"] = g.heading;
+    key["tilt"] = g.tilt;
+    key["fov_y"] = g.fov_y;
+  } else {
+    key["center"] = {p.center_u, p.center_v};
+    key["texels_per_pixel"] = p.texels_per_pixel;
+    key["heading"] = p.heading;
+    key["tilt"] = p.tilt;
+    key["fov_y"] = p.fov_y;
+  }
+  return {{"scene", globe ? "globe" : "plane"}, {"debug", debug_name(debug)}, {"keys", {key}}};
+}
+
+// The HUD's text: streaming numbers, then the camera. uploads and ms are per-frame averages.
+std::vector<std::string> hud_lines(const FrameStats& st, double uploads, double ms, DebugView debug,
+                                   bool globe, const PlaneView& p, const GlobeView& g) {
+  char buf[3][160];
+  std::snprintf(buf[0], sizeof buf[0], "resident %u  pending %u  uploads %.1f/frame", st.resident,
+                st.pending, uploads);
+  std::snprintf(buf[1], sizeof buf[1], "hit %.1f%%  bias %.2f  %.1f ms/frame%s%s",
+                st.hit_ratio * 100, st.mip_bias, ms, debug == DebugView::none ? "" : "  debug ",
+                debug == DebugView::none ? "" : debug_name(debug));
+  if (globe) {
+    std::snprintf(buf[2], sizeof buf[2], "lon %.4f  lat %.4f  altitude %.0f m", g.lon_deg,
+                  g.lat_deg, g.altitude_m);
+  } else {
+    std::snprintf(buf[2], sizeof buf[2], "center %.1f, %.1f  %.3g texels/pixel", p.center_u,
+                  p.center_v, p.texels_per_pixel);
+  }
+  return {buf[0], buf[1], buf[2]};
+}
+
+// Integer glyph scales keep the HUD's edges on pixel edges: 1 below 720 rows, 2 from 720, 3 from
+// 1080, ... (stb_easy_font's glyphs are 9 pixels tall at scale 1).
+float hud_scale(int framebuffer_height) {
+  return std::max(1.0f, std::floor(float(framebuffer_height) / 360.0f));
+}
+
 // The interactive camera: what the mouse and keys change.
 struct Controls {
   bool globe = false;
@@ -160,8 +212,13 @@ struct Controls {
   GlobeView globe_view;
   std::uint64_t image_w = 1, image_h = 1;
   bool left = false, right = false;
+  // The cursor as the latest event placed it, in window coordinates. Events are handled in
+  // order, so a press and the moves after it, read in one batch, still see the press's place
+  // (asking the server instead would give the place after the whole batch).
   double last_x = 0, last_y = 0;
+  bool cursor_seen = false;
   bool touched = false;  // the user moved the camera (a camera path stops driving it)
+  bool show_hud = true;
   std::optional<DebugView> debug_request;
 
   // Window coordinates -> framebuffer pixels.
@@ -183,7 +240,10 @@ void on_mouse_button(GLFWwindow* w, int button, int action, int) {
   const bool down = action == GLFW_PRESS;
   if (button == GLFW_MOUSE_BUTTON_LEFT) c.left = down;
   if (button == GLFW_MOUSE_BUTTON_RIGHT) c.right = down;
-  glfwGetCursorPos(w, &c.last_x, &c.last_y);
+  if (!c.cursor_seen) {
+    glfwGetCursorPos(w, &c.last_x, &c.last_y);
+    c.cursor_seen = true;
+  }
 }
 
 void on_cursor(GLFWwindow* w, double x, double y) {
@@ -193,7 +253,9 @@ void on_cursor(GLFWwindow* w, double x, double y) {
   const double px = c.last_x * k, py = c.last_y * k;
   c.last_x = x;
   c.last_y = y;
-  if (!c.left && !c.right) return;
+  const bool first = !c.cursor_seen;
+  c.cursor_seen = true;
+  if (first || (!c.left && !c.right)) return;
   c.touched = true;
   int fw = 1, fh = 1;
   c.fb_size(w, fw, fh);
@@ -245,8 +307,8 @@ void on_scroll(GLFWwindow* w, double, double yoff) {
   }
   int fw = 1, fh = 1;
   c.fb_size(w, fw, fh);
-  double x = 0, y = 0;
-  glfwGetCursorPos(w, &x, &y);
+  double x = c.last_x, y = c.last_y;
+  if (!c.cursor_seen) glfwGetCursorPos(w, &x, &y);
   const double k = c.scale(w);
   PlaneView& v = c.plane;
   const auto before = PlaneCamera::from_view(v, fw, std::max(fh, 1)).hit(x * k, y * k);
@@ -279,6 +341,9 @@ void on_key(GLFWwindow* w, int key, int, int action, int) {
       break;
     case GLFW_KEY_4:
       c.debug_request = DebugView::page_table;
+      break;
+    case GLFW_KEY_H:
+      if (action == GLFW_PRESS) c.show_hud = !c.show_hud;
       break;
     case GLFW_KEY_Q:
       heading -= 0.05;
@@ -375,6 +440,7 @@ int run_view(const ViewArgs& a) {
   vo.window = a.window;
   vo.feedback_divisor = a.feedback;
   vo.upload_tiles = a.upload_tiles;
+  vo.anisotropy = a.anisotropy;
   vo.debug = debug_from_name(a.debug);
   auto vt_made = VirtualTexture::create(tiles, geometry, vo);
   if (!vt_made) return report_error(vt_made.error());
@@ -400,6 +466,34 @@ int run_view(const ViewArgs& a) {
   };
   const std::string scene_name = globe ? "globe" : "plane";
   int rc = 0;
+  auto camera_now = [&] {
+    return camera_json(ctl.globe, ctl.plane, ctl.globe_view, vt->debug_view());
+  };
+
+  // The HUD: needed by the window, and by screenshots only with --hud. A window without one
+  // still has the numbers in its title.
+  std::unique_ptr<Hud> hud;
+  if (!a.headless || a.hud) {
+    auto made = Hud::create();
+    if (made) {
+      hud = std::move(*made);
+    } else if (a.hud) {
+      return report_error(made.error());
+    } else {
+      std::fprintf(stderr, "vts view: warning: no HUD in the window: %s\n",
+                   made.error().message.c_str());
+    }
+  }
+  // The screenshot: the last frame, with the HUD drawn over it when --hud asks.
+  auto write_screenshot = [&](const std::vector<std::string>& lines) -> int {
+    Image img = vt->read_image();
+    if (a.hud) {
+      if (auto s = hud->draw_onto(img, lines, hud_scale(img.height)); !s)
+        return report_error(s.error());
+    }
+    if (auto w = write_png(a.screenshot, img); !w) return report_error(w.error());
+    return 0;
+  };
 
   if (a.headless) {
     std::vector<FrameStats> frames;
@@ -413,10 +507,17 @@ int run_view(const ViewArgs& a) {
     }
     // A shader variant the driver refused leaves empty frames: say why instead of a black image.
     if (auto e = vt->last_error()) return report_error(*e);
-    if (!a.screenshot.empty()) {
-      if (auto w = write_png(a.screenshot, vt->read_image()); !w) rc = report_error(w.error());
-    }
     const FrameStats& last = frames.back();
+    if (!a.screenshot.empty()) {
+      double uploads = 0, ms = 0;
+      for (const auto& f : frames) {
+        uploads += double(f.uploads);
+        ms += f.frame_ms;
+      }
+      const double n = double(frames.size());
+      rc = write_screenshot(hud_lines(last, uploads / n, ms / n, vt->debug_view(), ctl.globe,
+                                      ctl.plane, ctl.globe_view));
+    }
     if (a.json) {
       nlohmann::json j;
       j["source"] = a.source;
@@ -432,6 +533,7 @@ int run_view(const ViewArgs& a) {
       j["page_table_bytes"] = vt->page_table_gpu_bytes();
       j["physical_bytes"] = vt->physical_gpu_bytes();
       j["gl_renderer"] = gl->info().renderer;
+      j["camera"] = camera_now();
       std::printf("%s\n", j.dump(2).c_str());
     } else {
       std::printf("%s %s %dx%d: %zu frames, %s; %u resident, %u pending, hit %.1f%%%s%s\n",
@@ -451,12 +553,13 @@ int run_view(const ViewArgs& a) {
     glfwSetKeyCallback(win, on_key);
     std::fprintf(stderr,
                  "vts view: %s — drag: %s, scroll: zoom, right-drag or Q/E R/F: heading/tilt, "
-                 "1-4: debug view, Esc: quit\n",
+                 "1-4: debug view, H: HUD, Esc: quit\n",
                  scene_name.c_str(), globe ? "orbit" : "pan");
     auto last_title = Clock::now(), last_line = last_title, last_frame = last_title;
     std::uint64_t uploads = 0, n = 0;
     double wall_ms = 0;
     double frame = 0;
+    std::vector<std::string> lines;  // the HUD's text, refreshed with the title
     const std::atomic<bool>& quit_requested = install_stop_signals();
     while (!gl->should_close() && !quit_requested.load()) {
       gl->poll_events();
@@ -473,33 +576,40 @@ int run_view(const ViewArgs& a) {
       const FrameStats st = render(frame, w, h, !ctl.touched);
       frame += 1;
       vt->blit_to_screen(w, h);
-      gl->swap_buffers();
       const auto now = Clock::now();
       wall_ms += std::chrono::duration<double, std::milli>(now - last_frame).count();
       last_frame = now;
       uploads += st.uploads;
       ++n;
-      if (now - last_title >= std::chrono::milliseconds(250)) {
-        char hud[256];
-        std::snprintf(hud, sizeof hud,
-                      "resident %u | pending %u | uploads %.1f/frame | hit %.1f%% | bias %.2f | "
-                      "%.1f ms/frame%s%s",
-                      st.resident, st.pending, double(uploads) / double(n), st.hit_ratio * 100,
-                      st.mip_bias, wall_ms / double(n),
-                      vt->debug_view() == DebugView::none ? "" : " | debug ",
-                      vt->debug_view() == DebugView::none ? "" : debug_name(vt->debug_view()));
-        glfwSetWindowTitle(win, ("vts view — " + std::string(hud)).c_str());
+      if (lines.empty() || now - last_title >= std::chrono::milliseconds(250)) {
+        lines = hud_lines(st, double(uploads) / double(n), wall_ms / double(n), vt->debug_view(),
+                          ctl.globe, ctl.plane, ctl.globe_view);
+        const std::string text = lines[0] + "  " + lines[1];
+        glfwSetWindowTitle(win, ("vts view — " + text).c_str());
         if (now - last_line >= std::chrono::seconds(1)) {
-          std::fprintf(stderr, "vts view: %s\n", hud);
+          std::fprintf(stderr, "vts view: %s\n", text.c_str());
           last_line = now;
         }
         last_title = now;
         uploads = n = 0;
         wall_ms = 0;
       }
+      if (hud && ctl.show_hud) {
+        if (auto s = hud->draw(lines, w, h, hud_scale(h)); !s) {
+          std::fprintf(stderr, "vts view: warning: the HUD is off: %s\n",
+                       s.error().message.c_str());
+          hud.reset();
+        }
+      }
+      gl->swap_buffers();
     }
-    if (!a.screenshot.empty())
-      if (auto s = write_png(a.screenshot, vt->read_image()); !s) rc = report_error(s.error());
+    // A key pressed in the same batch of events as Esc still counts (--print-camera shows it).
+    if (ctl.debug_request) vt->set_debug_view(*ctl.debug_request);
+    if (!a.screenshot.empty()) rc = write_screenshot(lines);
+  }
+  if (a.print_camera && rc == 0) {
+    std::printf("%s\n", camera_now().dump().c_str());
+    std::fflush(stdout);
   }
   vt.reset();  // GL objects go while the context is current
   gl.reset();
@@ -533,13 +643,27 @@ Runner add_view(CLI::App& app) {
       ->capture_default_str();
   c->add_option("--upload-tiles", a->upload_tiles, "Tile uploads per frame at most")
       ->capture_default_str();
+  c->add_option("--anisotropy", a->anisotropy,
+                "Anisotropic filtering: taps along the footprint's long axis (1 = isotropic)")
+      ->check(CLI::Range(1, 16))
+      ->capture_default_str();
   c->add_option("--debug", a->debug, "Debug view")
       ->check(CLI::IsMember({"none", "levels", "physical", "page-table"}))
       ->capture_default_str();
   auto* headless = c->add_flag("--headless", a->headless, "Hidden window: render --frames frames");
   c->add_option("--frames", a->frames, "Frames to render (--headless)")->needs(headless);
-  c->add_option("--screenshot", a->screenshot, "Write the last frame to this PNG");
-  c->add_flag("--json", a->json, "Print the frames' stats as JSON (--headless)")->needs(headless);
+  auto* screenshot =
+      c->add_option("--screenshot", a->screenshot, "Write the last frame to this PNG");
+  c->add_flag("--hud", a->hud,
+              "Draw the HUD into the screenshot too (the window shows it until H hides it)")
+      ->needs(screenshot);
+  auto* json =
+      c->add_flag("--json", a->json, "Print the frames' stats and the camera as JSON (--headless)")
+          ->needs(headless);
+  c->add_flag("--print-camera", a->print_camera,
+              "On exit, print the camera as a one-key camera path (JSON, one line) that "
+              "--camera-path replays")
+      ->excludes(json);
   c->add_flag("--until-complete", a->until_complete,
               "Stop at the first complete frame (--headless)")
       ->needs(headless);
