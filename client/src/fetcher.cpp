@@ -125,7 +125,7 @@ class Fetcher::Impl {
   Handle submit(FetchRequest request, FetchCallback callback) {
     const Handle h = next_handle_.fetch_add(1, std::memory_order_relaxed);
     stats_.submitted.fetch_add(1, std::memory_order_relaxed);
-    post(Command{Command::kSubmit, h, std::move(request), std::move(callback), 0, 0});
+    post(Command{Command::kSubmit, h, std::move(request), std::move(callback), 0, 0, Clock::now()});
     return h;
   }
   void cancel(Handle h) { post(Command{Command::kCancel, h, {}, {}, 0, 0}); }
@@ -156,6 +156,7 @@ class Fetcher::Impl {
     FetchCallback callback;
     int level;
     double urgency;
+    Clock::time_point submitted{};
   };
 
   struct Waiter {
@@ -163,6 +164,7 @@ class Fetcher::Impl {
     FetchCallback callback;
     int level;
     double urgency;
+    Clock::time_point submitted{};
   };
 
   enum class State { queued, waiting, in_flight };
@@ -184,6 +186,10 @@ class Fetcher::Impl {
     State state = State::queued;
     Clock::time_point due;
     int attempts = 0;
+    // Timing: the first attempt's and the current attempt's start, and the current attempt's
+    // first response byte (from libcurl's STARTTRANSFER time; unset when none arrived).
+    Clock::time_point first_start{}, attempt_start{};
+    std::optional<Clock::time_point> first_byte;
     curl_slist* headers = nullptr;
     CURL* easy = nullptr;
     // The current attempt's response.
@@ -248,7 +254,7 @@ class Fetcher::Impl {
     if (std::isnan(c.urgency)) c.urgency = 0;
     switch (c.kind) {
       case Command::kSubmit:
-        add(c.handle, std::move(c.request), std::move(c.callback));
+        add(c.handle, std::move(c.request), std::move(c.callback), c.submitted);
         break;
       case Command::kCancel:
         cancel_handle(c.handle);
@@ -259,7 +265,7 @@ class Fetcher::Impl {
     }
   }
 
-  void add(Handle h, FetchRequest req, FetchCallback cb) {
+  void add(Handle h, FetchRequest req, FetchCallback cb, Clock::time_point submitted) {
     std::string key = req.merge_key;
     if (key.empty()) {
       key = req.url;
@@ -272,7 +278,7 @@ class Fetcher::Impl {
     if (auto it = by_key_.find(key); it != by_key_.end()) {
       Transfer* t = it->second.get();
       stats_.merged.fetch_add(1, std::memory_order_relaxed);
-      t->waiters.push_back(Waiter{h, std::move(cb), req.level, req.urgency});
+      t->waiters.push_back(Waiter{h, std::move(cb), req.level, req.urgency, submitted});
       by_handle_.emplace(h, t);
       update_priority(t);
       return;
@@ -284,7 +290,7 @@ class Fetcher::Impl {
     t->url = std::move(req.url);
     t->range = req.range;
     t->if_none_match = std::move(req.if_none_match);
-    t->waiters.push_back(Waiter{h, std::move(cb), req.level, req.urgency});
+    t->waiters.push_back(Waiter{h, std::move(cb), req.level, req.urgency, submitted});
     t->level = req.level;
     t->urgency = req.urgency;
     t->seq = next_seq_++;
@@ -463,6 +469,9 @@ class Fetcher::Impl {
       e = curl_easy_init();
     }
     ++t->attempts;
+    t->attempt_start = Clock::now();
+    if (t->attempts == 1) t->first_start = t->attempt_start;
+    t->first_byte.reset();
     stats_.started.fetch_add(1, std::memory_order_relaxed);
     if (t->attempts > 1) stats_.retried.fetch_add(1, std::memory_order_relaxed);
     if (e == nullptr) {
@@ -544,6 +553,10 @@ class Fetcher::Impl {
       curl_easy_getinfo(e, CURLINFO_RETRY_AFTER, &retry_after);
       long os_errno = 0;
       curl_easy_getinfo(e, CURLINFO_OS_ERRNO, &os_errno);
+      curl_off_t first_byte_us = 0;
+      if (curl_easy_getinfo(e, CURLINFO_STARTTRANSFER_TIME_T, &first_byte_us) == CURLE_OK &&
+          first_byte_us > 0)
+        t->first_byte = t->attempt_start + std::chrono::microseconds(first_byte_us);
       release_easy(t);
       attempt_done(t, rc, int(status), std::int64_t(retry_after), int(os_errno));
       any = true;
@@ -731,13 +744,24 @@ class Fetcher::Impl {
     if (t->state == State::waiting) waiting_.erase({t->due, t->seq});
     std::vector<Waiter> waiters = std::move(t->waiters);
     for (const Waiter& w : waiters) by_handle_.erase(w.handle);
+    const bool t_started = t->attempts > 0;
+    const Clock::time_point first_start = t->first_start;
+    const std::optional<Clock::time_point> first_byte = t->first_byte;
     const std::string key = std::move(t->key);
     by_key_.erase(key);  // destroys t
     auto& counter = result.error ? stats_.failed : stats_.succeeded;
     counter.fetch_add(waiters.size(), std::memory_order_relaxed);
     publish_gauges();
+    const Clock::time_point now = Clock::now();
+    const auto since = [](Clock::time_point from, Clock::time_point to) {
+      return std::max(std::chrono::nanoseconds(0), std::chrono::nanoseconds(to - from));
+    };
     for (std::size_t i = 0; i < waiters.size(); ++i) {
       if (!waiters[i].callback) continue;
+      const Clock::time_point sub = waiters[i].submitted;
+      result.timing.queued = t_started ? since(sub, first_start) : since(sub, now);
+      result.timing.first_byte = first_byte ? since(sub, *first_byte) : std::chrono::nanoseconds(0);
+      result.timing.total = since(sub, now);
       if (i + 1 == waiters.size()) {
         waiters[i].callback(std::move(result));
       } else {

@@ -233,16 +233,19 @@ class TileJsonSource final : public TileSource {
     p->callback(std::move(tile));
   }
 
-  void finish_kind(Handle h, SourceTile::Kind kind) {
+  void finish_kind(Handle h, SourceTile::Kind kind,
+                   std::optional<SourceTransfer> transfer = std::nullopt) {
     SourceTile t;
     t.kind = kind;
+    t.transfer = transfer;
     finish(h, std::move(t));
   }
 
-  void finish_error(Handle h, Error e) {
+  void finish_error(Handle h, Error e, std::optional<SourceTransfer> transfer = std::nullopt) {
     SourceTile t;
     t.kind = SourceTile::Kind::error;
     t.error = std::move(e);
+    t.transfer = transfer;
     finish(h, std::move(t));
   }
 
@@ -257,8 +260,11 @@ class TileJsonSource final : public TileSource {
 
   void on_tile(Handle h, const std::string& url, FetchResult&& r) {
     if (r.cancelled) return finish_kind(h, SourceTile::Kind::cancelled);
-    if (r.error) return finish_error(h, std::move(*r.error));
+    const SourceTransfer transfer{r.status,        r.body.size(),       r.attempts,
+                                  r.timing.queued, r.timing.first_byte, r.timing.total};
+    if (r.error) return finish_error(h, std::move(*r.error), transfer);
     SourceTile t;
+    t.transfer = transfer;
     switch (r.status) {
       case 200: {
         t.kind = SourceTile::Kind::ok;
@@ -282,16 +288,16 @@ class TileJsonSource final : public TileSource {
         return finish(h, std::move(t));
       }
       case 204:
-        return finish_kind(h, SourceTile::Kind::absent);
+        return finish_kind(h, SourceTile::Kind::absent, transfer);
       case 404: {
         const std::string line = first_line(r.body);
         if (line.find(kNotCurrent) == std::string::npos) {
-          return finish_kind(h, SourceTile::Kind::absent);
+          return finish_kind(h, SourceTile::Kind::absent, transfer);
         }
         return on_not_current(h, url, line);
       }
       default:
-        return finish_error(h, make_error(ErrorCode::io, http_failure("GET", url, r)));
+        return finish_error(h, make_error(ErrorCode::io, http_failure("GET", url, r)), transfer);
     }
   }
 

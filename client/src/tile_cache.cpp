@@ -429,6 +429,7 @@ class TileCache::Impl {
       if (it != pending_.end() && it->second.serial == serial) it->second.source_handle = 0;
     }
     PayloadResult r;
+    r.transfer = t.transfer;
     switch (t.kind) {
       case SourceTile::Kind::ok: {
         if (auto v = verify_tile(t.payload); !v) {

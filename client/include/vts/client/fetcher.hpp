@@ -91,6 +91,15 @@ struct FetchResult {
   // byte; a server can therefore count one more request than this.)
   int attempts = 0;
   bool cancelled = false;
+  // Where the time went, each from this handle's submit() (a merged handle counts from its own):
+  // queued — until the transfer's first attempt went on the wire (our priority queue and the
+  // in-flight cap; the whole wait when it never started); first_byte — until the first response
+  // byte of the final attempt (0 when none came: retries and backoff are inside it otherwise);
+  // total — until this result was made.
+  struct Timing {
+    std::chrono::nanoseconds queued{0}, first_byte{0}, total{0};
+  };
+  Timing timing;
 };
 
 // Runs on the fetcher thread; must not block.

@@ -5,6 +5,7 @@
 // prefetching and decoding; sources themselves keep no tile cache.
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 #include <filesystem>
 #include <functional>
@@ -43,6 +44,17 @@ struct SourceRequest {
   double urgency = 0;         // ... then higher urgency
 };
 
+// What the HTTP exchange behind a tile cost, for sources that fetch one URL per tile (TileJSON
+// sources: `vts serve`, a cache daemon, a CDN); the load test reports it per request.
+struct SourceTransfer {
+  int status = 0;           // the final HTTP status (0: no response)
+  std::uint64_t bytes = 0;  // response body bytes
+  int attempts = 0;         // attempts the fetcher started (retries included)
+  // From the fetch's submission: until it went on the wire, until its first response byte (0:
+  // none), until it ended (FetchResult::Timing).
+  std::chrono::nanoseconds queued{0}, first_byte{0}, total{0};
+};
+
 struct SourceTile {
   enum class Kind {
     ok,            // payload + etag
@@ -55,6 +67,7 @@ struct SourceTile {
   std::vector<std::uint8_t> payload;  // the stored tile bytes, exactly as in the archive
   std::string etag;                   // quoted, as HTTP sends it
   std::optional<Error> error;
+  std::optional<SourceTransfer> transfer;  // set by sources that made one HTTP request for it
 };
 
 using SourceCallback = std::function<void(SourceTile&&)>;

@@ -53,6 +53,9 @@ struct PayloadResult {
   From from = From::network;
   std::shared_ptr<const CachedTile> tile;  // Kind::ok
   std::optional<Error> error;              // Kind::error
+  // From::network: the HTTP exchange that brought it, when the source reports one (the last
+  // one when a corrupt payload was fetched again).
+  std::optional<SourceTransfer> transfer;
 };
 
 // Runs on the caller's thread (RAM hits, absent tiles: before get() returns), on the disk
