@@ -10,7 +10,8 @@
 // Screenshots are the virtual texture's frame alone, comparable with the reference renderer,
 // unless --hud asks for the HUD in them too.
 // --print-camera prints the final camera as a one-key camera path: "record a view" for
-// --camera-path to replay.
+// --camera-path to replay. --record FILE writes the whole flight as a camera path on exit (a key
+// for every frame whose camera changed), which --camera-path replays frame for frame.
 #include <GLFW/glfw3.h>
 #include <unistd.h>
 
@@ -20,6 +21,7 @@
 #include <cmath>
 #include <csignal>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -50,7 +52,7 @@ using Clock = std::chrono::steady_clock;
 using namespace vts::renderer;
 
 struct ViewArgs {
-  std::string source, cache_dir, scene = "plane", camera_path, debug = "none", screenshot;
+  std::string source, cache_dir, scene = "plane", camera_path, debug = "none", screenshot, record;
   std::uint64_t ram_mb = 256;
   int width = 1280, height = 720;
   std::uint32_t slots = 256, window = 64, upload_tiles = 32;
@@ -178,6 +180,80 @@ nlohmann::json camera_json(bool globe, const PlaneView& p, const GlobeView& g, D
     key["fov_y"] = p.fov_y;
   }
   return {{"scene", globe ? "globe" : "plane"}, {"debug", debug_name(debug)}, {"keys", {key}}};
+}
+
+// --record: the camera of every rendered frame (frames counted from 0), kept as keys where it
+// changes. A camera that holds still for frames i..j and then changes at j + 1 gets keys at i and j
+// (linear interpolation would otherwise glide from i to j + 1), so the path replays the camera of
+// every recorded frame exactly. Keys the followed camera path marks as moves stay moves.
+class Recorder {
+ public:
+  explicit Recorder(bool globe) : globe_(globe) {}
+
+  void add(double frame, const PlaneView& plane, const GlobeView& globe, bool move) {
+    CameraKey k;
+    k.t = frame;
+    k.plane = plane;
+    k.globe = globe;
+    k.move = move || keys_.empty();
+    if (keys_.empty()) {
+      keys_.push_back(k);
+    } else if (k.move || !same(k, last_)) {
+      if (keys_.back().t < last_.t) keys_.push_back(last_);  // the end of a still stretch
+      keys_.push_back(k);
+    }
+    last_ = k;
+    last_.move = false;
+  }
+  bool empty() const { return keys_.empty(); }
+
+  // The path so far, with a key at the last frame; only the scene's own kind of fields.
+  CameraPath path() const {
+    std::vector<CameraKey> keys = keys_;
+    if (!keys.empty() && keys.back().t < last_.t) keys.push_back(last_);
+    return CameraPath(std::move(keys), !globe_, globe_);
+  }
+
+ private:
+  bool same(const CameraKey& a, const CameraKey& b) const {
+    if (globe_) {
+      const GlobeView &x = a.globe, &y = b.globe;
+      return x.lon_deg == y.lon_deg && x.lat_deg == y.lat_deg && x.altitude_m == y.altitude_m &&
+             x.heading == y.heading && x.tilt == y.tilt && x.fov_y == y.fov_y;
+    }
+    const PlaneView &x = a.plane, &y = b.plane;
+    return x.center_u == y.center_u && x.center_v == y.center_v &&
+           x.texels_per_pixel == y.texels_per_pixel && x.heading == y.heading && x.tilt == y.tilt &&
+           x.fov_y == y.fov_y;
+  }
+
+  bool globe_;
+  std::vector<CameraKey> keys_;
+  CameraKey last_;
+};
+
+// Writes `text` to `path` through a temporary file in the same folder and a rename, so the file
+// is either the old one or the whole new one.
+Status write_atomically(const std::string& path, const std::string& text) {
+  namespace fs = std::filesystem;
+  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
+  std::error_code ec;
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    out.write(text.data(), std::streamsize(text.size()));
+    out.flush();
+    if (!out) {
+      fs::remove(tmp, ec);
+      return make_error(ErrorCode::io, "--record: cannot write " + tmp);
+    }
+  }
+  fs::rename(tmp, path, ec);
+  if (ec) {
+    fs::remove(tmp, ec);
+    return make_error(ErrorCode::io,
+                      "--record: cannot rename " + tmp + " to " + path + ": " + ec.message());
+  }
+  return {};
 }
 
 // The HUD's text: streaming numbers, then the camera. uploads and ms are per-frame averages.
@@ -380,6 +456,16 @@ int run_view(const ViewArgs& a) {
     if (!t) return report_error(t.error());
     path_text = std::move(*t);
   }
+  if (!a.record.empty()) {
+    // Known before a long session, not at its end: the folder the file goes to exists.
+    namespace fs = std::filesystem;
+    const fs::path dir = fs::path(a.record).parent_path();
+    std::error_code ec;
+    if (fs::is_directory(a.record, ec) || !fs::is_directory(dir.empty() ? "." : dir, ec))
+      return report_error(
+          make_error(ErrorCode::invalid_argument,
+                     "--record " + a.record + ": not a file in an existing folder"));
+  }
 
   // The source, the tile client with its caches.
   client::SourceOptions so;
@@ -453,12 +539,21 @@ int run_view(const ViewArgs& a) {
   ctl.image_w = geometry.width();
   ctl.image_h = geometry.height();
 
+  // The frames a followed camera path starts a new view at (--record keeps them as moves).
+  std::vector<double> path_moves;
+  if (path) path_moves = path->move_frames();
+  std::optional<Recorder> recorder;
+  if (!a.record.empty()) recorder.emplace(globe);
+
   // One frame of the current camera at w x h.
   auto render = [&](double frame, int w, int h, bool follow_path) {
+    bool move = false;
     if (path && follow_path) {
       ctl.plane = path->plane_at(frame);
       ctl.globe_view = path->globe_at(frame);
+      move = std::binary_search(path_moves.begin(), path_moves.end(), frame);
     }
+    if (recorder) recorder->add(frame, ctl.plane, ctl.globe_view, move);
     if (ctl.globe) {
       return vt->render(GlobeScene(ctl.globe_view, geometry.width(), geometry.height()), w, h);
     }
@@ -607,6 +702,12 @@ int run_view(const ViewArgs& a) {
     if (ctl.debug_request) vt->set_debug_view(*ctl.debug_request);
     if (!a.screenshot.empty()) rc = write_screenshot(lines);
   }
+  if (recorder && !recorder->empty()) {
+    if (auto s = write_atomically(a.record, recorder->path().to_json()); !s) {
+      const int failed = report_error(s.error());
+      if (rc == 0) rc = failed;
+    }
+  }
   if (a.print_camera && rc == 0) {
     std::printf("%s\n", camera_now().dump().c_str());
     std::fflush(stdout);
@@ -633,6 +734,9 @@ Runner add_view(CLI::App& app) {
   c->add_option("--scene", a->scene, "plane, globe, or FILE.json {\"scene\":..., \"camera\":{...}}")
       ->capture_default_str();
   c->add_option("--camera-path", a->camera_path, "Keyframes FILE.json {\"keys\":[...]}");
+  c->add_option("--record", a->record,
+                "On exit, write every frame's camera to FILE.json as a camera path (a key where "
+                "it changed) that --camera-path replays");
   c->add_option("--width", a->width, "Frame width, pixels")->capture_default_str();
   c->add_option("--height", a->height, "Frame height, pixels")->capture_default_str();
   c->add_option("--slots", a->slots, "Physical texture slots")->capture_default_str();

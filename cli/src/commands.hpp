@@ -23,6 +23,7 @@ Runner add_serve(CLI::App& app);
 Runner add_sign(CLI::App& app);
 Runner add_cache(CLI::App& app);  // vts cache serve (cmd_cache.cpp)
 Runner add_warm(CLI::App& app);
+Runner add_loadtest(CLI::App& app);  // vts loadtest (cmd_loadtest.cpp)
 #ifdef VTS_HAVE_VIEWER
 Runner add_view(CLI::App& app);  // vts view (cmd_view.cpp): only when the renderer is built
 #endif
@@ -33,6 +34,9 @@ Result<std::pair<std::string, std::uint16_t>> parse_endpoint(const std::string& 
 // Makes SIGINT and SIGTERM set the returned flag instead of killing the process, so a long
 // command can stop cleanly (flush, write its output); a second signal kills as usual.
 const std::atomic<bool>& install_stop_signals();
+
+// The command line as typed ("vts loadtest http://... --viewers 64"), for reports.
+const std::string& command_line();
 
 // Prints "vts: error: <message>" to stderr and returns the mapped exit code.
 int report_error(const vts::Error& e);

@@ -2,11 +2,20 @@
 #include <csignal>
 #include <cstdio>
 #include <exception>
+#include <string>
 
 #include "commands.hpp"
 #include "vts/protocol/result.hpp"
 
 namespace vts::cli {
+
+namespace {
+std::string g_command_line;
+}  // namespace
+
+const std::string& command_line() {
+  return g_command_line;
+}
 
 int report_error(const Error& e) {
   std::fprintf(stderr, "vts: error: %s\n", e.message.c_str());
@@ -51,9 +60,14 @@ int main(int argc, char** argv) {
   add(&vts::cli::add_sign);
   add(&vts::cli::add_cache);
   add(&vts::cli::add_warm);
+  add(&vts::cli::add_loadtest);
 #ifdef VTS_HAVE_VIEWER
   add(&vts::cli::add_view);
 #endif
+  for (int i = 0; i < argc; ++i) {
+    if (i) vts::cli::g_command_line += ' ';
+    vts::cli::g_command_line += i == 0 ? "vts" : argv[i];
+  }
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -200,6 +200,13 @@ class Viewer {
   std::mutex mutex_;  // guards arrived_ and inflight_ (callbacks run on the cache's threads)
   std::unordered_map<std::uint64_t, Clock::time_point> arrived_;  // resident (or absent) tiles
   std::unordered_map<std::uint64_t, std::shared_ptr<Request>> inflight_;
+  // Tiles that failed, and when they may be asked for again (a viewer backs off instead of asking
+  // every frame): 250 ms, doubling per failure up to 8 s.
+  struct Backoff {
+    Clock::time_point until{};
+    int failures = 0;
+  };
+  std::unordered_map<std::uint64_t, Backoff> backoff_;
 
   // Driver thread only.
   std::unordered_map<std::uint64_t, std::uint64_t> last_wanted_;  // frame a tile was last demanded
@@ -274,6 +281,7 @@ Status Viewer::frame(std::uint64_t f, Clock::time_point due) {
         }
       }
       if (a == arrived_.end() && !inflight_.count(k)) {
+        if (auto b = backoff_.find(k); b != backoff_.end() && b->second.until > due) continue;
         auto req = std::make_shared<Request>();
         req->id = t.id;
         req->key = k;
@@ -348,8 +356,14 @@ void Viewer::done(const std::shared_ptr<Request>& req, PayloadResult&& r) {
     std::lock_guard lock(mutex_);
     auto it = inflight_.find(req->key);
     if (it != inflight_.end() && it->second == req) inflight_.erase(it);
-    if (r.kind == PayloadResult::Kind::ok || r.kind == PayloadResult::Kind::absent)
+    if (r.kind == PayloadResult::Kind::ok || r.kind == PayloadResult::Kind::absent) {
       arrived_[req->key] = now;
+      backoff_.erase(req->key);
+    } else {
+      Backoff& b = backoff_[req->key];
+      b.failures = std::min(b.failures + 1, 6);
+      b.until = now + std::chrono::milliseconds(125 << b.failures);
+    }
   }
   engine_.metrics.request_done(r, req->intended, req->sent, now);
 }
@@ -441,11 +455,21 @@ Result<LoadTestResult> run_load_test(const LoadTestOptions& options, const Deman
   std::vector<std::thread> drivers;
   for (int t = 0; t < threads; ++t) {
     drivers.emplace_back([&, t] {
-      for (std::uint64_t f = 0;; ++f) {
+      for (std::uint64_t f = 0;;) {
         const auto due = start + frame_period * std::int64_t(f);
         if (due >= end || engine.stopped()) break;
         std::this_thread::sleep_until(due);
-        if (Clock::now() - due > frame_period) late_frames.fetch_add(1);
+        const auto now = Clock::now();
+        if (now >= end) break;
+        if (now - due > frame_period) {
+          // Behind by more than a frame (the load generator is the bottleneck): like a renderer
+          // whose frame rate drops, skip to the frame due now instead of replaying a backlog.
+          const auto behind = std::uint64_t((now - start) / frame_period);
+          late_frames.fetch_add(behind - f);
+          f = behind;
+          continue;
+        }
+        ++f;
         for (std::size_t v = std::size_t(t); v < engine.viewers.size(); v += std::size_t(threads)) {
           if (engine.stopped()) break;
           if (auto st = engine.viewers[v]->frame(f, due); !st) {

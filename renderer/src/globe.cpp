@@ -107,10 +107,13 @@ std::int64_t clamp_index(double x, std::uint64_t n) {
 
 }  // namespace
 
+struct GlobeScene::Camera : GlobeCamera {};
+
 GlobeScene::GlobeScene(const GlobeView& view, std::uint64_t image_width, std::uint64_t image_height)
     : view_(view),
       width_(std::max<std::uint64_t>(image_width, 1)),
-      height_(std::max<std::uint64_t>(image_height, 1)) {}
+      height_(std::max<std::uint64_t>(image_height, 1)),
+      camera_(std::make_shared<const Camera>(Camera{camera_of(view)})) {}
 
 namespace {
 
@@ -146,12 +149,12 @@ Vec3d pixel_dir(const GlobeCamera& cam, double sx, double sy, int width, int hei
 }  // namespace
 
 UvHit GlobeScene::hit(double sx, double sy, int width, int height) const {
-  const GlobeCamera cam = camera_of(view_);
+  const GlobeCamera& cam = *camera_;
   return hit_dir(cam, pixel_dir(cam, sx, sy, width, height), double(width_), double(height_));
 }
 
 UvHit GlobeScene::miss_uv(double sx, double sy, int width, int height) const {
-  const GlobeCamera cam = camera_of(view_);
+  const GlobeCamera& cam = *camera_;
   const Vec3d d = pixel_dir(cam, sx, sy, width, height);
   const double a = dot(d, d), b = dot(cam.nadir.up, d);
   const double disc = b * b - a * cam.c;
@@ -160,7 +163,7 @@ UvHit GlobeScene::miss_uv(double sx, double sy, int width, int height) const {
 }
 
 std::pair<double, double> GlobeScene::focus() const {
-  const GlobeCamera cam = camera_of(view_);
+  const GlobeCamera& cam = *camera_;
   if (auto h = hit_dir(cam, cam.forward, double(width_), double(height_))) return *h;
   // The centre looks past the limb: the nadir.
   return *hit_dir(cam, cam.nadir.up * -1.0, double(width_), double(height_));
@@ -172,7 +175,7 @@ std::array<std::int64_t, 2> GlobeScene::anchor() const {
 }
 
 double GlobeScene::texels_per_pixel() const {
-  const GlobeCamera cam = camera_of(view_);
+  const GlobeCamera& cam = *camera_;
   const auto s = ray_param(cam, cam.forward);
   const double dist = s ? *s * cam.rh : std::max(view_.altitude_m, 0.0);
   const double pixel_rad = 2 * cam.tan_half_fov / kNominalHeightPx;
@@ -227,7 +230,7 @@ bool scene_hit(vec2 px, out vec2 rel) {
 }
 
 void GlobeScene::set_uniforms(UniformSink& sink, int width, int height) const {
-  const GlobeCamera cam = camera_of(view_);
+  const GlobeCamera& cam = *camera_;
   const auto an = anchor();
   const double lon_a = (double(an[0]) / double(width_) - 0.5) * 2 * kPi;
   const double lat_a = (0.5 - double(an[1]) / double(height_)) * kPi;

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # `vts view --headless` end to end under Xvfb (xvfb-run -a) with Mesa llvmpipe: a real archive
 # built by `vts build`, viewed from the file and through a real `vts serve` on 127.0.0.1; the
-# JSON report checked with python3, the screenshot with python3 (PNG header) and oiiotool; bad
-# sources and a missing display must fail cleanly with a message that says why.
+# JSON report checked with python3, the screenshot with python3 (PNG header) and oiiotool; a
+# camera path flown with --record and the recording replayed to the same camera; bad sources and
+# a missing display must fail cleanly with a message that says why.
 # Environment (besides lib.sh's): XVFB_RUN, the xvfb-run script.
 # shellcheck source=lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
@@ -90,6 +91,68 @@ check_view_json "$LOGS/served.json" "$WORK/served.png"
 # The same tiles through the network draw the same picture.
 "$IDIFF" -fail 0.01 -failpercent 0.1 "$WORK/local.png" "$WORK/served.png" >"$LOGS/idiff.txt" 2>&1 ||
   { cat "$LOGS/idiff.txt" >&2; fail "the served view differs from the local one"; }
+
+# record_and_replay NAME SCENE PATH.json: a headless flight along PATH.json recorded with --record,
+# the recording checked against the path (python3), then replayed: the same final camera.
+record_and_replay() {
+  local name=$1 scene=$2 path=$3 rec="$WORK/$1.rec.json"
+  expect_ok "${XVFB[@]}" "$VTS" view "$ARCHIVE" --headless --frames 25 --width "$W" --height "$H" \
+    --scene "$scene" --camera-path "$path" --record "$rec" --print-camera
+  tail -n 1 "$OUT" >"$LOGS/$name.flown.json"
+  [[ -s $rec ]] || fail "--record wrote no $rec"
+  cp "$rec" "$LOGS/$name.rec.json"
+  if compgen -G "$rec.tmp.*" >/dev/null; then fail "--record left a temporary file next to $rec"; fi
+  python3 - "$path" "$rec" "$scene" <<'EOF' || fail "the $name recording does not follow its path (kept in logs)"
+import json, sys
+path, rec, scene = json.load(open(sys.argv[1])), json.load(open(sys.argv[2])), sys.argv[3]
+def need(cond, what):
+    if not cond:
+        print("FAIL:", what, file=sys.stderr)
+        sys.exit(1)
+keys = rec["keys"]
+frames = [k["frame"] for k in keys]
+need(all(isinstance(f, int) for f in frames), "frames are not whole numbers: %r" % frames)
+# The path moves between its keys (a key every frame), then holds (no key until the last frame).
+need(frames == list(range(21)) + [24], "recorded frames %r, expected 0 .. 20 and 24" % frames)
+need(keys[0].get("move") is True, "the first key is not a move")
+fields = ("lon", "lat", "altitude_m") if scene == "globe" else ("center", "texels_per_pixel")
+other = ("center", "texels_per_pixel") if scene == "globe" else ("lon", "lat", "altitude_m")
+by_frame = {k["frame"]: k for k in keys}
+for k in path["keys"]:
+    r = by_frame[k["frame"]]
+    for f in fields + ("heading", "tilt"):
+        if f in k:
+            need(r[f] == k[f], "frame %d: %s recorded %r, the path says %r" % (k["frame"], f, r[f], k[f]))
+    need(r.get("move", False) == (k.get("move", False) or k["frame"] == 0),
+         "frame %d: move %r" % (k["frame"], r.get("move")))
+need(not any(f in k for k in keys for f in other), "a %s recording carries the other scene's fields" % scene)
+EOF
+  expect_ok "${XVFB[@]}" "$VTS" view "$ARCHIVE" --headless --frames 25 --width "$W" --height "$H" \
+    --scene "$scene" --camera-path "$rec" --print-camera
+  tail -n 1 "$OUT" >"$LOGS/$name.replayed.json"
+  python3 -c 'import json, sys; sys.exit(json.load(open(sys.argv[1])) != json.load(open(sys.argv[2])))' \
+    "$LOGS/$name.flown.json" "$LOGS/$name.replayed.json" ||
+    { diff "$LOGS/$name.flown.json" "$LOGS/$name.replayed.json" >&2; fail "the $name replay ends elsewhere"; }
+}
+
+note "--record: 3-key plane and globe flights recorded headless, then replayed to the same camera"
+cat >"$WORK/plane3.json" <<'EOF'
+{"keys": [{"frame": 0, "center": [300, 200], "texels_per_pixel": 4, "heading": 0, "tilt": 0},
+          {"frame": 10, "center": [900, 500], "texels_per_pixel": 1.5, "heading": 0.3, "tilt": 0.4},
+          {"frame": 20, "center": [1700, 800], "texels_per_pixel": 2.25, "move": true}]}
+EOF
+record_and_replay plane plane "$WORK/plane3.json"
+cat >"$WORK/globe3.json" <<'EOF'
+{"keys": [{"frame": 0, "lon": -40, "lat": 10, "altitude_m": 2e7},
+          {"frame": 10, "lon": 20, "lat": 35, "altitude_m": 3e6, "heading": 0.5, "tilt": 0.3},
+          {"frame": 20, "lon": 25.5, "lat": 40.25, "altitude_m": 8e5}]}
+EOF
+record_and_replay globe globe "$WORK/globe3.json"
+
+note "--record into a folder that does not exist fails before anything opens"
+expect_clean_failure "${XVFB[@]}" "$VTS" view "$ARCHIVE" --headless --frames 2 \
+  --record "$WORK/no/such/dir/rec.json"
+grep -q -- '--record' "$ERR" || { show_output; fail "the error does not name --record"; }
 
 note "a missing tileset (served) and a missing archive fail naming the source"
 expect_clean_failure "${XVFB[@]}" "$VTS" view "$BASE/nosuch" --headless --frames 5

@@ -4,6 +4,8 @@
 # and xdotool sending a mouse drag (pan), wheel clicks (zoom), keys (debug view, HUD) and Escape
 # (quit). `--print-camera` prints the final camera as a one-key camera path; python3 checks that
 # each input moved it the way the controls promise, and a headless run replays that path.
+# `--record` writes the whole session: it must start at the default camera and end at the
+# printed one.
 # Every wait has a time limit; on failure the viewer's and the X server's output are shown.
 # Environment (besides lib.sh's): XVFB, the Xvfb server; XDOTOOL, xdotool; VTS_TEST_DISPLAY, a
 # display number to use instead of the first free one.
@@ -96,9 +98,9 @@ DISPLAY=":$(cat "$LOGS/display")"
 export DISPLAY
 note "DISPLAY=$DISPLAY"
 
-note "vts view ARCHIVE (interactive) --print-camera"
+note "vts view ARCHIVE (interactive) --print-camera --record FILE"
 timeout -k 5 120 "$VTS" view "$ARCHIVE" --width "$W" --height "$H" --print-camera \
-  >"$LOGS/view.out" 2>"$LOGS/view.err" </dev/null &
+  --record "$WORK/session.json" >"$LOGS/view.out" 2>"$LOGS/view.err" </dev/null &
 VIEW_PID=$!
 
 # The window exists, and its title carries the HUD numbers: the frame loop (and with it the input
@@ -192,6 +194,32 @@ want_u = u0 - 60 * tpp0
 need(abs(u - want_u) < 2 * tpp0, "center_u %r after the drag, expected about %r" % (u, want_u))
 need(abs(v - v0) < 2 * tpp0, "center_v %r moved on a horizontal drag (was %r)" % (v, v0))
 need(k.get("heading") == 0 and k.get("tilt") == 0, "heading/tilt changed: %r" % k)
+EOF
+
+note "--record wrote the session: the default camera first, the printed camera last"
+[[ -s $WORK/session.json ]] || fail "--record wrote no session file"
+cp "$WORK/session.json" "$LOGS/session.json"
+python3 - "$WORK/session.json" "$WORK/recorded.json" "$TPP0" "$U0" "$V0" <<'EOF' || fail "the recorded session is wrong (kept in logs)"
+import json, sys
+s, printed = json.load(open(sys.argv[1])), json.load(open(sys.argv[2]))
+tpp0, u0, v0 = float(sys.argv[3]), float(sys.argv[4]), float(sys.argv[5])
+def need(cond, what):
+    if not cond:
+        print("FAIL:", what, file=sys.stderr)
+        sys.exit(1)
+keys = s["keys"]
+frames = [k["frame"] for k in keys]
+need(frames == sorted(set(frames)) and frames[0] == 0, "frames %r" % frames[:20])
+# The drag and the wheel clicks each changed the camera: a key at least before and after each.
+need(len(keys) >= 4, "only %d keys" % len(keys))
+first, last = keys[0], keys[-1]
+need(first.get("move") is True, "the first key is not a move")
+need(first["center"] == [u0, v0] and abs(first["texels_per_pixel"] - tpp0) < 1e-9,
+     "the first key is not the default camera: %r" % first)
+want = printed["keys"][0]
+for f in ("center", "texels_per_pixel", "heading", "tilt", "fov_y"):
+    need(last[f] == want[f], "the last key's %s is %r, --print-camera said %r" % (f, last[f], want[f]))
+need(not any("lon" in k for k in keys), "a plane session carries globe fields")
 EOF
 
 note "the recorded camera replays: --camera-path FILE renders exactly that camera"

@@ -5,10 +5,14 @@
 //
 // Each viewer has its own source and TileCache (caches per CacheMode), a resident set of at most
 // `resident_tiles` tiles (the viewer's physical texture; least recently wanted go first) and the
-// tiles it has asked for. Frame f of every viewer is due at start + f / fps. At each frame the
-// viewer takes its demand and
+// tiles it has asked for. Frame f of every viewer is due at start + f / fps; a driver thread that
+// falls more than a frame behind skips to the frame due now (counted as late frames), as a
+// renderer's frame rate drops, rather than replaying a backlog. At each frame the viewer takes
+// its demand and
 //   - asks its cache for every demanded tile neither resident nor on its way (coarse first, as the
-//     demand lists them), and cancels what it asked for that the frame no longer demands;
+//     demand lists them), and cancels what it asked for that the frame no longer demands; a tile
+//     whose request failed is asked for again after a backoff (250 ms, doubling to 8 s), not at
+//     every frame;
 //   - tracks camera moves: a move starts at a frame whose demand says `move` (and at frame 0). Its
 //     time to first visible tile is from the move's due time to the earliest arrival among the
 //     frame's direct tiles (0 when one was already resident), its time to full resolution until
@@ -72,7 +76,7 @@ struct LoadProgress {
   std::uint64_t requests = 0, errors = 0, in_flight = 0, moves_complete = 0;
   double requests_per_s = 0;      // over the last second
   std::uint64_t p99_ns = 0;       // total latency, last second
-  std::uint64_t late_frames = 0;  // frames a driver thread reached more than one frame late
+  std::uint64_t late_frames = 0;  // frames skipped because a driver thread fell a frame behind
 };
 
 struct LoadTestOptions {

@@ -11,6 +11,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 
 #include "vts/renderer/scene.hpp"
 
@@ -48,8 +49,10 @@ class GlobeScene final : public Scene {
   double u_period() const override { return double(width_); }
 
  private:
+  struct Camera;  // the view's camera basis, worked out once (globe.cpp)
   GlobeView view_;
   std::uint64_t width_ = 1, height_ = 1;
+  std::shared_ptr<const Camera> camera_;
 };
 
 }  // namespace vts::renderer
