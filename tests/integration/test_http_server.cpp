@@ -11,6 +11,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <csignal>
 #include <cstdlib>
 #include <filesystem>
 #include <random>
@@ -356,6 +357,43 @@ TEST(HttpServer, ConnectionsBeyondTheLimitAreClosed) {
   EXPECT_EQ(fetch(server.base() + "/").status, 200);
   EXPECT_NE(server->metrics_text().find("vts_http_refused_connections_total 10"),
             std::string::npos);
+}
+
+TEST(HttpServer, ClientsThatVanishMidResponseDoNotKillTheProcess) {
+  // Tiles go out with sendfile(2), which has no MSG_NOSIGNAL: writing to a connection the client
+  // has reset raises SIGPIPE, whose default action ends the process (seen under `vts loadtest`
+  // with 64 viewers). The server must ignore it, whatever the disposition it started with.
+  struct sigaction dfl {};
+  dfl.sa_handler = SIG_DFL;
+  sigemptyset(&dfl.sa_mask);
+  ASSERT_EQ(::sigaction(SIGPIPE, &dfl, nullptr), 0);
+  RunningServer server(vts::HttpServerOptions{});
+  struct sigaction now {};
+  ASSERT_EQ(::sigaction(SIGPIPE, nullptr, &now), 0);
+  EXPECT_EQ(now.sa_handler, SIG_IGN);
+
+  // Clients with a tiny receive window ask for the whole archive, read a byte and reset.
+  const std::string request =
+      "GET /" + archive().path.stem().string() + ".pmtiles HTTP/1.1\r\nHost: t\r\n\r\n";
+  for (int i = 0; i < 50; ++i) {
+    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+    ASSERT_GE(fd, 0);
+    const int small = 4096;
+    ::setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &small, sizeof small);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_port = htons(server->port());
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    ASSERT_EQ(::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
+    ASSERT_EQ(::send(fd, request.data(), request.size(), MSG_NOSIGNAL), ssize_t(request.size()));
+    char byte = 0;
+    (void)::recv(fd, &byte, 1, 0);
+    const linger rst{1, 0};
+    ::setsockopt(fd, SOL_SOCKET, SO_LINGER, &rst, sizeof rst);
+    ::close(fd);
+  }
+  std::this_thread::sleep_for(100ms);
+  EXPECT_EQ(fetch(server.base() + "/").status, 200);
 }
 
 TEST(HttpServer, HealthSaysLoadingUntilReady) {

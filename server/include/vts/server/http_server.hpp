@@ -87,6 +87,8 @@ class HttpServer {
  public:
   // Binds both listeners (so port() is known before run()). Fails with io when an address cannot
   // be bound, invalid_argument when it does not parse. The registry must outlive the server.
+  // Sets SIGPIPE to be ignored process-wide: tiles go out with sendfile(2), which cannot be asked
+  // not to raise it when a client has gone.
   static Result<std::unique_ptr<HttpServer>> create(HttpServerOptions options,
                                                     std::shared_ptr<TilesetRegistry> registry);
   virtual ~HttpServer() = default;
