@@ -94,3 +94,68 @@ start_vts_serve() {
   PORT=$(sed -nE 's|.*listening on http://[^ ]*:([0-9]+)[ ,].*|\1|p' "$2/vts.out")
   [[ -n $PORT ]] || die "vts serve did not start: $(cat "$2/vts.err")"
 }
+
+# free_port: a TCP port nobody listens on now on this machine.
+free_port() {
+  local p
+  while :; do
+    p=$((20000 + RANDOM % 30000))
+    ss -ltn | awk '{ print $4 }' | grep -q ":$p\$" || { echo "$p"; return; }
+  done
+}
+
+# extract_static ARCHIVE DIR: the peer's copy of an archive: every stored tile as the file
+# DIR/static/earth/z/x/y (the archive's offsets listed in DIR/offsets by pmtiles_dump, $DUMP).
+extract_static() {
+  local archive=$1 dir=$2 _ z x y off len
+  echo "extracting tiles for nginx" >&2
+  mkdir -p "$dir/static/earth"
+  "$DUMP" offsets "$archive" >"$dir/offsets" || die "pmtiles_dump offsets $archive failed"
+  while read -r _ z x y off len; do
+    mkdir -p "$dir/static/earth/$z/$x"
+    dd if="$archive" of="$dir/static/earth/$z/$x/$y" iflag=skip_bytes,count_bytes skip="$off" \
+      count="$len" status=none
+  done <"$dir/offsets"
+}
+
+# start_nginx_static ROOT DIR WORKERS: nginx serving ROOT as static files on a free loopback port
+# (sendfile on, access log off), unprivileged, its files in DIR/nginx; sets NGINX_PID and
+# NGINX_PORT once it answers (the caller's EXIT trap stops NGINX_PID with SIGQUIT).
+start_nginx_static() {
+  local root=$1 dir=$2/nginx workers=$3 i
+  chmod -R a+rX "$root"
+  NGINX_PORT=$(free_port)
+  mkdir -p "$dir/logs"
+  cat >"$dir/nginx.conf" <<CONF
+worker_processes $workers;
+daemon off;
+pid $dir/nginx.pid;
+error_log $dir/error.log warn;
+events { worker_connections 4096; }
+http {
+  access_log off;
+  sendfile on;
+  tcp_nopush on;
+  tcp_nodelay on;
+  keepalive_requests 1000000;
+  default_type application/octet-stream;
+  client_body_temp_path $dir/body;
+  proxy_temp_path $dir/proxy;
+  fastcgi_temp_path $dir/fastcgi;
+  uwsgi_temp_path $dir/uwsgi;
+  scgi_temp_path $dir/scgi;
+  server {
+    listen 127.0.0.1:$NGINX_PORT;
+    root $root;
+    location / { }
+  }
+}
+CONF
+  nginx -p "$dir" -c "$dir/nginx.conf" 2>"$dir/stderr" &
+  NGINX_PID=$!
+  for ((i = 0; i < 100; i++)); do
+    curl -s -o /dev/null "http://127.0.0.1:$NGINX_PORT/" && return
+    sleep 0.05
+  done
+  die "nginx did not start: $(cat "$dir/stderr")"
+}

@@ -45,56 +45,13 @@ start_vts_serve "$ARCHIVE" "$T" 1
 VTS_URL="http://127.0.0.1:$PORT/$NAME"
 
 # The peer: every stored tile as a static file, and a TileJSON naming nginx's tile URLs.
-echo "extracting tiles for nginx" >&2
-mkdir -p "$T/static/earth"
-"$DUMP" offsets "$ARCHIVE" >"$T/offsets"
-while read -r _ z x y off len; do
-  mkdir -p "$T/static/earth/$z/$x"
-  dd if="$ARCHIVE" of="$T/static/earth/$z/$x/$y" iflag=skip_bytes,count_bytes skip="$off" \
-    count="$len" status=none
-done <"$T/offsets"
-chmod -R a+rX "$T"
-NGINX_PORT=$((20000 + RANDOM % 30000))
-while ss -ltn | awk '{ print $4 }' | grep -q ":$NGINX_PORT\$"; do
-  NGINX_PORT=$((20000 + RANDOM % 30000))
-done
+extract_static "$ARCHIVE" "$T"
+start_nginx_static "$T/static" "$T" 1
 curl -sf "$VTS_URL.json" | python3 -c '
 import json, sys
 j = json.load(sys.stdin)
 j["tiles"] = ["http://127.0.0.1:'"$NGINX_PORT"'/earth/{z}/{x}/{y}"]
 json.dump(j, sys.stdout)' >"$T/static/earth.json" || die "no TileJSON from vts serve"
-mkdir -p "$T/nginx/logs"
-cat >"$T/nginx/nginx.conf" <<CONF
-worker_processes 1;
-daemon off;
-pid $T/nginx/nginx.pid;
-error_log $T/nginx/error.log warn;
-events { worker_connections 4096; }
-http {
-  access_log off;
-  sendfile on;
-  tcp_nopush on;
-  tcp_nodelay on;
-  keepalive_requests 1000000;
-  default_type application/octet-stream;
-  client_body_temp_path $T/nginx/body;
-  proxy_temp_path $T/nginx/proxy;
-  fastcgi_temp_path $T/nginx/fastcgi;
-  uwsgi_temp_path $T/nginx/uwsgi;
-  scgi_temp_path $T/nginx/scgi;
-  server {
-    listen 127.0.0.1:$NGINX_PORT;
-    root $T/static;
-    location / { }
-  }
-}
-CONF
-nginx -p "$T/nginx" -c "$T/nginx/nginx.conf" 2>"$T/nginx/stderr" &
-NGINX_PID=$!
-for ((i = 0; i < 100; i++)); do
-  curl -sf -o /dev/null "http://127.0.0.1:$NGINX_PORT/earth.json" && break
-  sleep 0.05
-done
 NGINX_URL="http://127.0.0.1:$NGINX_PORT/earth.json"
 
 run() { # LABEL URL PATH VIEWERS

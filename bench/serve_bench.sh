@@ -67,57 +67,13 @@ finish() {
 trap finish EXIT
 
 # Static copy for nginx: every stored tile as the file earth/z/x/y, plus the archive itself.
-echo "extracting tiles for nginx" >&2
-mkdir -p "$T/static/earth"
+extract_static "$ARCHIVE" "$T"
 cp "$ARCHIVE" "$T/static/earth.pmtiles"
-"$DUMP" offsets "$ARCHIVE" >"$T/offsets"
-while read -r _ z x y off len; do
-  mkdir -p "$T/static/earth/$z/$x"
-  dd if="$ARCHIVE" of="$T/static/earth/$z/$x/$y" iflag=skip_bytes,count_bytes skip="$off" \
-    count="$len" status=none
-done <"$T/offsets"
 awk '{ print "/earth/" $2 "/" $3 "/" $4 }' "$T/offsets" >"$T/tiles.txt"
 awk '{ print "/earth.pmtiles", $5, $5 + $6 - 1 }' "$T/offsets" >"$T/ranges.txt"
 NTILES=$(wc -l <"$T/tiles.txt")
 TILE_BYTES=$(awk '{ s += $6 } END { print s }' "$T/offsets")
-chmod -R a+rX "$T"
-
-free_port() {
-  local p
-  while :; do
-    p=$((20000 + RANDOM % 30000))
-    ss -ltn | awk '{ print $4 }' | grep -q ":$p\$" || { echo "$p"; return; }
-  done
-}
-NGINX_PORT=$(free_port)
-mkdir -p "$T/nginx/logs"
-cat >"$T/nginx/nginx.conf" <<CONF
-worker_processes $WORKERS;
-daemon off;
-pid $T/nginx/nginx.pid;
-error_log $T/nginx/error.log warn;
-events { worker_connections 4096; }
-http {
-  access_log off;
-  sendfile on;
-  tcp_nopush on;
-  tcp_nodelay on;
-  keepalive_requests 1000000;
-  default_type application/octet-stream;
-  client_body_temp_path $T/nginx/body;
-  proxy_temp_path $T/nginx/proxy;
-  fastcgi_temp_path $T/nginx/fastcgi;
-  uwsgi_temp_path $T/nginx/uwsgi;
-  scgi_temp_path $T/nginx/scgi;
-  server {
-    listen 127.0.0.1:$NGINX_PORT;
-    root $T/static;
-    location / { }
-  }
-}
-CONF
-nginx -p "$T/nginx" -c "$T/nginx/nginx.conf" 2>"$T/nginx/stderr" &
-NGINX_PID=$!
+start_nginx_static "$T/static" "$T" "$WORKERS"
 
 "$VTS" serve "$ARCHIVE" --listen 127.0.0.1:0 --admin 127.0.0.1:0 --threads "$WORKERS" \
   >"$T/vts.out" 2>"$T/vts.err" &

@@ -28,6 +28,7 @@
 #include "vts/client/source.hpp"
 #include "vts/client/tile_client.hpp"
 #include "vts/renderer/gl_context.hpp"
+#include "vts/renderer/gl_program.hpp"
 #include "vts/renderer/gl_uniforms.hpp"
 #include "vts/renderer/scene.hpp"
 #include "vts/renderer/virtual_texture.hpp"
@@ -134,23 +135,9 @@ void main() {
   o_color = hit && all(greaterThanEqual(uv, vec2(0))) && all(lessThan(uv, vec2(1)))
                 ? vec4(c.rgb, 1) : vec4(0, 0, 0, 1);
 })";
-    prog = glCreateProgram();
-    for (auto [type, text] : {std::pair{GL_VERTEX_SHADER, vs}, std::pair{GL_FRAGMENT_SHADER, fs}}) {
-      const GLuint s = glCreateShader(type);
-      const char* p = text.c_str();
-      glShaderSource(s, 1, &p, nullptr);
-      glCompileShader(s);
-      GLint ok = 0;
-      glGetShaderiv(s, GL_COMPILE_STATUS, &ok);
-      if (!ok) {
-        char log[2048] = {};
-        glGetShaderInfoLog(s, sizeof log, nullptr, log);
-        fail(std::string("mipmapped shader: ") + log);
-      }
-      glAttachShader(prog, s);
-      glDeleteShader(s);
-    }
-    glLinkProgram(prog);
+    auto linked = link_program(vs, fs, "mipmapped");
+    if (!linked) fail(linked.error().message);
+    prog = *linked;
     glCreateVertexArrays(1, &vao);
     glCreateTextures(GL_TEXTURE_2D, 1, &color);
     glTextureStorage2D(color, 1, GL_SRGB8_ALPHA8, w, h);

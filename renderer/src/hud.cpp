@@ -16,6 +16,8 @@
 #include <stb/stb_easy_font.h>
 #pragma GCC diagnostic pop
 
+#include "vts/renderer/gl_program.hpp"
+
 namespace vts::renderer {
 namespace {
 
@@ -49,10 +51,6 @@ in vec4 v_color;
 out vec4 o_color;
 void main() { o_color = v_color; }
 )";
-
-Error driver_error(std::string what) {
-  return make_error(ErrorCode::unsupported, "HUD: " + std::move(what));
-}
 
 bool good_scale(float scale) {
   return scale > 0 && scale <= Hud::kMaxScale;  // false for NaN too
@@ -117,23 +115,6 @@ Layout layout(const std::vector<std::string>& lines, float scale, bool with_vert
   return l;
 }
 
-Result<GLuint> compile(GLenum type, const char* source) {
-  const GLuint s = glCreateShader(type);
-  glShaderSource(s, 1, &source, nullptr);
-  glCompileShader(s);
-  GLint ok = 0;
-  glGetShaderiv(s, GL_COMPILE_STATUS, &ok);
-  if (ok) return s;
-  GLint len = 0;
-  glGetShaderiv(s, GL_INFO_LOG_LENGTH, &len);
-  std::string log(std::size_t(std::max(len, 1)), '\0');
-  glGetShaderInfoLog(s, GLsizei(log.size()), nullptr, log.data());
-  glDeleteShader(s);
-  return driver_error(std::string("compiling the ") +
-                      (type == GL_VERTEX_SHADER ? "vertex" : "fragment") +
-                      " shader failed: " + log.c_str());
-}
-
 // Every piece of GL state draw() changes, captured on entry and put back on exit.
 class SavedState {
  public:
@@ -194,28 +175,9 @@ class Hud::Impl {
   }
 
   Status init() {
-    auto vs = compile(GL_VERTEX_SHADER, kVertexShader);
-    if (!vs) return vs.error();
-    auto fs = compile(GL_FRAGMENT_SHADER, kFragmentShader);
-    if (!fs) {
-      glDeleteShader(*vs);
-      return fs.error();
-    }
-    program_ = glCreateProgram();
-    glAttachShader(program_, *vs);
-    glAttachShader(program_, *fs);
-    glLinkProgram(program_);
-    glDeleteShader(*vs);
-    glDeleteShader(*fs);
-    GLint ok = 0;
-    glGetProgramiv(program_, GL_LINK_STATUS, &ok);
-    if (!ok) {
-      GLint len = 0;
-      glGetProgramiv(program_, GL_INFO_LOG_LENGTH, &len);
-      std::string log(std::size_t(std::max(len, 1)), '\0');
-      glGetProgramInfoLog(program_, GLsizei(log.size()), nullptr, log.data());
-      return driver_error(std::string("linking the program failed: ") + log.c_str());
-    }
+    auto program = link_program(kVertexShader, kFragmentShader, "HUD");
+    if (!program) return program.error();
+    program_ = *program;
     size_loc_ = glGetUniformLocation(program_, "u_size");
 
     glCreateBuffers(1, &vbo_);

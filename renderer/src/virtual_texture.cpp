@@ -15,6 +15,7 @@
 
 #include "shaders.hpp"
 #include "vts/renderer/feedback.hpp"
+#include "vts/renderer/gl_program.hpp"
 #include "vts/renderer/gl_uniforms.hpp"
 #include "vts/renderer/page_table.hpp"
 #include "vts/renderer/pyramid.hpp"
@@ -27,55 +28,6 @@ using Clock = std::chrono::steady_clock;
 
 double ms_since(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
-
-Error gl_error(std::string what) {
-  return Error{ErrorCode::unsupported, std::move(what)};
-}
-
-Result<GLuint> compile(GLenum type, const std::string& source, const char* name) {
-  GLuint s = glCreateShader(type);
-  const char* text = source.c_str();
-  glShaderSource(s, 1, &text, nullptr);
-  glCompileShader(s);
-  GLint ok = 0;
-  glGetShaderiv(s, GL_COMPILE_STATUS, &ok);
-  if (!ok) {
-    GLint len = 0;
-    glGetShaderiv(s, GL_INFO_LOG_LENGTH, &len);
-    std::string log(std::size_t(std::max(len, 1)), '\0');
-    glGetShaderInfoLog(s, len, nullptr, log.data());
-    glDeleteShader(s);
-    return gl_error(std::string("compiling the ") + name + " shader failed: " + log);
-  }
-  return s;
-}
-
-Result<GLuint> link_program(const std::string& vs, const std::string& fs, const char* name) {
-  auto v = compile(GL_VERTEX_SHADER, vs, name);
-  if (!v) return v.error();
-  auto f = compile(GL_FRAGMENT_SHADER, fs, name);
-  if (!f) {
-    glDeleteShader(*v);
-    return f.error();
-  }
-  GLuint p = glCreateProgram();
-  glAttachShader(p, *v);
-  glAttachShader(p, *f);
-  glLinkProgram(p);
-  glDeleteShader(*v);
-  glDeleteShader(*f);
-  GLint ok = 0;
-  glGetProgramiv(p, GL_LINK_STATUS, &ok);
-  if (!ok) {
-    GLint len = 0;
-    glGetProgramiv(p, GL_INFO_LOG_LENGTH, &len);
-    std::string log(std::size_t(std::max(len, 1)), '\0');
-    glGetProgramInfoLog(p, len, nullptr, log.data());
-    glDeleteProgram(p);
-    return gl_error(std::string("linking the ") + name + " program failed: " + log);
-  }
-  return p;
 }
 
 // Waits for a fence; true once signalled (or when there is none).

@@ -1,0 +1,18 @@
+// Building a GL program from vertex + fragment GLSL, with the driver's log in the error: what the
+// virtual texture, the HUD and the renderer benchmark share.
+//
+// Thread safety: GL-thread only, with a current context.
+#pragma once
+
+#include <string>
+
+#include "vts/protocol/result.hpp"
+
+namespace vts::renderer {
+
+// The linked program's name. unsupported naming `what` (e.g. "plane colour") and carrying the
+// compile or link log when the driver refuses either shader or the link; nothing is left behind.
+Result<unsigned> link_program(const std::string& vertex, const std::string& fragment,
+                              const std::string& what);
+
+}  // namespace vts::renderer
