@@ -47,9 +47,17 @@ struct ViewerCamera {
   std::unique_ptr<DemandSimulator> sim;
 };
 
+// A --path that is not a preset names a camera-path file; a typo in a preset's name lands here
+// too, so the error lists the presets.
 Result<std::string> read_text(const std::string& file) {
   std::ifstream in(file, std::ios::binary);
-  if (!in) return make_error(ErrorCode::not_found, "cannot read camera path '" + file + "'");
+  if (!in) {
+    std::string presets;
+    for (auto p : CameraPath::preset_names())
+      presets += (presets.empty() ? "" : ", ") + std::string(p);
+    return make_error(ErrorCode::not_found, "--path '" + file + "' is neither a preset (" +
+                                                presets + ") nor a readable camera-path file");
+  }
   std::ostringstream s;
   s << in.rdbuf();
   return s.str();

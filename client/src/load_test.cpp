@@ -154,7 +154,9 @@ struct Request {
   std::uint64_t key = 0;
   Clock::time_point intended{}, sent{};
   TileCache::Handle handle = 0;
-  bool cancelled = false;  // open loop: dropped before its slot came
+  // Open loop: dropped before its slot came. Set under the viewer's lock, read by the dispatcher
+  // under the queue's.
+  std::atomic<bool> cancelled{false};
 };
 
 class Engine;
@@ -175,6 +177,13 @@ class Viewer {
   std::size_t in_flight() {
     std::lock_guard lock(mutex_);
     return inflight_.size();
+  }
+  // Open loop: drops a request that never got a slot (it was never on its way).
+  void unqueue(const std::shared_ptr<Request>& req) {
+    std::lock_guard lock(mutex_);
+    req->cancelled = true;
+    auto it = inflight_.find(req->key);
+    if (it != inflight_.end() && it->second == req) inflight_.erase(it);
   }
   // Cancels whatever is still on its way; returns how many.
   std::size_t cancel_all();
@@ -263,7 +272,7 @@ Status Viewer::frame(std::uint64_t f, Clock::time_point due) {
   wanted.reserve(d->tiles.size() * 2);
   std::vector<std::shared_ptr<Request>> to_issue;
   std::vector<TileCache::Handle> to_cancel;
-  std::size_t direct = 0, resolved = 0;
+  std::size_t direct = 0, resolved = 0, fresh = 0;
   Clock::time_point first{Clock::time_point::max()}, last{Clock::time_point::min()};
   {
     std::lock_guard lock(mutex_);
@@ -276,7 +285,12 @@ Status Viewer::frame(std::uint64_t f, Clock::time_point due) {
         ++direct;
         if (a != arrived_.end()) {
           ++resolved;
-          first = std::min(first, a->second);
+          // Only tiles that came after the move make it "visible": a coarse tile held from
+          // before (the globe's limb, a shared ancestor) shows nothing new.
+          if (a->second >= move_start_) {
+            ++fresh;
+            first = std::min(first, a->second);
+          }
           last = std::max(last, a->second);
         }
       }
@@ -305,13 +319,15 @@ Status Viewer::frame(std::uint64_t f, Clock::time_point due) {
   if (cancelled) engine_.metrics.cancelled(cancelled);
 
   if (move_open_) {
-    if (!first_visible_known_ && resolved > 0) {
+    if (!first_visible_known_ && fresh > 0) {
       first_visible_ = std::max(Ns(0), Ns(first - move_start_));
       first_visible_known_ = true;
     }
     if (resolved == direct) {
+      if (!first_visible_known_) first_visible_ = Ns(0);  // the whole view was already held
+      first_visible_known_ = true;
       const Ns full = direct == 0 ? Ns(0) : std::max(Ns(0), Ns(last - move_start_));
-      engine_.metrics.move_done(first_visible_known_ ? first_visible_ : full, full);
+      engine_.metrics.move_done(first_visible_, full);
       move_open_ = false;
     } else if (Clock::now() - move_start_ > engine_.options.view_timeout) {
       ++moves_incomplete_;
@@ -469,10 +485,10 @@ Result<LoadTestResult> run_load_test(const LoadTestOptions& options, const Deman
           f = behind;
           continue;
         }
-        ++f;
+        const std::uint64_t frame = f++;
         for (std::size_t v = std::size_t(t); v < engine.viewers.size(); v += std::size_t(threads)) {
           if (engine.stopped()) break;
-          if (auto st = engine.viewers[v]->frame(f, due); !st) {
+          if (auto st = engine.viewers[v]->frame(frame, due); !st) {
             engine.fail(st.error());
             break;
           }
@@ -532,6 +548,12 @@ Result<LoadTestResult> run_load_test(const LoadTestOptions& options, const Deman
   for (auto& d : drivers) d.join();
   engine.issuing = false;
   if (dispatcher.joinable()) dispatcher.join();
+  {
+    // Requests still waiting for a slot were never sent: the drain does not wait for them.
+    std::lock_guard lock(engine.queue_mutex);
+    for (auto& [viewer, req] : engine.queue) viewer->unqueue(req);
+    engine.queue.clear();
+  }
   const auto measured_end = std::min(Clock::now(), end);
 
   // Drain: what is on its way may still arrive (and count); then the rest is abandoned.

@@ -14,10 +14,11 @@
 //     whose request failed is asked for again after a backoff (250 ms, doubling to 8 s), not at
 //     every frame;
 //   - tracks camera moves: a move starts at a frame whose demand says `move` (and at frame 0). Its
-//     time to first visible tile is from the move's due time to the earliest arrival among the
-//     frame's direct tiles (0 when one was already resident), its time to full resolution until
-//     the latest arrival, at the first frame whose direct tiles are all resident (absent tiles
-//     count as resolved). A move that is not complete after `view_timeout`, or when the next move
+//     time to first visible tile is from the move's due time to the earliest arrival, after the
+//     move, among the frame's direct tiles (0 when the whole view was already resident; a coarse
+//     tile held from before shows nothing new and does not count); its time to full resolution
+//     runs until the latest arrival, at the first frame whose direct tiles are all resident
+//     (absent tiles count as resolved). A move that is not complete after `view_timeout`, or when the next move
 //     starts, is counted as incomplete and not in the histograms.
 //
 // Latency is measured from the intended send time, never from when a busy driver thread got
