@@ -123,6 +123,7 @@ extract_static() {
 # NGINX_PORT once it answers (the caller's EXIT trap stops NGINX_PID with SIGQUIT).
 start_nginx_static() {
   local root=$1 dir=$2/nginx workers=$3 i
+  chmod a+rX "$2"  # nginx's workers run as another user: they need to reach ROOT
   chmod -R a+rX "$root"
   NGINX_PORT=$(free_port)
   mkdir -p "$dir/logs"
