@@ -84,6 +84,16 @@ vec4 sample_level(int L, ivec2 abs_i, vec2 fr, out int mapped_level) {
   mapped_level = m;
   return textureLod(u_physical, uv, 0.0);
 }
+
+// One filtered sample at finest texel q + qf: bilinear at the finer level only, or trilinear
+// between L0 and L0 + 1 with weight w on the coarser. a, b: the levels actually mapped.
+vec4 filtered(ivec2 q, vec2 qf, float c, int L0, float w, out int a, out int b) {
+  a = -1;
+  b = -1;
+  if (!u_trilinear) return sample_level(int(ceil(c)), q, qf, a);
+  if (L0 >= u_max_level || w == 0.0) return sample_level(L0, q, qf, a);
+  return mix(sample_level(L0, q, qf, a), sample_level(L0 + 1, q, qf, b), w);
+}
 #endif
 
 // The texel (integer + fraction) a filter tap lands on, brought into the image: u wrapped where
@@ -159,29 +169,29 @@ void main() {
   }
   int L0 = int(floor(c));
   float w = c - float(L0);
-  vec2 axis = lx >= ly ? ddx : ddy;
-  vec4 col = vec4(0);
+  vec4 col;
   int m0 = -1, m1 = -1;
-  for (int i = 0; i < taps; ++i) {
-    // Taps spread evenly over the major axis, centred on the pixel (one tap: the pixel itself).
-    vec2 p = fr + axis * ((float(i) + 0.5) / float(taps) - 0.5);
-    p = clamp(p, vec2(-1.0e9), vec2(1.0e9));  // a horizon footprint: keep the int conversion defined
-    vec2 pf = floor(p);
-    ivec2 q = abs_i + ivec2(pf);
-    vec2 qf = p - pf;
-    if (taps > 1) tap_into_image(q, qf);
-    int a = -1, b = -1;
-    if (!u_trilinear) {
-      col += sample_level(int(ceil(c)), q, qf, a);
-    } else if (L0 >= u_max_level || w == 0.0) {
-      col += sample_level(L0, q, qf, a);
-    } else {
-      col += mix(sample_level(L0, q, qf, a), sample_level(L0 + 1, q, qf, b), w);
+  if (taps == 1) {
+    // The pixel itself: no loop, so the common isotropic case costs what it did before taps.
+    col = filtered(abs_i, fr, c, L0, w, m0, m1);
+  } else {
+    vec2 axis = lx >= ly ? ddx : ddy;
+    col = vec4(0);
+    for (int i = 0; i < taps; ++i) {
+      // Taps spread evenly over the major axis, centred on the pixel.
+      vec2 p = fr + axis * ((float(i) + 0.5) / float(taps) - 0.5);
+      p = clamp(p, vec2(-1.0e9), vec2(1.0e9));  // a horizon footprint: keep int conversion defined
+      vec2 pf = floor(p);
+      ivec2 q = abs_i + ivec2(pf);
+      vec2 qf = p - pf;
+      tap_into_image(q, qf);
+      int a, b;
+      col += filtered(q, qf, c, L0, w, a, b);
+      m0 = max(m0, a);
+      m1 = max(m1, b);
     }
-    m0 = max(m0, a);
-    m1 = max(m1, b);
+    col /= float(taps);
   }
-  col /= float(taps);
   if (u_debug == 1) {
     int m = max(m0, m1);
     col.rgb = m < 0 ? vec3(1, 0, 1) : mix(col.rgb, kLevelTint[m % 8], 0.5);
