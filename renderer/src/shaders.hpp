@@ -19,7 +19,7 @@ void main() {
 )";
 
 // The virtual-texturing fragment code. Prepended: "#version 450 core", optionally
-// "#define FEEDBACK", "uniform vec2 u_viewport;" and the scene's GLSL (Scene::glsl()).
+// "#define FEEDBACK" and "#define ANISOTROPIC" (anisotropy > 1: the tap loop and its level), "uniform vec2 u_viewport;" and the scene's GLSL (Scene::glsl()).
 inline constexpr const char* kVirtualTextureFragment = R"(
 const int kMaxLevels = 24;
 
@@ -143,10 +143,12 @@ void main() {
   float lx = length(ddx), ly = length(ddy);
   float major = max(lx, ly), minor = min(lx, ly);
   int taps = 1;
-  if (u_max_aniso > 1 && major > 0.0 && !isinf(major)) {
+#ifdef ANISOTROPIC
+  if (major > 0.0 && !isinf(major)) {
     float ratio = minor > 0.0 ? major / minor : float(u_max_aniso);
     taps = int(clamp(ceil(ratio), 1.0, float(u_max_aniso)));
   }
+#endif
   float rho = max(major / float(taps), minor);
   float c = float(u_max_level) - log2(rho) + u_level_offset;  // rho = 0 gives +inf: finest
   if (isnan(c)) c = float(u_max_level);
@@ -171,10 +173,14 @@ void main() {
   float w = c - float(L0);
   vec4 col;
   int m0 = -1, m1 = -1;
-  if (taps == 1) {
-    // The pixel itself: no loop, so the common isotropic case costs what it did before taps.
+#ifndef ANISOTROPIC
+  {
+    // Isotropic: the pixel itself. A variant of its own: a software rasteriser runs a loop it
+    // never enters under a mask (it doubled llvmpipe's frame).
     col = filtered(abs_i, fr, c, L0, w, m0, m1);
-  } else {
+  }
+#else
+  {
     vec2 axis = lx >= ly ? ddx : ddy;
     col = vec4(0);
     for (int i = 0; i < taps; ++i) {
@@ -192,6 +198,7 @@ void main() {
     }
     col /= float(taps);
   }
+#endif
   if (u_debug == 1) {
     int m = max(m0, m1);
     col.rgb = m < 0 ? vec3(1, 0, 1) : mix(col.rgb, kLevelTint[m % 8], 0.5);

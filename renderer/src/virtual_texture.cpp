@@ -151,7 +151,8 @@ class VirtualTexture::Impl {
   Result<Programs*> programs_for(const Scene& scene) {
     const std::string glsl = scene.glsl();
     if (auto it = programs_.find(glsl); it != programs_.end()) return &it->second;
-    const std::string head = "#version 450 core\n";
+    const std::string head = std::string("#version 450 core\n") +
+                             (options_.anisotropy > 1 ? "#define ANISOTROPIC\n" : "");
     const std::string body = "uniform vec2 u_viewport;\n" + glsl + detail::kVirtualTextureFragment;
     const std::string name(scene.name());
     auto color = link_program(detail::kFullscreenVertex, head + body, (name + " colour").c_str());
