@@ -41,6 +41,9 @@ PACKAGES=(
   sqlite3
   # the load-test report is checked by rendering it in a real headless browser
   chromium
+  # deploy/ tests: nginx templates filled by envsubst, a TLS front with a throwaway certificate,
+  # compose and Kubernetes YAML checked with python3
+  gettext-base openssl python3-yaml
 )
 # Node.js may come from elsewhere (e.g. NodeSource) with its own npm: only ask Debian for what is
 # missing, so the two never fight over /usr/bin/node or /usr/bin/npm.
