@@ -93,5 +93,6 @@ npm_ci() { # DIR
 }
 export npm_config_update_notifier=false
 npm_ci "$ROOT/tests/integration/pmtiles_js"
+npm_ci "$ROOT/tests/integration/deploy_js"
 
 log "done"

@@ -8,7 +8,13 @@
 #   - Dockerfile, compose.yaml and k8s/*.yaml: parsed (python3-yaml) and checked for consistency
 #     with each other, with the binary's shared libraries and with deploy/nginx (health path,
 #     ports, image, user, volumes, template placeholders, the ConfigMap holding the templates
-#     verbatim); `docker compose config` and `kubectl kustomize` too when those tools exist.
+#     verbatim); `docker compose config` and `kubectl kustomize` too when those tools exist;
+#   - schema validation with npm packages pinned in tests/integration/deploy_js (scripts/setup.sh
+#     installs them): dclint checks compose.yaml against the Compose Specification schema and its
+#     lint rules (deploy/.dclintrc.yaml), deploy_js/validate_k8s.js every document of k8s/*.yaml
+#     against its apiVersion/kind schema (kubernetes-models, plus unknown fields) and the
+#     kustomization's resources: list; broken copies (wrong field types, an unknown field, a
+#     missing resource) must fail them, so the validators are known to reject errors.
 # shellcheck source=lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 # shellcheck source=serve_lib.sh
@@ -290,6 +296,64 @@ for e in errors:
     print("deploy_config: " + e, file=sys.stderr)
 sys.exit(1 if errors else 0)
 PYTHON
+
+# ---- schema validation: npm packages pinned in tests/integration/deploy_js --------------------------
+DEPLOY_JS=${DEPLOY_JS:-$(cd "$(dirname "${BASH_SOURCE[0]}")/deploy_js" && pwd)}
+require_tool "$NODE"
+for pkg in dclint kubernetes-models yaml; do
+  [[ -f $DEPLOY_JS/node_modules/$pkg/package.json ]] ||
+    fail "npm package $pkg is not installed in $DEPLOY_JS (run scripts/setup.sh)"
+done
+dclint() { # COMPOSE_FILE: the Compose Specification schema, then the rules; any warning fails too
+  NO_COLOR=1 "$NODE" "$DEPLOY_JS/node_modules/dclint/bin/dclint.cjs" -c "$DEPLOY/.dclintrc.yaml" \
+    --max-warnings 0 "$1"
+}
+validate_k8s() { "$NODE" "$DEPLOY_JS/validate_k8s.js" "$@"; }
+
+note "compose.yaml: dclint $(dclint --version 2>/dev/null) (Compose Specification schema + rules of deploy/.dclintrc.yaml)"
+dclint "$DEPLOY/compose.yaml" >"$LOGS/dclint.log" 2>&1 ||
+  { cat "$LOGS/dclint.log" >&2; fail "dclint rejected deploy/compose.yaml (above)"; }
+note "k8s/*.yaml: each document against its apiVersion/kind schema (kubernetes-models)"
+validate_k8s "$DEPLOY"/k8s/*.yaml >"$LOGS/validate_k8s.log" 2>&1 ||
+  { cat "$LOGS/validate_k8s.log" >&2; fail "deploy/k8s/*.yaml failed schema validation (above)"; }
+note "$(cat "$LOGS/validate_k8s.log")"
+
+note "the validators reject broken copies"
+BROKEN="$WORK/broken"
+# broken_copy SRC DST SED_EXPR: DST is SRC edited by SED_EXPR, which must change it.
+broken_copy() {
+  mkdir -p "$(dirname "$2")"
+  sed "$3" "$1" >"$2"
+  ! cmp -s "$1" "$2" || fail "broken_copy: '$3' does not change $1 (update the test)"
+}
+# expect_rejected WHAT LOG PATTERN CMD...: CMD must fail and print PATTERN (an ERE).
+expect_rejected() {
+  local what=$1 log=$2 pattern=$3
+  shift 3
+  if "$@" >"$log" 2>&1; then
+    cat "$log" >&2
+    fail "the validator accepted $what"
+  fi
+  grep -qE "$pattern" "$log" || { cat "$log" >&2; fail "the validator rejected $what without /$pattern/"; }
+  note "rejected: $what"
+}
+broken_copy "$DEPLOY/compose.yaml" "$BROKEN/c1/compose.yaml" '0,/cap_drop: \[ALL\]/s//cap_drop: ALL/'
+expect_rejected "compose.yaml with cap_drop: ALL (a string, not a list)" "$LOGS/broken-c1.log" \
+  '/services/vts/cap_drop.*must be array.*invalid-schema' dclint "$BROKEN/c1/compose.yaml"
+broken_copy "$DEPLOY/compose.yaml" "$BROKEN/c2/compose.yaml" '0,/^    read_only: true$/s//    read_onyl: true/'
+expect_rejected "compose.yaml with an unknown service key read_onyl" "$LOGS/broken-c2.log" \
+  '/services/vts.*invalid-schema' dclint "$BROKEN/c2/compose.yaml"
+for n in 1 2 3; do mkdir -p "$BROKEN/k$n" && cp "$DEPLOY"/k8s/*.yaml "$BROKEN/k$n/"; done
+broken_copy "$DEPLOY/k8s/vts-serve.yaml" "$BROKEN/k1/vts-serve.yaml" 's/^  replicas: \([0-9]*\)$/  replicas: "\1"/'
+expect_rejected "a Deployment with replicas: a string" "$LOGS/broken-k1.log" \
+  'vts-serve\.yaml document 0 \(Deployment/vts-serve\).*spec/replicas must be integer' \
+  validate_k8s "$BROKEN"/k1/*.yaml
+broken_copy "$DEPLOY/k8s/vts-serve.yaml" "$BROKEN/k2/vts-serve.yaml" 's/^  replicas: /  replicaz: /'
+expect_rejected "a Deployment with an unknown field replicaz" "$LOGS/broken-k2.log" \
+  'Deployment/vts-serve.*unknown field /spec/replicaz' validate_k8s "$BROKEN"/k2/*.yaml
+rm "$BROKEN/k3/archive-pvc.yaml"
+expect_rejected "a kustomization naming a missing file" "$LOGS/broken-k3.log" \
+  'kustomization\.yaml.*archive-pvc\.yaml' validate_k8s "$BROKEN"/k3/*.yaml
 
 if docker compose version >/dev/null 2>&1; then
   note "docker compose config"
