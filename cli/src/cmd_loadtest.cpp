@@ -3,6 +3,7 @@
 // and the CPU demand simulator (renderer's DemandSimulator: the feedback pass's rule, no GL)
 // turn each viewer's frame into tile demand; the client's load engine (load_test.hpp) streams it
 // through the real client stack and measures; load_report.hpp prints and writes the results.
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -43,7 +44,8 @@ struct LoadArgs {
 // One viewer's camera: its path, where it starts in it, and its demand simulator.
 struct ViewerCamera {
   std::optional<CameraPath> path;
-  double offset = 0;  // frames: viewers replaying one file start at different places in it
+  double offset = 0;          // frames: viewers replaying one file start at different places in it
+  std::vector<double> moves;  // floor of the frames where the path starts a new view, sorted
   std::unique_ptr<DemandSimulator> sim;
 };
 
@@ -144,6 +146,7 @@ int run(const LoadArgs& a) {
     auto sim = DemandSimulator::create(geometry, DemandOptions{a.feedback, a.anisotropy});
     if (!sim) return report_error(sim.error());
     cams[v].path.emplace(std::move(*path));
+    for (double m : cams[v].path->move_frames()) cams[v].moves.push_back(std::floor(m));
     cams[v].sim = std::make_unique<DemandSimulator>(std::move(*sim));
     if (!preset) {
       const double span = cams[v].path->last_frame() - cams[v].path->first_frame();
@@ -160,9 +163,7 @@ int run(const LoadArgs& a) {
     const double first = p.first_frame(), span = p.last_frame() - first;
     if (!preset && span > 0) t = first + std::fmod(t - first, span + 1);
     client::ViewerDemand d;
-    for (const CameraKey& k : p.keys()) {
-      if (k.move && std::floor(k.t) == std::floor(t)) d.move = true;
-    }
+    d.move = std::binary_search(c.moves.begin(), c.moves.end(), std::floor(t));
     Result<std::vector<TileRequest>> wanted = Error{};
     if (p.has_globe() && !p.has_plane()) {
       wanted = c.sim->demand(GlobeScene(p.globe_at(t), geometry.width(), geometry.height()),

@@ -752,9 +752,7 @@ std::vector<std::vector<std::string>> totals_rows(const LoadReport& r) {
       {"camera moves", format_count(r.camera_moves),
        format_rate(per_second(static_cast<double>(r.camera_moves), r.duration_s))},
       {"wasted: cancelled", format_count(r.cancelled),
-       format_rate(per_second(static_cast<double>(r.cancelled), r.duration_s))},
-      {"wasted: merged", format_count(r.merged),
-       format_rate(per_second(static_cast<double>(r.merged), r.duration_s))}};
+       format_rate(per_second(static_cast<double>(r.cancelled), r.duration_s))}};
 }
 
 std::vector<std::vector<std::string>> tier_rows(const LoadReport& r) {
@@ -850,7 +848,7 @@ nlohmann::json to_json(const LoadReport& r) {
     slot = (slot.is_number() ? slot.get<std::uint64_t>() : 0) + n;
   }
   j["errors_by_kind"] = std::move(errors);
-  j["wasted"] = {{"cancelled", r.cancelled}, {"merged", r.merged}};
+  j["wasted"] = {{"cancelled", r.cancelled}};
   json seconds = json::array();
   for (std::size_t i = 0; i < r.seconds.size(); ++i) {
     const LoadSecond& s = r.seconds[i];

@@ -98,7 +98,6 @@ void synthesize(LoadReport& r) {
   }
   r.camera_moves = 24 * 30;
   r.cancelled = 1234;
-  r.merged = 321;
   r.errors_by_kind["checksum"] = 2;
   r.errors += 2;
 }

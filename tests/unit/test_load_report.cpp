@@ -59,7 +59,6 @@ LoadReport sample_report() {
   r.by_status = {{200, 40}, {304, 10}, {503, 5}};
   r.errors_by_kind = {{"http_503", 5}};
   r.cancelled = 7;
-  r.merged = 3;
   return r;
 }
 
@@ -133,7 +132,7 @@ TEST(LoadReport, JsonCarriesTheRunScenarioAndTotals) {
             (nlohmann::json{{"ram", 120}, {"disk", 30}, {"network", 40}, {"revalidated", 10}}));
   EXPECT_EQ(j["by_status"], (nlohmann::json{{"200", 40}, {"304", 10}, {"503", 5}}));
   EXPECT_EQ(j["errors_by_kind"], (nlohmann::json{{"http_503", 5}}));
-  EXPECT_EQ(j["wasted"], (nlohmann::json{{"cancelled", 7}, {"merged", 3}}));
+  EXPECT_EQ(j["wasted"], (nlohmann::json{{"cancelled", 7}}));
   ASSERT_EQ(j["seconds"].size(), 4u);
   EXPECT_EQ(j["seconds"][2], (nlohmann::json{{"t", 2},
                                              {"requests", 50},
@@ -238,8 +237,7 @@ TEST(LoadReport, SummaryTableNamesEveryFigureInAlignedColumns) {
                              "HTTP status",
                              "503",
                              "http_503",
-                             "cancelled",
-                             "merged"}) {
+                             "cancelled"}) {
     EXPECT_NE(text.find(needle), std::string::npos) << "missing '" << needle << "' in\n" << text;
   }
   // Every table is a header, a rule and rows of the same width (numbers right-aligned), and

@@ -78,7 +78,6 @@ struct LoadReport {
   std::map<int, std::uint64_t> by_status;               // HTTP status -> responses
   std::map<std::string, std::uint64_t> errors_by_kind;  // "timeout", "http_503", "checksum", ...
   std::uint64_t cancelled = 0;  // wasted: requests cancelled because the view moved on
-  std::uint64_t merged = 0;     // wasted: requests merged into an identical one in flight
 };
 
 // The --json document. Top-level keys: format ("vts-loadtest-report"), version (1), title,
@@ -87,7 +86,7 @@ struct LoadReport {
 // requests_per_s, bytes_per_s, error_ratio}, latency_ns {queue_time, ttfb, total, first_visible,
 // full_resolution: each {count, min, mean, p50, p90, p99, p99_9, max, relative_error,
 // sub_bucket_bits, buckets: [{low, high, count}]}}, cache_tiers {ram, disk, network,
-// revalidated}, by_status {"200": n, ...}, errors_by_kind {kind: n}, wasted {cancelled, merged},
+// revalidated}, by_status {"200": n, ...}, errors_by_kind {kind: n}, wasted {cancelled},
 // seconds [{t, requests, bytes, errors, p50_ns, p90_ns, p99_ns}]. Rates are 0 when duration_s is
 // not positive; strings are valid UTF-8 (invalid bytes become U+FFFD), so dump() never throws.
 nlohmann::json to_json(const LoadReport& report);
