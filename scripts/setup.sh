@@ -28,6 +28,8 @@ PACKAGES=(
   # libraries
   libopenimageio-dev libzstd-dev libxxhash-dev zlib1g-dev nlohmann-json3-dev libcli11-dev
   libspdlog-dev libfmt-dev libboost1.81-dev libssl-dev libcurl4-openssl-dev libsqlite3-dev
+  # the bc1 tile codec's encoders: libsquish, and stb_dxt from libstb-dev (below)
+  libsquish-dev
   # the OpenGL viewer (renderer/): GLFW 3.3, libepoxy (GL loader), GLM; its tests render under
   # Xvfb with Mesa's llvmpipe (GL 4.5 core, no GPU needed)
   libglfw3-dev libepoxy-dev libglm-dev xvfb xauth libgl1-mesa-dri

@@ -267,9 +267,11 @@ bool has_at_most_colours(const std::uint8_t* rgba, std::size_t texels, std::size
   return true;
 }
 
+}  // namespace
+
 // Compresses `body` into `out` (resized to header frame + compressed body) and fills the header.
-Status compress_payload(const std::uint8_t* body, std::size_t body_size, int level,
-                        TileHeader header, std::vector<std::uint8_t>& out) {
+Status detail::compress_payload(const std::uint8_t* body, std::size_t body_size, int level,
+                                TileHeader header, std::vector<std::uint8_t>& out) {
   ZSTD_CCtx* cctx = thread_cctx();
   if (cctx == nullptr) return make_error(ErrorCode::internal, "ZSTD_createCCtx failed");
   ZSTD_CCtx_reset(cctx, ZSTD_reset_session_and_parameters);
@@ -293,6 +295,8 @@ Status compress_payload(const std::uint8_t* body, std::size_t body_size, int lev
   return {};
 }
 
+namespace {
+
 Result<std::vector<std::uint8_t>> LosslessCodec::encode(const TileImage& image,
                                                         const EncodeOptions& options) const {
   if (image.format != PixelFormat::rgba8)
@@ -309,11 +313,7 @@ Result<std::vector<std::uint8_t>> LosslessCodec::encode(const TileImage& image,
                       "image has " + std::to_string(image.pixels.size()) + " bytes, " +
                           std::to_string(image.width) + "x" + std::to_string(image.height) +
                           " rgba8 needs " + std::to_string(body_size));
-  if (options.zstd_level < ZSTD_minCLevel() || options.zstd_level > ZSTD_maxCLevel())
-    return make_error(ErrorCode::invalid_argument,
-                      "zstd level " + std::to_string(options.zstd_level) + " outside " +
-                          std::to_string(ZSTD_minCLevel()) + ".." +
-                          std::to_string(ZSTD_maxCLevel()));
+  if (Status s = detail::check_zstd_level(options.zstd_level); !s) return s.error();
 
   TileHeader header;
   header.codec = CodecId::lossless;
@@ -335,8 +335,8 @@ Result<std::vector<std::uint8_t>> LosslessCodec::encode(const TileImage& image,
   const bool try_gradient = options.filter != FilterChoice::none;
   if (try_none) {
     header.filter = Filter::none;
-    if (Status s =
-            compress_payload(image.pixels.data(), body_size, options.zstd_level, header, plain);
+    if (Status s = detail::compress_payload(image.pixels.data(), body_size, options.zstd_level,
+                                            header, plain);
         !s)
       return s.error();
   }
@@ -345,7 +345,8 @@ Result<std::vector<std::uint8_t>> LosslessCodec::encode(const TileImage& image,
     planes.resize(body_size);
     detail::gradient_filter(image.pixels.data(), image.width, image.height, planes.data());
     header.filter = Filter::gradient;
-    if (Status s = compress_payload(planes.data(), body_size, options.zstd_level, header, filtered);
+    if (Status s = detail::compress_payload(planes.data(), body_size, options.zstd_level, header,
+                                            filtered);
         !s)
       return s.error();
   }
@@ -386,6 +387,25 @@ Result<CodecId> parse_codec_name(std::string_view name) {
   if (name == "bc1") return CodecId::bc1;
   return make_error(ErrorCode::unsupported,
                     "unknown codec \"" + std::string(name) + "\" (known: lossless, bc1)");
+}
+
+const char* bc1_quality_name(Bc1Quality q) noexcept {
+  switch (q) {
+    case Bc1Quality::fast:
+      return "fast";
+    case Bc1Quality::high:
+      return "high";
+    case Bc1Quality::best:
+      return "best";
+  }
+  return "unknown";
+}
+
+Result<Bc1Quality> parse_bc1_quality(std::string_view name) {
+  for (Bc1Quality q : {Bc1Quality::fast, Bc1Quality::high, Bc1Quality::best})
+    if (name == bc1_quality_name(q)) return q;
+  return make_error(ErrorCode::invalid_argument, "unknown bc1 quality \"" + std::string(name) +
+                                                     "\" (known: fast, high, best)");
 }
 
 const char* filter_name(Filter f) noexcept {
@@ -439,7 +459,7 @@ const Codec* find_codec(CodecId id) noexcept {
     case CodecId::lossless:
       return &kLossless;
     case CodecId::bc1:
-      return nullptr;  // not implemented yet
+      return &detail::bc1_codec();
   }
   return nullptr;
 }
@@ -457,11 +477,22 @@ Result<TileImage> decode_tile(std::span<const std::uint8_t> payload) {
 
 namespace detail {
 
-Result<TileImage> decode_lossless_body(const TileHeader& header,
-                                       std::span<const std::uint8_t> body) {
+Status check_zstd_level(int level) {
+  if (level < ZSTD_minCLevel() || level > ZSTD_maxCLevel())
+    return make_error(ErrorCode::invalid_argument, "zstd level " + std::to_string(level) +
+                                                       " outside " +
+                                                       std::to_string(ZSTD_minCLevel()) + ".." +
+                                                       std::to_string(ZSTD_maxCLevel()));
+  return {};
+}
+
+Result<TileHeader> verify_payload(std::span<const std::uint8_t> payload) {
+  return verify_impl(payload);
+}
+
+Status decompress_body(const TileHeader& header, std::span<const std::uint8_t> body,
+                       std::vector<std::uint8_t>& dst) {
   if (Status s = check_header(header); !s) return s.error();
-  if (header.codec != CodecId::lossless)
-    return make_error(ErrorCode::invalid_argument, "not a lossless tile header");
   if (Status s = check_body_frame(header, body); !s) return s.error();
   // check_body_frame() has parsed this header already; it cannot fail here.
   ZSTD_frameHeader fh{};
@@ -469,24 +500,11 @@ Result<TileImage> decode_lossless_body(const TileHeader& header,
   if (frame_content_bound(body, fh) < header.body_size)
     return make_error(ErrorCode::corrupt, "tile body frame's blocks cannot hold the declared " +
                                               std::to_string(header.body_size) + " bytes");
-
   ZSTD_DCtx* dctx = thread_dctx();
   if (dctx == nullptr) return make_error(ErrorCode::internal, "ZSTD_createDCtx failed");
-  TileImage image;
-  image.width = header.width;
-  image.height = header.height;
-  image.format = PixelFormat::rgba8;
-  image.pixels.resize(header.body_size);
-  // Filter none decompresses straight into the image; gradient goes through a scratch buffer.
-  std::vector<std::uint8_t>* planes = nullptr;
-  std::uint8_t* dst = image.pixels.data();
-  const TrimScratchOnExit trim;
-  if (header.filter == Filter::gradient) {
-    planes = &scratch(2);
-    planes->resize(header.body_size);
-    dst = planes->data();
-  }
-  const std::size_t n = ZSTD_decompressDCtx(dctx, dst, header.body_size, body.data(), body.size());
+  dst.resize(header.body_size);  // only now: the frame can produce this many bytes
+  const std::size_t n =
+      ZSTD_decompressDCtx(dctx, dst.data(), header.body_size, body.data(), body.size());
   if (ZSTD_isError(n))
     return make_error(ErrorCode::corrupt,
                       std::string("tile body does not decompress: ") + ZSTD_getErrorName(n));
@@ -494,8 +512,28 @@ Result<TileImage> decode_lossless_body(const TileHeader& header,
     return make_error(ErrorCode::corrupt, "tile body decompressed to " + std::to_string(n) +
                                               " bytes, header says " +
                                               std::to_string(header.body_size));
-  if (planes != nullptr)
-    gradient_unfilter(planes->data(), header.width, header.height, image.pixels.data());
+  return {};
+}
+
+Result<TileImage> decode_lossless_body(const TileHeader& header,
+                                       std::span<const std::uint8_t> body) {
+  if (Status s = check_header(header); !s) return s.error();
+  if (header.codec != CodecId::lossless)
+    return make_error(ErrorCode::invalid_argument, "not a lossless tile header");
+  TileImage image;
+  image.width = header.width;
+  image.height = header.height;
+  image.format = PixelFormat::rgba8;
+  // Filter none decompresses straight into the image; gradient goes through a scratch buffer.
+  const TrimScratchOnExit trim;
+  if (header.filter != Filter::gradient) {
+    if (Status s = decompress_body(header, body, image.pixels); !s) return s.error();
+    return image;
+  }
+  std::vector<std::uint8_t>& planes = scratch(2);
+  if (Status s = decompress_body(header, body, planes); !s) return s.error();
+  image.pixels.resize(header.body_size);
+  gradient_unfilter(planes.data(), header.width, header.height, image.pixels.data());
   return image;
 }
 

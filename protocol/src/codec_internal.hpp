@@ -5,6 +5,7 @@
 
 #include <cstdint>
 #include <span>
+#include <vector>
 
 #include "vts/protocol/codec.hpp"
 #include "vts/protocol/result.hpp"
@@ -33,5 +34,25 @@ void gradient_unfilter(const std::uint8_t* planes, std::uint32_t width, std::uin
 // unfilter paths that the checksum gate otherwise shields.
 Result<TileImage> decode_lossless_body(const TileHeader& header,
                                        std::span<const std::uint8_t> body);
+
+// ---- shared by the codecs -----------------------------------------------------------------------
+
+// invalid_argument naming the range when `level` is not a zstd level.
+Status check_zstd_level(int level);
+// Compresses `body` (body_size bytes) at zstd `level` into `out`: the header frame (the given
+// header with body_size and checksum filled in) followed by one zstd frame declaring its content
+// size. `out` is resized to fit exactly.
+Status compress_payload(const std::uint8_t* body, std::size_t body_size, int level,
+                        TileHeader header, std::vector<std::uint8_t>& out);
+// parse_tile_header() + the checksum + the body frame's structure (verify_tile() plus the frame
+// checks): after it, the body may be decompressed.
+Result<TileHeader> verify_payload(std::span<const std::uint8_t> payload);
+// Decompresses a body frame into dst, resized to header.body_size only after every size check of
+// decode_lossless_body() passed (no checksum check).
+Status decompress_body(const TileHeader& header, std::span<const std::uint8_t> body,
+                       std::vector<std::uint8_t>& dst);
+
+// The bc1 codec singleton (codec_bc1.cpp).
+const Codec& bc1_codec();
 
 }  // namespace vts::detail

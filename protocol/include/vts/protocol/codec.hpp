@@ -32,10 +32,19 @@ enum class Filter : std::uint8_t {
       1,  // planar R,G,B,A, each byte predicted by clamp(left + up - upleft), residual mod 256
 };
 enum class FilterChoice : std::uint8_t { none, gradient, automatic };
+// How hard the bc1 codec searches for each 4x4 block's two endpoint colours. Every mode writes the
+// same format; they differ in encode time and error (docs/ACCURACY.md, table 1):
+//   fast: stb_dxt (stb_compress_dxt_block, refinement on): a bounding-box fit refined once;
+//   high: libsquish cluster fit (the default): searches the orderings of the 16 texels along the
+//         principal axis;
+//   best: libsquish iterative cluster fit: repeats the cluster fit with the refined axis.
+enum class Bc1Quality : std::uint8_t { fast, high, best };
 
 const char* codec_name(CodecId id) noexcept;
 Result<CodecId> parse_codec_name(std::string_view name);
 const char* filter_name(Filter f) noexcept;
+const char* bc1_quality_name(Bc1Quality q) noexcept;
+Result<Bc1Quality> parse_bc1_quality(std::string_view name);
 
 // Decoded texels. rgba8: width*height*4 bytes, rows top to bottom, no padding, sRGB-encoded colour
 // with straight (not premultiplied) alpha. bc1: ceil(w/4)*ceil(h/4) blocks of 8 bytes.
@@ -48,7 +57,9 @@ struct TileImage {
 
 struct EncodeOptions {
   int zstd_level = 3;  // 1..19 (negative fast levels also accepted by zstd)
-  FilterChoice filter = FilterChoice::automatic;  // automatic: keep the smaller of none / gradient
+  FilterChoice filter = FilterChoice::automatic;  // lossless: automatic keeps the smaller of
+                                                  // none / gradient; bc1 takes no filter
+  Bc1Quality bc1 = Bc1Quality::high;              // bc1 only
 };
 
 // What the skippable header frame says. parse_tile_header() reads it without decompressing.
@@ -86,6 +97,15 @@ class Codec {
   // Verifies the header and checksum, then decodes into the codec's decoded_format().
   virtual Result<TileImage> decode(std::span<const std::uint8_t> payload) const = 0;
 };
+
+// The rgba8 image a bc1 image decodes to (width x height texels, the partial blocks of a size
+// that is not a multiple of 4 cropped): what a GPU sampling GL_COMPRESSED_SRGB_ALPHA_S3TC_DXT1
+// reads, before the sRGB decode. A block's two 5:6:5 endpoints are widened to 8 bits by bit
+// replication; c0 > c1 selects four colours (c0, c1, (2 c0 + c1) / 3, (c0 + 2 c1) / 3), else three
+// and transparent black. The interpolants follow libsquish's integer rounding; GPUs may differ
+// by one code (the S3TC specification leaves the rounding open). invalid_argument when `image`
+// is not bc1 or its byte count does not match its size.
+Result<TileImage> bc1_to_rgba8(const TileImage& image);
 
 // The codec singleton for an id; nullptr when not implemented in this build.
 const Codec* find_codec(CodecId id) noexcept;
