@@ -256,10 +256,13 @@ Status write_atomically(const std::string& path, const std::string& text) {
   return {};
 }
 
-// The HUD's text: streaming numbers, then the camera. uploads and ms are per-frame averages.
-std::vector<std::string> hud_lines(const FrameStats& st, double uploads, double ms, DebugView debug,
-                                   bool globe, const PlaneView& p, const GlobeView& g) {
-  char buf[3][160];
+// The HUD's text: streaming numbers, the physical texture, then the camera. uploads and ms are
+// per-frame averages.
+std::vector<std::string> hud_lines(const FrameStats& st, double uploads, double ms,
+                                   const VirtualTexture& vt, bool globe, const PlaneView& p,
+                                   const GlobeView& g) {
+  const DebugView debug = vt.debug_view();
+  char buf[4][160];
   std::snprintf(buf[0], sizeof buf[0], "resident %u  pending %u  uploads %.1f/frame", st.resident,
                 st.pending, uploads);
   std::snprintf(buf[1], sizeof buf[1], "hit %.1f%%  bias %.2f  %.1f ms/frame%s%s",
@@ -272,7 +275,11 @@ std::vector<std::string> hud_lines(const FrameStats& st, double uploads, double 
     std::snprintf(buf[2], sizeof buf[2], "center %.1f, %.1f  %.3g texels/pixel", p.center_u,
                   p.center_v, p.texels_per_pixel);
   }
-  return {buf[0], buf[1], buf[2]};
+  const bool bc1 = vt.tile_format() == PixelFormat::bc1;
+  std::snprintf(buf[3], sizeof buf[3], "%s slots  physical %.1f MiB  page table %.2f MiB",
+                bc1 ? "bc1 (S3TC)" : "rgba8", double(vt.physical_gpu_bytes()) / (1 << 20),
+                double(vt.page_table_gpu_bytes()) / (1 << 20));
+  return {buf[0], buf[1], buf[3], buf[2]};
 }
 
 // Integer glyph scales keep the HUD's edges on pixel edges: 1 below 720 rows, 2 from 720, 3 from
@@ -610,8 +617,8 @@ int run_view(const ViewArgs& a) {
         ms += f.frame_ms;
       }
       const double n = double(frames.size());
-      rc = write_screenshot(hud_lines(last, uploads / n, ms / n, vt->debug_view(), ctl.globe,
-                                      ctl.plane, ctl.globe_view));
+      rc = write_screenshot(
+          hud_lines(last, uploads / n, ms / n, *vt, ctl.globe, ctl.plane, ctl.globe_view));
     }
     if (a.json) {
       nlohmann::json j;
@@ -627,6 +634,7 @@ int run_view(const ViewArgs& a) {
           a.screenshot.empty() ? nlohmann::json(nullptr) : nlohmann::json(a.screenshot);
       j["page_table_bytes"] = vt->page_table_gpu_bytes();
       j["physical_bytes"] = vt->physical_gpu_bytes();
+      j["tile_format"] = vt->tile_format() == PixelFormat::bc1 ? "bc1" : "rgba8";
       j["gl_renderer"] = gl->info().renderer;
       j["camera"] = camera_now();
       std::printf("%s\n", j.dump(2).c_str());
@@ -677,8 +685,8 @@ int run_view(const ViewArgs& a) {
       uploads += st.uploads;
       ++n;
       if (lines.empty() || now - last_title >= std::chrono::milliseconds(250)) {
-        lines = hud_lines(st, double(uploads) / double(n), wall_ms / double(n), vt->debug_view(),
-                          ctl.globe, ctl.plane, ctl.globe_view);
+        lines = hud_lines(st, double(uploads) / double(n), wall_ms / double(n), *vt, ctl.globe,
+                          ctl.plane, ctl.globe_view);
         const std::string text = lines[0] + "  " + lines[1];
         glfwSetWindowTitle(win, ("vts view — " + text).c_str());
         if (now - last_line >= std::chrono::seconds(1)) {

@@ -53,10 +53,11 @@ std::uint8_t encode_srgb8(double linear) {
 // ---- PyramidSampler --------------------------------------------------------------------------
 
 PyramidSampler::PyramidSampler(std::filesystem::path path, std::shared_ptr<pmtiles::Reader> reader,
-                               Geometry geometry, std::size_t cache_tiles)
+                               Geometry geometry, PixelFormat format, std::size_t cache_tiles)
     : path_(std::move(path)),
       reader_(std::move(reader)),
       geometry_(geometry),
+      format_(format),
       cache_tiles_(std::max<std::size_t>(cache_tiles, 1)) {}
 
 Result<std::unique_ptr<PyramidSampler>> PyramidSampler::open(const std::filesystem::path& archive,
@@ -75,12 +76,21 @@ Result<std::unique_ptr<PyramidSampler>> PyramidSampler::open(const std::filesyst
     return e;
   }
   const Codec* codec = find_codec(info->codec);
-  if (!codec || codec->decoded_format() != PixelFormat::rgba8)
+  if (!codec)
     return make_error(ErrorCode::unsupported, quoted(archive) + ": codec '" +
                                                   codec_name(info->codec) +
-                                                  "' does not decode to rgba8 texels");
+                                                  "' is not implemented in this build");
+  const PixelFormat format = codec->decoded_format();
+  if (format != PixelFormat::rgba8 && format != PixelFormat::bc1)
+    return make_error(ErrorCode::unsupported, quoted(archive) + ": codec '" +
+                                                  codec_name(info->codec) +
+                                                  "' decodes to neither rgba8 nor bc1 texels");
+  if (format == PixelFormat::bc1 && info->geometry.stored_size() % 4 != 0)
+    return make_error(ErrorCode::unsupported, quoted(archive) + ": bc1 tiles of " +
+                                                  std::to_string(info->geometry.stored_size()) +
+                                                  " texels a side are not whole 4 x 4 blocks");
   return std::unique_ptr<PyramidSampler>(
-      new PyramidSampler(archive, std::move(*reader), info->geometry, cache_tiles));
+      new PyramidSampler(archive, std::move(*reader), info->geometry, format, cache_tiles));
 }
 
 Result<const std::vector<std::uint8_t>*> PyramidSampler::tile(TileId id) {
@@ -97,12 +107,20 @@ Result<const std::vector<std::uint8_t>*> PyramidSampler::tile(TileId id) {
       return make_error(img.error().code,
                         quoted(path_) + ": tile " + id.to_string() + ": " + img.error().message);
     const std::uint32_t s = geometry_.stored_size();
-    if (img->format != PixelFormat::rgba8 || img->width != s || img->height != s)
+    const char* expected = format_ == PixelFormat::bc1 ? "bc1" : "rgba8";
+    if (img->format != format_ || img->width != s || img->height != s)
       return make_error(ErrorCode::corrupt,
                         quoted(path_) + ": tile " + id.to_string() + " decodes to " +
                             std::to_string(img->width) + "x" + std::to_string(img->height) +
-                            (img->format == PixelFormat::rgba8 ? " rgba8" : " non-rgba8") +
-                            ", expected " + std::to_string(s) + "x" + std::to_string(s) + " rgba8");
+                            (img->format == PixelFormat::bc1 ? " bc1" : " rgba8") + ", expected " +
+                            std::to_string(s) + "x" + std::to_string(s) + " " + expected);
+    if (img->format == PixelFormat::bc1) {  // what the GPU's S3TC decoder reads
+      auto rgba = bc1_to_rgba8(*img);
+      if (!rgba)
+        return make_error(ErrorCode::corrupt,
+                          quoted(path_) + ": tile " + id.to_string() + ": " + rgba.error().message);
+      *img = std::move(*rgba);
+    }
     ++stats_.tiles_decoded;
     pixels = std::make_shared<const std::vector<std::uint8_t>>(std::move(img->pixels));
   } else if (bytes.error().code != ErrorCode::not_found) {

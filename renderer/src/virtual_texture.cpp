@@ -46,14 +46,32 @@ bool valid_divisor(int k) {
   return k == 1 || k == 2 || k == 4 || k == 8 || k == 16;
 }
 
+std::string gl_renderer() {
+  const auto* name = reinterpret_cast<const char*>(glGetString(GL_RENDERER));
+  return name ? name : "unknown renderer";
+}
+
+// The physical texture's internal format for the tiles' decoded format: sRGB either way, so
+// filtering happens in linear light whatever the codec.
+GLenum physical_format(PixelFormat format) {
+  return format == PixelFormat::bc1 ? GL_COMPRESSED_SRGB_ALPHA_S3TC_DXT1_EXT : GL_SRGB8_ALPHA8;
+}
+
+// Bytes of one stored tile of side s in the upload ring and the physical texture: 4 per texel
+// (rgba8), or one 8-byte block per 4 x 4 texels (bc1; s is a multiple of 4).
+std::uint64_t tile_bytes(PixelFormat format, std::uint32_t s) {
+  return format == PixelFormat::bc1 ? std::uint64_t(s / 4) * (s / 4) * 8 : std::uint64_t(s) * s * 4;
+}
+
 }  // namespace
 
 class VirtualTexture::Impl {
  public:
-  Impl(std::shared_ptr<client::TileClient> client, const Geometry& geometry, Pyramid pyramid,
-       ClipmapPageTable table, VirtualTextureOptions options)
+  Impl(std::shared_ptr<client::TileClient> client, const Geometry& geometry, PixelFormat format,
+       Pyramid pyramid, ClipmapPageTable table, VirtualTextureOptions options)
       : client_(std::move(client)),
         geometry_(geometry),
+        format_(format),
         pyramid_(pyramid),
         table_(std::move(table)),
         slots_({options.slots, options.keep_frames}),
@@ -113,16 +131,21 @@ class VirtualTexture::Impl {
                        "GL_MAX_TEXTURE_SIZE of " + std::to_string(max_size)};
     }
     glCreateTextures(GL_TEXTURE_2D, 1, &physical_tex_);
-    glTextureStorage2D(physical_tex_, 1, GL_SRGB8_ALPHA8, GLsizei(atlas_w_), GLsizei(atlas_h_));
+    glTextureStorage2D(physical_tex_, 1, physical_format(format_), GLsizei(atlas_w_),
+                       GLsizei(atlas_h_));
     glTextureParameteri(physical_tex_, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
     glTextureParameteri(physical_tex_, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
     glTextureParameteri(physical_tex_, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
     glTextureParameteri(physical_tex_, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
-    const std::uint8_t black[4] = {0, 0, 0, 255};
-    glClearTexImage(physical_tex_, 0, GL_RGBA, GL_UNSIGNED_BYTE, black);
+    if (format_ == PixelFormat::bc1) {
+      clear_compressed_atlas();
+    } else {
+      const std::uint8_t black[4] = {0, 0, 0, 255};
+      glClearTexImage(physical_tex_, 0, GL_RGBA, GL_UNSIGNED_BYTE, black);
+    }
 
     // Upload ring: pixel-unpack buffers of the per-frame byte budget each.
-    tile_bytes_ = std::uint64_t(slot_size_) * slot_size_ * 4;
+    tile_bytes_ = tile_bytes(format_, slot_size_);
     if (options_.upload_bytes < tile_bytes_) {
       return Error{ErrorCode::invalid_argument, "the upload budget of " +
                                                     std::to_string(options_.upload_bytes) +
@@ -142,6 +165,24 @@ class VirtualTexture::Impl {
     client_->request(TileId{}, 1e18);
     pending_[tile_key(TileId{})] = 0;
     return Status{};
+  }
+
+  // glClearTexImage does not take compressed textures: the bc1 atlas is filled with opaque black
+  // blocks instead (8 zero bytes: both endpoints black, every index 0), in strips of whole block
+  // rows of at most ~4 MiB from one zeroed host buffer, before any tile is uploaded.
+  void clear_compressed_atlas() {
+    const std::uint64_t row_bytes = std::uint64_t(atlas_w_ / 4) * 8;  // one row of blocks
+    const std::uint32_t block_rows = atlas_h_ / 4;
+    const std::uint32_t strip = std::uint32_t(
+        std::clamp<std::uint64_t>((4u << 20) / row_bytes, 1, std::uint64_t(block_rows)));
+    const std::vector<std::uint8_t> zeros(std::size_t(row_bytes * strip), 0);
+    glBindBuffer(GL_PIXEL_UNPACK_BUFFER, 0);
+    for (std::uint32_t r = 0; r < block_rows; r += strip) {
+      const std::uint32_t n = std::min(strip, block_rows - r);
+      glCompressedTextureSubImage2D(physical_tex_, 0, 0, GLint(r * 4), GLsizei(atlas_w_),
+                                    GLsizei(n * 4), physical_format(format_),
+                                    GLsizei(row_bytes * n), zeros.data());
+    }
   }
 
   // The colour and feedback programs of a scene's shader variant, built on first use.
@@ -299,7 +340,15 @@ class VirtualTexture::Impl {
   VirtualTextureOptions& options() { return options_; }
   // Read back from GL (what the driver was asked to allocate), not from the CPU-side table.
   std::uint64_t page_table_gpu_bytes() const { return texture_bytes(page_tex_, 4); }
-  std::uint64_t physical_gpu_bytes() const { return texture_bytes(physical_tex_, 4); }
+  std::uint64_t physical_gpu_bytes() const {
+    if (format_ != PixelFormat::bc1) return texture_bytes(physical_tex_, 4);
+    // What the driver stores for the compressed level (0.5 byte per texel for S3TC DXT1).
+    GLint compressed = 0, size = 0;
+    glGetTextureLevelParameteriv(physical_tex_, 0, GL_TEXTURE_COMPRESSED, &compressed);
+    glGetTextureLevelParameteriv(physical_tex_, 0, GL_TEXTURE_COMPRESSED_IMAGE_SIZE, &size);
+    return compressed ? std::uint64_t(std::max(size, 0)) : 0;
+  }
+  PixelFormat tile_format() const { return format_; }
   static std::uint64_t texture_bytes(GLuint tex, std::uint64_t texel_bytes) {
     GLint w = 0, h = 0, d = 0;
     glGetTextureLevelParameteriv(tex, 0, GL_TEXTURE_WIDTH, &w);
@@ -460,9 +509,8 @@ class VirtualTexture::Impl {
         inbox_.erase(inbox_.begin() + std::ptrdiff_t(i));
         continue;
       }
-      const bool well_formed = e.image.format == PixelFormat::rgba8 &&
-                               e.image.width == slot_size_ && e.image.height == slot_size_ &&
-                               e.image.pixels.size() == tile_bytes_;
+      const bool well_formed = e.image.format == format_ && e.image.width == slot_size_ &&
+                               e.image.height == slot_size_ && e.image.pixels.size() == tile_bytes_;
       std::optional<SlotCache::Acquired> got;
       if (well_formed && !slots_.slot_of(e.id)) got = slots_.acquire(e.id);
       if (!well_formed) ++error_count_;
@@ -501,11 +549,19 @@ class VirtualTexture::Impl {
       glBindBuffer(GL_PIXEL_UNPACK_BUFFER, ring.buffer);
       glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
       glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
+      const bool compressed = format_ == PixelFormat::bc1;
       for (const auto& s : staged_) {
         const GLint x = GLint((s.slot % slots_per_row_) * slot_size_);
         const GLint y = GLint((s.slot / slots_per_row_) * slot_size_);
-        glTextureSubImage2D(physical_tex_, 0, x, y, GLsizei(slot_size_), GLsizei(slot_size_),
-                            GL_RGBA, GL_UNSIGNED_BYTE, reinterpret_cast<const void*>(s.offset));
+        const auto* offset = reinterpret_cast<const void*>(s.offset);
+        if (compressed) {  // slot origins and sizes are multiples of the 4 x 4 block
+          glCompressedTextureSubImage2D(physical_tex_, 0, x, y, GLsizei(slot_size_),
+                                        GLsizei(slot_size_), physical_format(format_),
+                                        GLsizei(tile_bytes_), offset);
+        } else {
+          glTextureSubImage2D(physical_tex_, 0, x, y, GLsizei(slot_size_), GLsizei(slot_size_),
+                              GL_RGBA, GL_UNSIGNED_BYTE, offset);
+        }
       }
       glBindBuffer(GL_PIXEL_UNPACK_BUFFER, 0);
       ring.fence = glFenceSync(GL_SYNC_GPU_COMMANDS_COMPLETE, 0);
@@ -562,6 +618,7 @@ class VirtualTexture::Impl {
 
   std::shared_ptr<client::TileClient> client_;
   Geometry geometry_;
+  PixelFormat format_;  // of the decoded tiles, the upload ring and the physical texture
   Pyramid pyramid_;
   ClipmapPageTable table_;
   SlotCache slots_;
@@ -634,8 +691,27 @@ Result<std::unique_ptr<VirtualTexture>> VirtualTexture::create(
   if (epoxy_gl_version() < 45) {
     return Error{ErrorCode::unsupported, "the virtual texture needs a current OpenGL 4.5 context"};
   }
-  auto impl =
-      std::make_unique<Impl>(std::move(client), geometry, *pyramid, std::move(*table), options);
+  // The tiles' format follows the tileset's codec (DESIGN.md §3: a property of the tileset).
+  const CodecId codec = client->info().info.codec;
+  const PixelFormat format = codec == CodecId::bc1 ? PixelFormat::bc1 : PixelFormat::rgba8;
+  if (format == PixelFormat::bc1) {
+    if (geometry.stored_size() % 4 != 0) {
+      return Error{ErrorCode::unsupported,
+                   "bc1 slots must be whole 4 x 4 blocks, but the stored tile size T + 2B = " +
+                       std::to_string(geometry.tile_size()) + " + 2 x " +
+                       std::to_string(geometry.border()) + " = " +
+                       std::to_string(geometry.stored_size()) + " is not a multiple of 4"};
+    }
+    for (const char* ext : {"GL_EXT_texture_compression_s3tc", "GL_EXT_texture_sRGB"}) {
+      if (!epoxy_has_gl_extension(ext)) {
+        return Error{ErrorCode::unsupported,
+                     std::string("a bc1 tileset needs sRGB S3TC textures, but this GL (") +
+                         gl_renderer() + ") lacks " + ext};
+      }
+    }
+  }
+  auto impl = std::make_unique<Impl>(std::move(client), geometry, format, *pyramid,
+                                     std::move(*table), options);
   if (auto s = impl->init(); !s) return s.error();
   return std::unique_ptr<VirtualTexture>(new VirtualTexture(std::move(impl)));
 }
@@ -683,6 +759,9 @@ std::uint64_t VirtualTexture::page_table_gpu_bytes() const {
 }
 std::uint64_t VirtualTexture::physical_gpu_bytes() const {
   return impl_->physical_gpu_bytes();
+}
+PixelFormat VirtualTexture::tile_format() const {
+  return impl_->tile_format();
 }
 
 }  // namespace vts::renderer

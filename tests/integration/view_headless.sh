@@ -82,6 +82,30 @@ expect_ok "${XVFB[@]}" "$VTS" view "$ARCHIVE" --headless --frames 200 --until-co
 cp "$OUT" "$LOGS/local.json"
 check_view_json "$LOGS/local.json" "$WORK/local.png"
 
+note "vts view BC1-ARCHIVE --headless --until-complete: compressed slots, the same picture but lossy"
+BC1_ARCHIVE="$WORK/earth-bc1.pmtiles"
+build_earth "$BC1_ARCHIVE" --tile 64 --codec bc1
+expect_ok "${XVFB[@]}" "$VTS" view "$BC1_ARCHIVE" --headless --frames 200 --until-complete \
+  --screenshot "$WORK/bc1.png" --json --width "$W" --height "$H"
+cp "$OUT" "$LOGS/bc1.json"
+check_view_json "$LOGS/bc1.json" "$WORK/bc1.png"
+python3 - "$LOGS/local.json" "$LOGS/bc1.json" <<'EOF' || fail "bad bc1 view report (kept in logs)"
+import json, sys
+rgba, bc1 = json.load(open(sys.argv[1])), json.load(open(sys.argv[2]))
+if rgba.get("tile_format") != "rgba8" or bc1.get("tile_format") != "bc1":
+    sys.exit("tile formats %r and %r" % (rgba.get("tile_format"), bc1.get("tile_format")))
+# The same slots in S3TC DXT1: half a byte per texel instead of four.
+if bc1["physical_bytes"] * 8 != rgba["physical_bytes"]:
+    sys.exit("physical bytes %d (bc1) vs %d (rgba8)" % (bc1["physical_bytes"], rgba["physical_bytes"]))
+EOF
+# Lossy, so not identical to the lossless view, but close (docs/RENDERER.md, "BC1 tilesets").
+"$IDIFF" -v -fail 1 -failpercent 100 "$WORK/local.png" "$WORK/bc1.png" >"$LOGS/idiff-bc1.txt" 2>&1 || true
+python3 - "$LOGS/idiff-bc1.txt" <<'EOF' || { cat "$LOGS/idiff-bc1.txt" >&2; fail "the bc1 view is not close to the lossless one"; }
+import re, sys
+m = re.search(r"Peak SNR = ([0-9.]+)", open(sys.argv[1]).read())
+sys.exit(0 if m and 30 <= float(m.group(1)) < 60 else 1)
+EOF
+
 note "vts view http://127.0.0.1:PORT/earth (vts serve) --headless --until-complete"
 start_server "$ARCHIVE"
 expect_ok "${XVFB[@]}" "$VTS" view "$BASE/earth" --headless --frames 200 --until-complete \

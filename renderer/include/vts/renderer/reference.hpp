@@ -29,8 +29,12 @@
 // texel by texel: the texel returned is the ancestor's texel (x >> k, y >> k) k levels up (not a
 // sample filtered at the ancestor's level, as a GPU fallback would take, so images of sparse
 // regions are a guide, not an exact reference); every such texel read is counted in
-// stats().fallback_texels. A tile that is present but unreadable (corrupt, wrong size, a codec
-// not decoding to rgba8) is an error.
+// stats().fallback_texels. A tile that is present but unreadable (corrupt, wrong size, not in the
+// tileset's pixel format) is an error, and so is an archive whose codec this build lacks.
+//
+// BC1 archives: each bc1 tile is decoded to rgba8 with vts::bc1_to_rgba8() before its texels are
+// read, so the reference samples what a GPU sampling the S3TC blocks reads (up to the rounding of
+// the interpolated colours, where GPUs may differ by one code), in sRGB like the rgba8 path.
 //
 // Errors are returned as Result/Status values and name the archive or image file. Thread safety:
 // a PyramidSampler is not thread-safe (its tile cache mutates on every read); use one per thread.
@@ -47,6 +51,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "vts/protocol/codec.hpp"
 #include "vts/protocol/geometry.hpp"
 #include "vts/protocol/pmtiles.hpp"
 #include "vts/protocol/result.hpp"
@@ -113,13 +118,14 @@ class PyramidSampler {
   };
 
   PyramidSampler(std::filesystem::path path, std::shared_ptr<pmtiles::Reader> reader,
-                 Geometry geometry, std::size_t cache_tiles);
+                 Geometry geometry, PixelFormat format, std::size_t cache_tiles);
   // The decoded stored tile, or null when the archive does not have it.
   Result<const std::vector<std::uint8_t>*> tile(TileId id);
 
   std::filesystem::path path_;
   std::shared_ptr<pmtiles::Reader> reader_;
   Geometry geometry_;
+  PixelFormat format_;  // what the archive's tiles decode to (bc1 is then widened to rgba8)
   std::size_t cache_tiles_;
   std::list<std::uint64_t> lru_;  // most recently used first
   std::unordered_map<std::uint64_t, Entry> cache_;

@@ -2,13 +2,17 @@
 // (docs/RENDERER.md).
 //
 // One VirtualTexture draws one tiled image (a vts::Geometry) on the plane scene. It owns:
-//   - the physical texture: an SRGB8_ALPHA8 atlas of `slots` fixed slots of (T + 2B)^2 texels;
+//   - the physical texture: an atlas of `slots` fixed slots of (T + 2B)^2 texels, in the format
+//     the tileset's codec decodes to (TileClient::info().info.codec): SRGB8_ALPHA8 for lossless
+//     rgba8 tiles, COMPRESSED_SRGB_ALPHA_S3TC_DXT1 for bc1 tiles (uploaded as they are, 8 bytes
+//     per 4 x 4 block, so T + 2B must be a multiple of 4);
 //   - the page table: an R32UI 2D array texture of kMaxLevels layers of W x W (ClipmapPageTable),
 //     read with texelFetch, updated only where it changed;
 //   - the feedback pass: the scene at 1/k resolution into an RG32UI target, read back through a
 //     ring of pixel-pack buffers guarded by fences (never a stalling glReadPixels);
 //   - the upload queue: decoded tiles from the client's worker pool, copied into slots through a
-//     ring of pixel-unpack buffers under a per-frame budget of tiles and bytes;
+//     ring of pixel-unpack buffers under a per-frame budget of tiles and bytes (the bytes of the
+//     tiles as uploaded: compressed blocks for bc1);
 //   - the CPU core: FeedbackProcessor, SlotCache (LRU with guards, root pinned), MipBiasController.
 //
 // render() runs one frame: readback of an older feedback frame -> requests (coarse first) ->
@@ -23,6 +27,7 @@
 #include <vector>
 
 #include "vts/client/tile_client.hpp"
+#include "vts/protocol/codec.hpp"
 #include "vts/protocol/geometry.hpp"
 #include "vts/protocol/result.hpp"
 #include "vts/renderer/camera.hpp"
@@ -82,7 +87,10 @@ class VirtualTexture {
  public:
   // Needs a current GL 4.5 core context. Errors: options out of range, a physical texture larger
   // than GL_MAX_TEXTURE_SIZE, a geometry with more than kMaxLevels levels, shader build failures
-  // (with the driver's log).
+  // (with the driver's log); for a bc1 tileset, a GL without GL_EXT_texture_compression_s3tc and
+  // GL_EXT_texture_sRGB, or a stored tile size T + 2B that is not a multiple of 4 (unsupported).
+  // A decoded tile not of the tileset's format and stored size is dropped and counted in
+  // FrameStats::errors.
   static Result<std::unique_ptr<VirtualTexture>> create(std::shared_ptr<client::TileClient> client,
                                                         const Geometry& geometry,
                                                         VirtualTextureOptions options = {});
@@ -112,9 +120,12 @@ class VirtualTexture {
   const Geometry& geometry() const;
   const VirtualTextureOptions& options() const;
   // GPU memory of the page-table texture (whatever the image size) and of the slot atlas, from
-  // the textures' sizes as GL reports them.
+  // the textures' sizes as GL reports them (for bc1, GL_TEXTURE_COMPRESSED_IMAGE_SIZE: half a
+  // byte per texel, an eighth of the rgba8 atlas of the same slots).
   std::uint64_t page_table_gpu_bytes() const;
   std::uint64_t physical_gpu_bytes() const;
+  // The format of the tiles and of the physical texture: rgba8, or bc1 for a bc1 tileset.
+  PixelFormat tile_format() const;
 
  private:
   class Impl;
