@@ -47,6 +47,8 @@ struct BuildArgs {
   std::string codec = "lossless";
   int zstd_level = 3;
   std::string filter = "auto";
+  std::string bc1_quality = "fast";
+  std::string downsample = downsample_filter_name(BuildOptions{}.downsample);
   unsigned threads = 0;
   std::string grid, synthetic, region;
   int region_level = 6;
@@ -67,6 +69,15 @@ int run_build(const BuildArgs& a) {
   o.encode.filter = a.filter == "none"       ? FilterChoice::none
                     : a.filter == "gradient" ? FilterChoice::gradient
                                              : FilterChoice::automatic;
+  auto bc1 = parse_bc1_quality(a.bc1_quality);
+  if (!bc1) return report_error(bc1.error());
+  o.encode.bc1 = *bc1;
+  if (auto f = parse_downsample_filter(a.downsample)) {
+    o.downsample = *f;
+  } else {
+    return report_error(make_error(ErrorCode::invalid_argument,
+                                   "--downsample '" + a.downsample + "' is not box or lanczos3"));
+  }
   o.threads = a.threads;
   o.name = a.name;
   if (!a.grid.empty() && !parse_pair(a.grid, 'x', o.grid_columns, o.grid_rows))
@@ -117,6 +128,8 @@ int run_build(const BuildArgs& a) {
     j["border"] = g.border();
     j["max_zoom"] = g.max_zoom();
     j["codec"] = codec_name(r.info.codec);
+    if (r.info.codec == CodecId::bc1) j["bc1_quality"] = bc1_quality_name(o.encode.bc1);
+    j["downsample"] = r.info.downsample;
     j["tiles"] = r.stats.addressed_tiles;
     j["unique_tiles"] = r.stats.tile_contents;
     j["entries"] = r.stats.tile_entries;
@@ -147,7 +160,20 @@ Runner add_build(CLI::App& app) {
   c->add_option("-o,--output", a->output, "Output archive (.pmtiles)")->required();
   c->add_option("--tile", a->tile, "Tile content size T, a power of two")->capture_default_str();
   c->add_option("--border", a->border, "Border B copied from neighbours")->capture_default_str();
-  c->add_option("--codec", a->codec, "Tile codec: lossless")->capture_default_str();
+  c->add_option("--codec", a->codec,
+                "Tile codec: lossless (RGBA8, exact) or bc1 (GPU-native 4 bpp, lossy)")
+      ->check(CLI::IsMember({"lossless", "bc1"}))
+      ->capture_default_str();
+  c->add_option("--bc1-quality", a->bc1_quality,
+                "bc1 encoder effort: fast (stb_dxt), high (libsquish cluster fit), best "
+                "(libsquish iterative cluster fit)")
+      ->check(CLI::IsMember({"fast", "high", "best"}))
+      ->capture_default_str();
+  c->add_option("--downsample", a->downsample,
+                "Filter making each level from the next finer one, in linear light: box (2x2 "
+                "mean, fastest) or lanczos3 (separable Lanczos-3: sharper coarse levels, no moire)")
+      ->check(CLI::IsMember({"box", "lanczos3"}))
+      ->capture_default_str();
   c->add_option("--zstd-level", a->zstd_level, "zstd level (1..19)")
       ->check(CLI::Range(-7, 22))
       ->capture_default_str();

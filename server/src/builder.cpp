@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <cstring>
 #include <deque>
+#include <memory>
 #include <mutex>
 #include <thread>
 
@@ -72,7 +73,12 @@ struct Shared {
 // tile rows as soon as their last (border) row arrives and feeds the next coarser level.
 class Cascade {
  public:
-  Cascade(const Geometry& g, WorkQueue& queue, Shared& shared)
+  // The box filter reads the parent's two child rows straight from the level's ring (hence its
+  // T + 2B + 2 rows: the tile rows plus the pair being reduced). Lanczos-3 needs rows 2r - 5 ...
+  // 2r + 6 for parent row r; rather than keeping 12 extra 8-bit rows per level it filters every
+  // row horizontally as it arrives, into the LanczosReducer's ring of 12 half-width float rows, so
+  // the 8-bit ring stays at T + 2B + 2 rows for both filters.
+  Cascade(const Geometry& g, DownsampleFilter filter, WorkQueue& queue, Shared& shared)
       : g_(g), queue_(queue), shared_(shared), levels_(static_cast<std::size_t>(g.level_count())) {
     const std::uint32_t cap = g.stored_size() + 2;
     for (int z = 0; z <= g.max_zoom(); ++z) {
@@ -82,6 +88,8 @@ class Cascade {
       l.cap = cap;
       l.ring.resize(std::size_t{cap} * l.w * 4);
       l.parent_row.resize(z > 0 ? g.level_width(z - 1) * 4 : 0);
+      if (z > 0 && filter == DownsampleFilter::lanczos3)
+        l.reducer = std::make_unique<LanczosReducer>(l.w, l.h);
     }
   }
 
@@ -99,6 +107,14 @@ class Cascade {
       emit_tile_row(z, l.next_tile_row++);
     }
     if (z == 0) return;
+    if (l.reducer) {
+      l.reducer->push_row(row);
+      while (l.reducer->ready()) {
+        l.reducer->pop_row(l.parent_row.data());
+        push_row(z - 1, l.parent_row.data());
+      }
+      return;
+    }
     const std::uint64_t parent_h = g_.level_height(z - 1);
     while (l.next_parent_row < parent_h) {
       const std::uint64_t r0 = 2 * l.next_parent_row;
@@ -119,7 +135,8 @@ class Cascade {
     std::vector<std::uint8_t> parent_row;  // scratch row of level z-1
     std::uint64_t end_row = 0;             // rows [0, end_row) have been pushed
     std::uint32_t next_tile_row = 0;
-    std::uint64_t next_parent_row = 0;
+    std::uint64_t next_parent_row = 0;        // box: next row of level z-1 to make
+    std::unique_ptr<LanczosReducer> reducer;  // lanczos3: makes level z-1's rows instead
   };
 
   static std::uint8_t* slot(Level& l, std::uint64_t y) {
@@ -130,8 +147,9 @@ class Cascade {
     const Level& l = levels_[static_cast<std::size_t>(z)];
     const std::int64_t tile_start =
         std::int64_t{l.next_tile_row} * g_.tile_size() - std::int64_t{g_.border()};
-    return std::min<std::uint64_t>(
-        static_cast<std::uint64_t>(std::max<std::int64_t>(tile_start, 0)), 2 * l.next_parent_row);
+    const auto tiles = static_cast<std::uint64_t>(std::max<std::int64_t>(tile_start, 0));
+    // The reducer keeps its own (filtered) copy of what it still needs.
+    return l.reducer ? tiles : std::min<std::uint64_t>(tiles, 2 * l.next_parent_row);
   }
 
   void emit_tile_row(int z, std::uint32_t ty) {
@@ -285,7 +303,7 @@ TileRange synthetic_range(const Geometry& g, const SyntheticSpec& spec, int z) {
 void build_from_source(const BuildOptions& o, ImageSource& src, const Geometry& g, Shared& shared,
                        unsigned threads) {
   WorkQueue queue(threads, std::size_t{threads} * 4);
-  Cascade cascade(g, queue, shared);
+  Cascade cascade(g, o.downsample, queue, shared);
   const std::uint64_t row_bytes = g.width() * 4;
   // About 4 MiB per strip, at least one row, at most 64.
   const auto strip_rows =
@@ -382,6 +400,16 @@ Result<BuildReport> build_pyramid(const BuildOptions& o) {
   auto geometry = Geometry::create(width, height, o.tile_size, o.border);
   if (!geometry) return std::move(geometry).error();
   const Geometry& g = *geometry;
+  // A bc1 tile is whole 4x4 blocks, and the renderer places tiles in its compressed atlas at
+  // block-aligned slots: the stored size T + 2B must be a multiple of 4 (T is a power of two >= 4,
+  // so B must be even).
+  if (o.codec == CodecId::bc1 && g.stored_size() % 4 != 0)
+    return make_error(ErrorCode::invalid_argument,
+                      "codec bc1 needs tile + 2 x border to be a multiple of 4, whole 4x4 blocks "
+                      "(tile " +
+                          std::to_string(g.tile_size()) + " + 2 x border " +
+                          std::to_string(g.border()) + " = " + std::to_string(g.stored_size()) +
+                          "): use an even border");
   if (o.synthetic && o.synthetic->region) {
     const TexelRect& r = *o.synthetic->region;
     if (r.empty() || r.x1 > width || r.y1 > height)
@@ -423,7 +451,7 @@ Result<BuildReport> build_pyramid(const BuildOptions& o) {
   info.codec = o.codec;
   info.name = o.name.empty() ? o.output.stem().string() : o.name;
   info.description = o.description.empty() ? input_desc : o.description;
-  info.downsample = o.synthetic ? "synthetic-per-level" : "box-linear";
+  info.downsample = o.synthetic ? "synthetic-per-level" : downsample_method(o.downsample);
   info.sparse = o.synthetic && o.synthetic->region.has_value();
   char hash[17];
   std::snprintf(hash, sizeof hash, "%016llx",

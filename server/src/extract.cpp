@@ -19,6 +19,8 @@ Result<TileImage> load_tile(const pmtiles::Reader& reader, const TilesetInfo& in
     return e;
   }
   auto img = decode_tile(*bytes);
+  // A bc1 tileset extracts to what the GPU shows: its blocks decoded to rgba8.
+  if (img && img->format == PixelFormat::bc1) img = bc1_to_rgba8(*img);
   if (!img) {
     Error e = std::move(img).error();
     e.message = "tile " + id.to_string() + ": " + e.message;

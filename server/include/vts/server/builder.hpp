@@ -3,8 +3,10 @@
 //
 // Streaming: the input is read in strips of scanlines by a reader thread; every level keeps only a
 // ring of T + 2B + 2 rows of its own width, from which it cuts one row of tiles at a time and makes
-// the next coarser level's rows (2x2 box filter in linear light). Peak memory is therefore about
+// the next coarser level's rows (BuildOptions::downsample: a 2x2 box or a Lanczos-3 filter, in
+// linear light; downsample.hpp). Peak memory is therefore about
 //     8 * (T + 2B + 2) * W  bytes   (all levels' rings: their widths sum to ~2W)
+//   + 224 * W  bytes with lanczos3  (each level's 12 horizontally filtered float rows)
 //   + one band of input tiles for a tiled input (tile_height * W * channels)
 //   + threads * 4 tiles being encoded + three input strips of <= 4 MiB,
 // independent of the image height and of the number of texels; a 100k x 50k RGB tiled BigTIFF at
@@ -29,6 +31,7 @@
 #include "vts/protocol/pmtiles.hpp"
 #include "vts/protocol/result.hpp"
 #include "vts/protocol/tileset.hpp"
+#include "vts/server/downsample.hpp"
 
 namespace vts {
 
@@ -59,6 +62,9 @@ struct BuildOptions {
   std::uint32_t border = 4;
   CodecId codec = CodecId::lossless;
   EncodeOptions encode;
+  // How each level is made from the next finer one (downsample.hpp); recorded in the metadata as
+  // TilesetInfo::downsample. Not used by synthetic builds, whose levels are generated directly.
+  DownsampleFilter downsample = DownsampleFilter::box;
   unsigned threads = 0;  // encoder threads; 0 = one per hardware thread
   std::string name;      // tileset name in the metadata (default: the output file's stem)
   std::string description;
