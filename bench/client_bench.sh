@@ -7,13 +7,15 @@
 #   breakdown: the client's fetch alone, and the decode alone from memory (same driver)
 # Bars: cold <= 1.2x curl's time; disk hit p50 <= 100 us; RAM hit p50 <= 5 us.
 #
-#   bash bench/client_bench.sh [--vts PATH] [--driver PATH] [--out FILE]
+#   bash bench/client_bench.sh [--vts PATH] [--driver PATH] [--out FILE] [--codec lossless|bc1]
+# --codec bc1 runs the same on a bc1 build of the Earth (decode = zstd to blocks, no unfilter).
 # shellcheck source=lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 
-VTS_ARG="" DRIVER="" OUT_FILE=""
+VTS_ARG="" DRIVER="" OUT_FILE="" CODEC=lossless
 while (($#)); do
   case $1 in
+    --codec) CODEC=$2; shift 2 ;;
     --vts) VTS_ARG=$2; shift 2 ;;
     --driver) DRIVER=$2; shift 2 ;;
     --out) OUT_FILE=$2; shift 2 ;;
@@ -25,10 +27,13 @@ VTS=$(find_vts "$VTS_ARG")
 DRIVER=${DRIVER:-$(dirname "$VTS")/../bench/vts_client_bench}
 [[ -x $DRIVER ]] || die "no vts_client_bench at $DRIVER (build with VTS_BUILD_BENCH=ON)"
 
+[[ $CODEC == lossless || $CODEC == bc1 ]] || die "--codec must be lossless or bc1"
+SUFFIX="" BUILD_ARGS=()
+[[ $CODEC == bc1 ]] && SUFFIX=_bc1 BUILD_ARGS=(--codec bc1)
 if [[ -r $CACHE/earth_16384x8192.tif ]]; then
-  ARCHIVE=$(earth_archive serve_earth_16384x8192 16384x8192)
+  ARCHIVE=$(earth_archive "serve_earth_16384x8192$SUFFIX" 16384x8192 "${BUILD_ARGS[@]}")
 else
-  ARCHIVE=$(earth_archive serve_earth_8192x4096 8192x4096)
+  ARCHIVE=$(earth_archive "serve_earth_8192x4096$SUFFIX" 8192x4096 "${BUILD_ARGS[@]}")
 fi
 NAME=$(basename "${ARCHIVE%.pmtiles}")
 
@@ -67,7 +72,7 @@ COLD=$(field cold_s)
   echo "### Client stack vs curl --parallel ($(date -u '+%Y-%m-%d'))"
   echo
   machine_info
-  echo "- tileset: $NAME, $NTILES tiles, $(mb "$(field bytes)") MiB of payloads; vts serve on loopback (2 threads)"
+  echo "- tileset: $NAME (codec $CODEC), $NTILES tiles, $(mb "$(field bytes)") MiB of payloads; vts serve on loopback (2 threads)"
   echo "- curl: one \`curl --parallel --parallel-max 32\` over every tile URL; client: TileClient, 32 in flight, 2 decode threads, disk cache in a new folder"
   echo
   echo "| measure | value | bar |"

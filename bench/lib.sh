@@ -63,10 +63,12 @@ ratio() { # A B: A/B to 2 decimals, or "-" when B is 0/empty
 }
 mb() { awk -v b="$1" 'BEGIN { printf "%.1f", b / 1048576 }'; }
 
-# earth_archive NAME [WxH]: the Earth resized to WxH (default 8192x4096) as a TIFF in $CACHE, and
-# its archive $CACHE/NAME.pmtiles built by $VTS; both reused while current. Prints the archive.
+# earth_archive NAME [WxH [BUILD ARGS...]]: the Earth resized to WxH (default 8192x4096) as a TIFF
+# in $CACHE, and its archive $CACHE/NAME.pmtiles built by $VTS (with BUILD ARGS, e.g. --codec bc1:
+# give each set of arguments its own NAME); both reused while current. Prints the archive.
 earth_archive() {
   local name=$1 size=${2:-8192x4096} input archive
+  shift $(($# < 2 ? $# : 2))
   mkdir -p "$CACHE"
   input=$CACHE/earth_$size.tif
   if [[ ! -r $input ]]; then
@@ -75,7 +77,7 @@ earth_archive() {
   fi
   archive=$CACHE/$name.pmtiles
   if [[ ! -s $archive || $input -nt $archive ]]; then
-    "$VTS" build "$input" -o "$archive" >/dev/null || die "vts build $input failed"
+    "$VTS" build "$input" -o "$archive" "$@" >/dev/null || die "vts build $input failed"
   fi
   echo "$archive"
 }

@@ -61,6 +61,7 @@ int main(int argc, char** argv) {
   add(&vts::cli::add_cache);
   add(&vts::cli::add_warm);
   add(&vts::cli::add_loadtest);
+  add(&vts::cli::add_bench);
 #ifdef VTS_HAVE_VIEWER
   add(&vts::cli::add_view);
 #endif
