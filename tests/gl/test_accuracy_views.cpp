@@ -249,13 +249,16 @@ TEST_F(AccuracyViews, FilteringTableJudgesEachFilterAgainstTheSupersampledTruth)
   }
   EXPECT_EQ(num(t, 1, "time_vs_trilinear"), 1.0);
   // On the oblique views trilinear blurs along the footprint's short axis; taps along the long
-  // one get closer to the truth, and four get closer than two. (Beyond four the 16-sample truth
-  // itself, four samples along each axis, no longer tells the difference.)
+  // one get closer to the truth. Against the 64-sample truth of the oblique view (8 samples along
+  // each axis) every doubling of the taps gets closer still; the 16-sample one cannot tell 8 taps
+  // from 4.
   for (std::size_t r = 2; r < 5; ++r) {
     EXPECT_GT(num(t, r, "psnr_oblique_db"), num(t, 1, "psnr_oblique_db") + 1.0) << modes[r];
     EXPECT_GT(num(t, r, "psnr_db"), num(t, 1, "psnr_db")) << modes[r];
+    EXPECT_GT(num(t, r, "psnr_oblique_64_db"), num(t, r - 1, "psnr_oblique_64_db")) << modes[r];
   }
   EXPECT_GT(num(t, 3, "psnr_oblique_db"), num(t, 2, "psnr_oblique_db"));
+  EXPECT_GT(num(t, 4, "psnr_oblique_64_db"), num(t, 1, "psnr_oblique_64_db") + 3.0);
   // Anisotropy samples finer levels: it wants at least the tiles trilinear wants.
   EXPECT_GE(num(t, 4, "tiles_wanted"), num(t, 1, "tiles_wanted"));
   // The plot has a point per mode at (frame ms, PSNR).

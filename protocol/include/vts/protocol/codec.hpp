@@ -34,7 +34,8 @@ enum class Filter : std::uint8_t {
 enum class FilterChoice : std::uint8_t { none, gradient, automatic };
 // How hard the bc1 codec searches for each 4x4 block's two endpoint colours. Every mode writes the
 // same format; they differ in encode time and error (docs/ACCURACY.md, table 1):
-//   fast: stb_dxt (stb_compress_dxt_block, refinement on): a bounding-box fit refined once;
+//   fast: stb_dxt (stb_compress_dxt_block, STB_DXT_HIGHQUAL): the principal axis by power
+//         iteration, endpoints refined twice by least squares;
 //   high: libsquish cluster fit: searches the orderings of the 16 texels along the
 //         principal axis;
 //   best: libsquish iterative cluster fit: repeats the cluster fit with the refined axis.
