@@ -32,10 +32,12 @@ constexpr const char* kDefaultInput = "/usr/share/xplanet/images/earth.jpg";
 bool needs_gl(const std::string& id) {
   return id == "feedback" || id == "filtering" || id == "addressing";
 }
+#ifdef VTS_BENCH_HAVE_GL
 // The codec table measures uploads when it can, and reads "n/a" there without GL.
 bool uses_gl(const std::string& id) {
   return needs_gl(id) || id == "codec";
 }
+#endif
 
 std::string utc_now() {
   const std::time_t t = std::time(nullptr);

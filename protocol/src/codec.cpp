@@ -404,8 +404,8 @@ const char* bc1_quality_name(Bc1Quality q) noexcept {
 Result<Bc1Quality> parse_bc1_quality(std::string_view name) {
   for (Bc1Quality q : {Bc1Quality::fast, Bc1Quality::high, Bc1Quality::best})
     if (name == bc1_quality_name(q)) return q;
-  return make_error(ErrorCode::invalid_argument, "unknown bc1 quality \"" + std::string(name) +
-                                                     "\" (known: fast, high, best)");
+  return make_error(ErrorCode::invalid_argument,
+                    "unknown bc1 quality \"" + std::string(name) + "\" (known: fast, high, best)");
 }
 
 const char* filter_name(Filter f) noexcept {

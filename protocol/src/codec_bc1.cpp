@@ -90,16 +90,16 @@ class Bc1Codec final : public Codec {
       return make_error(ErrorCode::invalid_argument, "bc1 codec encodes rgba8 images only");
     if (image.width == 0 || image.height == 0 || image.width > TileHeader::kMaxDimension ||
         image.height > TileHeader::kMaxDimension)
-      return make_error(ErrorCode::invalid_argument,
-                        "tile size " + std::to_string(image.width) + "x" +
-                            std::to_string(image.height) + " outside 1.." +
-                            std::to_string(TileHeader::kMaxDimension));
+      return make_error(ErrorCode::invalid_argument, "tile size " + std::to_string(image.width) +
+                                                         "x" + std::to_string(image.height) +
+                                                         " outside 1.." +
+                                                         std::to_string(TileHeader::kMaxDimension));
     if (image.pixels.size() != std::size_t(image.width) * image.height * 4)
       return make_error(ErrorCode::invalid_argument,
                         "image has " + std::to_string(image.pixels.size()) + " bytes, " +
                             std::to_string(image.width) + "x" + std::to_string(image.height) +
-                            " rgba8 needs " + std::to_string(std::size_t(image.width) *
-                                                             image.height * 4));
+                            " rgba8 needs " +
+                            std::to_string(std::size_t(image.width) * image.height * 4));
     if (Status s = detail::check_zstd_level(options.zstd_level); !s) return s.error();
 
     const std::size_t bw = blocks_across(image.width), bh = blocks_across(image.height);
@@ -158,10 +158,10 @@ Result<TileImage> bc1_to_rgba8(const TileImage& image) {
     return make_error(ErrorCode::invalid_argument, "bc1_to_rgba8 needs a bc1 image");
   if (image.width == 0 || image.height == 0 || image.width > TileHeader::kMaxDimension ||
       image.height > TileHeader::kMaxDimension)
-    return make_error(ErrorCode::invalid_argument,
-                      "bc1 image size " + std::to_string(image.width) + "x" +
-                          std::to_string(image.height) + " outside 1.." +
-                          std::to_string(TileHeader::kMaxDimension));
+    return make_error(ErrorCode::invalid_argument, "bc1 image size " + std::to_string(image.width) +
+                                                       "x" + std::to_string(image.height) +
+                                                       " outside 1.." +
+                                                       std::to_string(TileHeader::kMaxDimension));
   const std::size_t bw = blocks_across(image.width), bh = blocks_across(image.height);
   if (image.pixels.size() != bw * bh * kBlockBytes)
     return make_error(ErrorCode::invalid_argument,
@@ -177,13 +177,12 @@ Result<TileImage> bc1_to_rgba8(const TileImage& image) {
   std::uint8_t texels[64];
   for (std::size_t by = 0; by < bh; ++by) {
     for (std::size_t bx = 0; bx < bw; ++bx) {
-      squish::Decompress(texels, image.pixels.data() + (by * bw + bx) * kBlockBytes,
-                         squish::kDxt1);
+      squish::Decompress(texels, image.pixels.data() + (by * bw + bx) * kBlockBytes, squish::kDxt1);
       const std::size_t rows = std::min<std::size_t>(4, image.height - by * 4);
       const std::size_t cols = std::min<std::size_t>(4, image.width - bx * 4);
       for (std::size_t j = 0; j < rows; ++j)
-        std::memcpy(out.pixels.data() + 4 * ((by * 4 + j) * image.width + bx * 4),
-                    texels + 16 * j, 4 * cols);
+        std::memcpy(out.pixels.data() + 4 * ((by * 4 + j) * image.width + bx * 4), texels + 16 * j,
+                    4 * cols);
     }
   }
   return out;

@@ -224,8 +224,7 @@ TEST(Bc1Codec, CorruptPayloadsAreErrorsNotCrashes) {
   EXPECT_EQ(find_codec(CodecId::lossless)->decode(p).error().code, ErrorCode::invalid_argument);
   auto lossless = find_codec(CodecId::lossless)->encode(solid(4, 4, 1, 2, 3), {});
   ASSERT_TRUE(lossless.ok());
-  EXPECT_EQ(find_codec(CodecId::bc1)->decode(*lossless).error().code,
-            ErrorCode::invalid_argument);
+  EXPECT_EQ(find_codec(CodecId::bc1)->decode(*lossless).error().code, ErrorCode::invalid_argument);
 }
 
 TEST(Bc1Codec, EncodeAndConvertRejectMalformedImages) {
