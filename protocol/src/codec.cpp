@@ -299,20 +299,8 @@ namespace {
 
 Result<std::vector<std::uint8_t>> LosslessCodec::encode(const TileImage& image,
                                                         const EncodeOptions& options) const {
-  if (image.format != PixelFormat::rgba8)
-    return make_error(ErrorCode::invalid_argument, "lossless codec encodes rgba8 images only");
-  if (image.width == 0 || image.height == 0 || image.width > TileHeader::kMaxDimension ||
-      image.height > TileHeader::kMaxDimension)
-    return make_error(ErrorCode::invalid_argument, "tile size " + std::to_string(image.width) +
-                                                       "x" + std::to_string(image.height) +
-                                                       " outside 1.." +
-                                                       std::to_string(TileHeader::kMaxDimension));
+  if (Status s = detail::check_encode_input(image, "lossless"); !s) return s.error();
   const std::size_t body_size = std::size_t(image.width) * image.height * 4;
-  if (image.pixels.size() != body_size)
-    return make_error(ErrorCode::invalid_argument,
-                      "image has " + std::to_string(image.pixels.size()) + " bytes, " +
-                          std::to_string(image.width) + "x" + std::to_string(image.height) +
-                          " rgba8 needs " + std::to_string(body_size));
   if (Status s = detail::check_zstd_level(options.zstd_level); !s) return s.error();
 
   TileHeader header;
@@ -483,6 +471,25 @@ Status check_zstd_level(int level) {
                                                        " outside " +
                                                        std::to_string(ZSTD_minCLevel()) + ".." +
                                                        std::to_string(ZSTD_maxCLevel()));
+  return {};
+}
+
+Status check_encode_input(const TileImage& image, const char* codec) {
+  if (image.format != PixelFormat::rgba8)
+    return make_error(ErrorCode::invalid_argument,
+                      std::string(codec) + " codec encodes rgba8 images only");
+  if (image.width == 0 || image.height == 0 || image.width > TileHeader::kMaxDimension ||
+      image.height > TileHeader::kMaxDimension)
+    return make_error(ErrorCode::invalid_argument, "tile size " + std::to_string(image.width) +
+                                                       "x" + std::to_string(image.height) +
+                                                       " outside 1.." +
+                                                       std::to_string(TileHeader::kMaxDimension));
+  const std::size_t bytes = std::size_t(image.width) * image.height * 4;
+  if (image.pixels.size() != bytes)
+    return make_error(ErrorCode::invalid_argument,
+                      "image has " + std::to_string(image.pixels.size()) + " bytes, " +
+                          std::to_string(image.width) + "x" + std::to_string(image.height) +
+                          " rgba8 needs " + std::to_string(bytes));
   return {};
 }
 

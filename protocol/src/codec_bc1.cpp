@@ -86,20 +86,7 @@ class Bc1Codec final : public Codec {
 
   Result<std::vector<std::uint8_t>> encode(const TileImage& image,
                                            const EncodeOptions& options) const override {
-    if (image.format != PixelFormat::rgba8)
-      return make_error(ErrorCode::invalid_argument, "bc1 codec encodes rgba8 images only");
-    if (image.width == 0 || image.height == 0 || image.width > TileHeader::kMaxDimension ||
-        image.height > TileHeader::kMaxDimension)
-      return make_error(ErrorCode::invalid_argument, "tile size " + std::to_string(image.width) +
-                                                         "x" + std::to_string(image.height) +
-                                                         " outside 1.." +
-                                                         std::to_string(TileHeader::kMaxDimension));
-    if (image.pixels.size() != std::size_t(image.width) * image.height * 4)
-      return make_error(ErrorCode::invalid_argument,
-                        "image has " + std::to_string(image.pixels.size()) + " bytes, " +
-                            std::to_string(image.width) + "x" + std::to_string(image.height) +
-                            " rgba8 needs " +
-                            std::to_string(std::size_t(image.width) * image.height * 4));
+    if (Status s = detail::check_encode_input(image, "bc1"); !s) return s.error();
     if (Status s = detail::check_zstd_level(options.zstd_level); !s) return s.error();
 
     const std::size_t bw = blocks_across(image.width), bh = blocks_across(image.height);
