@@ -273,7 +273,9 @@ std::string to_json(const AccuracyReport& r) {
       for (const PlotSeries& s : p.series) {
         json pts = json::array();
         for (const auto& [x, y] : s.points) pts.push_back({cell_json(x), cell_json(y)});
-        jp["series"].push_back({{"label", s.label}, {"points", pts}});
+        json js{{"label", s.label}, {"points", pts}};
+        if (!s.labels.empty()) js["labels"] = s.labels;
+        jp["series"].push_back(std::move(js));
       }
       jt["plots"].push_back(std::move(jp));
     }
@@ -346,6 +348,7 @@ std::string plot_svg(const TablePlot& p) {
     out.label = s.label;
     out.color = kColours[k++ % std::size(kColours)];
     out.markers = true;
+    out.point_labels = s.labels;
     for (const auto& [x, y] : s.points) {
       const bool ok =
           std::isfinite(x) && std::isfinite(y) && (!p.log_x || x > 0) && (!p.log_y || y > 0);

@@ -223,11 +223,15 @@ Result<AccuracyTable> codec_table(const AccuracyContext& ctx) {
     auto series = std::find_if(size_plot.series.begin(), size_plot.series.end(),
                                [&](const PlotSeries& p) { return p.label == s.family; });
     if (series == size_plot.series.end())
-      series = size_plot.series.insert(size_plot.series.end(), PlotSeries{s.family, {}});
+      series = size_plot.series.insert(size_plot.series.end(), PlotSeries{s.family, {}, {}});
     series->points.emplace_back(encode_ms / n, double(bytes) / n);
+    series->labels.push_back(bc1 ? bc1_quality_name(s.encode.bc1)
+                                 : "z" + std::to_string(s.encode.zstd_level));
     if (bc1) {
-      if (quality_plot.series.empty()) quality_plot.series.push_back({"bc1 fast, high, best", {}});
+      if (quality_plot.series.empty())
+        quality_plot.series.push_back({"bc1 fast, high, best", {}, {}});
       quality_plot.series.front().points.emplace_back(double(bytes) / n, psnr);
+      quality_plot.series.front().labels.push_back(bc1_quality_name(s.encode.bc1));
     }
   }
   t.notes = {

@@ -381,6 +381,7 @@ Result<AccuracyTable> feedback_table(const AccuracyContext& ctx) {
     const double x = cpu_by_mode[std::size_t(m)];
     if (!std::isfinite(x)) continue;
     tiles.points.emplace_back(x, found_by_mode[std::size_t(m)]);
+    tiles.labels.push_back("1/" + std::to_string(kDivisors[m]));
     pixels.points.emplace_back(x, pixels_by_mode[std::size_t(m)]);
   }
   found_plot.series = {tiles, pixels};

@@ -300,8 +300,10 @@ Result<AccuracyTable> filtering_table(const AccuracyContext& ctx) {
   for (int m = 0; m < kModeCount; ++m) {
     const ModeResult& r = results[std::size_t(m)];
     const double x = views::mean(r.frame_ms);
-    if (std::isfinite(x) && std::isfinite(r.all.psnr_db()))
+    if (std::isfinite(x) && std::isfinite(r.all.psnr_db())) {
       all.points.emplace_back(x, r.all.psnr_db());
+      all.labels.emplace_back(kModes[m].name);
+    }
     if (std::isfinite(x) && r.per_view.size() > oblique &&
         std::isfinite(r.per_view[oblique].psnr_db()))
       obl.points.emplace_back(x, r.per_view[oblique].psnr_db());

@@ -182,7 +182,8 @@ std::string render_plot(const Plot& plot, const AxisSet* axes) {
     const Axis& ya = series.right_axis && axes->y2 ? *axes->y2 : axes->y;
     std::string d, marks;
     bool pen_down = false;
-    for (const auto& [vx, vy] : series.points) {
+    for (const auto& point : series.points) {
+      const auto& [vx, vy] = point;
       if (!std::isfinite(vx) || !std::isfinite(vy)) {
         pen_down = false;
         continue;
@@ -192,6 +193,11 @@ std::string render_plot(const Plot& plot, const AxisSet* axes) {
       pen_down = true;
       if (series.markers) {
         marks += "<circle cx=\"" + px(x) + "\" cy=\"" + px(y) + "\" r=\"2.5\"/>";
+      }
+      const std::size_t index = static_cast<std::size_t>(&point - series.points.data());
+      if (index < series.point_labels.size() && !series.point_labels[index].empty()) {
+        marks += svg_text(x + 5, y - 5, series.point_labels[index], "start",
+                          " class=\"point-label\" font-size=\"10\"");
       }
     }
     if (d.empty()) continue;

@@ -44,6 +44,7 @@ using Cell = std::variant<double, std::string>;
 struct PlotSeries {
   std::string label;
   std::vector<std::pair<double, double>> points;  // (x, y), drawn in this order
+  std::vector<std::string> labels;  // optional, one per point: the setting it stands for
 };
 
 // A trade-off curve: usually accuracy (y) against time or bytes (x), one series per family.

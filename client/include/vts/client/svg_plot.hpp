@@ -104,6 +104,7 @@ struct Series {
   std::vector<std::pair<double, double>> points;  // a NaN y breaks the line
   bool right_axis = false;
   bool markers = false;
+  std::vector<std::string> point_labels;  // drawn beside the markers, by index (may be shorter)
 };
 
 struct Plot {
