@@ -53,6 +53,8 @@ class Output {
     OIIO::ImageSpec spec(static_cast<int>(w), static_cast<int>(h), o.channels,
                          OIIO::TypeDesc::UINT8);
     spec.attribute("oiio:ColorSpace", "sRGB");
+    // The texels have straight alpha: written as they are, not divided by alpha again.
+    spec.attribute("oiio:UnassociatedAlpha", 1);
     // Write under a temporary name with the right extension handled by the plugin chosen above.
     if (!out.out_->open(out.tmp_.string(), spec))
       return make_error(ErrorCode::io,

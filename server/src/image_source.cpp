@@ -69,7 +69,11 @@ Result<std::unique_ptr<OIIO::ImageInput>> open_input(const std::filesystem::path
   std::error_code ec;
   if (!std::filesystem::exists(path, ec))
     return make_error(ErrorCode::not_found, "input '" + path.string() + "' does not exist");
-  auto in = OIIO::ImageInput::open(path.string());
+  // Texels are stored with straight alpha (docs/FORMAT.md): ask readers whose files hold straight
+  // alpha (PNG, TIFF with unassociated extra samples) not to premultiply it on the way in.
+  OIIO::ImageSpec config;
+  config.attribute("oiio:UnassociatedAlpha", 1);
+  auto in = OIIO::ImageInput::open(path.string(), &config);
   if (!in) {
     std::string why = OIIO::geterror();
     if (why.empty()) why = "not an image format OpenImageIO can read";

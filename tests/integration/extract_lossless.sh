@@ -44,4 +44,21 @@ done
 expect_clean_failure "$VTS" extract "$A" --level 9 -o "$WORK/none.png"
 [[ ! -e $WORK/none.png ]] || fail "vts extract wrote a file for a missing level"
 
+note "translucent RGBA PNG: straight alpha in, the same texels out (never premultiplied)"
+# Every alpha from 0.1 to 1 and saturated colours: a reader or writer that premultiplied (or
+# divided) by alpha on the way changes colour codes where alpha < 1.
+"$OIIOTOOL" --pattern fill:topleft=1,0.2,0,0.1:topright=0,1,0.4,0.5:bottomleft=0.3,0,1,1:bottomright=1,1,0.7,0.25 \
+  300x200 4 -d uint8 -o "$WORK/alpha.png" || fail "cannot make the RGBA input"
+expect_ok "$VTS" build "$WORK/alpha.png" -o "$WORK/alpha.pmtiles" --tile 64
+expect_ok "$VTS" extract "$WORK/alpha.pmtiles" --level 3 -o "$WORK/alpha_out.png"
+for f in alpha alpha_out; do
+  "$OIIOTOOL" --iconfig oiio:UnassociatedAlpha 1 --dumpdata "$WORK/$f.png" >"$WORK/$f.txt" 2>&1 ||
+    fail "cannot dump $f.png"
+done
+if ! cmp -s <(grep Pixel "$WORK/alpha.txt") <(grep Pixel "$WORK/alpha_out.txt"); then
+  diff <(grep Pixel "$WORK/alpha.txt") <(grep Pixel "$WORK/alpha_out.txt") | head -n 6 >&2
+  fail "the RGBA texels changed between the PNG and the archive (alpha handling)"
+fi
+grep -q "Pixel" "$WORK/alpha.txt" || fail "no texels dumped from alpha.png"
+
 note "PASS"

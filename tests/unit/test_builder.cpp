@@ -40,9 +40,12 @@ struct Rgba {
   const std::uint8_t* at(std::uint64_t x, std::uint64_t y) const { return &px[(y * w + x) * 4]; }
 };
 
-// The source image as RGBA8, the way the builder is specified to see it.
+// The source image as RGBA8, the way the builder is specified to see it (straight alpha: PNG
+// texels as stored, not premultiplied by the reader).
 Rgba read_source(const fs::path& p) {
-  auto in = OIIO::ImageInput::open(p.string());
+  OIIO::ImageSpec config;
+  config.attribute("oiio:UnassociatedAlpha", 1);
+  auto in = OIIO::ImageInput::open(p.string(), &config);
   EXPECT_TRUE(in) << p;
   const auto& spec = in->spec();
   Rgba img;
