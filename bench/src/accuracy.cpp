@@ -200,7 +200,6 @@ Result<AccuracyReport> run_accuracy(const AccuracyOptions& options) {
     if (c) {
       gl = std::move(*c);
       gl->make_current();
-      ctx.gl = true;
       report.gl = gl->info().renderer + ", " + gl->info().version_text;
     } else {
       gl_error = c.error().message;

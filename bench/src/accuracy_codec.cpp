@@ -14,7 +14,11 @@
 #include "vts/protocol/tileset.hpp"
 
 #ifdef VTS_BENCH_HAVE_GL
+// epoxy first: GLFW must not pull in the system GL header before it.
 #include <epoxy/gl.h>
+// clang-format off
+#include <GLFW/glfw3.h>
+// clang-format on
 #endif
 
 namespace vts::bench {
@@ -92,9 +96,10 @@ Result<std::vector<TileImage>> source_tiles(const std::filesystem::path& archive
 #ifdef VTS_BENCH_HAVE_GL
 // Mean time to upload one tile into a slot of an atlas of the renderer's kind (one level, sRGB),
 // through a mapped pixel-unpack buffer as the renderer does, until the GPU has it (glFinish).
-double upload_ms_per_tile(bool gl, const std::vector<TileImage>& decoded, PixelFormat format,
+double upload_ms_per_tile(const std::vector<TileImage>& decoded, PixelFormat format,
                           std::uint32_t size, int rounds) {
-  if (!gl || decoded.empty()) return NAN;
+  // Measured only where a GL context is current (run_accuracy makes one when it can).
+  if (glfwGetCurrentContext() == nullptr || decoded.empty()) return NAN;
   const bool bc1 = format == PixelFormat::bc1;
   if (bc1 && !(epoxy_has_gl_extension("GL_EXT_texture_compression_s3tc") &&
                epoxy_has_gl_extension("GL_EXT_texture_sRGB")))
@@ -142,7 +147,7 @@ double upload_ms_per_tile(bool gl, const std::vector<TileImage>& decoded, PixelF
   return ok && n > 0 ? ms / double(n) : NAN;
 }
 #else
-double upload_ms_per_tile(bool, const std::vector<TileImage>&, PixelFormat, std::uint32_t, int) {
+double upload_ms_per_tile(const std::vector<TileImage>&, PixelFormat, std::uint32_t, int) {
   return NAN;
 }
 #endif
@@ -215,7 +220,7 @@ Result<AccuracyTable> codec_table(const AccuracyContext& ctx) {
     const bool bc1 = s.codec == CodecId::bc1;
     double& upload = bc1 ? upload_bc1 : upload_rgba;
     if (std::isnan(upload))
-      upload = upload_ms_per_tile(ctx.gl, decoded, decoded.front().format, size, rounds);
+      upload = upload_ms_per_tile(decoded, decoded.front().format, size, rounds);
     const double gpu_bytes = bc1 ? std::ceil(size / 4.0) * std::ceil(size / 4.0) * 8 : texels * 4;
     t.rows.push_back({s.label, psnr, double(max_err), double(bytes) / n,
                       double(bytes) * 8 / (n * texels), encode_ms / n, decode_ms / n, upload,

@@ -71,7 +71,6 @@ struct AccuracyContext {
   std::filesystem::path archive;
   bool quick = false;             // ctest mode: fewest sizes, views and frames; same tables
   int width = 640, height = 400;  // viewport of the GL tables (quick: 160 x 100)
-  bool gl = false;                // a GL 4.5 core context is current on this thread
   std::function<void(const std::string&)> progress;  // a one-line status; may be empty
   void say(const std::string& line) const {
     if (progress) progress(line);

@@ -60,7 +60,7 @@ struct EncodeOptions {
   int zstd_level = 3;  // 1..19 (negative fast levels also accepted by zstd)
   FilterChoice filter = FilterChoice::automatic;  // lossless: automatic keeps the smaller of
                                                   // none / gradient; bc1 takes no filter
-  Bc1Quality bc1 = Bc1Quality::fast;              // bc1 only (docs/ACCURACY.md: fast is 60x quicker
+  Bc1Quality bc1 = Bc1Quality::fast;              // bc1 only (docs/ACCURACY.md: fast is 40x quicker
                                                   // than high for 0.3 dB less on the Earth)
 };
 
