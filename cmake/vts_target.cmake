@@ -17,3 +17,17 @@ macro(vts_enable_sanitizers)
                       -fno-sanitize-recover=undefined)
   add_link_options(-fsanitize=address,undefined)
 endmacro()
+
+# vts_library(<name> [PUBLIC deps...] [PRIVATE deps...]): the library of the current folder,
+# vts::<name>. Every library is laid out the same way: its sources are every src/*.cpp (globbed,
+# so a file dropped into src/ is part of the library it sits in), its public headers live under
+# include/vts/<name>/, and it is configured by vts_configure_target().
+function(vts_library name)
+  cmake_parse_arguments(ARG "" "" "PUBLIC;PRIVATE" ${ARGN})
+  file(GLOB sources CONFIGURE_DEPENDS ${CMAKE_CURRENT_SOURCE_DIR}/src/*.cpp)
+  add_library(vts_${name} ${sources})
+  add_library(vts::${name} ALIAS vts_${name})
+  vts_configure_target(vts_${name})
+  target_include_directories(vts_${name} PUBLIC ${CMAKE_CURRENT_SOURCE_DIR}/include)
+  target_link_libraries(vts_${name} PUBLIC ${ARG_PUBLIC} PRIVATE ${ARG_PRIVATE})
+endfunction()

@@ -5,7 +5,7 @@
 #include "commands.hpp"
 #include "progress.hpp"
 #include "vts/protocol/inspect.hpp"
-#include "vts/server/extract.hpp"
+#include "vts/builder/extract.hpp"
 
 namespace vts::cli {
 

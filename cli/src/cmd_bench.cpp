@@ -1,4 +1,4 @@
-// vts bench accuracy: what accuracy costs in time (docs/ACCURACY.md). Thin glue over vts::bench.
+// vts bench accuracy: what accuracy costs in time (docs/ACCURACY.md). Thin glue over vts::accuracy.
 #include <cstdio>
 #include <memory>
 #include <sstream>
@@ -6,7 +6,7 @@
 #include <vector>
 
 #include "commands.hpp"
-#include "vts/bench/accuracy.hpp"
+#include "vts/accuracy/accuracy.hpp"
 
 namespace vts::cli {
 namespace {
@@ -18,7 +18,7 @@ struct BenchArgs {
 };
 
 int run_accuracy_bench(const BenchArgs& a) {
-  bench::AccuracyOptions o;
+  accuracy::AccuracyOptions o;
   o.input = a.input;
   o.tables = a.tables;
   o.quick = a.quick;
@@ -36,17 +36,17 @@ int run_accuracy_bench(const BenchArgs& a) {
       std::fprintf(stderr, "[accuracy] %s\n", line.c_str());
     };
   }
-  auto report = bench::run_accuracy(o);
+  auto report = accuracy::run_accuracy(o);
   if (!report) return report_error(report.error());
   report->command = command_line();
   if (!a.report.empty()) {
-    if (Status s = bench::write_report(*report, a.report); !s) return report_error(s.error());
+    if (Status s = accuracy::write_report(*report, a.report); !s) return report_error(s.error());
     if (!a.quiet) std::fprintf(stderr, "[accuracy] report written to %s\n", a.report.c_str());
   }
   if (a.json) {
-    std::printf("%s\n", bench::to_json(*report).c_str());
+    std::printf("%s\n", accuracy::to_json(*report).c_str());
   } else {
-    std::printf("%s", bench::to_markdown(*report, a.report.empty() ? "" : a.report + "/").c_str());
+    std::printf("%s", accuracy::to_markdown(*report, a.report.empty() ? "" : a.report + "/").c_str());
   }
   int failed = 0;
   for (const auto& s : report->skipped) {

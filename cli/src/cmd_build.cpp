@@ -5,7 +5,7 @@
 
 #include "commands.hpp"
 #include "progress.hpp"
-#include "vts/server/builder.hpp"
+#include "vts/builder/builder.hpp"
 
 namespace vts::cli {
 

@@ -16,8 +16,8 @@
 
 #include "commands.hpp"
 #include "progress.hpp"
-#include "vts/client/load_report.hpp"
-#include "vts/client/load_test.hpp"
+#include "vts/loadtest/load_report.hpp"
+#include "vts/loadtest/load_test.hpp"
 #include "vts/client/source.hpp"
 #include "vts/renderer/camera_path.hpp"
 #include "vts/renderer/demand.hpp"

@@ -24,7 +24,9 @@ Runner add_sign(CLI::App& app);
 Runner add_cache(CLI::App& app);  // vts cache serve (cmd_cache.cpp)
 Runner add_warm(CLI::App& app);
 Runner add_loadtest(CLI::App& app);  // vts loadtest (cmd_loadtest.cpp)
-Runner add_bench(CLI::App& app);     // vts bench accuracy (cmd_bench.cpp)
+#ifdef VTS_HAVE_ACCURACY
+Runner add_bench(CLI::App& app);  // vts bench accuracy (cmd_bench.cpp): only with VTS_BUILD_BENCH
+#endif
 #ifdef VTS_HAVE_VIEWER
 Runner add_view(CLI::App& app);  // vts view (cmd_view.cpp): only when the renderer is built
 #endif

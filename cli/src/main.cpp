@@ -61,7 +61,9 @@ int main(int argc, char** argv) {
   add(&vts::cli::add_cache);
   add(&vts::cli::add_warm);
   add(&vts::cli::add_loadtest);
+#ifdef VTS_HAVE_ACCURACY
   add(&vts::cli::add_bench);
+#endif
 #ifdef VTS_HAVE_VIEWER
   add(&vts::cli::add_view);
 #endif

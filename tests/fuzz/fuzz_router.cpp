@@ -18,7 +18,7 @@
 #include <string_view>
 #include <vector>
 
-#include "vts/server/builder.hpp"
+#include "vts/builder/builder.hpp"
 #include "vts/server/router.hpp"
 #include "vts/server/tileset_registry.hpp"
 

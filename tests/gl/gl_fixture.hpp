@@ -16,7 +16,7 @@
 #include "vts/renderer/gl_context.hpp"
 #include "vts/renderer/reference.hpp"
 #include "vts/renderer/virtual_texture.hpp"
-#include "vts/server/builder.hpp"
+#include "vts/builder/builder.hpp"
 
 namespace vts::test {
 

@@ -29,7 +29,7 @@
 #include "vts/renderer/globe.hpp"
 #include "vts/renderer/reference.hpp"
 #include "vts/renderer/virtual_texture.hpp"
-#include "vts/server/builder.hpp"
+#include "vts/builder/builder.hpp"
 
 namespace fs = std::filesystem;
 using namespace vts::renderer;

@@ -1,4 +1,4 @@
-// The viewer's HUD (renderer/include/vts/renderer/hud.hpp) under Mesa llvmpipe: known text on a
+// The viewer's HUD (renderer/gl/include/vts/renderer/hud.hpp) under Mesa llvmpipe: known text on a
 // known background, read back pixel by pixel.
 #include "vts/renderer/hud.hpp"
 

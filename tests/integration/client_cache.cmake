@@ -2,9 +2,6 @@
 # once, driven by `cache_torture` (fill / check) and checked with the real sqlite3 CLI.
 # Included by tests/integration/CMakeLists.txt (VTS_INTEGRATION_ENV, BASH_EXECUTABLE come from it).
 
-if(NOT TARGET PkgConfig::SQLITE3)
-  pkg_check_modules(SQLITE3 REQUIRED IMPORTED_TARGET sqlite3)
-endif()
 add_executable(cache_torture ${CMAKE_CURRENT_LIST_DIR}/cache_torture.cpp)
 vts_configure_target(cache_torture)
 target_link_libraries(cache_torture PRIVATE vts::client vts::protocol PkgConfig::SQLITE3

@@ -4,7 +4,7 @@
 # defines fault_server_lib.
 add_executable(test_sources ${CMAKE_CURRENT_LIST_DIR}/test_sources.cpp)
 vts_configure_target(test_sources)
-target_link_libraries(test_sources PRIVATE vts::client vts::server vts::protocol fault_server_lib
+target_link_libraries(test_sources PRIVATE vts::client vts::server vts::builder vts::protocol fault_server_lib
                                            GTest::gtest_main Threads::Threads)
 # One ctest per gtest case: integration.sources.<Suite>.<Case>.
 gtest_discover_tests(test_sources

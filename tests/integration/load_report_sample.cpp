@@ -14,7 +14,7 @@
 #include <string>
 #include <string_view>
 
-#include "vts/client/load_report.hpp"
+#include "vts/loadtest/load_report.hpp"
 
 namespace {
 

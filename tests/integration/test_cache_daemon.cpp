@@ -32,7 +32,7 @@
 #include <vector>
 
 #include "vts/protocol/pmtiles.hpp"
-#include "vts/server/builder.hpp"
+#include "vts/builder/builder.hpp"
 #include "vts/server/http_server.hpp"
 
 namespace fs = std::filesystem;

@@ -21,7 +21,7 @@
 #include "vts/client/source.hpp"
 #include "vts/client/tile_cache.hpp"
 #include "vts/protocol/pmtiles.hpp"
-#include "vts/server/builder.hpp"
+#include "vts/builder/builder.hpp"
 #include "vts/server/http_server.hpp"
 
 namespace fs = std::filesystem;

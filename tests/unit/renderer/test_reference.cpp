@@ -1,5 +1,5 @@
 // The CPU reference renderer against real archives of the synthetic source, whose texels encode
-// their own level coordinates (vts/server/synthetic.hpp), so every expected pixel is known exactly;
+// their own level coordinates (vts/builder/synthetic.hpp), so every expected pixel is known exactly;
 // plus the image metrics and the PNG round trip.
 #include "vts/renderer/reference.hpp"
 
@@ -15,8 +15,8 @@
 #include <optional>
 #include <string>
 
-#include "vts/server/builder.hpp"
-#include "vts/server/synthetic.hpp"
+#include "vts/builder/builder.hpp"
+#include "vts/builder/synthetic.hpp"
 
 namespace fs = std::filesystem;
 

@@ -1,0 +1,93 @@
+// The pyramid builder behind `vts build`: cuts one image (or a C x R mosaic of images, or the
+// built-in synthetic source) into the tile pyramid of DESIGN.md §3 and writes a PMTiles archive.
+//
+// Streaming: the input is read in strips of scanlines by a reader thread; every level keeps only a
+// ring of T + 2B + 2 rows of its own width, from which it cuts one row of tiles at a time and makes
+// the next coarser level's rows (BuildOptions::downsample: a 2x2 box or a Lanczos-3 filter, in
+// linear light; downsample.hpp). Peak memory is therefore about
+//     8 * (T + 2B + 2) * W  bytes   (all levels' rings: their widths sum to ~2W)
+//   + 224 * W  bytes with lanczos3  (each level's 12 horizontally filtered float rows)
+//   + one band of input tiles for a tiled input (tile_height * W * channels)
+//   + threads * 4 tiles being encoded + three input strips of <= 4 MiB,
+// independent of the image height and of the number of texels; a 100k x 50k RGB tiled BigTIFF at
+// T=256 peaked at 436 MiB RSS (bench/memory_bench.sh), ~130 MiB of it code and fixed buffers.
+// Tile encoding runs on a pool of worker threads.
+//
+// A build writes the archive under a temporary name and renames it at the end: a failed or
+// cancelled build leaves nothing under the output name.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "vts/protocol/codec.hpp"
+#include "vts/protocol/geometry.hpp"
+#include "vts/protocol/pmtiles.hpp"
+#include "vts/protocol/result.hpp"
+#include "vts/protocol/tileset.hpp"
+#include "vts/builder/downsample.hpp"
+
+namespace vts {
+
+struct SyntheticSpec {
+  std::uint64_t width = 0, height = 0;
+  // When set, tiles at levels >= region_level exist only where they overlap this rectangle
+  // (finest-level texels); coarser levels are complete. Makes planet-sized sparse test archives.
+  std::optional<TexelRect> region;
+  int region_level = 6;
+};
+
+struct BuildProgress {
+  std::uint64_t tiles_done = 0;
+  std::uint64_t tiles_total = 0;
+  std::uint64_t rows_read = 0;  // input scanlines read so far (0 for synthetic)
+  std::uint64_t rows_total = 0;
+  std::uint64_t bytes_written = 0;  // tile payload bytes so far (before dedup)
+  double seconds = 0;
+  bool finishing = false;  // every tile is encoded; the archive file is being assembled
+};
+
+struct BuildOptions {
+  std::vector<std::filesystem::path> inputs;  // row-major order for a grid
+  std::uint32_t grid_columns = 1, grid_rows = 1;
+  std::optional<SyntheticSpec> synthetic;  // instead of inputs
+  std::filesystem::path output;
+  std::uint32_t tile_size = 256;
+  std::uint32_t border = 4;
+  CodecId codec = CodecId::lossless;
+  EncodeOptions encode;
+  // How each level is made from the next finer one (downsample.hpp); recorded in the metadata as
+  // TilesetInfo::downsample. Not used by synthetic builds, whose levels are generated directly.
+  DownsampleFilter downsample = DownsampleFilter::box;
+  unsigned threads = 0;  // encoder threads; 0 = one per hardware thread
+  std::string name;      // tileset name in the metadata (default: the output file's stem)
+  std::string description;
+  // Called from the building thread about ten times a second and once at the end.
+  std::function<void(const BuildProgress&)> on_progress;
+  // Polled; when it becomes true the build stops with ErrorCode::cancelled and leaves no output.
+  const std::atomic<bool>* cancel = nullptr;
+};
+
+struct LevelReport {
+  int z = 0;
+  std::uint64_t width = 0, height = 0;
+  std::uint64_t tiles = 0;
+};
+
+struct BuildReport {
+  TilesetInfo info;
+  pmtiles::WriterStats stats;
+  std::vector<LevelReport> levels;
+  double seconds = 0;
+  std::string input_description;  // "earth.jpg 2048x1024 3ch uint8" / "synthetic 3000x1700"
+};
+
+Result<BuildReport> build_pyramid(const BuildOptions& options);
+
+}  // namespace vts

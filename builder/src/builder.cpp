@@ -1,0 +1,484 @@
+#include "vts/builder/builder.hpp"
+
+#include <algorithm>
+#include <cassert>
+#include <condition_variable>
+#include <cstdio>
+#include <cstring>
+#include <deque>
+#include <memory>
+#include <mutex>
+#include <thread>
+
+#include <xxhash.h>
+
+#include "image_source.hpp"
+#include "vts/builder/downsample.hpp"
+#include "vts/builder/synthetic.hpp"
+#include "work_queue.hpp"
+
+namespace vts {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using detail::ImageSource;
+using detail::WorkQueue;
+
+double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+// State shared by the building thread and the encoder workers.
+struct Shared {
+  const Codec* codec = nullptr;
+  EncodeOptions encode;
+  pmtiles::Writer* writer = nullptr;
+  const std::atomic<bool>* cancel = nullptr;
+  std::atomic<std::uint64_t> tiles_done{0};
+  std::atomic<std::uint64_t> bytes{0};
+  // Sum over tiles of XXH3(tile id, payload checksum): order-independent, so encoder threads can
+  // add in any order. Becomes TilesetInfo::content_hash.
+  std::atomic<std::uint64_t> content_sum{0};
+  std::atomic<bool> failed{false};
+  std::mutex error_mutex;
+  std::optional<Error> error;
+
+  void fail(Error e) {
+    std::lock_guard lock(error_mutex);
+    if (!error) error = std::move(e);
+    failed = true;
+  }
+  // True when the build must stop (an error, or the caller cancelled).
+  bool stopping() {
+    if (!failed && cancel && cancel->load())
+      fail(make_error(ErrorCode::cancelled, "build cancelled"));
+    return failed;
+  }
+  void store(TileId id, const TileImage& img) {
+    if (failed) return;
+    auto payload = codec->encode(img, encode);
+    if (!payload) return fail(std::move(payload).error());
+    if (auto st = writer->add_tile(id, *payload); !st) return fail(st.error());
+    if (auto header = parse_tile_header(*payload)) {
+      const std::uint64_t key[2] = {pmtiles::zxy_to_tile_id(id.z, id.x, id.y), header->checksum};
+      content_sum += XXH3_64bits(key, sizeof key);
+    }
+    bytes += payload->size();
+    ++tiles_done;
+  }
+};
+
+// The streaming level cascade: rows of the finest level are pushed in order; each level cuts its
+// tile rows as soon as their last (border) row arrives and feeds the next coarser level.
+class Cascade {
+ public:
+  // The box filter reads the parent's two child rows straight from the level's ring (hence its
+  // T + 2B + 2 rows: the tile rows plus the pair being reduced). Lanczos-3 needs rows 2r - 5 ...
+  // 2r + 6 for parent row r; rather than keeping 12 extra 8-bit rows per level it filters every
+  // row horizontally as it arrives, into the LanczosReducer's ring of 12 half-width float rows, so
+  // the 8-bit ring stays at T + 2B + 2 rows for both filters.
+  Cascade(const Geometry& g, DownsampleFilter filter, WorkQueue& queue, Shared& shared)
+      : g_(g), queue_(queue), shared_(shared), levels_(static_cast<std::size_t>(g.level_count())) {
+    const std::uint32_t cap = g.stored_size() + 2;
+    for (int z = 0; z <= g.max_zoom(); ++z) {
+      Level& l = levels_[static_cast<std::size_t>(z)];
+      l.w = g.level_width(z);
+      l.h = g.level_height(z);
+      l.cap = cap;
+      l.ring.resize(std::size_t{cap} * l.w * 4);
+      l.parent_row.resize(z > 0 ? g.level_width(z - 1) * 4 : 0);
+      if (z > 0 && filter == DownsampleFilter::lanczos3)
+        l.reducer = std::make_unique<LanczosReducer>(l.w, l.h);
+    }
+  }
+
+  // Pushes the next row (RGBA8, level_width(z) texels) of level z.
+  void push_row(int z, const std::uint8_t* row) {
+    Level& l = levels_[static_cast<std::size_t>(z)];
+    assert(l.end_row < l.h);
+    assert(l.end_row < l.cap || l.end_row - l.cap < oldest_needed(z));
+    std::memcpy(slot(l, l.end_row), row, l.w * 4);
+    ++l.end_row;
+    const std::uint32_t T = g_.tile_size(), B = g_.border();
+    while (l.next_tile_row < g_.tiles_y(z)) {
+      const std::uint64_t need = std::min<std::uint64_t>((l.next_tile_row + 1ull) * T + B, l.h);
+      if (l.end_row < need) break;
+      emit_tile_row(z, l.next_tile_row++);
+    }
+    if (z == 0) return;
+    if (l.reducer) {
+      l.reducer->push_row(row);
+      while (l.reducer->ready()) {
+        l.reducer->pop_row(l.parent_row.data());
+        push_row(z - 1, l.parent_row.data());
+      }
+      return;
+    }
+    const std::uint64_t parent_h = g_.level_height(z - 1);
+    while (l.next_parent_row < parent_h) {
+      const std::uint64_t r0 = 2 * l.next_parent_row;
+      const std::uint64_t r1 = std::min(r0 + 1, l.h - 1);
+      if (l.end_row <= r1) break;
+      downsample_row_rgba8(slot(l, r0), slot(l, r1), l.w, l.parent_row.data(),
+                           g_.level_width(z - 1));
+      ++l.next_parent_row;
+      push_row(z - 1, l.parent_row.data());
+    }
+  }
+
+ private:
+  struct Level {
+    std::uint64_t w = 0, h = 0;
+    std::uint32_t cap = 0;
+    std::vector<std::uint8_t> ring;        // cap rows; row y lives in slot y % cap
+    std::vector<std::uint8_t> parent_row;  // scratch row of level z-1
+    std::uint64_t end_row = 0;             // rows [0, end_row) have been pushed
+    std::uint32_t next_tile_row = 0;
+    std::uint64_t next_parent_row = 0;        // box: next row of level z-1 to make
+    std::unique_ptr<LanczosReducer> reducer;  // lanczos3: makes level z-1's rows instead
+  };
+
+  static std::uint8_t* slot(Level& l, std::uint64_t y) {
+    return l.ring.data() + (y % l.cap) * l.w * 4;
+  }
+
+  std::uint64_t oldest_needed(int z) const {
+    const Level& l = levels_[static_cast<std::size_t>(z)];
+    const std::int64_t tile_start =
+        std::int64_t{l.next_tile_row} * g_.tile_size() - std::int64_t{g_.border()};
+    const auto tiles = static_cast<std::uint64_t>(std::max<std::int64_t>(tile_start, 0));
+    // The reducer keeps its own (filtered) copy of what it still needs.
+    return l.reducer ? tiles : std::min<std::uint64_t>(tiles, 2 * l.next_parent_row);
+  }
+
+  void emit_tile_row(int z, std::uint32_t ty) {
+    Level& l = levels_[static_cast<std::size_t>(z)];
+    const std::uint32_t S = g_.stored_size();
+    for (std::uint32_t tx = 0; tx < g_.tiles_x(z); ++tx) {
+      const TileId id{static_cast<std::uint8_t>(z), tx, ty};
+      TileImage img;
+      img.width = img.height = S;
+      img.pixels.resize(std::size_t{S} * S * 4);
+      const std::int64_t x_start = std::int64_t{tx} * g_.tile_size() - g_.border();
+      // Columns [0, left) clamp to texel 0, [left, right) copy, [right, S) clamp to w - 1.
+      const auto left = static_cast<std::uint32_t>(std::clamp<std::int64_t>(-x_start, 0, S));
+      const auto right = static_cast<std::uint32_t>(
+          std::clamp<std::int64_t>(static_cast<std::int64_t>(l.w) - x_start, left, S));
+      for (std::uint32_t sy = 0; sy < S; ++sy) {
+        const std::uint8_t* src = slot(l, g_.stored_to_level_y(id, sy));
+        std::uint8_t* dst = img.pixels.data() + std::size_t{sy} * S * 4;
+        for (std::uint32_t sx = 0; sx < left; ++sx) std::memcpy(dst + 4 * sx, src, 4);
+        if (right > left)
+          std::memcpy(dst + 4 * left, src + 4 * (x_start + left), std::size_t{right - left} * 4);
+        const std::uint8_t* last = src + 4 * (l.w - 1);
+        for (std::uint32_t sx = right; sx < S; ++sx) std::memcpy(dst + 4 * sx, last, 4);
+      }
+      Shared* shared = &shared_;
+      queue_.submit([shared, id, img = std::move(img)] { shared->store(id, img); });
+    }
+  }
+
+  const Geometry& g_;
+  WorkQueue& queue_;
+  Shared& shared_;
+  std::vector<Level> levels_;
+};
+
+// Strips of scanlines handed from the reader thread to the cascade, with a fixed number of
+// buffers in flight.
+class StripChannel {
+ public:
+  struct Strip {
+    std::uint64_t y = 0;
+    std::uint32_t rows = 0;
+    std::vector<std::uint8_t> pixels;
+  };
+
+  explicit StripChannel(std::size_t buffers, std::size_t bytes) {
+    for (std::size_t i = 0; i < buffers; ++i) free_.emplace_back().pixels.resize(bytes);
+  }
+  // Reader side.
+  std::optional<Strip> take_free() {
+    std::unique_lock lock(m_);
+    cv_.wait(lock, [&] { return closed_ || !free_.empty(); });
+    if (closed_) return std::nullopt;
+    Strip s = std::move(free_.front());
+    free_.pop_front();
+    return s;
+  }
+  void put_full(Strip s) {
+    std::lock_guard lock(m_);
+    full_.push_back(std::move(s));
+    cv_.notify_all();
+  }
+  void finish_reading(std::optional<Error> error) {
+    std::lock_guard lock(m_);
+    done_ = true;
+    error_ = std::move(error);
+    cv_.notify_all();
+  }
+  // Consumer side: nullopt at the end (check error()).
+  std::optional<Strip> take_full() {
+    std::unique_lock lock(m_);
+    cv_.wait(lock, [&] { return done_ || !full_.empty(); });
+    if (full_.empty()) return std::nullopt;
+    Strip s = std::move(full_.front());
+    full_.pop_front();
+    return s;
+  }
+  void give_back(Strip s) {
+    std::lock_guard lock(m_);
+    free_.push_back(std::move(s));
+    cv_.notify_all();
+  }
+  void close() {
+    std::lock_guard lock(m_);
+    closed_ = true;
+    cv_.notify_all();
+  }
+  std::optional<Error> error() {
+    std::lock_guard lock(m_);
+    return error_;
+  }
+
+ private:
+  std::mutex m_;
+  std::condition_variable cv_;
+  std::deque<Strip> free_, full_;
+  bool done_ = false, closed_ = false;
+  std::optional<Error> error_;
+};
+
+class ProgressTicker {
+ public:
+  ProgressTicker(const BuildOptions& o, Shared& s, std::uint64_t tiles_total,
+                 std::uint64_t rows_total)
+      : o_(o), s_(s), t0_(Clock::now()) {
+    p_.tiles_total = tiles_total;
+    p_.rows_total = rows_total;
+  }
+  void tick(std::uint64_t rows_read, bool force = false) {
+    if (!o_.on_progress) return;
+    const auto now = Clock::now();
+    if (!force && now - last_ < std::chrono::milliseconds(100)) return;
+    last_ = now;
+    p_.rows_read = rows_read;
+    p_.tiles_done = s_.tiles_done;
+    p_.bytes_written = s_.bytes;
+    p_.seconds = seconds_since(t0_);
+    o_.on_progress(p_);
+  }
+
+ private:
+  const BuildOptions& o_;
+  Shared& s_;
+  Clock::time_point t0_, last_{};
+  BuildProgress p_;
+};
+
+unsigned worker_count(unsigned requested) {
+  if (requested) return requested;
+  return std::max(1u, std::thread::hardware_concurrency());
+}
+
+// Tiles of level z that a synthetic build writes: all of them, or only those over the region.
+struct TileRange {
+  std::uint32_t x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+  std::uint64_t count() const { return std::uint64_t(x1 - x0) * (y1 - y0); }
+};
+
+TileRange synthetic_range(const Geometry& g, const SyntheticSpec& spec, int z) {
+  TileRange r{0, 0, g.tiles_x(z), g.tiles_y(z)};
+  if (!spec.region || z < spec.region_level) return r;
+  const TexelRect level = g.map_rect(g.max_zoom(), *spec.region, z);
+  const std::uint32_t T = g.tile_size();
+  r.x0 = static_cast<std::uint32_t>(level.x0 / T);
+  r.y0 = static_cast<std::uint32_t>(level.y0 / T);
+  r.x1 = std::max(r.x0, static_cast<std::uint32_t>((level.x1 + T - 1) / T));
+  r.y1 = std::max(r.y0, static_cast<std::uint32_t>((level.y1 + T - 1) / T));
+  return r;
+}
+
+void build_from_source(const BuildOptions& o, ImageSource& src, const Geometry& g, Shared& shared,
+                       unsigned threads) {
+  WorkQueue queue(threads, std::size_t{threads} * 4);
+  Cascade cascade(g, o.downsample, queue, shared);
+  const std::uint64_t row_bytes = g.width() * 4;
+  // About 4 MiB per strip, at least one row, at most 64.
+  const auto strip_rows =
+      static_cast<std::uint32_t>(std::clamp<std::uint64_t>((4u << 20) / row_bytes, 1, 64));
+  StripChannel channel(3, strip_rows * row_bytes);
+  std::thread reader([&] {
+    std::optional<Error> error;
+    for (std::uint64_t y = 0; y < g.height();) {
+      auto strip = channel.take_free();
+      if (!strip || shared.failed) break;
+      strip->y = y;
+      strip->rows = static_cast<std::uint32_t>(std::min<std::uint64_t>(strip_rows, g.height() - y));
+      if (auto st = src.read_rows(y, strip->rows, strip->pixels.data()); !st) {
+        error = st.error();
+        break;
+      }
+      y += strip->rows;
+      channel.put_full(std::move(*strip));
+    }
+    channel.finish_reading(std::move(error));
+  });
+  ProgressTicker ticker(o, shared, g.total_tile_count(), g.height());
+  std::uint64_t rows = 0;
+  while (auto strip = channel.take_full()) {
+    for (std::uint32_t r = 0; r < strip->rows && !shared.stopping(); ++r)
+      cascade.push_row(g.max_zoom(), strip->pixels.data() + r * row_bytes);
+    rows += strip->rows;
+    channel.give_back(std::move(*strip));
+    ticker.tick(rows);
+    if (shared.stopping()) break;
+  }
+  channel.close();
+  reader.join();
+  queue.close_and_join();
+  if (auto e = channel.error(); e && !shared.failed) shared.fail(*e);
+  if (!shared.failed && rows != g.height())
+    shared.fail(make_error(ErrorCode::internal, "input ended early"));
+  ticker.tick(rows, true);
+}
+
+void build_synthetic(const BuildOptions& o, const SyntheticSpec& spec, const Geometry& g,
+                     Shared& shared, unsigned threads) {
+  std::uint64_t total = 0;
+  for (int z = 0; z <= g.max_zoom(); ++z) total += synthetic_range(g, spec, z).count();
+  ProgressTicker ticker(o, shared, total, 0);
+  WorkQueue queue(threads, std::size_t{threads} * 4);
+  for (int z = 0; z <= g.max_zoom() && !shared.stopping(); ++z) {
+    const TileRange r = synthetic_range(g, spec, z);
+    for (std::uint32_t y = r.y0; y < r.y1 && !shared.stopping(); ++y) {
+      for (std::uint32_t x = r.x0; x < r.x1; ++x) {
+        const TileId id{static_cast<std::uint8_t>(z), x, y};
+        Shared* s = &shared;
+        const Geometry* gp = &g;
+        queue.submit([s, gp, id] {
+          if (!s->failed) s->store(id, synthetic_tile(*gp, id));
+        });
+      }
+      ticker.tick(0);
+    }
+  }
+  queue.close_and_join();
+  ticker.tick(0, true);
+}
+
+}  // namespace
+
+Result<BuildReport> build_pyramid(const BuildOptions& o) {
+  const auto t0 = Clock::now();
+  if (o.output.empty()) return make_error(ErrorCode::invalid_argument, "no output file given");
+  const Codec* codec = find_codec(o.codec);
+  if (!codec)
+    return make_error(ErrorCode::unsupported,
+                      std::string("codec '") + codec_name(o.codec) + "' is not available yet");
+  if (o.synthetic && !o.inputs.empty())
+    return make_error(ErrorCode::invalid_argument, "give either input images or --synthetic");
+  if (!o.synthetic && o.inputs.empty())
+    return make_error(ErrorCode::invalid_argument, "no input image given");
+
+  std::unique_ptr<ImageSource> source;
+  std::uint64_t width = 0, height = 0;
+  std::string input_desc;
+  if (o.synthetic) {
+    width = o.synthetic->width;
+    height = o.synthetic->height;
+    input_desc = "synthetic " + std::to_string(width) + "x" + std::to_string(height);
+  } else {
+    auto src = ImageSource::open(o.inputs, o.grid_columns, o.grid_rows);
+    if (!src) return std::move(src).error();
+    source = std::move(src).value();
+    width = source->width();
+    height = source->height();
+    input_desc = source->description();
+  }
+  auto geometry = Geometry::create(width, height, o.tile_size, o.border);
+  if (!geometry) return std::move(geometry).error();
+  const Geometry& g = *geometry;
+  // A bc1 tile is whole 4x4 blocks, and the renderer places tiles in its compressed atlas at
+  // block-aligned slots: the stored size T + 2B must be a multiple of 4 (T is a power of two >= 4,
+  // so B must be even).
+  if (o.codec == CodecId::bc1 && g.stored_size() % 4 != 0)
+    return make_error(ErrorCode::invalid_argument,
+                      "codec bc1 needs tile + 2 x border to be a multiple of 4, whole 4x4 blocks "
+                      "(tile " +
+                          std::to_string(g.tile_size()) + " + 2 x border " +
+                          std::to_string(g.border()) + " = " + std::to_string(g.stored_size()) +
+                          "): use an even border");
+  if (o.synthetic && o.synthetic->region) {
+    const TexelRect& r = *o.synthetic->region;
+    if (r.empty() || r.x1 > width || r.y1 > height)
+      return make_error(ErrorCode::invalid_argument,
+                        "region " + std::to_string(r.x0) + "," + std::to_string(r.y0) + "," +
+                            std::to_string(r.x1) + "," + std::to_string(r.y1) +
+                            " is empty or outside the " + std::to_string(width) + "x" +
+                            std::to_string(height) + " image");
+    if (o.synthetic->region_level < 0)
+      return make_error(ErrorCode::invalid_argument, "region level must be >= 0");
+  }
+
+  pmtiles::WriterOptions wo;
+  wo.path = o.output;
+  wo.min_zoom = 0;
+  wo.max_zoom = static_cast<std::uint8_t>(g.max_zoom());
+  auto writer = pmtiles::Writer::create(wo);
+  if (!writer) return std::move(writer).error();
+
+  Shared shared;
+  shared.codec = codec;
+  shared.encode = o.encode;
+  shared.writer = writer->get();
+  shared.cancel = o.cancel;
+  const unsigned threads = worker_count(o.threads);
+  if (o.synthetic)
+    build_synthetic(o, *o.synthetic, g, shared, threads);
+  else
+    build_from_source(o, *source, g, shared, threads);
+  if (shared.failed) {
+    (*writer)->abort();
+    return *shared.error;
+  }
+
+  BuildReport report;
+  report.input_description = input_desc;
+  TilesetInfo& info = report.info;
+  info.geometry = g;
+  info.codec = o.codec;
+  info.name = o.name.empty() ? o.output.stem().string() : o.name;
+  info.description = o.description.empty() ? input_desc : o.description;
+  info.downsample = o.synthetic ? "synthetic-per-level" : downsample_method(o.downsample);
+  info.sparse = o.synthetic && o.synthetic->region.has_value();
+  char hash[17];
+  std::snprintf(hash, sizeof hash, "%016llx",
+                static_cast<unsigned long long>(shared.content_sum.load()));
+  info.content_hash = hash;
+  for (int z = 0; z <= g.max_zoom(); ++z) {
+    const std::uint64_t n =
+        o.synthetic ? synthetic_range(g, *o.synthetic, z).count() : g.tile_count(z);
+    report.levels.push_back({z, g.level_width(z), g.level_height(z), n});
+  }
+  if (o.cancel && o.cancel->load()) {
+    (*writer)->abort();
+    return make_error(ErrorCode::cancelled, "build cancelled");
+  }
+  if (o.on_progress) {
+    BuildProgress p;
+    p.tiles_done = p.tiles_total = shared.tiles_done;
+    p.bytes_written = shared.bytes;
+    p.seconds = seconds_since(t0);
+    p.finishing = true;
+    o.on_progress(p);
+  }
+  auto stats = (*writer)->finish(info.to_json());
+  if (!stats) return std::move(stats).error();
+  report.stats = *stats;
+  report.seconds = seconds_since(t0);
+  return report;
+}
+
+}  // namespace vts

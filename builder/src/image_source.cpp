@@ -1,0 +1,244 @@
+#include "image_source.hpp"
+
+#include <OpenImageIO/imageio.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+
+#include "vts/builder/downsample.hpp"
+
+namespace vts::detail {
+
+namespace OIIO = OIIO_NAMESPACE;
+
+struct ImageSource::Piece {
+  std::unique_ptr<OIIO::ImageInput> in;
+  std::filesystem::path path;
+  std::uint64_t width = 0, height = 0;
+  int channels = 0;
+  bool is_float = false;       // float/half data: linear light, converted with the sRGB OETF
+  bool float_is_srgb = false;  // float data the file declares as sRGB-encoded
+  // Tiled files are read one band of tile rows at a time with read_tiles(): OpenImageIO 2.4's
+  // read_scanlines() on tiled TIFFs crashes (SIGFPE), and whole tile rows are what it would
+  // decode anyway.
+  int tile_width = 0, tile_height = 0;
+  std::vector<std::uint8_t> band;
+  std::int64_t band_y0 = -1;
+
+  // Reads rows [y, y + n) of channels [0, nch) as `type` into out (tightly packed).
+  bool read(std::uint64_t y, std::uint32_t n, int nch, OIIO::TypeDesc type, void* out) {
+    if (tile_height <= 0)
+      return in->read_scanlines(0, 0, static_cast<int>(y), static_cast<int>(y + n), 0, 0, nch, type,
+                                out);
+    const std::size_t row_bytes = width * nch * type.size();
+    auto* dst = static_cast<std::uint8_t*>(out);
+    for (std::uint64_t row = y; row < y + n;) {
+      const auto b0 = static_cast<std::int64_t>(row / tile_height * tile_height);
+      const auto b1 = std::min<std::int64_t>(b0 + tile_height, static_cast<std::int64_t>(height));
+      if (b0 != band_y0) {
+        band.resize(static_cast<std::size_t>(b1 - b0) * row_bytes);
+        // A few tiles at a time: OpenImageIO stages a read_tiles() region in a buffer of its own,
+        // which for a whole band would double the band's memory.
+        const std::uint64_t chunk = std::uint64_t(tile_width) * 8;
+        for (std::uint64_t x0 = 0; x0 < width; x0 += chunk) {
+          const std::uint64_t x1 = std::min(width, x0 + chunk);
+          const std::size_t px = nch * type.size();
+          if (!in->read_tiles(0, 0, static_cast<int>(x0), static_cast<int>(x1),
+                              static_cast<int>(b0), static_cast<int>(b1), 0, 1, 0, nch, type,
+                              band.data() + x0 * px, static_cast<OIIO::stride_t>(px),
+                              static_cast<OIIO::stride_t>(row_bytes)))
+            return false;
+        }
+        band_y0 = b0;
+      }
+      const std::uint64_t take =
+          std::min<std::uint64_t>(y + n, static_cast<std::uint64_t>(b1)) - row;
+      std::memcpy(dst, band.data() + (row - static_cast<std::uint64_t>(b0)) * row_bytes,
+                  take * row_bytes);
+      dst += take * row_bytes;
+      row += take;
+    }
+    return true;
+  }
+};
+
+namespace {
+
+Result<std::unique_ptr<OIIO::ImageInput>> open_input(const std::filesystem::path& path) {
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec))
+    return make_error(ErrorCode::not_found, "input '" + path.string() + "' does not exist");
+  // Texels are stored with straight alpha (docs/FORMAT.md): ask readers whose files hold straight
+  // alpha (PNG, TIFF with unassociated extra samples) not to premultiply it on the way in.
+  OIIO::ImageSpec config;
+  config.attribute("oiio:UnassociatedAlpha", 1);
+  auto in = OIIO::ImageInput::open(path.string(), &config);
+  if (!in) {
+    std::string why = OIIO::geterror();
+    if (why.empty()) why = "not an image format OpenImageIO can read";
+    return make_error(ErrorCode::invalid_argument,
+                      "cannot read input '" + path.string() + "': " + why);
+  }
+  return in;
+}
+
+}  // namespace
+
+ImageSource::~ImageSource() = default;
+
+Result<std::unique_ptr<ImageSource>> ImageSource::open(
+    const std::vector<std::filesystem::path>& inputs, std::uint32_t columns, std::uint32_t rows) {
+  if (columns == 0 || rows == 0)
+    return make_error(ErrorCode::invalid_argument, "grid must be at least 1x1");
+  if (inputs.size() != std::size_t{columns} * rows)
+    return make_error(ErrorCode::invalid_argument,
+                      "grid " + std::to_string(columns) + "x" + std::to_string(rows) + " needs " +
+                          std::to_string(columns * rows) + " inputs, got " +
+                          std::to_string(inputs.size()));
+  std::unique_ptr<ImageSource> src(new ImageSource());
+  src->inputs_ = inputs;
+  src->columns_ = columns;
+  src->rows_ = rows;
+  src->column_widths_.assign(columns, 0);
+  src->row_heights_.assign(rows, 0);
+  std::string first_desc;
+  // Read every header once up front so inconsistencies fail before any work is done.
+  for (std::uint32_t r = 0; r < rows; ++r) {
+    for (std::uint32_t c = 0; c < columns; ++c) {
+      const auto& path = inputs[std::size_t{r} * columns + c];
+      auto in = open_input(path);
+      if (!in) return std::move(in).error();
+      const OIIO::ImageSpec& spec = (*in)->spec();
+      if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0 || spec.depth > 1)
+        return make_error(ErrorCode::invalid_argument,
+                          "input '" + path.string() + "' has no 2D pixels");
+      const auto w = static_cast<std::uint64_t>(spec.width);
+      const auto h = static_cast<std::uint64_t>(spec.height);
+      if (src->column_widths_[c] == 0) src->column_widths_[c] = w;
+      if (src->row_heights_[r] == 0) src->row_heights_[r] = h;
+      if (src->column_widths_[c] != w || src->row_heights_[r] != h)
+        return make_error(ErrorCode::invalid_argument,
+                          "input '" + path.string() + "' is " + std::to_string(w) + "x" +
+                              std::to_string(h) + " but grid column " + std::to_string(c) + " is " +
+                              std::to_string(src->column_widths_[c]) + " wide and row " +
+                              std::to_string(r) + " is " + std::to_string(src->row_heights_[r]) +
+                              " high");
+      if (first_desc.empty())
+        first_desc = path.filename().string() + " " + std::to_string(w) + "x" + std::to_string(h) +
+                     " " + std::to_string(spec.nchannels) + "ch " + spec.format.c_str();
+    }
+  }
+  for (auto w : src->column_widths_) src->width_ += w;
+  for (auto h : src->row_heights_) src->height_ += h;
+  src->description_ = inputs.size() == 1
+                          ? first_desc
+                          : std::to_string(columns) + "x" + std::to_string(rows) + " mosaic " +
+                                std::to_string(src->width_) + "x" + std::to_string(src->height_) +
+                                " (first: " + first_desc + ")";
+  return src;
+}
+
+Status ImageSource::open_row(std::uint32_t grid_row) {
+  pieces_.clear();
+  for (std::uint32_t c = 0; c < columns_; ++c) {
+    const auto& path = inputs_[std::size_t{grid_row} * columns_ + c];
+    auto in = open_input(path);
+    if (!in) return std::move(in).error();
+    auto piece = std::make_unique<Piece>();
+    piece->in = std::move(in).value();
+    piece->path = path;
+    const OIIO::ImageSpec& spec = piece->in->spec();
+    piece->width = static_cast<std::uint64_t>(spec.width);
+    piece->height = static_cast<std::uint64_t>(spec.height);
+    piece->channels = spec.nchannels;
+    piece->tile_width = spec.tile_width;
+    piece->tile_height = spec.tile_width > 0 ? spec.tile_height : 0;
+    const auto base = spec.format.basetype;
+    piece->is_float = base == OIIO::TypeDesc::FLOAT || base == OIIO::TypeDesc::HALF ||
+                      base == OIIO::TypeDesc::DOUBLE;
+    const std::string cs = spec.get_string_attribute("oiio:ColorSpace");
+    piece->float_is_srgb = cs == "sRGB" || cs == "srgb_rec709_scene";
+    pieces_.push_back(std::move(piece));
+  }
+  open_row_ = grid_row;
+  return {};
+}
+
+Status ImageSource::read_rows(std::uint64_t y, std::uint32_t count, std::uint8_t* out) {
+  // Split the request at grid-row boundaries.
+  while (count > 0) {
+    std::uint32_t r = 0;
+    std::uint64_t row_start = 0;
+    while (r < rows_ && y >= row_start + row_heights_[r]) row_start += row_heights_[r++];
+    if (r >= rows_) return make_error(ErrorCode::internal, "row past the end of the mosaic");
+    if (open_row_ != r) {
+      if (auto st = open_row(r); !st) return st;
+    }
+    const std::uint64_t local_y = y - row_start;
+    const auto n =
+        static_cast<std::uint32_t>(std::min<std::uint64_t>(count, row_heights_[r] - local_y));
+    std::uint64_t x_offset = 0;
+    for (auto& piece : pieces_) {
+      const int ch = piece->channels;
+      const int read_ch = std::min(ch, 4);
+      const std::size_t texels = piece->width * n;
+      std::uint8_t* dst_base = out + x_offset * 4;
+      const std::size_t dst_stride = width_ * 4;
+      auto expand = [&](auto get) {
+        // get(i, c) returns channel c of texel i as 8-bit sRGB.
+        for (std::uint32_t row = 0; row < n; ++row) {
+          std::uint8_t* dst = dst_base + row * dst_stride;
+          const std::size_t base = std::size_t{row} * piece->width;
+          for (std::uint64_t x = 0; x < piece->width; ++x, dst += 4) {
+            const std::size_t i = base + x;
+            if (read_ch >= 3) {
+              dst[0] = get(i, 0);
+              dst[1] = get(i, 1);
+              dst[2] = get(i, 2);
+              dst[3] = read_ch == 4 ? get(i, 3) : 255;
+            } else {  // grey, or grey + alpha
+              dst[0] = dst[1] = dst[2] = get(i, 0);
+              dst[3] = read_ch == 2 ? get(i, 1) : 255;
+            }
+          }
+        }
+      };
+      bool ok;
+      if (piece->is_float) {
+        scratch_float_.resize(texels * read_ch);
+        ok = piece->read(local_y, n, read_ch, OIIO::TypeDesc::FLOAT, scratch_float_.data());
+        const bool srgb = piece->float_is_srgb;
+        const float* f = scratch_float_.data();
+        if (ok)
+          expand([&](std::size_t i, int c) -> std::uint8_t {
+            float v = f[i * read_ch + c];
+            const bool alpha = (read_ch == 4 && c == 3) || (read_ch == 2 && c == 1);
+            if (!(v > 0.0f)) return 0;
+            if (v >= 1.0f) return 255;
+            if (alpha || srgb) return static_cast<std::uint8_t>(std::lround(v * 255.0f));
+            return encode_srgb8(v);
+          });
+      } else {
+        scratch_.resize(texels * read_ch);
+        ok = piece->read(local_y, n, read_ch, OIIO::TypeDesc::UINT8, scratch_.data());
+        const std::uint8_t* b = scratch_.data();
+        if (ok) expand([&](std::size_t i, int c) { return b[i * read_ch + c]; });
+      }
+      if (!ok) {
+        std::string why = piece->in->geterror();
+        return make_error(ErrorCode::io, "reading rows " + std::to_string(local_y) + ".." +
+                                             std::to_string(local_y + n) + " of '" +
+                                             piece->path.string() + "' failed" +
+                                             (why.empty() ? "" : ": " + why));
+      }
+      x_offset += piece->width;
+    }
+    out += std::size_t{n} * width_ * 4;
+    y += n;
+    count -= n;
+  }
+  return {};
+}
+
+}  // namespace vts::detail

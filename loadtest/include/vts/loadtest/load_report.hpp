@@ -1,0 +1,113 @@
+// The results of one load test (`vts loadtest`) as plain data, and the three ways they are shown:
+// to_json() for --json, summary_table() for the terminal, write_html_report() for --report DIR.
+//
+// The load engine fills a LoadReport once the run is over (or at an interrupt, with what it has);
+// nothing here measures or aggregates, so the writers are deterministic functions of the struct.
+// All latencies are nanoseconds. Every writer accepts any LoadReport, including an empty one (no
+// requests, no seconds): plots then say "no data" and percentiles are 0. Strings may hold anything
+// (a hostile title or URL): they are escaped in HTML and made valid UTF-8 in JSON.
+//
+// Thread safety: the functions only read their argument; call them from any thread.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <filesystem>
+#include <map>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "vts/loadtest/latency_histogram.hpp"
+#include "vts/protocol/result.hpp"
+
+namespace vts::client {
+
+// One second of the run: element i of LoadReport::seconds covers [i, i + 1) s after the start.
+// Requests count when they complete (with a tile or an error); the percentiles are those of the
+// total latency of the requests completed in that second, 0 when none completed.
+struct LoadSecond {
+  std::uint64_t requests = 0;
+  std::uint64_t bytes = 0;  // payload bytes received in that second
+  std::uint64_t errors = 0;
+  std::uint64_t p50_ns = 0, p90_ns = 0, p99_ns = 0;
+};
+
+// Where completed requests were served from. revalidated: a conditional request answered 304
+// (a network round trip, but the bytes came from the disk cache).
+struct CacheTierCounts {
+  std::uint64_t ram = 0, disk = 0, network = 0, revalidated = 0;
+};
+
+enum class LoopMode : std::uint8_t {
+  closed,  // each viewer waits for its tiles before it asks for more
+  open,    // requests are issued at `rate` whatever the responses (no coordinated omission)
+};
+
+struct LoadReport {
+  // What ran, against what.
+  std::string title;         // shown as the page and table heading; may be empty
+  std::string target;        // the URL (or archive path) under test
+  std::string command_line;  // as typed, for reproducing the run
+  std::chrono::system_clock::time_point start{};
+  double duration_s = 0;  // wall time of the measured run
+
+  // The simulated load.
+  std::uint32_t viewers = 0;
+  std::string path;  // camera path name ("orbit", "zoom-in", ...)
+  double fps = 0;    // frames per second each viewer simulates
+  LoopMode mode = LoopMode::closed;
+  double rate = 0;                  // open loop: the rate held, in rate_unit; ignored when closed
+  std::string rate_unit = "req/s";  // unit of `rate`, shown next to it
+
+  // Totals over the whole run (not recomputed from `seconds`, which may be cut short).
+  std::uint64_t requests = 0;  // completed requests, with a tile or an error
+  std::uint64_t bytes = 0;     // payload bytes received
+  std::uint64_t errors = 0;    // requests that ended in an error
+  std::uint64_t camera_moves = 0;
+
+  std::vector<LoadSecond> seconds;
+
+  // Merged over every viewer. Per request: time queued before it was sent, time to the first
+  // response byte, and total (issue to tile in hand). Per camera move: time until the first
+  // tile of the new view was visible, and until every visible tile was at full resolution.
+  LatencyHistogram queue_time, ttfb, total, first_visible, full_resolution;
+
+  CacheTierCounts tiers;
+  std::map<int, std::uint64_t> by_status;               // HTTP status -> responses
+  std::map<std::string, std::uint64_t> errors_by_kind;  // "timeout", "http_503", "checksum", ...
+  std::uint64_t cancelled = 0;  // wasted: requests cancelled because the view moved on
+};
+
+// The --json document. Top-level keys: format ("vts-loadtest-report"), version (1), title,
+// target, command_line, start (ISO 8601 UTC), start_unix_ms, duration_s, scenario {viewers, path,
+// fps, mode ("open"/"closed"), rate, rate_unit}, totals {requests, bytes, errors, camera_moves,
+// requests_per_s, bytes_per_s, error_ratio}, latency_ns {queue_time, ttfb, total, first_visible,
+// full_resolution: each {count, min, mean, p50, p90, p99, p99_9, max, relative_error,
+// sub_bucket_bits, buckets: [{low, high, count}]}}, cache_tiers {ram, disk, network,
+// revalidated}, by_status {"200": n, ...}, errors_by_kind {kind: n}, wasted {cancelled},
+// seconds [{t, requests, bytes, errors, p50_ns, p90_ns, p99_ns}]. Rates are 0 when duration_s is
+// not positive; strings are valid UTF-8 (invalid bytes become U+FFFD), so dump() never throws.
+nlohmann::json to_json(const LoadReport& report);
+
+// The terminal summary: a few aligned plain-text tables (ASCII only, so any terminal aligns them),
+// ending in a newline. Durations carry their own unit (ns, us, ms, s).
+std::string summary_table(const LoadReport& report);
+
+// Writes dir/index.html: one self-contained page (inline CSS and SVG, no scripts, no external
+// resources) with the run's description, the summary tables and four plots, each an
+// <svg class="plot"> with axes, tick labels and a legend, and with these ids:
+//   plot-latency          p50 / p90 / p99 request latency per second
+//   plot-full-resolution  distribution (CDF) of time to first visible tile and to full resolution
+//   plot-throughput       requests/s and MB/s per second
+//   plot-errors           errors per second
+// Creates dir (and its parents) when missing. The page is written to a temporary file in dir,
+// flushed to disk and renamed to index.html, so a failure never leaves a half-written report;
+// an existing index.html is replaced. io on any file-system failure.
+Status write_html_report(const LoadReport& report, const std::filesystem::path& dir);
+
+// The page write_html_report() writes, as a string.
+std::string html_report(const LoadReport& report);
+
+}  // namespace vts::client

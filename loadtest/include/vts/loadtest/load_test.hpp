@@ -1,0 +1,123 @@
+// The load engine of `vts loadtest`: simulated viewers streaming tiles through the real client
+// stack (TileSource -> TileCache: fetcher, RAM and disk caches), driven by tile demand the caller
+// computes per viewer and frame (the CLI uses the renderer's CPU demand simulator on a camera path;
+// this library knows no cameras), measured per request and per camera move.
+//
+// Each viewer has its own source and TileCache (caches per CacheMode), a resident set of at most
+// `resident_tiles` tiles (the viewer's physical texture; least recently wanted go first) and the
+// tiles it has asked for. Frame f of every viewer is due at start + f / fps; a driver thread that
+// falls more than a frame behind skips to the frame due now (counted as late frames), as a
+// renderer's frame rate drops, rather than replaying a backlog. At each frame the viewer takes
+// its demand and
+//   - asks its cache for every demanded tile neither resident nor on its way (coarse first, as the
+//     demand lists them), and cancels what it asked for that the frame no longer demands; a tile
+//     whose request failed is asked for again after a backoff (250 ms, doubling to 8 s), not at
+//     every frame;
+//   - tracks camera moves: a move starts at a frame whose demand says `move` (and at frame 0). Its
+//     time to first visible tile is from the move's due time to the earliest arrival, after the
+//     move, among the frame's direct tiles (0 when the whole view was already resident; a coarse
+//     tile held from before shows nothing new and does not count); its time to full resolution
+//     runs until the latest arrival, at the first frame whose direct tiles are all resident
+//     (absent tiles count as resolved). A move that is not complete after `view_timeout`, or when the next move
+//     starts, is counted as incomplete and not in the histograms.
+//
+// Latency is measured from the intended send time, never from when a busy driver thread got
+// round to it, so a stalled server or a lagging load generator cannot hide latency (no
+// coordinated omission):
+//   - closed loop (rate == 0): requests are issued at their frame; the intended time is the
+//     frame's due time;
+//   - open loop (rate > 0): the viewers' requests join one queue that a dispatcher drains at
+//     exactly `rate` requests a second, whatever the responses; the intended time is the slot's
+//     time. A slot with nothing queued is counted (idle_slots): the demand did not fill the rate.
+// queue time = intended time to the request going on the wire (our queue, the fetcher's queue);
+// ttfb = intended time to the first response byte (network only); total = intended time to the
+// tile (or error) in hand. Cache hits have queue time and total, no ttfb.
+//
+// Thread safety: run_load_test() blocks; `demand` is called from the engine's driver threads, for
+// different viewers concurrently but never twice at once for one viewer; `progress` from one
+// reporter thread.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "vts/loadtest/load_report.hpp"
+#include "vts/client/source.hpp"
+#include "vts/protocol/geometry.hpp"
+#include "vts/protocol/result.hpp"
+
+namespace vts::client {
+
+struct DemandTile {
+  TileId id;
+  double urgency = 0;   // within a level, higher first (the renderer's pixel coverage)
+  bool direct = false;  // a pixel of the view samples this tile itself (not only a descendant)
+};
+
+struct ViewerDemand {
+  std::vector<DemandTile> tiles;  // coarse first
+  bool move = false;              // the camera jumped / started a new view at this frame
+};
+
+using DemandFn = std::function<Result<ViewerDemand>(std::uint32_t viewer, std::uint64_t frame)>;
+
+enum class CacheMode : std::uint8_t {
+  none,  // every tile from the network (the target may itself be a cache daemon)
+  ram,   // a RAM cache per viewer
+  disk,  // RAM + a disk cache per viewer (cache_dir/viewer-N)
+};
+
+struct LoadProgress {
+  double elapsed_s = 0;
+  std::uint64_t requests = 0, errors = 0, in_flight = 0, moves_complete = 0;
+  double requests_per_s = 0;      // over the last second
+  std::uint64_t p99_ns = 0;       // total latency, last second
+  std::uint64_t late_frames = 0;  // frames skipped because a driver thread fell a frame behind
+};
+
+struct LoadTestOptions {
+  std::string target;  // any location open_source() accepts
+  SourceOptions source;
+  std::uint32_t viewers = 8;
+  double fps = 30;
+  double duration_s = 30;
+  double rate = 0;  // > 0: open loop at this many requests a second
+  CacheMode cache = CacheMode::none;
+  std::filesystem::path cache_dir;    // CacheMode::disk: viewer folders are made under it
+  std::size_t ram_bytes = 64u << 20;  // per viewer, CacheMode::ram and ::disk
+  std::size_t resident_tiles = 256;   // per viewer (the renderer's default slot count)
+  std::chrono::milliseconds view_timeout{10000};
+  std::chrono::milliseconds drain_timeout{5000};  // at the end, for requests still on their way
+  int threads = 0;                                // driver threads; 0: one per core
+  // Report fields passed through.
+  std::string title, path_name, command_line;
+  std::function<void(const LoadProgress&)> progress;  // about once a second
+  const std::atomic<bool>* stop = nullptr;            // set to end the run early (SIGINT)
+};
+
+// Extra figures of a run that LoadReport has no field for.
+struct LoadRunStats {
+  std::uint64_t frames = 0, late_frames = 0;
+  std::uint64_t moves_incomplete = 0;  // timed out or superseded before full resolution
+  std::uint64_t idle_slots = 0;        // open loop: slots with nothing to send
+  std::uint64_t abandoned = 0;         // still on their way at the end of the drain
+  double demand_cpu_ms_per_frame = 0;  // mean time in the demand function
+};
+
+struct LoadTestResult {
+  LoadReport report;
+  LoadRunStats run;
+};
+
+// invalid_argument for options out of range (no viewers, fps or duration not positive, a
+// negative rate, disk mode without cache_dir); the error of open_source() when the target cannot
+// be opened (each viewer opens it: the first failure ends the run before it starts), or of the
+// demand function (the run stops and reports it).
+Result<LoadTestResult> run_load_test(const LoadTestOptions& options, const DemandFn& demand);
+
+}  // namespace vts::client

@@ -1,0 +1,604 @@
+#include "vts/loadtest/load_test.hpp"
+
+#include <algorithm>
+#include <condition_variable>
+#include <deque>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <unordered_map>
+#include <unordered_set>
+#include <utility>
+
+#include "vts/client/tile_cache.hpp"
+
+namespace vts::client {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using Ns = std::chrono::nanoseconds;
+
+std::uint64_t key_of(TileId t) {
+  return (std::uint64_t{t.z} << 56) | (std::uint64_t{t.x} << 28) | std::uint64_t{t.y};
+}
+
+std::uint64_t ns(Ns d) {
+  return d.count() > 0 ? std::uint64_t(d.count()) : 0;
+}
+
+// The kind an error is counted under: the HTTP status when one came, else what the fetcher said.
+std::string error_kind(const PayloadResult& r) {
+  if (r.transfer && r.transfer->status >= 400) return "http_" + std::to_string(r.transfer->status);
+  if (!r.error) return "unknown";
+  const std::string& m = r.error->message;
+  if (m.find("timed out") != std::string::npos) return "timeout";
+  if (m.find("connection reset") != std::string::npos) return "reset";
+  if (m.find("connection refused") != std::string::npos) return "refused";
+  if (m.find("empty reply") != std::string::npos) return "empty_reply";
+  return error_code_name(r.error->code);
+}
+
+// Everything measured, shared by all viewers (one short lock per completed request).
+class Metrics {
+ public:
+  explicit Metrics(Clock::time_point start) : start_(start) {}
+
+  void request_done(const PayloadResult& r, Clock::time_point intended, Clock::time_point sent,
+                    Clock::time_point done) {
+    const Ns lag = sent - intended;
+    const std::uint64_t total = ns(done - intended);
+    std::uint64_t bytes = 0;
+    if (r.kind == PayloadResult::Kind::ok && r.tile) bytes = r.tile->payload.size();
+    const bool error = r.kind == PayloadResult::Kind::error;
+    std::lock_guard lock(mutex_);
+    ++requests_;
+    report_.total.record(total);
+    if (r.transfer) {
+      report_.queue_time.record(ns(lag + r.transfer->queued));
+      if (r.transfer->first_byte.count() > 0) report_.ttfb.record(ns(lag + r.transfer->first_byte));
+      if (r.transfer->status > 0) ++report_.by_status[r.transfer->status];
+    } else {
+      report_.queue_time.record(ns(lag));
+    }
+    if (!error && r.kind == PayloadResult::Kind::ok) {
+      switch (r.from) {
+        case PayloadResult::From::ram:
+          ++report_.tiers.ram;
+          break;
+        case PayloadResult::From::disk:
+          ++report_.tiers.disk;
+          break;
+        case PayloadResult::From::network:
+          ++report_.tiers.network;
+          break;
+      }
+    }
+    if (error) {
+      ++errors_;
+      ++report_.errors_by_kind[error_kind(r)];
+    }
+    bytes_ += bytes;
+    const auto second = std::size_t(std::max<std::int64_t>(
+        0, std::chrono::duration_cast<std::chrono::seconds>(done - start_).count()));
+    if (second < 24 * 3600) {
+      if (seconds_.size() <= second) {
+        seconds_.resize(second + 1);
+        second_latency_.resize(second + 1);
+      }
+      ++seconds_[second].requests;
+      seconds_[second].bytes += bytes;
+      seconds_[second].errors += error ? 1 : 0;
+      second_latency_[second].record(total);
+    }
+  }
+
+  void move_done(Ns first_visible, Ns full) {
+    std::lock_guard lock(mutex_);
+    report_.first_visible.record(ns(first_visible));
+    report_.full_resolution.record(ns(full));
+    ++moves_complete_;
+  }
+  void moves_started(std::uint64_t n) {
+    std::lock_guard lock(mutex_);
+    report_.camera_moves += n;
+  }
+  void cancelled(std::uint64_t n) {
+    std::lock_guard lock(mutex_);
+    report_.cancelled += n;
+  }
+
+  LoadProgress progress(Clock::time_point now) {
+    std::lock_guard lock(mutex_);
+    LoadProgress p;
+    p.elapsed_s = std::chrono::duration<double>(now - start_).count();
+    p.requests = requests_;
+    p.errors = errors_;
+    p.moves_complete = moves_complete_;
+    const auto s = std::size_t(std::max(0.0, p.elapsed_s));
+    if (s >= 1 && s - 1 < seconds_.size()) {
+      p.requests_per_s = double(seconds_[s - 1].requests);
+      p.p99_ns = second_latency_[s - 1].percentile(99);
+    }
+    return p;
+  }
+
+  // The report so far: totals and the per-second series with their percentiles.
+  LoadReport finish() {
+    std::lock_guard lock(mutex_);
+    LoadReport r = report_;
+    r.requests = requests_;
+    r.bytes = bytes_;
+    r.errors = errors_;
+    r.seconds = seconds_;
+    for (std::size_t i = 0; i < r.seconds.size(); ++i) {
+      r.seconds[i].p50_ns = second_latency_[i].percentile(50);
+      r.seconds[i].p90_ns = second_latency_[i].percentile(90);
+      r.seconds[i].p99_ns = second_latency_[i].percentile(99);
+    }
+    return r;
+  }
+
+ private:
+  Clock::time_point start_;
+  std::mutex mutex_;
+  LoadReport report_;
+  std::uint64_t requests_ = 0, errors_ = 0, bytes_ = 0, moves_complete_ = 0;
+  std::vector<LoadSecond> seconds_;
+  std::vector<LatencyHistogram> second_latency_;
+};
+
+struct Request {
+  TileId id;
+  std::uint64_t key = 0;
+  Clock::time_point intended{}, sent{};
+  TileCache::Handle handle = 0;
+  // Open loop: dropped before its slot came. Set under the viewer's lock, read by the dispatcher
+  // under the queue's.
+  std::atomic<bool> cancelled{false};
+};
+
+class Engine;
+
+// One simulated viewer: its client stack, what it holds and what it waits for.
+class Viewer {
+ public:
+  Viewer(Engine& engine, std::uint32_t index, std::unique_ptr<TileCache> cache)
+      : engine_(engine), index_(index), cache_(std::move(cache)) {}
+
+  std::uint32_t index() const { return index_; }
+  TileCache& cache() { return *cache_; }
+
+  // One frame (driver thread). Returns the demand function's error, if any.
+  Status frame(std::uint64_t f, Clock::time_point due);
+  // Open loop: sends a queued request in its slot (dispatcher thread).
+  void send(const std::shared_ptr<Request>& req, Clock::time_point slot);
+  std::size_t in_flight() {
+    std::lock_guard lock(mutex_);
+    return inflight_.size();
+  }
+  // Open loop: drops a request that never got a slot (it was never on its way).
+  void unqueue(const std::shared_ptr<Request>& req) {
+    std::lock_guard lock(mutex_);
+    req->cancelled = true;
+    auto it = inflight_.find(req->key);
+    if (it != inflight_.end() && it->second == req) inflight_.erase(it);
+  }
+  // Cancels whatever is still on its way; returns how many.
+  std::size_t cancel_all();
+  // Ends a move still open at the end of the run.
+  void end_moves(LoadRunStats& run) {
+    if (move_open_) ++run.moves_incomplete;
+    move_open_ = false;
+  }
+  std::uint64_t moves_incomplete() const { return moves_incomplete_; }
+  std::uint64_t moves_started() const { return moves_started_; }
+  double demand_ms = 0;
+  std::uint64_t frames = 0;
+
+ private:
+  void issue(const std::shared_ptr<Request>& req);
+  void done(const std::shared_ptr<Request>& req, PayloadResult&& r);
+  void evict(std::uint64_t frame);
+
+  Engine& engine_;
+  std::uint32_t index_;
+  std::unique_ptr<TileCache> cache_;
+
+  std::mutex mutex_;  // guards arrived_ and inflight_ (callbacks run on the cache's threads)
+  std::unordered_map<std::uint64_t, Clock::time_point> arrived_;  // resident (or absent) tiles
+  std::unordered_map<std::uint64_t, std::shared_ptr<Request>> inflight_;
+  // Tiles that failed, and when they may be asked for again (a viewer backs off instead of asking
+  // every frame): 250 ms, doubling per failure up to 8 s.
+  struct Backoff {
+    Clock::time_point until{};
+    int failures = 0;
+  };
+  std::unordered_map<std::uint64_t, Backoff> backoff_;
+
+  // Driver thread only.
+  std::unordered_map<std::uint64_t, std::uint64_t> last_wanted_;  // frame a tile was last demanded
+  bool move_open_ = false, first_visible_known_ = false;
+  Clock::time_point move_start_{};
+  Ns first_visible_{0};
+  std::uint64_t moves_incomplete_ = 0, moves_started_ = 0;
+};
+
+class Engine {
+ public:
+  Engine(const LoadTestOptions& o, const DemandFn& d, Clock::time_point t0)
+      : options(o), demand(d), metrics(t0), start(t0) {}
+
+  const LoadTestOptions& options;
+  const DemandFn& demand;
+  Metrics metrics;
+  Clock::time_point start;
+  std::vector<std::unique_ptr<Viewer>> viewers;
+
+  // Open loop: requests waiting for a slot.
+  std::mutex queue_mutex;
+  std::condition_variable queue_cv;
+  std::deque<std::pair<Viewer*, std::shared_ptr<Request>>> queue;
+  std::atomic<bool> issuing{true};
+
+  std::mutex error_mutex;
+  std::optional<Error> error;
+  void fail(Error e) {
+    std::lock_guard lock(error_mutex);
+    if (!error) error = std::move(e);
+    issuing = false;
+  }
+  bool stopped() const { return !issuing.load() || (options.stop && options.stop->load()); }
+};
+
+Status Viewer::frame(std::uint64_t f, Clock::time_point due) {
+  ++frames;
+  const auto t0 = Clock::now();
+  auto d = engine_.demand(index_, f);
+  demand_ms += std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+  if (!d) return d.error();
+
+  // Moves.
+  if (d->move || f == 0) {
+    if (move_open_) ++moves_incomplete_;
+    move_open_ = true;
+    first_visible_known_ = false;
+    move_start_ = due;
+    ++moves_started_;
+  }
+
+  std::unordered_set<std::uint64_t> wanted;
+  wanted.reserve(d->tiles.size() * 2);
+  std::vector<std::shared_ptr<Request>> to_issue;
+  std::vector<TileCache::Handle> to_cancel;
+  std::size_t direct = 0, resolved = 0, fresh = 0;
+  Clock::time_point first{Clock::time_point::max()}, last{Clock::time_point::min()};
+  {
+    std::lock_guard lock(mutex_);
+    for (const DemandTile& t : d->tiles) {
+      const std::uint64_t k = key_of(t.id);
+      if (!wanted.insert(k).second) continue;
+      last_wanted_[k] = f;
+      auto a = arrived_.find(k);
+      if (t.direct) {
+        ++direct;
+        if (a != arrived_.end()) {
+          ++resolved;
+          // Only tiles that came after the move make it "visible": a coarse tile held from
+          // before (the globe's limb, a shared ancestor) shows nothing new.
+          if (a->second >= move_start_) {
+            ++fresh;
+            first = std::min(first, a->second);
+          }
+          last = std::max(last, a->second);
+        }
+      }
+      if (a == arrived_.end() && !inflight_.count(k)) {
+        if (auto b = backoff_.find(k); b != backoff_.end() && b->second.until > due) continue;
+        auto req = std::make_shared<Request>();
+        req->id = t.id;
+        req->key = k;
+        req->intended = due;
+        inflight_.emplace(k, req);
+        to_issue.push_back(std::move(req));
+      }
+    }
+    for (auto it = inflight_.begin(); it != inflight_.end();) {
+      if (wanted.count(it->first)) {
+        ++it;
+        continue;
+      }
+      it->second->cancelled = true;
+      if (it->second->handle != 0) to_cancel.push_back(it->second->handle);
+      it = inflight_.erase(it);
+    }
+  }
+  const std::size_t cancelled = to_cancel.size();
+  for (TileCache::Handle h : to_cancel) cache_->cancel(h);
+  if (cancelled) engine_.metrics.cancelled(cancelled);
+
+  if (move_open_) {
+    if (!first_visible_known_ && fresh > 0) {
+      first_visible_ = std::max(Ns(0), Ns(first - move_start_));
+      first_visible_known_ = true;
+    }
+    if (resolved == direct) {
+      if (!first_visible_known_) first_visible_ = Ns(0);  // the whole view was already held
+      first_visible_known_ = true;
+      const Ns full = direct == 0 ? Ns(0) : std::max(Ns(0), Ns(last - move_start_));
+      engine_.metrics.move_done(first_visible_, full);
+      move_open_ = false;
+    } else if (Clock::now() - move_start_ > engine_.options.view_timeout) {
+      ++moves_incomplete_;
+      move_open_ = false;
+    }
+  }
+
+  if (engine_.options.rate > 0) {
+    std::lock_guard lock(engine_.queue_mutex);
+    for (auto& r : to_issue) engine_.queue.emplace_back(this, std::move(r));
+    engine_.queue_cv.notify_one();
+  } else {
+    for (auto& r : to_issue) issue(r);
+  }
+  evict(f);
+  return {};
+}
+
+void Viewer::issue(const std::shared_ptr<Request>& req) {
+  GetOptions o;
+  o.level = req->id.z;
+  req->sent = Clock::now();
+  const TileCache::Handle h =
+      cache_->get(req->id, o, [this, req](PayloadResult&& r) { done(req, std::move(r)); });
+  std::lock_guard lock(mutex_);
+  req->handle = h;
+}
+
+void Viewer::send(const std::shared_ptr<Request>& req, Clock::time_point slot) {
+  {
+    std::lock_guard lock(mutex_);
+    if (req->cancelled) return;
+  }
+  req->intended = slot;
+  issue(req);
+}
+
+void Viewer::done(const std::shared_ptr<Request>& req, PayloadResult&& r) {
+  if (r.kind == PayloadResult::Kind::cancelled) return;
+  const auto now = Clock::now();
+  {
+    std::lock_guard lock(mutex_);
+    auto it = inflight_.find(req->key);
+    if (it != inflight_.end() && it->second == req) inflight_.erase(it);
+    if (r.kind == PayloadResult::Kind::ok || r.kind == PayloadResult::Kind::absent) {
+      arrived_[req->key] = now;
+      backoff_.erase(req->key);
+    } else {
+      Backoff& b = backoff_[req->key];
+      b.failures = std::min(b.failures + 1, 6);
+      b.until = now + std::chrono::milliseconds(125 << b.failures);
+    }
+  }
+  engine_.metrics.request_done(r, req->intended, req->sent, now);
+}
+
+void Viewer::evict(std::uint64_t frame) {
+  const std::size_t cap = std::max<std::size_t>(engine_.options.resident_tiles, 1);
+  std::lock_guard lock(mutex_);
+  if (arrived_.size() <= cap) return;
+  std::vector<std::pair<std::uint64_t, std::uint64_t>> order;  // (last wanted frame, key)
+  order.reserve(arrived_.size());
+  for (const auto& [k, t] : arrived_) {
+    auto w = last_wanted_.find(k);
+    order.emplace_back(w == last_wanted_.end() ? 0 : w->second, k);
+  }
+  const std::size_t drop = arrived_.size() - cap;
+  std::nth_element(order.begin(), order.begin() + std::ptrdiff_t(drop - 1), order.end());
+  for (std::size_t i = 0; i < drop; ++i) {
+    if (order[i].first == frame) continue;  // wanted this frame: never evicted
+    arrived_.erase(order[i].second);
+    last_wanted_.erase(order[i].second);
+  }
+}
+
+std::size_t Viewer::cancel_all() {
+  std::vector<TileCache::Handle> handles;
+  {
+    std::lock_guard lock(mutex_);
+    for (auto& [k, r] : inflight_) {
+      r->cancelled = true;
+      if (r->handle) handles.push_back(r->handle);
+    }
+    const std::size_t n = inflight_.size();
+    inflight_.clear();
+    if (handles.empty()) return n;
+  }
+  for (auto h : handles) cache_->cancel(h);
+  return handles.size();
+}
+
+Status check(const LoadTestOptions& o) {
+  const auto bad = [](const std::string& m) { return make_error(ErrorCode::invalid_argument, m); };
+  if (o.viewers < 1 || o.viewers > 10000) return bad("viewers must be 1 to 10000");
+  if (!(o.fps > 0) || o.fps > 1000) return bad("fps must be above 0 and at most 1000");
+  if (!(o.duration_s > 0) || o.duration_s > 7 * 24 * 3600.0)
+    return bad("duration must be above 0 s and at most a week");
+  if (!(o.rate >= 0) || o.rate > 1e7) return bad("rate must be 0 (closed loop) to 1e7 req/s");
+  if (o.cache == CacheMode::disk && o.cache_dir.empty())
+    return bad("the disk cache mode needs a cache folder");
+  if (o.target.empty()) return bad("no target to load-test");
+  return {};
+}
+
+}  // namespace
+
+Result<LoadTestResult> run_load_test(const LoadTestOptions& options, const DemandFn& demand) {
+  if (auto st = check(options); !st) return st.error();
+
+  // Every viewer's client stack first: opening is not part of the measured run.
+  std::vector<std::unique_ptr<TileCache>> caches;
+  for (std::uint32_t v = 0; v < options.viewers; ++v) {
+    if (options.stop && options.stop->load())
+      return make_error(ErrorCode::cancelled, "load test interrupted while opening viewers");
+    auto src = open_source(options.target, options.source);
+    if (!src) return src.error();
+    TileCacheOptions co;
+    co.ram_bytes = options.cache == CacheMode::none ? 0 : options.ram_bytes;
+    if (options.cache == CacheMode::disk)
+      co.disk = DiskCacheOptions{.dir = options.cache_dir / ("viewer-" + std::to_string(v))};
+    auto cache = TileCache::create(std::shared_ptr<TileSource>(std::move(*src)), co);
+    if (!cache) return cache.error();
+    caches.push_back(std::move(*cache));
+  }
+
+  const auto start = Clock::now() + std::chrono::milliseconds(20);
+  const auto end = start + std::chrono::duration_cast<Clock::duration>(
+                               std::chrono::duration<double>(options.duration_s));
+  Engine engine(options, demand, start);
+  for (std::uint32_t v = 0; v < options.viewers; ++v)
+    engine.viewers.push_back(std::make_unique<Viewer>(engine, v, std::move(caches[v])));
+
+  const int threads = std::max(
+      1, std::min<int>(options.threads > 0 ? options.threads
+                                           : int(std::max(1u, std::thread::hardware_concurrency())),
+                       int(options.viewers)));
+  const auto frame_period =
+      std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / options.fps));
+  std::atomic<std::uint64_t> late_frames{0};
+
+  std::vector<std::thread> drivers;
+  for (int t = 0; t < threads; ++t) {
+    drivers.emplace_back([&, t] {
+      for (std::uint64_t f = 0;;) {
+        const auto due = start + frame_period * std::int64_t(f);
+        if (due >= end || engine.stopped()) break;
+        std::this_thread::sleep_until(due);
+        const auto now = Clock::now();
+        if (now >= end) break;
+        if (now - due > frame_period) {
+          // Behind by more than a frame (the load generator is the bottleneck): like a renderer
+          // whose frame rate drops, skip to the frame due now instead of replaying a backlog.
+          const auto behind = std::uint64_t((now - start) / frame_period);
+          late_frames.fetch_add(behind - f);
+          f = behind;
+          continue;
+        }
+        const std::uint64_t frame = f++;
+        for (std::size_t v = std::size_t(t); v < engine.viewers.size(); v += std::size_t(threads)) {
+          if (engine.stopped()) break;
+          if (auto st = engine.viewers[v]->frame(frame, due); !st) {
+            engine.fail(st.error());
+            break;
+          }
+        }
+      }
+    });
+  }
+
+  // Open loop: one request per slot, slot k at start + k / rate.
+  std::uint64_t idle_slots = 0;
+  std::thread dispatcher;
+  if (options.rate > 0) {
+    dispatcher = std::thread([&] {
+      const double period_s = 1.0 / options.rate;
+      for (std::uint64_t k = 0;; ++k) {
+        const auto slot = start + std::chrono::duration_cast<Clock::duration>(
+                                      std::chrono::duration<double>(period_s * double(k)));
+        if (slot >= end || engine.stopped()) break;
+        std::this_thread::sleep_until(slot);
+        std::pair<Viewer*, std::shared_ptr<Request>> item{nullptr, nullptr};
+        {
+          std::lock_guard lock(engine.queue_mutex);
+          while (!engine.queue.empty()) {
+            item = std::move(engine.queue.front());
+            engine.queue.pop_front();
+            if (!item.second->cancelled) break;
+            item = {nullptr, nullptr};
+          }
+        }
+        if (!item.first) {
+          ++idle_slots;
+          continue;
+        }
+        item.first->send(item.second, slot);
+      }
+    });
+  }
+
+  // Progress, about once a second, until the drivers are done.
+  std::atomic<bool> drivers_done{false};
+  std::thread reporter;
+  if (options.progress) {
+    reporter = std::thread([&] {
+      auto next = start + std::chrono::seconds(1);
+      while (!drivers_done.load()) {
+        std::this_thread::sleep_until(std::min(next, Clock::now() + std::chrono::milliseconds(50)));
+        if (Clock::now() < next) continue;
+        next += std::chrono::seconds(1);
+        LoadProgress p = engine.metrics.progress(Clock::now());
+        for (auto& v : engine.viewers) p.in_flight += v->in_flight();
+        p.late_frames = late_frames.load();
+        options.progress(p);
+      }
+    });
+  }
+
+  for (auto& d : drivers) d.join();
+  engine.issuing = false;
+  if (dispatcher.joinable()) dispatcher.join();
+  {
+    // Requests still waiting for a slot were never sent: the drain does not wait for them.
+    std::lock_guard lock(engine.queue_mutex);
+    for (auto& [viewer, req] : engine.queue) viewer->unqueue(req);
+    engine.queue.clear();
+  }
+  const auto measured_end = std::min(Clock::now(), end);
+
+  // Drain: what is on its way may still arrive (and count); then the rest is abandoned.
+  const auto drain_until = Clock::now() + options.drain_timeout;
+  for (;;) {
+    std::size_t n = 0;
+    for (auto& v : engine.viewers) n += v->in_flight();
+    if (n == 0 || Clock::now() >= drain_until || (options.stop && options.stop->load())) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  drivers_done = true;
+  if (reporter.joinable()) reporter.join();
+
+  LoadTestResult result;
+  for (auto& v : engine.viewers) {
+    result.run.abandoned += v->cancel_all();
+    v->end_moves(result.run);
+    result.run.moves_incomplete += v->moves_incomplete();
+    engine.metrics.moves_started(v->moves_started());
+    result.run.demand_cpu_ms_per_frame += v->demand_ms;
+  }
+  std::uint64_t revalidated = 0;
+  for (auto& v : engine.viewers) revalidated += v->cache().stats().not_modified;
+  for (auto& v : engine.viewers) result.run.frames += v->frames;  // viewer-frames
+  if (result.run.frames) result.run.demand_cpu_ms_per_frame /= double(result.run.frames);
+  result.run.late_frames = late_frames.load();
+  result.run.idle_slots = idle_slots;
+  engine.viewers.clear();  // closes every client stack (flushes disk caches)
+
+  if (engine.error) return *engine.error;
+
+  LoadReport& r = result.report = engine.metrics.finish();
+  r.tiers.revalidated = revalidated;
+  r.title = options.title;
+  r.target = options.target;
+  r.command_line = options.command_line;
+  r.start = std::chrono::system_clock::now() -
+            std::chrono::duration_cast<std::chrono::system_clock::duration>(Clock::now() - start);
+  r.duration_s = std::max(0.0, std::chrono::duration<double>(measured_end - start).count());
+  r.viewers = options.viewers;
+  r.path = options.path_name;
+  r.fps = options.fps;
+  r.mode = options.rate > 0 ? LoopMode::open : LoopMode::closed;
+  r.rate = options.rate;
+  return result;
+}
+
+}  // namespace vts::client

@@ -1,0 +1,443 @@
+// TileCache and TileClient over real archives (built here) and a real disk cache: the network is
+// played by a wrapper around the local archive source that holds answers until the test releases
+// them (to observe merging, cancellation and ordering) and can corrupt or count them.
+#include "vts/client/tile_cache.hpp"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <deque>
+#include <filesystem>
+#include <map>
+#include <mutex>
+#include <thread>
+
+#include "vts/client/tile_client.hpp"
+#include "vts/protocol/codec.hpp"
+#include "vts/protocol/pmtiles.hpp"
+#include "vts/builder/builder.hpp"
+
+namespace fs = std::filesystem;
+using namespace vts::client;
+using vts::TileId;
+
+namespace {
+
+struct Dir {
+  fs::path path;
+  Dir() {
+    static std::atomic<int> n{0};
+    path = fs::temp_directory_path() /
+           ("vts-tile-cache-test-" + std::to_string(::getpid()) + "-" + std::to_string(n++));
+    fs::create_directories(path);
+  }
+  ~Dir() {
+    std::error_code ec;
+    fs::remove_all(path, ec);
+  }
+};
+
+fs::path build(const fs::path& out, std::optional<vts::TexelRect> region = std::nullopt) {
+  vts::BuildOptions o;
+  o.synthetic = vts::SyntheticSpec{1000, 600, region, 2};
+  o.output = out;
+  o.threads = 1;
+  auto r = vts::build_pyramid(o);
+  EXPECT_TRUE(r.ok()) << r.error().to_string();
+  return out;
+}
+
+// The local source, as if remote: answers are queued until release(), can be corrupted, and
+// If-None-Match is honoured (not_modified when the ETag matches).
+class HeldSource final : public TileSource {
+ public:
+  explicit HeldSource(std::unique_ptr<TileSource> inner) : inner_(std::move(inner)) {}
+  const SourceInfo& info() const override { return inner_->info(); }
+  bool local() const override { return false; }
+  Handle fetch(const SourceRequest& request, SourceCallback callback) override {
+    std::lock_guard lock(mutex_);
+    const Handle h = next_++;
+    fetches_.push_back(request.id);
+    held_.emplace(h, Held{request, std::move(callback)});
+    order_.push_back(h);
+    return h;
+  }
+  void cancel(Handle h) override {
+    SourceCallback cb;
+    {
+      std::lock_guard lock(mutex_);
+      auto it = held_.find(h);
+      if (it == held_.end()) return;
+      cb = std::move(it->second.callback);
+      held_.erase(it);
+      ++cancels_;
+    }
+    SourceTile t;
+    t.kind = SourceTile::Kind::cancelled;
+    cb(std::move(t));
+  }
+  // Answers held requests in (level, -urgency, arrival) order, like the fetcher; returns how many.
+  int release(int max = 1 << 30) {
+    int n = 0;
+    while (n < max) {
+      Held h;
+      {
+        std::lock_guard lock(mutex_);
+        if (held_.empty()) break;
+        auto best = held_.begin();
+        for (auto it = held_.begin(); it != held_.end(); ++it) {
+          const auto& a = it->second.request;
+          const auto& b = best->second.request;
+          if (a.level < b.level || (a.level == b.level && a.urgency > b.urgency)) best = it;
+        }
+        h = std::move(best->second);
+        held_.erase(best);
+      }
+      inner_->fetch(h.request, [&](SourceTile&& t) {
+        if (t.kind == SourceTile::Kind::ok && !h.request.if_none_match.empty() &&
+            t.etag == h.request.if_none_match) {
+          t = SourceTile{};
+          t.kind = SourceTile::Kind::not_modified;
+        }
+        if (t.kind == SourceTile::Kind::ok && corrupt_ > 0) {
+          --corrupt_;
+          t.payload[t.payload.size() / 2] ^= 0x40;
+        }
+        h.callback(std::move(t));
+      });
+      ++n;
+    }
+    return n;
+  }
+  std::size_t held() {
+    std::lock_guard lock(mutex_);
+    return held_.size();
+  }
+  std::vector<TileId> fetches() {
+    std::lock_guard lock(mutex_);
+    return fetches_;
+  }
+  int cancels() {
+    std::lock_guard lock(mutex_);
+    return cancels_;
+  }
+  std::atomic<int> corrupt_{0};
+
+ private:
+  struct Held {
+    SourceRequest request;
+    SourceCallback callback;
+  };
+  std::unique_ptr<TileSource> inner_;
+  std::mutex mutex_;
+  Handle next_ = 1;
+  std::map<Handle, Held> held_;
+  std::deque<Handle> order_;
+  std::vector<TileId> fetches_;
+  int cancels_ = 0;
+};
+
+std::shared_ptr<HeldSource> held(const fs::path& archive) {
+  auto s = open_source(archive.string());
+  EXPECT_TRUE(s.ok()) << s.error().to_string();
+  return std::make_shared<HeldSource>(std::move(*s));
+}
+
+std::vector<std::uint8_t> stored(const fs::path& archive, TileId id) {
+  auto r = vts::pmtiles::Reader::open(archive);
+  auto p = (*r)->get(id);
+  return {p->begin(), p->end()};
+}
+
+struct Got {
+  std::mutex m;
+  std::vector<PayloadResult> results;
+  PayloadCallback callback() {
+    return [this](PayloadResult&& r) {
+      std::lock_guard lock(m);
+      results.push_back(std::move(r));
+    };
+  }
+  std::size_t size() {
+    std::lock_guard lock(m);
+    return results.size();
+  }
+};
+
+// Answers held fetches until `got` has `n` results (gets with a disk cache reach the source
+// from the disk thread, a moment later).
+void drain(HeldSource& source, Got& got, std::size_t n) {
+  for (int i = 0; i < 5000 && got.size() < n; ++i) {
+    if (source.release() == 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+}
+
+template <class T>
+T take(vts::Result<T> r) {
+  EXPECT_TRUE(r.ok()) << r.error().to_string();
+  return std::move(*r);
+}
+
+TileCacheOptions with_disk(const fs::path& dir) {
+  TileCacheOptions o;
+  o.disk = DiskCacheOptions{};
+  o.disk->dir = dir;
+  return o;
+}
+
+}  // namespace
+
+TEST(TileCache, EveryTileComesByteExactFromTheSourceThenDiskThenRam) {
+  Dir d;
+  const auto archive = build(d.path / "a.pmtiles");
+  auto reader = vts::pmtiles::Reader::open(archive);
+  std::vector<TileId> ids;
+  ASSERT_TRUE((*reader)
+                  ->for_each_entry([&](const vts::pmtiles::Entry& e) {
+                    for (std::uint64_t i = 0; i < e.run_length; ++i)
+                      ids.push_back(*vts::pmtiles::tile_id_to_zxy(e.tile_id + i));
+                    return true;
+                  })
+                  .ok());
+  ASSERT_GT(ids.size(), 10u);
+  for (const auto expected_from :
+       {PayloadResult::From::network, PayloadResult::From::disk, PayloadResult::From::ram}) {
+    // A new cache over the same folder for the disk pass; the same one for the RAM pass.
+    static std::unique_ptr<TileCache> cache;
+    static std::shared_ptr<HeldSource> source;
+    if (expected_from != PayloadResult::From::ram) {
+      cache.reset();
+      source = held(archive);
+      auto c = TileCache::create(source, with_disk(d.path / "cache"));
+      ASSERT_TRUE(c.ok()) << c.error().to_string();
+      cache = std::move(*c);
+    }
+    Got got;
+    for (const auto id : ids) cache->get(id, {}, got.callback());
+    drain(*source, got, ids.size());
+    ASSERT_TRUE(cache->flush().ok());
+    ASSERT_EQ(got.size(), ids.size());
+    for (std::size_t i = 0; i < ids.size(); ++i) {
+      const auto& r = got.results[i];
+      ASSERT_EQ(r.kind, PayloadResult::Kind::ok);
+      EXPECT_EQ(r.from, expected_from);
+    }
+    std::size_t exact = 0;
+    for (const auto& r : got.results)
+      for (const auto id : ids)
+        if (r.tile->payload == stored(archive, id)) {
+          ++exact;
+          break;
+        }
+    EXPECT_EQ(exact, ids.size());
+    if (expected_from != PayloadResult::From::network) {
+      EXPECT_TRUE(source->fetches().empty());
+    }
+    if (expected_from == PayloadResult::From::ram) {
+      cache.reset();
+      source.reset();
+    }
+  }
+}
+
+TEST(TileCache, ConcurrentGetsOfOneTileAreMergedIntoOneFetch) {
+  Dir d;
+  const auto archive = build(d.path / "a.pmtiles");
+  auto source = held(archive);
+  auto cache = take(TileCache::create(source, {}));
+  Got got;
+  for (int i = 0; i < 5; ++i) cache->get(TileId{1, 1, 0}, {}, got.callback());
+  EXPECT_EQ(source->held(), 1u);
+  source->release();
+  ASSERT_EQ(got.size(), 5u);
+  for (const auto& r : got.results) {
+    EXPECT_EQ(r.kind, PayloadResult::Kind::ok);
+    EXPECT_EQ(r.tile->payload, stored(archive, TileId{1, 1, 0}));
+  }
+  EXPECT_EQ(source->fetches().size(), 1u);
+}
+
+TEST(TileCache, CancellingTheLastWaiterCancelsTheFetchButOthersKeepIt) {
+  Dir d;
+  const auto archive = build(d.path / "a.pmtiles");
+  auto source = held(archive);
+  auto cache = take(TileCache::create(source, {}));
+  Got a, b;
+  const auto ha = cache->get(TileId{2, 0, 0}, {}, a.callback());
+  const auto hb = cache->get(TileId{2, 0, 0}, {}, b.callback());
+  cache->cancel(ha);
+  ASSERT_EQ(a.size(), 1u);
+  EXPECT_EQ(a.results[0].kind, PayloadResult::Kind::cancelled);
+  EXPECT_EQ(source->cancels(), 0);  // b still wants it
+  cache->cancel(hb);
+  EXPECT_EQ(b.results[0].kind, PayloadResult::Kind::cancelled);
+  EXPECT_EQ(source->cancels(), 1);
+  EXPECT_EQ(source->held(), 0u);
+  EXPECT_EQ(cache->stats().cancelled, 2u);
+}
+
+TEST(TileCache, ACorruptPayloadIsRefetchedAndNeverCachedOrDelivered) {
+  Dir d;
+  const auto archive = build(d.path / "a.pmtiles");
+  auto source = held(archive);
+  auto cache = take(TileCache::create(source, with_disk(d.path / "cache")));
+  // One bad answer: refetched, then the good bytes.
+  source->corrupt_ = 1;
+  Got got;
+  cache->get(TileId{0, 0, 0}, {}, got.callback());
+  drain(*source, got, 1);
+  ASSERT_EQ(got.size(), 1u);
+  EXPECT_EQ(got.results[0].kind, PayloadResult::Kind::ok);
+  EXPECT_EQ(got.results[0].tile->payload, stored(archive, TileId{0, 0, 0}));
+  EXPECT_EQ(cache->stats().corrupt_rejected, 1u);
+  // Always bad: an error naming the tile after corrupt_retries re-fetches; nothing cached.
+  source->corrupt_ = 100;
+  Got bad;
+  cache->get(TileId{1, 0, 0}, {}, bad.callback());
+  drain(*source, bad, 1);
+  ASSERT_EQ(bad.size(), 1u);
+  ASSERT_EQ(bad.results[0].kind, PayloadResult::Kind::error);
+  EXPECT_NE(bad.results[0].error->message.find("1/0/0"), std::string::npos);
+  EXPECT_EQ(source->fetches().size(), 2u + 3u);
+  ASSERT_TRUE(cache->flush().ok());
+  EXPECT_EQ(cache->ram()->get(TileKey{cache->info().key, TileId{1, 0, 0}}), nullptr);
+  auto row = cache->disk()->get(cache->info().key, TileId{1, 0, 0});
+  ASSERT_TRUE(row.ok());
+  EXPECT_FALSE(row->has_value());
+}
+
+TEST(TileCache, AbsentTilesAreRememberedAndNotAskedForAgain) {
+  Dir d;
+  // Sparse: only the top-left finest tile exists.
+  const auto archive = build(d.path / "s.pmtiles", vts::TexelRect{0, 0, 256, 256});
+  auto source = held(archive);
+  auto cache = take(TileCache::create(source, {}));
+  Got got;
+  cache->get(TileId{2, 3, 2}, {}, got.callback());
+  source->release();
+  ASSERT_EQ(got.size(), 1u);
+  EXPECT_EQ(got.results[0].kind, PayloadResult::Kind::absent);
+  EXPECT_EQ(cache->get(TileId{2, 3, 2}, {}, got.callback()), 0u);  // answered inline
+  ASSERT_EQ(got.size(), 2u);
+  EXPECT_EQ(got.results[1].kind, PayloadResult::Kind::absent);
+  EXPECT_EQ(source->fetches().size(), 1u);
+}
+
+TEST(TileCache, AStaleTileIsServedAtOnceThenRevalidatedInTheBackground) {
+  Dir d;
+  const auto archive = build(d.path / "a.pmtiles");
+  auto source = held(archive);
+  TileCacheOptions o;
+  o.revalidate_after = std::chrono::seconds(0);
+  auto cache = take(TileCache::create(source, o));
+  Got got;
+  cache->get(TileId{0, 0, 0}, {}, got.callback());
+  source->release();
+  ASSERT_EQ(got.size(), 1u);
+  // The RAM hit is delivered inline, and a revalidation (with the ETag) is queued.
+  cache->get(TileId{0, 0, 0}, {}, got.callback());
+  ASSERT_EQ(got.size(), 2u);
+  EXPECT_EQ(got.results[1].from, PayloadResult::From::ram);
+  EXPECT_EQ(source->held(), 1u);
+  source->release();
+  EXPECT_EQ(cache->stats().revalidations, 1u);
+  EXPECT_EQ(cache->stats().not_modified, 1u);
+}
+
+TEST(TileCache, DiskReadsAreNotBlockedByAStuckNetwork) {
+  Dir d;
+  const auto archive = build(d.path / "a.pmtiles");
+  {
+    auto source = held(archive);
+    auto cache = take(TileCache::create(source, with_disk(d.path / "cache")));
+    Got got;
+    cache->get(TileId{0, 0, 0}, {}, got.callback());
+    drain(*source, got, 1);
+    ASSERT_TRUE(cache->flush().ok());
+  }
+  auto source = held(archive);
+  TileCacheOptions o = with_disk(d.path / "cache");
+  o.ram_bytes = 0;
+  auto cache = take(TileCache::create(source, o));
+  // Many network requests stay unanswered ...
+  Got stuck;
+  for (std::uint32_t x = 0; x < 4; ++x) cache->get(TileId{2, x, 1}, {}, stuck.callback());
+  // ... while a tile on disk is delivered.
+  Got got;
+  cache->get(TileId{0, 0, 0}, {}, got.callback());
+  for (int i = 0; i < 200 && got.size() == 0; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  ASSERT_EQ(got.size(), 1u);
+  EXPECT_EQ(got.results[0].from, PayloadResult::From::disk);
+  EXPECT_EQ(stuck.size(), 0u);
+  source->release();
+}
+
+TEST(TileClient, AncestorsAreFetchedFirstAndEveryTileIsDecodedExactly) {
+  Dir d;
+  const auto archive = build(d.path / "a.pmtiles");
+  auto source = held(archive);
+  auto client = take(TileClient::create(source, {}));
+  client->request(TileId{2, 3, 1}, 1.0);
+  client->request(TileId{2, 0, 2}, 5.0);
+  // Root, both parents, both targets: one fetch each, released coarse first.
+  EXPECT_EQ(source->held(), 5u);
+  source->release();
+  std::vector<TileId> order;
+  for (int i = 0; i < 5; ++i) {
+    auto e = client->wait(std::chrono::seconds(5));
+    ASSERT_TRUE(e.has_value());
+    ASSERT_EQ(e->kind, TileEvent::Kind::decoded);
+    auto expected = vts::decode_tile(stored(archive, e->id));
+    ASSERT_TRUE(expected.ok());
+    EXPECT_EQ(e->image.pixels, expected->pixels) << e->id.to_string();
+    order.push_back(e->id);
+  }
+  const auto fetched = source->fetches();
+  ASSERT_EQ(fetched.size(), 5u);
+  EXPECT_EQ(fetched[0], (TileId{0, 0, 0}));
+  // Delivered tiles are not asked for again, even as ancestors.
+  client->request(TileId{2, 2, 1});
+  EXPECT_EQ(source->held(), 1u);
+  // The root is pinned in RAM.
+  EXPECT_EQ(client->cache().ram()->stats().pinned_bytes > 0, true);
+}
+
+TEST(TileClient, DecodedTilesWaitWithinTheirByteBudget) {
+  Dir d;
+  const auto archive = build(d.path / "a.pmtiles");
+  auto source = held(archive);
+  TileClientOptions o;
+  o.decoded_bytes = 1;  // one tile at a time
+  auto client = take(TileClient::create(source, o));
+  for (std::uint32_t x = 0; x < 4; ++x) client->request(TileId{2, x, 0});
+  source->release();
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  const auto s = client->stats();
+  EXPECT_EQ(s.decoded, 1u);  // the others wait for room
+  int n = 0;
+  while (auto e = client->wait(std::chrono::seconds(5))) {
+    ++n;
+    if (n == 7) break;  // root, 2 parents, 4 tiles
+  }
+  EXPECT_EQ(n, 7);
+}
+
+TEST(TileClient, CancelledTilesProduceNoEvent) {
+  Dir d;
+  const auto archive = build(d.path / "a.pmtiles");
+  auto source = held(archive);
+  auto client = take(TileClient::create(source, {}));
+  client->request(TileId{2, 3, 2});
+  client->cancel(TileId{2, 3, 2});
+  source->release();
+  std::vector<TileEvent> events;
+  for (int i = 0; i < 2; ++i) {
+    auto e = client->wait(std::chrono::seconds(5));
+    ASSERT_TRUE(e.has_value());
+    events.push_back(std::move(*e));
+  }
+  EXPECT_FALSE(client->wait(std::chrono::milliseconds(100)).has_value());
+  for (const auto& e : events) EXPECT_LT(e.id.z, 2);  // the ancestors only
+}

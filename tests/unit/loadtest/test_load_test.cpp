@@ -1,0 +1,523 @@
+// The load engine (run_load_test) over real archives built here, through the real client stack:
+// a local archive (tiles arrive before get() returns, so counts are exact) and, where requests
+// must stay in flight across frames, the same archive behind the real HTTP server in process.
+// Tile demand comes from hand-written DemandFns, so no renderer is involved.
+#include "vts/loadtest/load_test.hpp"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <memory>
+#include <mutex>
+#include <stdexcept>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "vts/protocol/pmtiles.hpp"
+#include "vts/builder/builder.hpp"
+#include "vts/server/http_server.hpp"
+#include "vts/server/tileset_registry.hpp"
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+using namespace vts::client;
+using vts::TileId;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+// A folder for the suite's archives, removed at exit.
+const fs::path& dir() {
+  static const struct Dir {
+    fs::path path;
+    Dir() {
+      path = fs::temp_directory_path() / ("vts-load-test-" + std::to_string(::getpid()));
+      fs::create_directories(path / "served");
+    }
+    ~Dir() {
+      std::error_code ec;
+      fs::remove_all(path, ec);
+    }
+  } d;
+  return d.path;
+}
+
+fs::path build(const fs::path& out) {
+  vts::BuildOptions o;
+  o.synthetic = vts::SyntheticSpec{2048, 2048, std::nullopt, 6};
+  o.tile_size = 64;
+  o.border = 2;
+  o.output = out;
+  o.threads = 2;
+  auto r = vts::build_pyramid(o);
+  EXPECT_TRUE(r.ok()) << r.error().to_string();
+  return out;
+}
+
+// 2048x2048 texels in 64-texel tiles: levels 0..5, 1365 tiles, all distinct.
+const fs::path& archive() {
+  static const fs::path p = build(dir() / "served" / "syn.pmtiles");
+  return p;
+}
+
+const vts::Geometry& geometry() {
+  static const vts::Geometry g = [] {
+    auto src = open_source(archive().string());
+    EXPECT_TRUE(src.ok()) << src.error().to_string();
+    return (*src)->info().info.geometry;
+  }();
+  return g;
+}
+
+// Every tile of levels [z0, z1], coarse first, all direct.
+std::vector<DemandTile> tiles_of_levels(int z0, int z1) {
+  std::vector<DemandTile> out;
+  for (int z = z0; z <= z1; ++z)
+    for (std::uint32_t y = 0; y < geometry().tiles_y(z); ++y)
+      for (std::uint32_t x = 0; x < geometry().tiles_x(z); ++x)
+        out.push_back(DemandTile{TileId{std::uint8_t(z), x, y}, 0, true});
+  return out;
+}
+
+LoadTestOptions local_options(std::uint32_t viewers, double duration_s) {
+  LoadTestOptions o;
+  o.target = archive().string();
+  o.viewers = viewers;
+  o.fps = 30;
+  o.duration_s = duration_s;
+  o.threads = 2;
+  o.drain_timeout = 2000ms;
+  return o;
+}
+
+// The same demand for every viewer and frame; a move at frame 0 only.
+DemandFn constant(std::vector<DemandTile> tiles) {
+  return [tiles = std::move(tiles)](std::uint32_t, std::uint64_t f) -> vts::Result<ViewerDemand> {
+    return ViewerDemand{tiles, f == 0};
+  };
+}
+
+double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+// `vts serve` over the suite's "served" folder, in process on 127.0.0.1 port 0.
+class Server {
+ public:
+  Server() {
+    archive();
+    vts::HttpServerOptions o;
+    o.listen_port = 0;
+    o.admin_enabled = false;
+    o.handle_signals = false;
+    o.threads = 1;
+    o.reload_interval = 0ms;
+    registry_ = std::make_shared<vts::TilesetRegistry>();
+    auto st = registry_->load({dir() / "served"});
+    if (!st.ok()) throw std::runtime_error(st.error().to_string());
+    auto s = vts::HttpServer::create(std::move(o), registry_);
+    if (!s.ok()) throw std::runtime_error(s.error().to_string());
+    server_ = std::move(*s);
+    thread_ = std::thread([this] { server_->run(); });
+  }
+  ~Server() {
+    server_->stop();
+    thread_.join();
+  }
+  std::string url(const std::string& name) const {
+    return "http://127.0.0.1:" + std::to_string(server_->port()) + "/" + name;
+  }
+
+ private:
+  std::shared_ptr<vts::TilesetRegistry> registry_;
+  std::unique_ptr<vts::HttpServer> server_;
+  std::thread thread_;
+};
+
+TEST(LoadTest, EveryViewerStreamsItsDemandOnceAndReachesFullResolution) {
+  const auto tiles = tiles_of_levels(0, 2);
+  ASSERT_EQ(tiles.size(), 21u);
+  LoadTestOptions o = local_options(3, 0.5);
+  o.title = "levels 0-2";
+  o.path_name = "still";
+  auto r = run_load_test(o, constant(tiles));
+  ASSERT_TRUE(r.ok()) << r.error().to_string();
+  const LoadReport& rep = r->report;
+  EXPECT_EQ(rep.camera_moves, 3u);
+  EXPECT_EQ(rep.full_resolution.count(), 3u);
+  EXPECT_EQ(rep.first_visible.count(), 3u);
+  EXPECT_EQ(r->run.moves_incomplete, 0u);
+  // Resident tiles are not asked for again: one request per tile and viewer.
+  EXPECT_EQ(rep.requests, 21u * 3);
+  EXPECT_EQ(rep.errors, 0u);
+  EXPECT_TRUE(rep.errors_by_kind.empty());
+  EXPECT_EQ(rep.tiers.network, 21u * 3);  // CacheMode::none: every tile from the source
+  EXPECT_EQ(rep.tiers.ram + rep.tiers.disk, 0u);
+  EXPECT_EQ(rep.total.count(), rep.requests);
+  EXPECT_EQ(rep.queue_time.count(), rep.requests);
+  EXPECT_EQ(rep.ttfb.count(), 0u);  // a local archive has no first byte
+  EXPECT_GT(rep.bytes, 0u);
+  EXPECT_EQ(rep.cancelled, 0u);
+  EXPECT_LE(rep.first_visible.max(), rep.full_resolution.max());
+  // Frame 0 asks for everything and a local read answers at once: the view is complete within
+  // milliseconds of its due time (its arrival, not the frame that noticed it).
+  EXPECT_LT(rep.full_resolution.max(), std::uint64_t(std::chrono::nanoseconds(200ms).count()));
+  EXPECT_EQ(r->run.abandoned, 0u);
+  EXPECT_GE(r->run.frames, 3u * 10);  // 15 frames due per viewer in 0.5 s at 30 fps
+  EXPECT_LE(r->run.frames, 3u * 15);
+  // Passed through.
+  EXPECT_EQ(rep.title, "levels 0-2");
+  EXPECT_EQ(rep.path, "still");
+  EXPECT_EQ(rep.target, archive().string());
+  EXPECT_EQ(rep.viewers, 3u);
+  EXPECT_EQ(rep.fps, 30);
+  EXPECT_EQ(rep.mode, LoopMode::closed);
+  EXPECT_NEAR(rep.duration_s, 0.5, 0.1);
+  std::uint64_t per_second = 0;
+  for (const LoadSecond& s : rep.seconds) per_second += s.requests;
+  EXPECT_EQ(per_second, rep.requests);
+}
+
+TEST(LoadTest, EveryMoveTheDemandAnnouncesIsCountedAndTimed) {
+  // Moves at frames 0, 5 and 10, each to a level of its own.
+  const DemandFn demand = [](std::uint32_t, std::uint64_t f) -> vts::Result<ViewerDemand> {
+    const int z = f < 5 ? 1 : f < 10 ? 2 : 3;
+    return ViewerDemand{tiles_of_levels(z, z), f == 0 || f == 5 || f == 10};
+  };
+  auto r = run_load_test(local_options(2, 0.5), demand);
+  ASSERT_TRUE(r.ok()) << r.error().to_string();
+  EXPECT_EQ(r->report.camera_moves, 2u * 3);
+  EXPECT_EQ(r->report.full_resolution.count(), 2u * 3);
+  EXPECT_EQ(r->run.moves_incomplete, 0u);
+  EXPECT_EQ(r->report.requests, 2u * (4 + 16 + 64));
+}
+
+TEST(LoadTest, AMoveToAViewAlreadyResidentIsAtFullResolutionAtOnce) {
+  // The same tiles before and after the move at frame 10.
+  const auto tiles = tiles_of_levels(0, 2);
+  const DemandFn demand = [&](std::uint32_t, std::uint64_t f) -> vts::Result<ViewerDemand> {
+    return ViewerDemand{tiles, f == 0 || f == 10};
+  };
+  auto r = run_load_test(local_options(1, 0.5), demand);
+  ASSERT_TRUE(r.ok()) << r.error().to_string();
+  const LoadReport& rep = r->report;
+  EXPECT_EQ(rep.camera_moves, 2u);
+  ASSERT_EQ(rep.full_resolution.count(), 2u);
+  EXPECT_EQ(rep.full_resolution.min(), 0u);
+  EXPECT_EQ(rep.first_visible.min(), 0u);
+  EXPECT_EQ(rep.requests, 21u);
+}
+
+TEST(LoadTest, AbsentTilesResolveWithoutErrors) {
+  // One tile beyond the pyramid's finest level and one beyond the image's edge, next to a real one.
+  const std::vector<DemandTile> tiles = {
+      {TileId{0, 0, 0}, 0, true},
+      {TileId{std::uint8_t(geometry().max_zoom() + 1), 0, 0}, 0, true},
+      {TileId{1, 7, 0}, 0, true},
+  };
+  auto r = run_load_test(local_options(2, 0.4), constant(tiles));
+  ASSERT_TRUE(r.ok()) << r.error().to_string();
+  const LoadReport& rep = r->report;
+  EXPECT_EQ(rep.errors, 0u);
+  EXPECT_EQ(rep.requests, 3u * 2);  // absent is an answer: not asked for again
+  EXPECT_EQ(rep.tiers.network, 1u * 2);
+  EXPECT_EQ(rep.camera_moves, 2u);
+  EXPECT_EQ(rep.full_resolution.count(), 2u);
+  EXPECT_EQ(r->run.moves_incomplete, 0u);
+}
+
+TEST(LoadTest, ViewsAlternatingFasterThanTilesArriveCancelWhatTheyNoLongerNeed) {
+  Server server;
+  // The two halves of level 5 (512 tiles each), swapped every frame at 200 fps: far more than
+  // the fetcher's 32 transfers at a time can bring in 5 ms, so each frame cancels most of the
+  // other half.
+  const auto level5 = tiles_of_levels(5, 5);
+  ASSERT_EQ(level5.size(), 1024u);
+  const std::vector<DemandTile> a(level5.begin(), level5.begin() + 512),
+      b(level5.begin() + 512, level5.end());
+  const DemandFn demand = [&](std::uint32_t, std::uint64_t f) -> vts::Result<ViewerDemand> {
+    return ViewerDemand{f % 2 ? b : a, f == 0};
+  };
+  LoadTestOptions o = local_options(1, 0.5);
+  o.target = server.url("syn");
+  o.fps = 200;
+  auto r = run_load_test(o, demand);
+  ASSERT_TRUE(r.ok()) << r.error().to_string();
+  const LoadReport& rep = r->report;
+  EXPECT_GT(rep.cancelled, 0u) << rep.requests << " requests in " << r->run.frames << " frames";
+  EXPECT_GT(rep.requests, 0u);
+  EXPECT_EQ(rep.errors, 0u) << "a cancelled request is not an error";
+  EXPECT_EQ(rep.tiers.network, rep.requests);
+  EXPECT_EQ(rep.by_status.at(200), rep.requests);
+  // Over HTTP every request has a first byte.
+  EXPECT_EQ(rep.ttfb.count(), rep.requests);
+  EXPECT_LE(rep.ttfb.percentile(50), rep.total.percentile(50));
+}
+
+TEST(LoadTest, ResidentSetKeepsItsCapAndEvictedTilesComeBackFromRam) {
+  // Sets A and B of 6 tiles each, alternated every frame, 8 resident slots: each frame evicts 4
+  // tiles of the other set, which the next frame asks for again and the RAM cache answers.
+  const auto level3 = tiles_of_levels(3, 3);
+  const std::vector<DemandTile> a(level3.begin(), level3.begin() + 6),
+      b(level3.begin() + 6, level3.begin() + 12);
+  const DemandFn demand = [&](std::uint32_t, std::uint64_t f) -> vts::Result<ViewerDemand> {
+    return ViewerDemand{f % 2 ? b : a, f == 0};
+  };
+  LoadTestOptions o = local_options(1, 0.5);
+  o.cache = CacheMode::ram;
+  o.resident_tiles = 8;
+  auto r = run_load_test(o, demand);
+  ASSERT_TRUE(r.ok()) << r.error().to_string();
+  const LoadReport& rep = r->report;
+  const std::uint64_t frames = r->run.frames;
+  ASSERT_GE(frames, 5u);
+  EXPECT_EQ(rep.tiers.network, 12u);  // each tile from the source once
+  EXPECT_EQ(rep.tiers.ram, rep.requests - 12);
+  EXPECT_GT(rep.tiers.ram, 0u);
+  EXPECT_EQ(rep.errors, 0u);
+  // Frames 0 and 1 fetch 12 tiles, every later frame re-requests the 4 evicted ones (with a
+  // skipped frame, two frames in a row may want the same set and re-request nothing).
+  if (r->run.late_frames == 0)
+    EXPECT_EQ(rep.requests, 12 + 4 * (frames - 2));
+  else
+    EXPECT_LE(rep.requests, 12 + 4 * (frames - 2));
+}
+
+TEST(LoadTest, DiskModeKeepsOneCachePerViewerAcrossRuns) {
+  const fs::path cache = dir() / "disk-cache";
+  LoadTestOptions o = local_options(2, 0.3);
+  o.cache = CacheMode::disk;
+  o.cache_dir = cache;
+  auto first = run_load_test(o, constant(tiles_of_levels(0, 2)));
+  ASSERT_TRUE(first.ok()) << first.error().to_string();
+  EXPECT_EQ(first->report.tiers.network, 21u * 2);
+  EXPECT_TRUE(fs::is_directory(cache / "viewer-0"));
+  EXPECT_TRUE(fs::is_directory(cache / "viewer-1"));
+  auto second = run_load_test(o, constant(tiles_of_levels(0, 2)));
+  ASSERT_TRUE(second.ok()) << second.error().to_string();
+  EXPECT_EQ(second->report.tiers.disk, 21u * 2);
+  EXPECT_EQ(second->report.tiers.network, 0u);
+  EXPECT_EQ(second->report.errors, 0u);
+}
+
+TEST(LoadTest, LatencyCountsFromTheFrameDueTimeNotFromWhenTheDriverGotRoundToIt) {
+  // The demand of frame 0 takes 40 ms: its requests go out 40 ms after they were due, and that
+  // lag is part of their queue time and total latency (no coordinated omission).
+  const auto tiles = tiles_of_levels(0, 1);
+  const DemandFn demand = [&](std::uint32_t, std::uint64_t f) -> vts::Result<ViewerDemand> {
+    if (f == 0) std::this_thread::sleep_for(40ms);
+    return ViewerDemand{tiles, f == 0};
+  };
+  auto r = run_load_test(local_options(1, 0.3), demand);
+  ASSERT_TRUE(r.ok()) << r.error().to_string();
+  const LoadReport& rep = r->report;
+  ASSERT_EQ(rep.requests, 5u);
+  const std::uint64_t lag = std::chrono::nanoseconds(40ms).count();
+  EXPECT_GE(rep.queue_time.min(), lag);
+  EXPECT_GE(rep.total.min(), lag);
+  EXPECT_GE(rep.full_resolution.min(), lag);
+  EXPECT_LT(rep.total.max(), std::uint64_t(std::chrono::nanoseconds(300ms).count()));
+  EXPECT_GT(r->run.demand_cpu_ms_per_frame, 0.0);
+}
+
+TEST(LoadTest, OpenLoopSendsAtExactlyTheRateAndMeasuresFromEachSlot) {
+  // Far more demand than 200 req/s can serve in 1 s: the dispatcher is never idle.
+  LoadTestOptions o = local_options(2, 1.0);
+  o.rate = 200;
+  const auto t0 = Clock::now();
+  auto r = run_load_test(o, constant(tiles_of_levels(0, 5)));
+  const double wall = seconds_since(t0);
+  ASSERT_TRUE(r.ok()) << r.error().to_string();
+  const LoadReport& rep = r->report;
+  EXPECT_EQ(rep.mode, LoopMode::open);
+  EXPECT_EQ(rep.rate, 200);
+  EXPECT_GE(rep.requests, 180u);
+  EXPECT_LE(rep.requests, 220u);
+  // The first slots may pass while frame 0 is still working out its 1365 tiles; then never idle.
+  EXPECT_LE(r->run.idle_slots, 5u);
+  EXPECT_EQ(rep.errors, 0u);
+  // Requests waited up to a second in the queue for their slot, but latency counts from the
+  // slot: a local read takes well under 100 ms.
+  EXPECT_LT(rep.total.percentile(90), std::uint64_t(std::chrono::nanoseconds(100ms).count()));
+  EXPECT_LE(rep.queue_time.percentile(50), rep.total.percentile(50));
+  // Requests still queued when the run ends were never sent: nothing to wait for.
+  EXPECT_LT(wall, 1.5);
+}
+
+TEST(LoadTest, OpenLoopCountsSlotsItHadNothingToSendIn) {
+  LoadTestOptions o = local_options(1, 0.5);
+  o.rate = 100;
+  auto r = run_load_test(o, constant(tiles_of_levels(0, 1)));  // 5 tiles, then nothing to do
+  ASSERT_TRUE(r.ok()) << r.error().to_string();
+  EXPECT_EQ(r->report.requests, 5u);
+  EXPECT_GE(r->run.idle_slots, 40u);
+  EXPECT_LE(r->run.idle_slots, 45u);
+}
+
+TEST(LoadTest, OpenLoopSpendsNoSlotOnARequestTheViewNoLongerWants) {
+  // Two sets of 16 tiles swapped every frame (33 ms) while slots come every 10 ms: most of a
+  // set is still queued when the next frame drops it, and the dispatcher skips what was dropped.
+  const auto level4 = tiles_of_levels(4, 4);
+  const std::vector<DemandTile> a(level4.begin(), level4.begin() + 16),
+      b(level4.begin() + 16, level4.begin() + 32);
+  const DemandFn demand = [&](std::uint32_t, std::uint64_t f) -> vts::Result<ViewerDemand> {
+    return ViewerDemand{f % 2 ? b : a, f == 0};
+  };
+  LoadTestOptions o = local_options(1, 0.5);
+  o.rate = 100;
+  auto r = run_load_test(o, demand);
+  ASSERT_TRUE(r.ok()) << r.error().to_string();
+  // Every one of the 50 slots sent one wanted request or was idle.
+  EXPECT_EQ(r->report.requests + r->run.idle_slots, 50u);
+  EXPECT_LE(r->report.requests, 32u);
+  EXPECT_EQ(r->report.errors, 0u);
+}
+
+TEST(LoadTest, AFailingTileIsRetriedAfterABackoffNotEveryFrame) {
+  // A copy of the archive with one byte of tile 1/0/0 flipped: it fails verification.
+  const fs::path bad = dir() / "bitflip.pmtiles";
+  std::uint64_t offset = 0, length = 0;
+  {
+    auto reader = vts::pmtiles::Reader::open(archive());
+    ASSERT_TRUE(reader.ok()) << reader.error().to_string();
+    auto payload = (*reader)->get(TileId{1, 0, 0});
+    ASSERT_TRUE(payload.ok()) << payload.error().to_string();
+    offset = std::uint64_t(payload->data() - (*reader)->bytes().data());
+    length = payload->size();
+  }
+  fs::copy_file(archive(), bad, fs::copy_options::overwrite_existing);
+  {
+    std::fstream f(bad, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekg(std::streamoff(offset + length / 2));
+    const char c = char(f.get() ^ 0x40);
+    f.seekp(std::streamoff(offset + length / 2));
+    f.put(c);
+  }
+  LoadTestOptions o = local_options(2, 1.0);
+  o.target = bad.string();
+  // Moves at frames 0 and 15: the first is superseded, the second still open at the end.
+  const DemandFn demand = [](std::uint32_t, std::uint64_t f) -> vts::Result<ViewerDemand> {
+    return ViewerDemand{{{TileId{0, 0, 0}, 0, true}, {TileId{1, 0, 0}, 0, true}},
+                        f == 0 || f == 15};
+  };
+  auto r = run_load_test(o, demand);
+  ASSERT_TRUE(r.ok()) << r.error().to_string();
+  const LoadReport& rep = r->report;
+  // 30 frames wanted the tile; it was asked for at 0, ~0.25 and ~0.75 s (backoff 250, 500 ms).
+  EXPECT_GE(rep.errors, 2u * 2);
+  EXPECT_LE(rep.errors, 2u * 3);
+  EXPECT_EQ(rep.requests, rep.errors + 2);
+  ASSERT_EQ(rep.errors_by_kind.size(), 1u);
+  EXPECT_EQ(rep.errors_by_kind.begin()->second, rep.errors);
+  // Neither view reached full resolution, so neither is in the histograms.
+  EXPECT_EQ(rep.camera_moves, 2u * 2);
+  EXPECT_EQ(rep.full_resolution.count(), 0u);
+  EXPECT_EQ(rep.first_visible.count(), 0u);
+  EXPECT_EQ(r->run.moves_incomplete, 2u * 2);
+}
+
+TEST(LoadTest, TheDemandFunctionsErrorEndsTheRunAndIsReturned) {
+  const auto tiles = tiles_of_levels(0, 1);
+  const DemandFn demand = [&](std::uint32_t v, std::uint64_t f) -> vts::Result<ViewerDemand> {
+    if (v == 1 && f == 3) return vts::make_error(vts::ErrorCode::corrupt, "camera path broke");
+    return ViewerDemand{tiles, f == 0};
+  };
+  LoadTestOptions o = local_options(2, 10);
+  const auto t0 = Clock::now();
+  auto r = run_load_test(o, demand);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.error().code, vts::ErrorCode::corrupt);
+  EXPECT_EQ(r.error().message, "camera path broke");
+  EXPECT_LT(seconds_since(t0), 1.0);
+}
+
+TEST(LoadTest, OptionsOutOfRangeAreInvalidArguments) {
+  const auto demand = constant(tiles_of_levels(0, 0));
+  const auto expect_invalid = [&](const LoadTestOptions& o, const std::string& what) {
+    auto r = run_load_test(o, demand);
+    ASSERT_FALSE(r.ok()) << what;
+    EXPECT_EQ(r.error().code, vts::ErrorCode::invalid_argument) << what;
+    EXPECT_FALSE(r.error().message.empty()) << what;
+  };
+  LoadTestOptions o = local_options(1, 0.2);
+  o.viewers = 0;
+  expect_invalid(o, "no viewers");
+  o = local_options(1, 0.2);
+  o.fps = 0;
+  expect_invalid(o, "fps 0");
+  o.fps = std::numeric_limits<double>::quiet_NaN();
+  expect_invalid(o, "fps NaN");
+  o = local_options(1, 0.2);
+  o.duration_s = 0;
+  expect_invalid(o, "duration 0");
+  o = local_options(1, 0.2);
+  o.rate = -1;
+  expect_invalid(o, "negative rate");
+  o = local_options(1, 0.2);
+  o.cache = CacheMode::disk;
+  expect_invalid(o, "disk mode without a cache folder");
+  o = local_options(1, 0.2);
+  o.target.clear();
+  expect_invalid(o, "no target");
+}
+
+TEST(LoadTest, ATargetThatCannotBeOpenedIsTheOpenError) {
+  LoadTestOptions o = local_options(2, 0.2);
+  o.target = (dir() / "no-such.pmtiles").string();
+  auto r = run_load_test(o, constant(tiles_of_levels(0, 0)));
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.error().code, vts::ErrorCode::not_found);
+  EXPECT_NE(r.error().message.find("no-such.pmtiles"), std::string::npos) << r.error().message;
+}
+
+TEST(LoadTest, TheStopFlagEndsTheRunPromptlyWithWhatItHas) {
+  std::atomic<bool> stop{false};
+  LoadTestOptions o = local_options(2, 30);
+  o.stop = &stop;
+  std::atomic<int> progress_calls{0};
+  o.progress = [&](const LoadProgress& p) {
+    EXPECT_GT(p.elapsed_s, 0.9);
+    ++progress_calls;
+  };
+  std::thread stopper([&] {
+    std::this_thread::sleep_for(300ms);
+    stop = true;
+  });
+  const auto t0 = Clock::now();
+  auto r = run_load_test(o, constant(tiles_of_levels(0, 2)));
+  const double wall = seconds_since(t0);
+  stopper.join();
+  ASSERT_TRUE(r.ok()) << r.error().to_string();
+  EXPECT_LT(wall, 1.0);
+  EXPECT_EQ(r->report.requests, 21u * 2);
+  EXPECT_EQ(r->report.camera_moves, 2u);
+  EXPECT_LT(r->report.duration_s, 1.0);
+  EXPECT_GT(r->report.duration_s, 0.2);
+  EXPECT_EQ(progress_calls.load(), 0);  // stopped before its first second
+}
+
+TEST(LoadTest, ProgressIsReportedAboutOnceASecond) {
+  std::mutex m;
+  std::vector<LoadProgress> seen;
+  LoadTestOptions o = local_options(1, 1.3);
+  o.progress = [&](const LoadProgress& p) {
+    std::lock_guard lock(m);
+    seen.push_back(p);
+  };
+  auto r = run_load_test(o, constant(tiles_of_levels(0, 2)));
+  ASSERT_TRUE(r.ok()) << r.error().to_string();
+  ASSERT_EQ(seen.size(), 1u);
+  EXPECT_NEAR(seen[0].elapsed_s, 1.0, 0.2);
+  EXPECT_EQ(seen[0].requests, 21u);
+  EXPECT_EQ(seen[0].moves_complete, 1u);
+  EXPECT_EQ(seen[0].errors, 0u);
+}
+
+}  // namespace
