@@ -167,7 +167,7 @@ struct TouchKey {
 struct TouchKeyHash {
   std::size_t operator()(const TouchKey& k) const noexcept {
     std::uint64_t h = std::uint64_t(k.tileset_id) * 0x9e3779b97f4a7c15ULL;
-    h ^= (std::uint64_t(k.id.z) << 58) ^ (std::uint64_t(k.id.x) << 29) ^ k.id.y;
+    h ^= tile_key(k.id);
     h ^= h >> 31;
     return static_cast<std::size_t>(h * 0xbf58476d1ce4e5b9ULL);
   }

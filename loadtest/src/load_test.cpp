@@ -20,10 +20,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 using Ns = std::chrono::nanoseconds;
 
-std::uint64_t key_of(TileId t) {
-  return (std::uint64_t{t.z} << 56) | (std::uint64_t{t.x} << 28) | std::uint64_t{t.y};
-}
-
 std::uint64_t ns(Ns d) {
   return d.count() > 0 ? std::uint64_t(d.count()) : 0;
 }
@@ -277,7 +273,7 @@ Status Viewer::frame(std::uint64_t f, Clock::time_point due) {
   {
     std::lock_guard lock(mutex_);
     for (const DemandTile& t : d->tiles) {
-      const std::uint64_t k = key_of(t.id);
+      const std::uint64_t k = tile_key(t.id);
       if (!wanted.insert(k).second) continue;
       last_wanted_[k] = f;
       auto a = arrived_.find(k);

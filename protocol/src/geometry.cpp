@@ -95,6 +95,13 @@ bool Geometry::exists(TileId t) const {
   return valid_level(t.z) && t.x < tiles_x(t.z) && t.y < tiles_y(t.z);
 }
 
+std::vector<TileId> ancestors(TileId t) {
+  std::vector<TileId> out;
+  out.reserve(t.z);
+  for (int z = t.z - 1; z >= 0; --z) out.push_back(ancestor_at(t, z));
+  return out;
+}
+
 std::optional<TileId> Geometry::parent(TileId t) const {
   if (t.z == 0) return std::nullopt;
   return TileId{static_cast<std::uint8_t>(t.z - 1), t.x >> 1, t.y >> 1};

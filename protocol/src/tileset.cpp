@@ -230,4 +230,16 @@ Result<TilesetInfo> TilesetInfo::from_json(const std::string& metadata_json) {
   }
 }
 
+std::string tileset_name_problem(std::string_view name) {
+  if (name.empty()) return "is empty";
+  if (name.size() > 128) return "is longer than 128 characters";
+  if (name.front() == '.') return "starts with a dot";
+  for (char c : name) {
+    const bool ok = (c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') ||
+                    c == '.' || c == '_' || c == '-';
+    if (!ok) return "contains a character outside [A-Za-z0-9._-]";
+  }
+  return {};
+}
+
 }  // namespace vts

@@ -35,21 +35,6 @@ const std::array<double, 256>& decode_table() {
 
 }  // namespace
 
-double srgb_to_linear(double e) {
-  return e <= 0.04045 ? e / 12.92 : std::pow((e + 0.055) / 1.055, 2.4);
-}
-
-double linear_to_srgb(double l) {
-  return l <= 0.0031308 ? 12.92 * l : 1.055 * std::pow(l, 1.0 / 2.4) - 0.055;
-}
-
-std::uint8_t encode_srgb8(double linear) {
-  if (!(linear > 0)) return 0;  // also NaN
-  if (linear >= 1) return 255;
-  const double e = std::clamp(linear_to_srgb(linear), 0.0, 1.0);
-  return static_cast<std::uint8_t>(std::lround(e * 255.0));
-}
-
 // ---- PyramidSampler --------------------------------------------------------------------------
 
 PyramidSampler::PyramidSampler(std::filesystem::path path, std::shared_ptr<pmtiles::Reader> reader,
@@ -264,7 +249,7 @@ Result<Image> render_with(PyramidSampler& sampler, int w, int h, double bias, in
       }
     }
     std::uint8_t* out = img.at(p.x, p.y);
-    for (int ch = 0; ch < 3; ++ch) out[ch] = encode_srgb8(colour[ch]);
+    for (int ch = 0; ch < 3; ++ch) out[ch] = encode_srgb8_exact(colour[ch]);
     out[3] = 255;
     return true;
   };
@@ -354,7 +339,7 @@ Result<Image> render_supersampled(PyramidSampler& sampler, const Scene& scene, i
         }
       }
       std::uint8_t* o = out.at(x, y);
-      for (int c = 0; c < 3; ++c) o[c] = encode_srgb8(sum[c] / n);
+      for (int c = 0; c < 3; ++c) o[c] = encode_srgb8_exact(sum[c] / n);
       o[3] = 255;
     }
   }

@@ -453,17 +453,12 @@ class VirtualTexture::Impl {
     // Pending tiles that the view no longer wants are cancelled (never the root).
     for (auto it = pending_.begin(); it != pending_.end();) {
       if (it->first != tile_key(TileId{}) && !wanted_keys_.count(it->first)) {
-        client_->cancel(key_tile(it->first));
+        client_->cancel(tile_from_key(it->first));
         it = pending_.erase(it);
       } else {
         ++it;
       }
     }
-  }
-
-  static TileId key_tile(std::uint64_t key) {
-    return TileId{std::uint8_t(key >> 56), std::uint32_t((key >> 28) & ((1u << 28) - 1)),
-                  std::uint32_t(key & ((1u << 28) - 1))};
   }
 
   void touch_wanted() {

@@ -22,6 +22,8 @@
 #include <string_view>
 #include <vector>
 
+#include "vts/protocol/srgb.hpp"
+
 namespace vts {
 
 enum class DownsampleFilter : std::uint8_t { box, lanczos3 };
@@ -32,14 +34,6 @@ std::optional<DownsampleFilter> parse_downsample_filter(std::string_view name);
 // What TilesetInfo::downsample records for a build with f: "box-linear" / "lanczos3-linear".
 std::string downsample_method(DownsampleFilter f);
 
-// sRGB (IEC 61966-2-1) transfer functions on [0, 1], double precision references.
-double srgb_to_linear(double v);
-double linear_to_srgb(double v);
-
-// Nearest 8-bit sRGB code of a linear value (exact rounding in sRGB space). Thread-safe.
-std::uint8_t encode_srgb8(float linear);
-// Linear value of an 8-bit sRGB code (table lookup).
-float decode_srgb8(std::uint8_t code);
 
 // The box filter on one row pair: makes one row of `out_width` RGBA8 texels from rows a and b (b
 // may equal a at an odd bottom edge) of `in_width` texels: out[i] = mean of a[2i], a[2i+1], b[2i],

@@ -24,7 +24,4 @@ struct TileKeyHash {
   std::size_t operator()(const TileKey& k) const noexcept;
 };
 
-// The tile's ancestors from its parent up to the root (z-1, z-2, ..., 0), nearest first.
-std::vector<TileId> ancestors(TileId id);
-
 }  // namespace vts::client

@@ -11,7 +11,9 @@
 #pragma once
 
 #include <compare>
+#include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -28,6 +30,27 @@ struct TileId {
   auto operator<=>(const TileId&) const = default;
   std::string to_string() const;  // "z/x/y"
 };
+
+// A 64-bit key unique per tile (z < 64, x and y < 2^28: every pyramid a Geometry accepts), for
+// hash maps and sets; tile_from_key() inverts it.
+constexpr std::uint64_t tile_key(TileId t) noexcept {
+  return (std::uint64_t{t.z} << 56) | (std::uint64_t{t.x} << 28) | std::uint64_t{t.y};
+}
+constexpr TileId tile_from_key(std::uint64_t key) noexcept {
+  constexpr std::uint64_t kMask = (std::uint64_t{1} << 28) - 1;
+  return TileId{static_cast<std::uint8_t>(key >> 56),
+                static_cast<std::uint32_t>((key >> 28) & kMask),
+                static_cast<std::uint32_t>(key & kMask)};
+}
+
+// The ancestor of t at level z (0 <= z <= t.z); t itself when z == t.z.
+constexpr TileId ancestor_at(TileId t, int z) noexcept {
+  const int d = t.z - z;
+  return TileId{static_cast<std::uint8_t>(z), t.x >> d, t.y >> d};
+}
+
+// t's ancestors from its parent up to the root (z-1, z-2, ..., 0), nearest first.
+std::vector<TileId> ancestors(TileId t);
 
 // Parses "z/x/y" (decimal, no signs, no spaces). Range is not checked against any geometry.
 Result<TileId> parse_tile_id(std::string_view text);
@@ -104,3 +127,11 @@ class Geometry {
 };
 
 }  // namespace vts
+
+// Tiles as keys of unordered containers.
+template <>
+struct std::hash<vts::TileId> {
+  std::size_t operator()(vts::TileId t) const noexcept {
+    return std::hash<std::uint64_t>{}(vts::tile_key(t));
+  }
+};

@@ -21,10 +21,10 @@ namespace vts {
 // elsewhere, asynchronously: an AsyncTileProvider. The router answers everything it can for them
 // synchronously (index, TileJSON, target validation, access control, pyramid bounds) and hands
 // back a *deferred* tile response; the network layer asks the provider for the tile and, when the
-// provider calls back, finishes the response with complete_deferred() (vts/server/router.hpp). So the HTTP semantics of
-// a provided tile (ETag from the payload's header frame, 304, Cache-Control, 204/404 for absent
-// tiles, CORS, HEAD) are the router's, exactly as for an archive tile. A registry tileset hides a
-// provided one of the same name.
+// provider calls back, finishes the response with complete_deferred() (vts/server/router.hpp). So
+// the HTTP semantics of a provided tile (ETag from the payload's header frame, 304, Cache-Control,
+// 204/404 for absent tiles, CORS, HEAD) are the router's, exactly as for an archive tile. A
+// registry tileset hides a provided one of the same name.
 
 // What the router needs to know about a provided tileset. Immutable once handed out.
 struct ProvidedTileset {

@@ -5,6 +5,7 @@
 
 #include <cstdint>
 #include <string>
+#include <string_view>
 
 #include "vts/protocol/codec.hpp"
 #include "vts/protocol/geometry.hpp"
@@ -33,5 +34,13 @@ struct TilesetInfo {
   // Validates every field (unknown codec, unsupported format_version, bad geometry → error).
   static Result<TilesetInfo> from_json(const std::string& metadata_json);
 };
+
+// Tileset names travel in URLs and are looked up in tables, so they keep to an unreserved-only
+// alphabet that never needs escaping and can never mean a path: [A-Za-z0-9._-]+, no leading dot,
+// at most 128 characters. Returns empty for a valid name, else why it is not ("is empty",
+// "starts with a dot", ...), to be quoted in an error.
+std::string tileset_name_problem(std::string_view name);
+inline constexpr std::string_view kTilesetNameRule =
+    "names are [A-Za-z0-9._-], at most 128 characters, no leading dot";
 
 }  // namespace vts

@@ -49,15 +49,4 @@ class Pyramid {
   std::array<std::uint32_t, kMaxLevels> tiles_y_{};
 };
 
-// The ancestor of t at level z (z <= t.z); t itself when z == t.z.
-inline TileId ancestor_at(TileId t, int z) {
-  const int d = t.z - z;
-  return TileId{static_cast<std::uint8_t>(z), t.x >> d, t.y >> d};
-}
-
-// A 64-bit key unique per tile with z < 64 and x, y < 2^28, for hash maps.
-inline std::uint64_t tile_key(TileId t) {
-  return (std::uint64_t{t.z} << 56) | (std::uint64_t{t.x} << 28) | std::uint64_t{t.y};
-}
-
 }  // namespace vts::renderer

@@ -55,6 +55,7 @@
 #include "vts/protocol/geometry.hpp"
 #include "vts/protocol/pmtiles.hpp"
 #include "vts/protocol/result.hpp"
+#include "vts/protocol/srgb.hpp"
 #include "vts/renderer/camera.hpp"
 #include "vts/renderer/footprint.hpp"
 #include "vts/renderer/scene.hpp"
@@ -79,10 +80,6 @@ using Rgba8 = std::array<std::uint8_t, 4>;
 using LinearRgba = std::array<double, 4>;  // linear-light colour, straight alpha, all in [0, 1]
 
 // The exact IEC 61966-2-1 transfer functions (no lookup-table approximation in the encoder).
-double srgb_to_linear(double encoded);  // encoded in [0, 1]
-double linear_to_srgb(double linear);   // linear in [0, 1]
-// linear_to_srgb of the value clamped to [0, 1], times 255, rounded to nearest.
-std::uint8_t encode_srgb8(double linear);
 
 class PyramidSampler {
  public:

@@ -1,0 +1,28 @@
+// Whole small files in and out (configs, camera paths, reports), and text helpers for the
+// protocols' case-insensitive tokens. Not for archives or tiles: those stream.
+#pragma once
+
+#include <filesystem>
+#include <string>
+#include <string_view>
+
+#include "vts/protocol/result.hpp"
+
+namespace vts {
+
+// Replaces `path` with `bytes` atomically: a reader (or a crash) sees either the old file or the
+// whole new one, never a part. Writes a uniquely named temporary beside `path` (created with
+// O_EXCL, mode 0666 & ~umask), fsyncs it, renames it over `path`, then fsyncs the folder (best
+// effort). On failure nothing but the old file is left. Error io, naming the file and the cause.
+Status write_file_atomically(const std::filesystem::path& path, std::string_view bytes);
+
+// The whole file. Error not_found (missing or unreadable) or io, naming the file.
+Result<std::string> read_file(const std::filesystem::path& path);
+
+// HTTP-style text: spaces and tabs (and CR/LF) trimmed from both ends; ASCII case-insensitive
+// comparison and prefix test.
+std::string_view trim(std::string_view s) noexcept;
+bool iequals(std::string_view a, std::string_view b) noexcept;
+bool istarts_with(std::string_view s, std::string_view prefix) noexcept;
+
+}  // namespace vts
