@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Pyramid build benchmark (DESIGN.md §6): `vts build` (lossless, default options) against
+# Pyramid build benchmark: `vts build` (lossless, default options) against
 # `vips dzsave` with PNG tiles, `vips dzsave` with JPEG Q90 tiles and OpenImageIO's `maketx`, all on
 # the same 16384x8192 RGB input, one after another on this machine. Measures wall time, CPU time,
 # peak RSS (/usr/bin/time -v) and output bytes, and prints a markdown table with ratios against
@@ -13,7 +13,7 @@
 # strips), so that decoding the input costs every tool next to nothing and the comparison is about
 # building the pyramid. It is read once before the runs, so every tool reads it from the page cache.
 #
-# Peer settings (chosen to match the peer figures in DESIGN.md §6, whose PNG run made 2,739 tiles):
+# Peer settings (chosen to match the published peer figures, whose PNG run made 2,739 tiles):
 #   vips dzsave IN DIR --tile-size 256 --overlap 0 --suffix .png        (PNG, libvips' default zlib level)
 #   vips dzsave IN DIR --tile-size 256 --overlap 0 --suffix '.jpg[Q=90]'
 #   maketx IN -o OUT.tx --tile 256 256                                  (tiled, mip-mapped TIFF, zip)
@@ -149,9 +149,9 @@ report() {
     r=$(ratio "${WALL[vts]}" "$BASE_WALL")
     echo
     if awk -v r="$r" 'BEGIN { exit !(r < 0.5) }'; then
-      echo "Bar (DESIGN.md §6, lossless build in under half of dzsave-PNG's time): met, ratio $r."
+      echo "Bar (lossless build in under half of dzsave-PNG's time): met, ratio $r."
     else
-      echo "Bar (DESIGN.md §6, lossless build in under half of dzsave-PNG's time): NOT met, ratio $r."
+      echo "Bar (lossless build in under half of dzsave-PNG's time): NOT met, ratio $r."
     fi
   fi
 }

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Client stack benchmark (issue 4): against `vts serve` on loopback, in one run,
+# Client stack benchmark: against `vts serve` on loopback, in one run,
 #   curl   one `curl --parallel --parallel-max 32` fetching every tile URL of the pyramid
 #   vts    the same tiles cold through the full client (fetch + checksum + disk cache write +
 #          decode) with 32 requests in flight: bench/client_bench.cpp

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Deployment benchmark (issue 7): the nginx cache front of deploy/nginx (rendered from the
+# Deployment benchmark: the nginx cache front of deploy/nginx (rendered from the
 # checked-in templates, as tests/integration/deploy_front.sh does) with two `vts serve` replicas
 # behind it, the cache hot, against one replica directly. wrk -t2 -c64 --latency with
 # bench/random_tiles.lua over every tile of the Earth archive (versioned URLs, the ones TileJSON

@@ -1,11 +1,11 @@
 #!/usr/bin/env bash
-# Streaming latency under simulated viewers (issue 6): `vts loadtest` with N viewers on a camera
+# Streaming latency under simulated viewers: `vts loadtest` with N viewers on a camera
 # path against `vts serve`, and against nginx serving the same tiles as static files (the peer),
 # one after the other in one run, on loopback:
 #   - request latency p50 / p99 (from the intended send time), requests/s;
 #   - time to first visible tile and to full resolution after each camera move, p50 / p99;
 #   - how hard the load generator itself worked (late frames, demand CPU per frame).
-# The archive is the Earth at 16384x8192 (DESIGN.md §6's image) in 256-texel tiles.
+# The archive is the Earth at 16384x8192 (the benchmarks' image) in 256-texel tiles.
 #
 #   bash bench/loadtest_bench.sh [--vts PATH] [--paths flyover:64,jumps:16] [--duration 30]
 #                                [--fps 30] [--feedback 16] [--report DIR] [--out FILE]

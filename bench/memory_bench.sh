@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Memory-bound check (DESIGN.md §6: "memory bounded independent of image size"): peak RSS of
+# Memory-bound check ("memory bounded independent of image size"): peak RSS of
 # `vts build` as the image grows, from 5*10^7 to 5*10^9 texels. Slow (the largest synthetic build
 # encodes ~102k tiles); not part of ctest.
 #

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Tile serving benchmark (DESIGN.md §6, issue 3): `vts serve` against nginx serving the same tiles
+# Tile serving benchmark: `vts serve` against nginx serving the same tiles
 # extracted as static files (sendfile on, access_log off, 2 workers), on this machine in one run,
 # with wrk -t2 -c64 --latency and bench/random_tiles.lua:
 #   tiles  random existing tiles (GET /earth/z/x/y), bodies from the archive mapping / sendfile

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Renderer benchmark (issue 5), under Xvfb with Mesa llvmpipe (all this machine has), in one run:
+# Renderer benchmark, under Xvfb with Mesa llvmpipe (all this machine has), in one run:
 #   - CPU time per frame in the virtual-texturing system (feedback reduction, requests, uploads,
 #     page table) at 1920x1080 with 1/8 feedback;
 #   - render time of the same tilted view through the virtual texture vs an ordinary mipmapped

@@ -1,4 +1,4 @@
-// Pyramid geometry shared by every part of vtstream (DESIGN.md §3).
+// Pyramid geometry shared by every part of vtstream (docs/ARCHITECTURE.md, docs/FORMAT.md).
 //
 // The virtual texture is a square power-of-two quadtree: level z (0 = the single root tile) has
 // 2^z x 2^z tile slots of T x T content texels. The image occupies the top-left W x H texels of the
