@@ -1,0 +1,115 @@
+#!/usr/bin/env python3
+"""Checks that the tree shows the architecture docs/ARCHITECTURE.md describes.
+
+1. Every library folder of the folder table exists, is made by vts_library() and vice versa.
+2. No file includes another folder's src/ (or climbs out of its folder with "../").
+3. Includes follow the dependency graph: a library includes only its own headers and those of
+   the libraries it may depend on.
+4. Third-party libraries stay where they belong: no GL in render_core, server, client;
+   no OpenImageIO in server, client, render_core, renderer; no Beast outside the server.
+5. cli/ is glue: no file over 250 lines, no function over 60 lines.
+
+Usage: layout.py [REPO_ROOT]. Prints every violation; exits 1 if there is any.
+"""
+import pathlib
+import re
+import sys
+
+ROOT = pathlib.Path(sys.argv[1] if len(sys.argv) > 1 else pathlib.Path(__file__).parents[2])
+
+# folder -> (include name under vts/, libraries whose headers it may include)
+LIBRARIES = {
+    "protocol": ("protocol", set()),
+    "builder": ("builder", {"protocol"}),
+    "server": ("server", {"protocol"}),
+    "client": ("client", {"protocol"}),
+    "renderer/core": ("renderer", {"protocol"}),
+    "renderer/gl": ("renderer", {"protocol", "client"}),
+    "plot": ("plot", {"protocol"}),
+    "loadtest": ("loadtest", {"protocol", "client", "plot", "renderer"}),
+    "accuracy": ("accuracy", {"protocol", "builder", "client", "plot", "renderer"}),
+}
+FORBIDDEN = {  # folder -> include prefixes it must not use
+    "protocol": ["GLFW/", "epoxy/", "OpenImageIO/", "boost/", "curl/", "sqlite3.h"],
+    "builder": ["GLFW/", "epoxy/", "boost/", "curl/", "sqlite3.h"],
+    "server": ["GLFW/", "epoxy/", "OpenImageIO/", "curl/", "sqlite3.h"],
+    "client": ["GLFW/", "epoxy/", "OpenImageIO/", "boost/"],
+    "renderer/core": ["GLFW/", "epoxy/", "OpenImageIO/", "boost/", "curl/", "sqlite3.h"],
+    "renderer/gl": ["OpenImageIO/", "boost/", "curl/", "sqlite3.h"],
+    "plot": ["GLFW/", "epoxy/", "OpenImageIO/", "boost/", "curl/", "sqlite3.h"],
+    "loadtest": ["GLFW/", "epoxy/", "OpenImageIO/", "boost/", "sqlite3.h"],
+}
+INCLUDE = re.compile(r'^\s*#\s*include\s*[<"]([^>"]+)[>"]', re.M)
+problems = []
+
+
+def sources(folder):
+    return sorted(p for p in (ROOT / folder).rglob("*") if p.suffix in (".cpp", ".hpp", ".h"))
+
+
+# 1. The folder table and the tree agree.
+arch = (ROOT / "docs/ARCHITECTURE.md").read_text()
+table = set(re.findall(r"^\| `([a-z/]+)/` \| `vts::", arch, re.M))
+made = {str(p.parent.relative_to(ROOT)) for p in ROOT.rglob("CMakeLists.txt")
+        if "vts_library(" in p.read_text() and "tests" not in p.parts and "build" not in p.parts[0]}
+made.discard("cmake")
+for folder in sorted(table ^ made):
+    where = "docs/ARCHITECTURE.md's folder table" if folder in made else "the tree (vts_library)"
+    problems.append(f"library folder {folder}/ is missing from {where}")
+for folder in sorted(made - set(LIBRARIES)):
+    problems.append(f"library folder {folder}/ is not known to tests/lint/layout.py")
+
+# 2-4. Includes.
+every = [p for p in ROOT.rglob("*") if p.suffix in (".cpp", ".hpp", ".h")
+         and not any(part.startswith(("build", ".")) or part == "node_modules" for part in
+                     p.relative_to(ROOT).parts)]
+for path in every:
+    rel = path.relative_to(ROOT)
+    for inc in INCLUDE.findall(path.read_text(errors="replace")):
+        if inc.startswith("../") or "/src/" in inc or inc.startswith("src/"):
+            problems.append(f"{rel}: includes \"{inc}\" (another folder's private files)")
+for folder, (name, allowed) in LIBRARIES.items():
+    for path in sources(folder):
+        rel = path.relative_to(ROOT)
+        for inc in INCLUDE.findall(path.read_text(errors="replace")):
+            m = re.match(r"vts/([a-z_]+)/", inc)
+            if m and m.group(1) != name and m.group(1) not in allowed:
+                problems.append(f"{rel}: {folder}/ may not include {inc}")
+            if folder == "renderer/core" and inc.startswith("vts/renderer/"):
+                header = ROOT / "renderer/core/include" / inc
+                if not header.exists():
+                    problems.append(f"{rel}: the CPU renderer includes the GL side's {inc}")
+            for bad in FORBIDDEN.get(folder, []):
+                if inc.startswith(bad):
+                    problems.append(f"{rel}: {folder}/ may not use {inc}")
+
+# 5. cli/ is glue.
+FUNC = re.compile(r"^[A-Za-z_][\w:<>,*& ]*\([^;]*$")
+for path in sources("cli"):
+    rel = path.relative_to(ROOT)
+    lines = path.read_text().splitlines()
+    if len(lines) > 250:
+        problems.append(f"{rel}: {len(lines)} lines (cli/ files stay under 250)")
+    depth, start, name = 0, None, ""
+    for i, line in enumerate(lines):
+        code = re.sub(r'"(\\.|[^"\\])*"', '""', line.split("//")[0])
+        code = re.sub(r"'(\\.|[^'\\])'", "''", code)
+        if re.match(r"\s*(namespace\b.*\{|\}\s*$)", code) and start is None and depth == 0:
+            continue  # namespace braces do not nest functions
+        if depth == 0 and start is None and FUNC.match(code) and not code.startswith(
+                ("namespace", "struct", "class", "enum", "using", "return", "#")):
+            name, start = code.strip(), i
+        opened, closed = code.count("{"), code.count("}")
+        depth += opened - closed
+        if start is not None and depth == 0 and (opened or closed) and "}" in code:
+            length = i - start + 1
+            if length > 60:
+                problems.append(f"{rel}:{start + 1}: {name[:60]} is {length} lines (at most 60)")
+            start = None
+        elif start is not None and depth == 0 and code.rstrip().endswith(";"):
+            start = None  # a declaration
+
+for p in problems:
+    print("layout:", p)
+print(f"layout: {len(problems)} problem(s) in {len(every)} files")
+sys.exit(1 if problems else 0)
