@@ -103,6 +103,16 @@ Error varint_error(VarintStatus status, std::size_t pos, const char* what) {
 
 // ---- compression --------------------------------------------------------------------------------
 
+namespace {
+
+Error unsupported_compression(Compression c) {
+  return make_error(ErrorCode::unsupported, "internal compression " +
+                                                std::to_string(static_cast<int>(c)) +
+                                                " is not supported (none, gzip or zstd)");
+}
+
+}  // namespace
+
 // zlib counts each call's input and output in uInt (32 bits); larger buffers are fed in pieces.
 constexpr std::size_t kZlibChunk = std::numeric_limits<uInt>::max();
 
@@ -516,6 +526,16 @@ Result<std::vector<Entry>> parse_directory(std::span<const std::uint8_t> bytes,
 
 // ---- compression --------------------------------------------------------------------------------
 
+namespace {
+
+Error unsupported_compression(Compression c) {
+  return make_error(ErrorCode::unsupported, "internal compression " +
+                                                std::to_string(static_cast<int>(c)) +
+                                                " is not supported (none, gzip or zstd)");
+}
+
+}  // namespace
+
 Result<std::vector<std::uint8_t>> compress(std::span<const std::uint8_t> bytes, Compression c) {
   switch (c) {
     case Compression::none:
@@ -528,9 +548,7 @@ Result<std::vector<std::uint8_t>> compress(std::span<const std::uint8_t> bytes, 
     case Compression::brotli:
       break;
   }
-  return make_error(ErrorCode::unsupported, "internal compression " +
-                                                std::to_string(static_cast<int>(c)) +
-                                                " is not supported (none, gzip or zstd)");
+  return unsupported_compression(c);
 }
 
 Result<std::vector<std::uint8_t>> decompress(std::span<const std::uint8_t> bytes, Compression c,
@@ -547,9 +565,7 @@ Result<std::vector<std::uint8_t>> decompress(std::span<const std::uint8_t> bytes
     case Compression::brotli:
       break;
   }
-  return make_error(ErrorCode::unsupported, "internal compression " +
-                                                std::to_string(static_cast<int>(c)) +
-                                                " is not supported (none, gzip or zstd)");
+  return unsupported_compression(c);
 }
 
 }  // namespace vts::pmtiles
