@@ -14,8 +14,6 @@
 //     and from a new client whose disk cache (--cache-dir) holds the tiles.
 #include <epoxy/gl.h>
 
-#include <OpenImageIO/imageio.h>
-
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -24,10 +22,12 @@
 #include <thread>
 #include <vector>
 
+#include "vts/builder/image_io.hpp"
 #include "vts/client/disk_cache.hpp"
 #include "vts/client/source.hpp"
 #include "vts/client/tile_client.hpp"
 #include "vts/renderer/gl_context.hpp"
+#include "vts/renderer/gl_handle.hpp"
 #include "vts/renderer/gl_program.hpp"
 #include "vts/renderer/gl_uniforms.hpp"
 #include "vts/renderer/scene.hpp"
@@ -87,34 +87,34 @@ double time_to_full(VirtualTexture& vt, const Scene& scene, int w, int h) {
 // The same plane view through one ordinary mipmapped SRGB texture of the whole image, hardware
 // trilinear: the cost the virtual texture adds is the difference.
 struct MipmappedRenderer {
-  GLuint tex = 0, prog = 0, vao = 0, fbo = 0, color = 0;
+  GlTexture tex, color;
+  GlProgram prog;
+  GlVertexArray vao;
+  GlFramebuffer fbo;
   double W = 0, H = 0;
 
   void init(const std::string& image, int w, int h) {
-    auto in = OIIO::ImageInput::open(image);
-    if (!in) fail("cannot read " + image);
-    const OIIO::ImageSpec& spec = in->spec();
-    W = spec.width;
-    H = spec.height;
-    std::vector<std::uint8_t> px(std::size_t(spec.width) * spec.height * 4, 255);
-    if (!in->read_image(0, 0, 0, std::min(spec.nchannels, 4), OIIO::TypeDesc::UINT8, px.data(), 4))
-      fail("cannot decode " + image);
+    auto img = vts::read_rgba8(image);
+    if (!img) fail(img.error().to_string());
+    W = img->width;
+    H = img->height;
     GLint max_size = 0;
     glGetIntegerv(GL_MAX_TEXTURE_SIZE, &max_size);
-    if (spec.width > max_size || spec.height > max_size) fail(image + " does not fit a texture");
+    if (img->width > max_size || img->height > max_size) fail(image + " does not fit a texture");
     int levels = 1;
-    while ((std::max(spec.width, spec.height) >> levels) > 0) ++levels;
-    glCreateTextures(GL_TEXTURE_2D, 1, &tex);
-    glTextureStorage2D(tex, levels, GL_SRGB8_ALPHA8, spec.width, spec.height);
+    while ((std::max(img->width, img->height) >> levels) > 0) ++levels;
+    glCreateTextures(GL_TEXTURE_2D, 1, tex.out());
+    glTextureStorage2D(tex.get(), levels, GL_SRGB8_ALPHA8, img->width, img->height);
     glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
-    glTextureSubImage2D(tex, 0, 0, 0, spec.width, spec.height, GL_RGBA, GL_UNSIGNED_BYTE,
-                        px.data());
-    glGenerateTextureMipmap(tex);
-    glTextureParameteri(tex, GL_TEXTURE_MIN_FILTER, GL_LINEAR_MIPMAP_LINEAR);
-    glTextureParameteri(tex, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
-    glTextureParameteri(tex, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
-    glTextureParameteri(tex, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
-    if (g_anisotropy > 1) glTextureParameterf(tex, GL_TEXTURE_MAX_ANISOTROPY, float(g_anisotropy));
+    glTextureSubImage2D(tex.get(), 0, 0, 0, img->width, img->height, GL_RGBA, GL_UNSIGNED_BYTE,
+                        img->rgba.data());
+    glGenerateTextureMipmap(tex.get());
+    glTextureParameteri(tex.get(), GL_TEXTURE_MIN_FILTER, GL_LINEAR_MIPMAP_LINEAR);
+    glTextureParameteri(tex.get(), GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+    glTextureParameteri(tex.get(), GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+    glTextureParameteri(tex.get(), GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+    if (g_anisotropy > 1)
+      glTextureParameterf(tex.get(), GL_TEXTURE_MAX_ANISOTROPY, float(g_anisotropy));
 
     const std::string vs = R"(#version 450 core
 void main() {
@@ -137,28 +137,30 @@ void main() {
 })";
     auto linked = link_program(vs, fs, "mipmapped");
     if (!linked) fail(linked.error().message);
-    prog = *linked;
-    glCreateVertexArrays(1, &vao);
-    glCreateTextures(GL_TEXTURE_2D, 1, &color);
-    glTextureStorage2D(color, 1, GL_SRGB8_ALPHA8, w, h);
-    glCreateFramebuffers(1, &fbo);
-    glNamedFramebufferTexture(fbo, GL_COLOR_ATTACHMENT0, color, 0);
+    prog = std::move(*linked);
+    glCreateVertexArrays(1, vao.out());
+    glCreateTextures(GL_TEXTURE_2D, 1, color.out());
+    glTextureStorage2D(color.get(), 1, GL_SRGB8_ALPHA8, w, h);
+    glCreateFramebuffers(1, fbo.out());
+    glNamedFramebufferTexture(fbo.get(), GL_COLOR_ATTACHMENT0, color.get(), 0);
   }
 
   double frame(const PlaneScene& scene, int w, int h) {
     const auto t0 = Clock::now();
-    GlProgramUniforms u(prog);
+    GlProgramUniforms u(prog.get());
     scene.set_uniforms(u, w, h);
     const auto a = scene.anchor();
-    glProgramUniform2f(prog, glGetUniformLocation(prog, "u_viewport"), float(w), float(h));
-    glProgramUniform2i(prog, glGetUniformLocation(prog, "u_anchor"), GLint(a[0]), GLint(a[1]));
-    glProgramUniform2f(prog, glGetUniformLocation(prog, "u_image"), float(W), float(H));
-    glBindFramebuffer(GL_FRAMEBUFFER, fbo);
+    glProgramUniform2f(prog.get(), glGetUniformLocation(prog.get(), "u_viewport"), float(w),
+                       float(h));
+    glProgramUniform2i(prog.get(), glGetUniformLocation(prog.get(), "u_anchor"), GLint(a[0]),
+                       GLint(a[1]));
+    glProgramUniform2f(prog.get(), glGetUniformLocation(prog.get(), "u_image"), float(W), float(H));
+    glBindFramebuffer(GL_FRAMEBUFFER, fbo.get());
     glViewport(0, 0, w, h);
     glEnable(GL_FRAMEBUFFER_SRGB);
-    glUseProgram(prog);
-    glBindVertexArray(vao);
-    glBindTextureUnit(0, tex);
+    glUseProgram(prog.get());
+    glBindVertexArray(vao.get());
+    glBindTextureUnit(0, tex.get());
     glDrawArrays(GL_TRIANGLES, 0, 3);
     glFinish();
     return ms_since(t0);

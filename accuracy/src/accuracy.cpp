@@ -16,6 +16,7 @@
 #include "vts/accuracy/accuracy.hpp"
 #include "vts/plot/svg_plot.hpp"
 #include "vts/builder/builder.hpp"
+#include "vts/protocol/file_io.hpp"
 
 #ifdef VTS_ACCURACY_HAVE_GL
 #include "vts/renderer/gl_context.hpp"
@@ -376,17 +377,8 @@ Status write_report(const AccuracyReport& report, const fs::path& dir) {
   std::error_code ec;
   fs::create_directories(dir, ec);
   if (ec) return Error{ErrorCode::io, "cannot create " + dir.string() + ": " + ec.message()};
-  auto write = [&](const fs::path& path, const std::string& text) -> Status {
-    const fs::path tmp = path.string() + ".tmp";
-    {
-      std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
-      f << text;
-      f.close();
-      if (!f) return Error{ErrorCode::io, "cannot write " + tmp.string()};
-    }
-    fs::rename(tmp, path, ec);
-    if (ec) return Error{ErrorCode::io, "cannot rename " + tmp.string() + ": " + ec.message()};
-    return {};
+  auto write = [](const fs::path& path, const std::string& text) {
+    return write_file_atomically(path, text);
   };
   if (auto s = write(dir / "report.md", "# vtstream accuracy report\n\n" + to_markdown(report)); !s)
     return s;

@@ -19,6 +19,8 @@
 // clang-format off
 #include <GLFW/glfw3.h>
 // clang-format on
+
+#include "vts/renderer/gl_handle.hpp"
 #endif
 
 namespace vts::accuracy {
@@ -105,14 +107,15 @@ double upload_ms_per_tile(const std::vector<TileImage>& decoded, PixelFormat for
                epoxy_has_gl_extension("GL_EXT_texture_sRGB")))
     return NAN;
   const int slots_per_row = 4;
-  GLuint tex = 0, pbo = 0;
-  glCreateTextures(GL_TEXTURE_2D, 1, &tex);
-  glTextureStorage2D(tex, 1, bc1 ? GL_COMPRESSED_SRGB_ALPHA_S3TC_DXT1_EXT : GL_SRGB8_ALPHA8,
+  renderer::GlTexture tex;
+  renderer::GlBuffer pbo;
+  glCreateTextures(GL_TEXTURE_2D, 1, tex.out());
+  glTextureStorage2D(tex.get(), 1, bc1 ? GL_COMPRESSED_SRGB_ALPHA_S3TC_DXT1_EXT : GL_SRGB8_ALPHA8,
                      GLsizei(size * slots_per_row), GLsizei(size * slots_per_row));
   const std::size_t bytes = decoded.front().pixels.size();
-  glCreateBuffers(1, &pbo);
-  glNamedBufferStorage(pbo, GLsizeiptr(bytes), nullptr, GL_MAP_WRITE_BIT);
-  glBindBuffer(GL_PIXEL_UNPACK_BUFFER, pbo);
+  glCreateBuffers(1, pbo.out());
+  glNamedBufferStorage(pbo.get(), GLsizeiptr(bytes), nullptr, GL_MAP_WRITE_BIT);
+  glBindBuffer(GL_PIXEL_UNPACK_BUFFER, pbo.get());
   glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
   glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
   glFinish();
@@ -121,19 +124,19 @@ double upload_ms_per_tile(const std::vector<TileImage>& decoded, PixelFormat for
   for (int r = 0; r < rounds; ++r) {
     for (const TileImage& t : decoded) {
       if (t.pixels.size() != bytes) continue;
-      void* dst = glMapNamedBufferRange(pbo, 0, GLsizeiptr(bytes),
+      void* dst = glMapNamedBufferRange(pbo.get(), 0, GLsizeiptr(bytes),
                                         GL_MAP_WRITE_BIT | GL_MAP_INVALIDATE_BUFFER_BIT);
       if (dst == nullptr) break;
       std::memcpy(dst, t.pixels.data(), bytes);
-      glUnmapNamedBuffer(pbo);
+      glUnmapNamedBuffer(pbo.get());
       const GLint x = GLint((n % slots_per_row) * size), y = GLint((n / slots_per_row % 4) * size);
       if (bc1) {
-        glCompressedTextureSubImage2D(tex, 0, x, y, GLsizei(size), GLsizei(size),
+        glCompressedTextureSubImage2D(tex.get(), 0, x, y, GLsizei(size), GLsizei(size),
                                       GL_COMPRESSED_SRGB_ALPHA_S3TC_DXT1_EXT, GLsizei(bytes),
                                       nullptr);
       } else {
-        glTextureSubImage2D(tex, 0, x, y, GLsizei(size), GLsizei(size), GL_RGBA, GL_UNSIGNED_BYTE,
-                            nullptr);
+        glTextureSubImage2D(tex.get(), 0, x, y, GLsizei(size), GLsizei(size), GL_RGBA,
+                            GL_UNSIGNED_BYTE, nullptr);
       }
       ++n;
     }
@@ -142,8 +145,6 @@ double upload_ms_per_tile(const std::vector<TileImage>& decoded, PixelFormat for
   const double ms = ms_since(t0);
   glBindBuffer(GL_PIXEL_UNPACK_BUFFER, 0);
   const bool ok = glGetError() == GL_NO_ERROR;
-  glDeleteBuffers(1, &pbo);
-  glDeleteTextures(1, &tex);
   return ok && n > 0 ? ms / double(n) : NAN;
 }
 #else

@@ -19,6 +19,8 @@
 #include <vector>
 
 #include "gl_fixture.hpp"
+#include "vts/builder/builder.hpp"
+#include "vts/builder/image_io.hpp"
 #include "vts/client/source.hpp"
 #include "vts/client/tile_client.hpp"
 #include "vts/protocol/codec.hpp"
@@ -29,7 +31,6 @@
 #include "vts/renderer/globe.hpp"
 #include "vts/renderer/reference.hpp"
 #include "vts/renderer/virtual_texture.hpp"
-#include "vts/builder/builder.hpp"
 
 namespace fs = std::filesystem;
 using namespace vts::renderer;
@@ -112,8 +113,8 @@ class Bc1Test : public vts::test::VirtualTextureFixture {
   static ImageDiff compare(const Image& got, const Image& ref, const std::string& name) {
     // VTS_TEST_KEEP_IMAGES=DIR keeps both images for a look.
     if (const char* keep = std::getenv("VTS_TEST_KEEP_IMAGES")) {
-      (void)write_png(fs::path(keep) / (name + "-gpu.png"), got);
-      (void)write_png(fs::path(keep) / (name + "-ref.png"), ref);
+      (void)vts::write_png(fs::path(keep) / (name + "-gpu.png"), got.width, got.height, got.rgba);
+      (void)vts::write_png(fs::path(keep) / (name + "-ref.png"), ref.width, ref.height, ref.rgba);
     }
     auto d = compare_images(got, ref);
     EXPECT_TRUE(d.ok()) << d.error().to_string();
@@ -324,7 +325,7 @@ void main() { o_color = texelFetch(u_tex, ivec2(gl_FragCoord.xy), 0); })",
         glBindFramebuffer(GL_FRAMEBUFFER, fbo);
         glViewport(0, 0, s, s);
         glDisable(GL_FRAMEBUFFER_SRGB);
-        glUseProgram(*program);
+        glUseProgram(program->get());
         glBindTextureUnit(0, tex);
         glBindVertexArray(vao);
         glDrawArrays(GL_TRIANGLES, 0, 3);
@@ -342,7 +343,6 @@ void main() { o_color = texelFetch(u_tex, ivec2(gl_FragCoord.xy), 0); })",
     }
   }
   glBindFramebuffer(GL_FRAMEBUFFER, 0);
-  glDeleteProgram(*program);
   glDeleteTextures(1, &tex);
   glDeleteTextures(1, &target);
   glDeleteFramebuffers(1, &fbo);

@@ -13,13 +13,14 @@
 #include <string>
 
 #include "gl_fixture.hpp"
+#include "vts/builder/builder.hpp"
+#include "vts/builder/image_io.hpp"
 #include "vts/client/source.hpp"
 #include "vts/client/tile_client.hpp"
 #include "vts/renderer/gl_context.hpp"
 #include "vts/renderer/globe.hpp"
 #include "vts/renderer/reference.hpp"
 #include "vts/renderer/virtual_texture.hpp"
-#include "vts/builder/builder.hpp"
 
 namespace fs = std::filesystem;
 using namespace vts::renderer;
@@ -71,8 +72,8 @@ class GlobeTest : public vts::test::VirtualTextureFixture {
 
   static ImageDiff compare(const Image& a, const Image& b, const std::string& name) {
     if (const char* keep = std::getenv("VTS_TEST_KEEP_IMAGES")) {
-      (void)write_png(fs::path(keep) / (name + "-a.png"), a);
-      (void)write_png(fs::path(keep) / (name + "-b.png"), b);
+      (void)vts::write_png(fs::path(keep) / (name + "-a.png"), a.width, a.height, a.rgba);
+      (void)vts::write_png(fs::path(keep) / (name + "-b.png"), b.width, b.height, b.rgba);
     }
     auto d = compare_images(a, b);
     EXPECT_TRUE(d.ok()) << d.error().to_string();

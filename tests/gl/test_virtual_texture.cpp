@@ -14,6 +14,8 @@
 #include <string>
 
 #include "gl_fixture.hpp"
+#include "vts/builder/builder.hpp"
+#include "vts/builder/image_io.hpp"
 #include "vts/client/source.hpp"
 #include "vts/client/tile_client.hpp"
 #include "vts/renderer/camera.hpp"
@@ -21,7 +23,6 @@
 #include "vts/renderer/page_table.hpp"
 #include "vts/renderer/reference.hpp"
 #include "vts/renderer/virtual_texture.hpp"
-#include "vts/builder/builder.hpp"
 
 namespace fs = std::filesystem;
 using namespace vts::renderer;
@@ -58,8 +59,10 @@ class VirtualTextureTest : public vts::test::VirtualTextureFixture {
     if (!save_as.empty()) {
       // VTS_TEST_KEEP_IMAGES=DIR keeps both images for a look.
       if (const char* keep = std::getenv("VTS_TEST_KEEP_IMAGES")) {
-        (void)write_png(fs::path(keep) / (save_as + "-gpu.png"), got);
-        (void)write_png(fs::path(keep) / (save_as + "-ref.png"), ref);
+        (void)vts::write_png(fs::path(keep) / (save_as + "-gpu.png"), got.width, got.height,
+                             got.rgba);
+        (void)vts::write_png(fs::path(keep) / (save_as + "-ref.png"), ref.width, ref.height,
+                             ref.rgba);
       }
     }
     auto diff = compare_images(got, ref);

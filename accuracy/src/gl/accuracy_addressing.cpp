@@ -1,6 +1,6 @@
-// Table: addressing (accuracy/include/vts/accuracy/accuracy.hpp, table 4). How precisely a pixel finds
-// its finest-level texel, float32 UV against the renderer's integer + fraction scheme, at virtual
-// sizes 2^15 ... 2^25, and what each costs in the shader.
+// Table: addressing (accuracy/include/vts/accuracy/accuracy.hpp, table 4). How precisely a pixel
+// finds its finest-level texel, float32 UV against the renderer's integer + fraction scheme, at
+// virtual sizes 2^15 ... 2^25, and what each costs in the shader.
 //
 // Both variants run as a fullscreen pass of a small dedicated shader on a plane view
 // (camera.hpp) and write the finest texel each pixel addresses — integer texel + fraction bits,
@@ -29,13 +29,13 @@
 #include <utility>
 #include <vector>
 
-#include "vts/renderer/shaders.hpp"
-#include "vts/accuracy/addressing_detail.hpp"
 #include "vts/accuracy/accuracy.hpp"
+#include "vts/accuracy/addressing_detail.hpp"
 #include "vts/renderer/camera.hpp"
 #include "vts/renderer/gl_program.hpp"
 #include "vts/renderer/gl_uniforms.hpp"
 #include "vts/renderer/scene.hpp"
+#include "vts/renderer/shaders.hpp"
 
 namespace vts::accuracy {
 
@@ -124,21 +124,16 @@ struct Address {
 
 // The GL objects of the table; released on every path out.
 struct GlState {
-  GLuint fbo = 0, addr_tex = 0, foot_tex = 0, vao = 0;
-  GLuint programs[2] = {0, 0};
+  renderer::GlFramebuffer fbo;
+  renderer::GlTexture addr_tex, foot_tex;
+  renderer::GlVertexArray vao;
+  renderer::GlProgram programs[2];
   int width = 0, height = 0;
   GLint viewport[4] = {0, 0, 0, 0};  // the caller's, restored
   GlState() { glGetIntegerv(GL_VIEWPORT, viewport); }
   GlState(const GlState&) = delete;
   GlState& operator=(const GlState&) = delete;
   ~GlState() {
-    for (GLuint p : programs) {
-      if (p) glDeleteProgram(p);
-    }
-    if (fbo) glDeleteFramebuffers(1, &fbo);
-    if (addr_tex) glDeleteTextures(1, &addr_tex);
-    if (foot_tex) glDeleteTextures(1, &foot_tex);
-    if (vao) glDeleteVertexArrays(1, &vao);
     glBindFramebuffer(GL_FRAMEBUFFER, 0);
     glUseProgram(0);
     glBindVertexArray(0);
@@ -149,17 +144,17 @@ struct GlState {
 Result<bool> create_targets(GlState& gl, int w, int h) {
   gl.width = w;
   gl.height = h;
-  glCreateTextures(GL_TEXTURE_2D, 1, &gl.addr_tex);
-  glTextureStorage2D(gl.addr_tex, 1, GL_RGBA32UI, w, h);
-  glCreateTextures(GL_TEXTURE_2D, 1, &gl.foot_tex);
-  glTextureStorage2D(gl.foot_tex, 1, GL_RG32F, w, h);
-  glCreateFramebuffers(1, &gl.fbo);
-  glNamedFramebufferTexture(gl.fbo, GL_COLOR_ATTACHMENT0, gl.addr_tex, 0);
-  glNamedFramebufferTexture(gl.fbo, GL_COLOR_ATTACHMENT1, gl.foot_tex, 0);
+  glCreateTextures(GL_TEXTURE_2D, 1, gl.addr_tex.out());
+  glTextureStorage2D(gl.addr_tex.get(), 1, GL_RGBA32UI, w, h);
+  glCreateTextures(GL_TEXTURE_2D, 1, gl.foot_tex.out());
+  glTextureStorage2D(gl.foot_tex.get(), 1, GL_RG32F, w, h);
+  glCreateFramebuffers(1, gl.fbo.out());
+  glNamedFramebufferTexture(gl.fbo.get(), GL_COLOR_ATTACHMENT0, gl.addr_tex.get(), 0);
+  glNamedFramebufferTexture(gl.fbo.get(), GL_COLOR_ATTACHMENT1, gl.foot_tex.get(), 0);
   const GLenum bufs[2] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT1};
-  glNamedFramebufferDrawBuffers(gl.fbo, 2, bufs);
-  glCreateVertexArrays(1, &gl.vao);
-  const GLenum status = glCheckNamedFramebufferStatus(gl.fbo, GL_FRAMEBUFFER);
+  glNamedFramebufferDrawBuffers(gl.fbo.get(), 2, bufs);
+  glCreateVertexArrays(1, gl.vao.out());
+  const GLenum status = glCheckNamedFramebufferStatus(gl.fbo.get(), GL_FRAMEBUFFER);
   if (status != GL_FRAMEBUFFER_COMPLETE)
     return Error{ErrorCode::unsupported,
                  "addressing table: the RGBA32UI + RG32F render target is incomplete (status 0x" +
@@ -178,7 +173,7 @@ Result<bool> create_targets(GlState& gl, int w, int h) {
 
 // Sets the variant's uniforms for `view` at S texels per side.
 void set_uniforms(GlState& gl, Variant variant, const PlaneView& view, double size) {
-  const GLuint p = gl.programs[variant];
+  const GLuint p = gl.programs[variant].get();
   renderer::GlProgramUniforms u(p);
   u.set("u_viewport", float(gl.width), float(gl.height));
   if (variant == kOurs) {
@@ -202,13 +197,13 @@ void set_uniforms(GlState& gl, Variant variant, const PlaneView& view, double si
 }
 
 void draw(GlState& gl, Variant variant) {
-  glBindFramebuffer(GL_FRAMEBUFFER, gl.fbo);
+  glBindFramebuffer(GL_FRAMEBUFFER, gl.fbo.get());
   glViewport(0, 0, gl.width, gl.height);
   glDisable(GL_DEPTH_TEST);
   glDisable(GL_BLEND);
   glDisable(GL_SCISSOR_TEST);
-  glUseProgram(gl.programs[variant]);
-  glBindVertexArray(gl.vao);
+  glUseProgram(gl.programs[variant].get());
+  glBindVertexArray(gl.vao.get());
   glDrawArrays(GL_TRIANGLES, 0, 3);
 }
 
@@ -221,9 +216,9 @@ Result<std::vector<Address>> addresses(GlState& gl, Variant variant, const Plane
   std::vector<std::uint32_t> addr(std::size_t(w) * h * 4);
   std::vector<float> foot(std::size_t(w) * h * 2);
   glPixelStorei(GL_PACK_ALIGNMENT, 4);
-  glNamedFramebufferReadBuffer(gl.fbo, GL_COLOR_ATTACHMENT0);
+  glNamedFramebufferReadBuffer(gl.fbo.get(), GL_COLOR_ATTACHMENT0);
   glReadPixels(0, 0, w, h, GL_RGBA_INTEGER, GL_UNSIGNED_INT, addr.data());
-  glNamedFramebufferReadBuffer(gl.fbo, GL_COLOR_ATTACHMENT1);
+  glNamedFramebufferReadBuffer(gl.fbo.get(), GL_COLOR_ATTACHMENT1);
   glReadPixels(0, 0, w, h, GL_RG, GL_FLOAT, foot.data());
   if (GLenum e = glGetError(); e != GL_NO_ERROR)
     return Error{ErrorCode::unsupported, std::string("addressing table: the ") +
@@ -371,7 +366,8 @@ Result<AccuracyTable> addressing_table(const AccuracyContext& ctx) {
     if (!production_has(s))
       return Error{ErrorCode::internal,
                    "addressing table: the virtual-texturing shader no longer contains the "
-                   "addressing code this table measures as ours (renderer/core/include/vts/renderer/shaders.hpp "
+                   "addressing code this table measures as ours "
+                   "(renderer/core/include/vts/renderer/shaders.hpp "
                    "changed; update accuracy/include/vts/accuracy/addressing_detail.hpp):\n" +
                        std::string(s)};
   }
@@ -392,11 +388,11 @@ Result<AccuracyTable> addressing_table(const AccuracyContext& ctx) {
     auto f = renderer::link_program(renderer::detail::kFullscreenVertex, kFloatFragment,
                                     "addressing float32 UV");
     if (!f) return f.error();
-    gl.programs[kFloat] = *f;
+    gl.programs[kFloat] = std::move(*f);
     auto o = renderer::link_program(renderer::detail::kFullscreenVertex, ours_fragment(),
                                     "addressing ours");
     if (!o) return o.error();
-    gl.programs[kOurs] = *o;
+    gl.programs[kOurs] = std::move(*o);
   }
 
   AccuracyTable t;
@@ -473,7 +469,8 @@ Result<AccuracyTable> addressing_table(const AccuracyContext& ctx) {
       "ours: the shipped code — PlaneScene's GLSL and uniforms (the eye relative to an integer "
       "anchor texel, formed in double), then the virtual-texturing shader's own lines that take "
       "dFdxFine(rel) and split rel into integer texel + fraction (checked at run time to be a "
-      "verbatim part of renderer/core/include/vts/renderer/shaders.hpp). At a coarser level L the shader shifts the "
+      "verbatim part of renderer/core/include/vts/renderer/shaders.hpp). At a coarser level L the "
+      "shader shifts the "
       "integer by s = max_level - L and adds the shifted-out bits to the fraction, / 2^s: in "
       "that level's texels the error is the finest level's / 2^s plus one float rounding "
       "(2^-24), so the finest level measured here bounds them all.",

@@ -1,6 +1,6 @@
-// Table: feedback (accuracy/include/vts/accuracy/accuracy.hpp). What the resolution of the feedback pass
-// (1/1 ... 1/16 of the screen) costs in missed tiles, in frames to convergence after a jump, and
-// saves in CPU time and readback bytes per frame.
+// Table: feedback (accuracy/include/vts/accuracy/accuracy.hpp). What the resolution of the feedback
+// pass (1/1 ... 1/16 of the screen) costs in missed tiles, in frames to convergence after a jump,
+// and saves in CPU time and readback bytes per frame.
 //
 // Two measurements:
 //   - tiles found: the CPU demand simulator (renderer/demand.hpp: the GPU feedback pass pixel for
@@ -240,10 +240,8 @@ Result<AccuracyTable> feedback_table(const AccuracyContext& ctx) {
     for (auto& vt : textures) (void)views::converge(*vt, scene, w, h, max_frames);
     for (int i = 0; i < steady_frames; ++i) {
       for (int m = 0; m < kModes; ++m) {
-        const auto t0 = Clock::now();
-        const FrameStats st = textures[std::size_t(m)]->render(scene, w, h);
-        glFinish();
-        runs[m].frame_ms.push_back(views::ms_since(t0));
+        const auto [st, ms] = views::timed_frame(*textures[std::size_t(m)], scene, w, h);
+        runs[m].frame_ms.push_back(ms);
         if (st.feedback_frames > 0 && st.uploads == 0) runs[m].cpu_ms.push_back(st.vt_cpu_ms);
       }
     }

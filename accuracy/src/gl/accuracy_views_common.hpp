@@ -1,8 +1,8 @@
 // Shared by the feedback and filtering tables of `vts bench accuracy` (accuracy_feedback.cpp,
 // accuracy_filtering.cpp): a VirtualTexture over the real client stack on a local archive, views of
 // the plane and the globe (some oblique) placed on any image, convergence loops, and image error
-// over the pixels that show the image. Private to vts::accuracy; the functions that need the current
-// GL context say so.
+// over the pixels that show the image. Private to vts::accuracy; the functions that need the
+// current GL context say so.
 #pragma once
 
 #include <epoxy/gl.h>
@@ -110,36 +110,30 @@ inline View make_view(ViewKind kind, Rng& rng, const Geometry& g, int height) {
     return std::string(buf);
   };
   View out;
+  // A plane view centred in the middle half at a zoom in [tpp_lo, tpp_hi); turned to a random
+  // heading and tilted into [tilt_lo, tilt_hi) when tilt_hi > 0.
+  const auto plane = [&](double tpp_lo, double tpp_hi, double tilt_lo, double tilt_hi) {
+    PlaneView v;
+    centre(v);
+    v.texels_per_pixel = rng.uniform(tpp_lo, tpp_hi);
+    if (tilt_hi > 0) {
+      v.heading = rng.uniform(-std::numbers::pi, std::numbers::pi);
+      v.tilt = rng.uniform(tilt_lo, tilt_hi);
+    }
+    out.scene = std::make_shared<PlaneScene>(v);
+    return v;
+  };
   switch (kind) {
-    case ViewKind::plane_straight: {
-      PlaneView v;
-      centre(v);
-      v.texels_per_pixel = rng.uniform(0.7, 2.6);
-      out.name = "plane straight (" + fmt(v.texels_per_pixel) + " texel/px)";
-      out.scene = std::make_shared<PlaneScene>(v);
+    case ViewKind::plane_straight:
+      out.name = "plane straight (" + fmt(plane(0.7, 2.6, 0, 0).texels_per_pixel) + " texel/px)";
       break;
-    }
-    case ViewKind::plane_turned: {
-      PlaneView v;
-      centre(v);
-      v.texels_per_pixel = rng.uniform(0.6, 2.0);
-      v.heading = rng.uniform(-std::numbers::pi, std::numbers::pi);
-      v.tilt = rng.uniform(0.3, 0.7);
-      out.name = "plane turned (tilt " + fmt(v.tilt) + ")";
-      out.scene = std::make_shared<PlaneScene>(v);
+    case ViewKind::plane_turned:
+      out.name = "plane turned (tilt " + fmt(plane(0.6, 2.0, 0.3, 0.7).tilt) + ")";
       break;
-    }
-    case ViewKind::plane_oblique: {
-      PlaneView v;
-      centre(v);
-      v.texels_per_pixel = rng.uniform(0.8, 1.6);
-      v.heading = rng.uniform(-std::numbers::pi, std::numbers::pi);
-      v.tilt = rng.uniform(1.0, 1.2);
-      out.name = "plane oblique (tilt " + fmt(v.tilt) + ")";
-      out.scene = std::make_shared<PlaneScene>(v);
+    case ViewKind::plane_oblique:
+      out.name = "plane oblique (tilt " + fmt(plane(0.8, 1.6, 1.0, 1.2).tilt) + ")";
       out.oblique = true;
       break;
-    }
     case ViewKind::globe_far: {
       GlobeView v;
       v.lon_deg = rng.uniform(-180, 180);
@@ -194,6 +188,20 @@ inline Result<std::unique_ptr<renderer::VirtualTexture>> open_vt(
   if (!tiles) return tiles.error();
   const Geometry geometry = (*tiles)->info().info.geometry;
   return renderer::VirtualTexture::create(std::shared_ptr(std::move(*tiles)), geometry, options);
+}
+
+// One frame of `scene` finished on the GPU (glFinish), and its wall time. Needs the GL context.
+struct TimedFrame {
+  renderer::FrameStats stats;
+  double ms = 0;
+};
+inline TimedFrame timed_frame(renderer::VirtualTexture& vt, const renderer::Scene& scene, int w,
+                              int h) {
+  const auto t0 = Clock::now();
+  TimedFrame f{vt.render(scene, w, h), 0};
+  glFinish();
+  f.ms = ms_since(t0);
+  return f;
 }
 
 struct Convergence {

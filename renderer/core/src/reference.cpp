@@ -1,7 +1,5 @@
 #include "vts/renderer/reference.hpp"
 
-#include <OpenImageIO/imageio.h>
-
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -14,8 +12,6 @@
 #include "vts/renderer/pyramid.hpp"
 
 namespace vts::renderer {
-
-namespace OIIO = OIIO_NAMESPACE;
 
 namespace {
 
@@ -382,72 +378,6 @@ Result<ImageDiff> compare_images(const Image& a, const Image& b, int threshold) 
   d.psnr_db = sum_sq == 0 ? std::numeric_limits<double>::infinity()
                           : 10.0 * std::log10(255.0 * 255.0 * values / double(sum_sq));
   return d;
-}
-
-// ---- PNG -------------------------------------------------------------------------------------
-
-Status write_png(const std::filesystem::path& path, const Image& image) {
-  if (image.width <= 0 || image.height <= 0 ||
-      image.rgba.size() != std::size_t(image.width) * std::size_t(image.height) * 4)
-    return make_error(ErrorCode::invalid_argument, "cannot write " + quoted(path) + ": invalid " +
-                                                       std::to_string(image.width) + "x" +
-                                                       std::to_string(image.height) + " image");
-  auto out = OIIO::ImageOutput::create("png");
-  if (!out)
-    return make_error(ErrorCode::unsupported,
-                      "cannot write " + quoted(path) + ": no PNG writer: " + OIIO::geterror());
-  OIIO::ImageSpec spec(image.width, image.height, 4, OIIO::TypeDesc::UINT8);
-  spec.attribute("oiio:ColorSpace", "sRGB");
-  spec.attribute("oiio:UnassociatedAlpha", 1);  // straight alpha as given: no un-premultiplying
-  if (!out->open(path.string(), spec))
-    return make_error(ErrorCode::io, "cannot write " + quoted(path) + ": " + out->geterror());
-  if (!out->write_image(OIIO::TypeDesc::UINT8, image.rgba.data())) {
-    const std::string error = out->geterror();
-    out->close();
-    return make_error(ErrorCode::io, "writing " + quoted(path) + ": " + error);
-  }
-  if (!out->close())
-    return make_error(ErrorCode::io, "writing " + quoted(path) + ": " + out->geterror());
-  return {};
-}
-
-Result<Image> read_png(const std::filesystem::path& path) {
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec))
-    return make_error(ErrorCode::not_found, "cannot read " + quoted(path) + ": no such file");
-  OIIO::ImageSpec config;
-  config.attribute("oiio:UnassociatedAlpha", 1);  // keep straight alpha: no premultiplying
-  auto in = OIIO::ImageInput::open(path.string(), &config);
-  if (!in)
-    return make_error(ErrorCode::corrupt, "cannot read " + quoted(path) + ": " + OIIO::geterror());
-  const OIIO::ImageSpec& spec = in->spec();
-  const int channels = spec.nchannels;
-  if (spec.width <= 0 || spec.height <= 0 || spec.width > (1 << 15) || spec.height > (1 << 15) ||
-      channels < 1 || channels > 4)
-    return make_error(ErrorCode::unsupported, "cannot read " + quoted(path) + ": " +
-                                                  std::to_string(spec.width) + "x" +
-                                                  std::to_string(spec.height) + " with " +
-                                                  std::to_string(channels) + " channels");
-  std::vector<std::uint8_t> raw(std::size_t(spec.width) * spec.height * channels);
-  if (!in->read_image(0, 0, 0, channels, OIIO::TypeDesc::UINT8, raw.data()))
-    return make_error(ErrorCode::corrupt, "reading " + quoted(path) + ": " + in->geterror());
-  in->close();
-  Image img = Image::blank(spec.width, spec.height);
-  const std::size_t n = std::size_t(spec.width) * spec.height;
-  for (std::size_t i = 0; i < n; ++i) {
-    const std::uint8_t* s = raw.data() + i * channels;
-    std::uint8_t* d = img.rgba.data() + i * 4;
-    if (channels <= 2) {
-      d[0] = d[1] = d[2] = s[0];
-      d[3] = channels == 2 ? s[1] : 255;
-    } else {
-      d[0] = s[0];
-      d[1] = s[1];
-      d[2] = s[2];
-      d[3] = channels == 4 ? s[3] : 255;
-    }
-  }
-  return img;
 }
 
 }  // namespace vts::renderer

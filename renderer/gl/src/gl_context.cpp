@@ -1,5 +1,7 @@
 #include "vts/renderer/gl_context.hpp"
 
+#include "vts/renderer/gl_check.hpp"
+
 // clang-format off
 #include <epoxy/gl.h>  // before GLFW, which must not include a GL header of its own
 
@@ -84,6 +86,9 @@ Result<std::unique_ptr<GlContext>> GlContext::create(const GlContextOptions& o) 
   ++g_users;
   std::unique_ptr<GlContext> c(new GlContext(w));
   glfwMakeContextCurrent(w);
+#if VTS_GL_CHECKS
+  gl_check::set_gl_thread();
+#endif
   glfwSwapInterval(o.vsync ? 1 : 0);
   c->info_.version = epoxy_gl_version();
   c->info_.version_text = gl_string(GL_VERSION);
@@ -109,6 +114,9 @@ GlContext::~GlContext() {
 
 void GlContext::make_current() {
   glfwMakeContextCurrent(window_);
+#if VTS_GL_CHECKS
+  gl_check::set_gl_thread();
+#endif
 }
 bool GlContext::should_close() const {
   return glfwWindowShouldClose(window_) == GLFW_TRUE;

@@ -16,6 +16,8 @@
 #include <stb/stb_easy_font.h>
 #pragma GCC diagnostic pop
 
+#include "vts/renderer/gl_check.hpp"
+#include "vts/renderer/gl_handle.hpp"
 #include "vts/renderer/gl_program.hpp"
 
 namespace vts::renderer {
@@ -166,29 +168,21 @@ class SavedState {
 
 class Hud::Impl {
  public:
-  ~Impl() {
-    glDeleteProgram(program_);
-    glDeleteBuffers(1, &vbo_);
-    glDeleteVertexArrays(1, &vao_);
-    glDeleteFramebuffers(1, &image_fbo_);
-    glDeleteTextures(1, &image_tex_);
-  }
-
   Status init() {
     auto program = link_program(kVertexShader, kFragmentShader, "HUD");
     if (!program) return program.error();
-    program_ = *program;
-    size_loc_ = glGetUniformLocation(program_, "u_size");
+    program_ = std::move(*program);
+    size_loc_ = glGetUniformLocation(program_.get(), "u_size");
 
-    glCreateBuffers(1, &vbo_);
-    glCreateVertexArrays(1, &vao_);
-    glVertexArrayVertexBuffer(vao_, 0, vbo_, 0, sizeof(Vertex));
-    glEnableVertexArrayAttrib(vao_, 0);
-    glVertexArrayAttribFormat(vao_, 0, 2, GL_FLOAT, GL_FALSE, offsetof(Vertex, x));
-    glVertexArrayAttribBinding(vao_, 0, 0);
-    glEnableVertexArrayAttrib(vao_, 1);
-    glVertexArrayAttribFormat(vao_, 1, 4, GL_UNSIGNED_BYTE, GL_TRUE, offsetof(Vertex, rgba));
-    glVertexArrayAttribBinding(vao_, 1, 0);
+    glCreateBuffers(1, vbo_.out());
+    glCreateVertexArrays(1, vao_.out());
+    glVertexArrayVertexBuffer(vao_.get(), 0, vbo_.get(), 0, sizeof(Vertex));
+    glEnableVertexArrayAttrib(vao_.get(), 0);
+    glVertexArrayAttribFormat(vao_.get(), 0, 2, GL_FLOAT, GL_FALSE, offsetof(Vertex, x));
+    glVertexArrayAttribBinding(vao_.get(), 0, 0);
+    glEnableVertexArrayAttrib(vao_.get(), 1);
+    glVertexArrayAttribFormat(vao_.get(), 1, 4, GL_UNSIGNED_BYTE, GL_TRUE, offsetof(Vertex, rgba));
+    glVertexArrayAttribBinding(vao_.get(), 1, 0);
     return {};
   }
 
@@ -208,7 +202,7 @@ class Hud::Impl {
     if (l.vertices.empty()) return {};
 
     SavedState saved;
-    glNamedBufferData(vbo_, GLsizeiptr(l.vertices.size() * sizeof(Vertex)), l.vertices.data(),
+    glNamedBufferData(vbo_.get(), GLsizeiptr(l.vertices.size() * sizeof(Vertex)), l.vertices.data(),
                       GL_STREAM_DRAW);
     glBindFramebuffer(GL_DRAW_FRAMEBUFFER, framebuffer);
     glViewport(0, 0, width, height);
@@ -221,9 +215,9 @@ class Hud::Impl {
     glEnable(GL_BLEND);
     glBlendEquation(GL_FUNC_ADD);
     glBlendFuncSeparate(GL_SRC_ALPHA, GL_ONE_MINUS_SRC_ALPHA, GL_ONE, GL_ONE_MINUS_SRC_ALPHA);
-    glUseProgram(program_);
+    glUseProgram(program_.get());
     glUniform2f(size_loc_, float(width), float(height));
-    glBindVertexArray(vao_);
+    glBindVertexArray(vao_.get());
     glDrawArrays(GL_TRIANGLES, 0, GLsizei(l.vertices.size()));
     return {};
   }
@@ -252,12 +246,11 @@ class Hud::Impl {
     if (layout(lines, scale, false).box.width == 0) return {};
 
     if (image.width != image_w_ || image.height != image_h_) {
-      glDeleteFramebuffers(1, &image_fbo_);
-      glDeleteTextures(1, &image_tex_);
-      glCreateTextures(GL_TEXTURE_2D, 1, &image_tex_);
-      glTextureStorage2D(image_tex_, 1, GL_RGBA8, image.width, image.height);
-      glCreateFramebuffers(1, &image_fbo_);
-      glNamedFramebufferTexture(image_fbo_, GL_COLOR_ATTACHMENT0, image_tex_, 0);
+      image_fbo_.reset();
+      glCreateTextures(GL_TEXTURE_2D, 1, image_tex_.out());
+      glTextureStorage2D(image_tex_.get(), 1, GL_RGBA8, image.width, image.height);
+      glCreateFramebuffers(1, image_fbo_.out());
+      glNamedFramebufferTexture(image_fbo_.get(), GL_COLOR_ATTACHMENT0, image_tex_.get(), 0);
       image_w_ = image.width;
       image_h_ = image.height;
     }
@@ -281,11 +274,11 @@ class Hud::Impl {
         std::memcpy(to + std::size_t(y) * row, from + std::size_t(image.height - 1 - y) * row, row);
     };
     flip(image.rgba.data(), flipped.data());
-    glTextureSubImage2D(image_tex_, 0, 0, 0, image.width, image.height, GL_RGBA, GL_UNSIGNED_BYTE,
-                        flipped.data());
-    Status drawn = draw(lines, image.width, image.height, scale, image_fbo_);
+    glTextureSubImage2D(image_tex_.get(), 0, 0, 0, image.width, image.height, GL_RGBA,
+                        GL_UNSIGNED_BYTE, flipped.data());
+    Status drawn = draw(lines, image.width, image.height, scale, image_fbo_.get());
     if (drawn) {
-      glGetTextureImage(image_tex_, 0, GL_RGBA, GL_UNSIGNED_BYTE, GLsizei(flipped.size()),
+      glGetTextureImage(image_tex_.get(), 0, GL_RGBA, GL_UNSIGNED_BYTE, GLsizei(flipped.size()),
                         flipped.data());
       flip(flipped.data(), image.rgba.data());
     }
@@ -298,9 +291,12 @@ class Hud::Impl {
   }
 
  private:
-  GLuint program_ = 0, vbo_ = 0, vao_ = 0;
+  GlProgram program_;
+  GlBuffer vbo_;
+  GlVertexArray vao_;
   GLint size_loc_ = -1;
-  GLuint image_tex_ = 0, image_fbo_ = 0;  // draw_onto()'s target, kept while the size holds
+  GlTexture image_tex_;  // draw_onto()'s target, kept while the size holds
+  GlFramebuffer image_fbo_;
   int image_w_ = 0, image_h_ = 0;
 };
 
@@ -308,6 +304,7 @@ Hud::Hud(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 Hud::~Hud() = default;
 
 Result<std::unique_ptr<Hud>> Hud::create() {
+  VTS_GL_CALL_SITE("Hud::create");
   auto impl = std::make_unique<Impl>();
   if (auto s = impl->init(); !s) return s.error();
   return std::unique_ptr<Hud>(new Hud(std::move(impl)));
@@ -319,10 +316,12 @@ HudBox Hud::measure(const std::vector<std::string>& lines, float scale) {
 
 Status Hud::draw(const std::vector<std::string>& lines, int width, int height, float scale,
                  unsigned framebuffer) {
+  VTS_GL_CALL_SITE("Hud::draw");
   return impl_->draw(lines, width, height, scale, GLuint(framebuffer));
 }
 
 Status Hud::draw_onto(Image& image, const std::vector<std::string>& lines, float scale) {
+  VTS_GL_CALL_SITE("Hud::draw_onto");
   return impl_->draw_onto(image, lines, scale);
 }
 

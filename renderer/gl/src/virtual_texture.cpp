@@ -13,12 +13,14 @@
 #include <unordered_set>
 #include <vector>
 
-#include "vts/renderer/shaders.hpp"
 #include "vts/renderer/feedback.hpp"
+#include "vts/renderer/gl_check.hpp"
+#include "vts/renderer/gl_handle.hpp"
 #include "vts/renderer/gl_program.hpp"
 #include "vts/renderer/gl_uniforms.hpp"
 #include "vts/renderer/page_table.hpp"
 #include "vts/renderer/pyramid.hpp"
+#include "vts/renderer/shaders.hpp"
 #include "vts/renderer/slot_cache.hpp"
 
 namespace vts::renderer {
@@ -82,20 +84,7 @@ class VirtualTexture::Impl {
   ~Impl() {
     for (auto& r : readbacks_) delete_fence(r.fence);
     for (auto& u : uploads_) delete_fence(u.fence);
-    std::vector<GLuint> buffers;
-    for (auto& r : readbacks_) buffers.push_back(r.buffer);
-    for (auto& u : uploads_) buffers.push_back(u.buffer);
-    glDeleteBuffers(GLsizei(buffers.size()), buffers.data());
-    const GLuint textures[] = {page_tex_, physical_tex_, color_tex_, feedback_tex_};
-    glDeleteTextures(4, textures);
-    const GLuint fbos[] = {color_fbo_, feedback_fbo_};
-    glDeleteFramebuffers(2, fbos);
-    glDeleteVertexArrays(1, &vao_);
-    for (auto& [glsl, p] : programs_) {
-      glDeleteProgram(p.color.program());
-      glDeleteProgram(p.feedback.program());
-    }
-    glDeleteProgram(debug_prog_);
+    // The GL objects are the members' handles.
   }
 
   Status init() {
@@ -103,17 +92,17 @@ class VirtualTexture::Impl {
     if (auto p = programs_for(PlaneScene(PlaneView{})); !p) return p.error();
     auto dbg = link_program(detail::kFullscreenVertex, detail::kDebugFragment, "debug view");
     if (!dbg) return dbg.error();
-    debug_prog_ = *dbg;
-    glCreateVertexArrays(1, &vao_);
+    debug_prog_ = std::move(*dbg);
+    glCreateVertexArrays(1, vao_.out());
 
     // Page table: kMaxLevels layers of W x W, R32UI, all zero (invalid).
     const GLsizei w = GLsizei(table_.window());
-    glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &page_tex_);
-    glTextureStorage3D(page_tex_, 1, GL_R32UI, w, w, kMaxLevels);
-    glTextureParameteri(page_tex_, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
-    glTextureParameteri(page_tex_, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+    glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, page_tex_.out());
+    glTextureStorage3D(page_tex_.get(), 1, GL_R32UI, w, w, kMaxLevels);
+    glTextureParameteri(page_tex_.get(), GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+    glTextureParameteri(page_tex_.get(), GL_TEXTURE_MAG_FILTER, GL_NEAREST);
     const GLuint zero = 0;
-    glClearTexImage(page_tex_, 0, GL_RED_INTEGER, GL_UNSIGNED_INT, &zero);
+    glClearTexImage(page_tex_.get(), 0, GL_RED_INTEGER, GL_UNSIGNED_INT, &zero);
 
     // Physical texture: a grid of slots_per_row_ x rows slots of (T + 2B)^2 texels.
     slot_size_ = geometry_.stored_size();
@@ -130,18 +119,18 @@ class VirtualTexture::Impl {
                        std::to_string(atlas_h_) + " physical texture, above this GL's " +
                        "GL_MAX_TEXTURE_SIZE of " + std::to_string(max_size)};
     }
-    glCreateTextures(GL_TEXTURE_2D, 1, &physical_tex_);
-    glTextureStorage2D(physical_tex_, 1, physical_format(format_), GLsizei(atlas_w_),
+    glCreateTextures(GL_TEXTURE_2D, 1, physical_tex_.out());
+    glTextureStorage2D(physical_tex_.get(), 1, physical_format(format_), GLsizei(atlas_w_),
                        GLsizei(atlas_h_));
-    glTextureParameteri(physical_tex_, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
-    glTextureParameteri(physical_tex_, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
-    glTextureParameteri(physical_tex_, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
-    glTextureParameteri(physical_tex_, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+    glTextureParameteri(physical_tex_.get(), GL_TEXTURE_MIN_FILTER, GL_LINEAR);
+    glTextureParameteri(physical_tex_.get(), GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+    glTextureParameteri(physical_tex_.get(), GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+    glTextureParameteri(physical_tex_.get(), GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
     if (format_ == PixelFormat::bc1) {
       clear_compressed_atlas();
     } else {
       const std::uint8_t black[4] = {0, 0, 0, 255};
-      glClearTexImage(physical_tex_, 0, GL_RGBA, GL_UNSIGNED_BYTE, black);
+      glClearTexImage(physical_tex_.get(), 0, GL_RGBA, GL_UNSIGNED_BYTE, black);
     }
 
     // Upload ring: pixel-unpack buffers of the per-frame byte budget each.
@@ -154,12 +143,13 @@ class VirtualTexture::Impl {
     }
     uploads_.resize(3);
     for (auto& u : uploads_) {
-      glCreateBuffers(1, &u.buffer);
-      glNamedBufferStorage(u.buffer, GLsizeiptr(options_.upload_bytes), nullptr, GL_MAP_WRITE_BIT);
+      glCreateBuffers(1, u.buffer.out());
+      glNamedBufferStorage(u.buffer.get(), GLsizeiptr(options_.upload_bytes), nullptr,
+                           GL_MAP_WRITE_BIT);
     }
     readbacks_.resize(std::size_t(options_.readback_ring));
-    glCreateFramebuffers(1, &color_fbo_);
-    glCreateFramebuffers(1, &feedback_fbo_);
+    glCreateFramebuffers(1, color_fbo_.out());
+    glCreateFramebuffers(1, feedback_fbo_.out());
 
     // The root first: everything falls back on it.
     client_->request(TileId{}, 1e18);
@@ -179,7 +169,7 @@ class VirtualTexture::Impl {
     glBindBuffer(GL_PIXEL_UNPACK_BUFFER, 0);
     for (std::uint32_t r = 0; r < block_rows; r += strip) {
       const std::uint32_t n = std::min(strip, block_rows - r);
-      glCompressedTextureSubImage2D(physical_tex_, 0, 0, GLint(r * 4), GLsizei(atlas_w_),
+      glCompressedTextureSubImage2D(physical_tex_.get(), 0, 0, GLint(r * 4), GLsizei(atlas_w_),
                                     GLsizei(n * 4), physical_format(format_),
                                     GLsizei(row_bytes * n), zeros.data());
     }
@@ -187,7 +177,8 @@ class VirtualTexture::Impl {
 
   // The colour and feedback programs of a scene's shader variant, built on first use.
   struct Programs {
-    GlProgramUniforms color, feedback;  // the programs, with their uniform locations
+    GlProgram color_program, feedback_program;
+    GlProgramUniforms color, feedback;  // the programs' uniform locations
   };
   Result<Programs*> programs_for(const Scene& scene) {
     const std::string glsl = scene.glsl();
@@ -200,12 +191,10 @@ class VirtualTexture::Impl {
     if (!color) return color.error();
     auto fb = link_program(detail::kFullscreenVertex, head + "#define FEEDBACK\n" + body,
                            (name + " feedback").c_str());
-    if (!fb) {
-      glDeleteProgram(*color);
-      return fb.error();
-    }
-    return &programs_.emplace(glsl, Programs{GlProgramUniforms(*color), GlProgramUniforms(*fb)})
-                .first->second;
+    if (!fb) return fb.error();
+    const unsigned c = color->get(), f = fb->get();
+    Programs p{std::move(*color), std::move(*fb), GlProgramUniforms(c), GlProgramUniforms(f)};
+    return &programs_.emplace(glsl, std::move(p)).first->second;
   }
 
   FrameStats render(const Scene& scene, int width, int height) {
@@ -244,20 +233,20 @@ class VirtualTexture::Impl {
       u.set_int("u_max_aniso", options_.anisotropy);
     };
 
-    glBindVertexArray(vao_);
+    glBindVertexArray(vao_.get());
     glDisable(GL_DEPTH_TEST);
     glDisable(GL_BLEND);
 
     // Feedback pass at 1/k, read back later through the ring.
     if (!readbacks_[ring_pos_].fence) {
       set_common((*programs)->feedback, fb_w_, fb_h_, float(std::log2(double(width_) / fb_w_)));
-      glBindFramebuffer(GL_FRAMEBUFFER, feedback_fbo_);
+      glBindFramebuffer(GL_FRAMEBUFFER, feedback_fbo_.get());
       glViewport(0, 0, fb_w_, fb_h_);
       glDisable(GL_FRAMEBUFFER_SRGB);
       glUseProgram(programs.value()->feedback.program());
       glDrawArrays(GL_TRIANGLES, 0, 3);
       auto& rb = readbacks_[ring_pos_];
-      glBindBuffer(GL_PIXEL_PACK_BUFFER, rb.buffer);
+      glBindBuffer(GL_PIXEL_PACK_BUFFER, rb.buffer.get());
       glPixelStorei(GL_PACK_ALIGNMENT, 4);
       glReadPixels(0, 0, fb_w_, fb_h_, GL_RG_INTEGER, GL_UNSIGNED_INT, nullptr);
       glBindBuffer(GL_PIXEL_PACK_BUFFER, 0);
@@ -267,11 +256,11 @@ class VirtualTexture::Impl {
     }
 
     // Colour pass.
-    glBindFramebuffer(GL_FRAMEBUFFER, color_fbo_);
+    glBindFramebuffer(GL_FRAMEBUFFER, color_fbo_.get());
     glViewport(0, 0, width_, height_);
     glEnable(GL_FRAMEBUFFER_SRGB);
     if (options_.debug == DebugView::physical || options_.debug == DebugView::page_table) {
-      const GLuint p = debug_prog_;
+      const GLuint p = debug_prog_.get();
       glProgramUniform1i(p, glGetUniformLocation(p, "u_mode"), int(options_.debug));
       const int centre_level =
           std::clamp(int(std::lround(geometry_.max_zoom() -
@@ -302,8 +291,8 @@ class VirtualTexture::Impl {
       u.set_int("u_page_table", 1);
       glUseProgram(u.program());
     }
-    glBindTextureUnit(0, physical_tex_);
-    glBindTextureUnit(1, page_tex_);
+    glBindTextureUnit(0, physical_tex_.get());
+    glBindTextureUnit(1, page_tex_.get());
     glDrawArrays(GL_TRIANGLES, 0, 3);
     glDisable(GL_FRAMEBUFFER_SRGB);
     glBindFramebuffer(GL_FRAMEBUFFER, 0);
@@ -320,7 +309,8 @@ class VirtualTexture::Impl {
     const std::size_t row = std::size_t(width_) * 4;
     std::vector<std::uint8_t> raw(row * std::size_t(height_));
     glPixelStorei(GL_PACK_ALIGNMENT, 1);
-    glGetTextureImage(color_tex_, 0, GL_RGBA, GL_UNSIGNED_BYTE, GLsizei(raw.size()), raw.data());
+    glGetTextureImage(color_tex_.get(), 0, GL_RGBA, GL_UNSIGNED_BYTE, GLsizei(raw.size()),
+                      raw.data());
     img.rgba.resize(raw.size());
     for (int y = 0; y < height_; ++y) {  // GL rows go bottom to top
       std::memcpy(img.rgba.data() + std::size_t(y) * row,
@@ -331,7 +321,7 @@ class VirtualTexture::Impl {
 
   void blit_to_screen(int width, int height) const {
     glDisable(GL_FRAMEBUFFER_SRGB);
-    glBlitNamedFramebuffer(color_fbo_, 0, 0, 0, width_, height_, 0, 0, width, height,
+    glBlitNamedFramebuffer(color_fbo_.get(), 0, 0, 0, width_, height_, 0, 0, width, height,
                            GL_COLOR_BUFFER_BIT, GL_LINEAR);
   }
 
@@ -339,13 +329,13 @@ class VirtualTexture::Impl {
   std::optional<Error> last_error() const { return last_error_; }
   VirtualTextureOptions& options() { return options_; }
   // Read back from GL (what the driver was asked to allocate), not from the CPU-side table.
-  std::uint64_t page_table_gpu_bytes() const { return texture_bytes(page_tex_, 4); }
+  std::uint64_t page_table_gpu_bytes() const { return texture_bytes(page_tex_.get(), 4); }
   std::uint64_t physical_gpu_bytes() const {
-    if (format_ != PixelFormat::bc1) return texture_bytes(physical_tex_, 4);
+    if (format_ != PixelFormat::bc1) return texture_bytes(physical_tex_.get(), 4);
     // What the driver stores for the compressed level (0.5 byte per texel for S3TC DXT1).
     GLint compressed = 0, size = 0;
-    glGetTextureLevelParameteriv(physical_tex_, 0, GL_TEXTURE_COMPRESSED, &compressed);
-    glGetTextureLevelParameteriv(physical_tex_, 0, GL_TEXTURE_COMPRESSED_IMAGE_SIZE, &size);
+    glGetTextureLevelParameteriv(physical_tex_.get(), 0, GL_TEXTURE_COMPRESSED, &compressed);
+    glGetTextureLevelParameteriv(physical_tex_.get(), 0, GL_TEXTURE_COMPRESSED_IMAGE_SIZE, &size);
     return compressed ? std::uint64_t(std::max(size, 0)) : 0;
   }
   PixelFormat tile_format() const { return format_; }
@@ -362,7 +352,7 @@ class VirtualTexture::Impl {
 
  private:
   struct Readback {
-    GLuint buffer = 0;
+    GlBuffer buffer;
     GLsync fence = nullptr;
     std::uint64_t view_generation = 0;  // the view the feedback was rendered from
     std::size_t bytes = 0;
@@ -389,7 +379,7 @@ class VirtualTexture::Impl {
     }
   }
   struct Upload {
-    GLuint buffer = 0;
+    GlBuffer buffer;
     GLsync fence = nullptr;
   };
 
@@ -400,21 +390,18 @@ class VirtualTexture::Impl {
     const int k = options_.feedback_divisor;
     fb_w_ = std::max(1, (width + k - 1) / k);
     fb_h_ = std::max(1, (height + k - 1) / k);
-    if (color_tex_) glDeleteTextures(1, &color_tex_);
-    glCreateTextures(GL_TEXTURE_2D, 1, &color_tex_);
-    glTextureStorage2D(color_tex_, 1, GL_SRGB8_ALPHA8, width, height);
-    glNamedFramebufferTexture(color_fbo_, GL_COLOR_ATTACHMENT0, color_tex_, 0);
-    if (feedback_tex_) glDeleteTextures(1, &feedback_tex_);
-    glCreateTextures(GL_TEXTURE_2D, 1, &feedback_tex_);
-    glTextureStorage2D(feedback_tex_, 1, GL_RG32UI, fb_w_, fb_h_);
-    glNamedFramebufferTexture(feedback_fbo_, GL_COLOR_ATTACHMENT0, feedback_tex_, 0);
+    glCreateTextures(GL_TEXTURE_2D, 1, color_tex_.out());
+    glTextureStorage2D(color_tex_.get(), 1, GL_SRGB8_ALPHA8, width, height);
+    glNamedFramebufferTexture(color_fbo_.get(), GL_COLOR_ATTACHMENT0, color_tex_.get(), 0);
+    glCreateTextures(GL_TEXTURE_2D, 1, feedback_tex_.out());
+    glTextureStorage2D(feedback_tex_.get(), 1, GL_RG32UI, fb_w_, fb_h_);
+    glNamedFramebufferTexture(feedback_fbo_.get(), GL_COLOR_ATTACHMENT0, feedback_tex_.get(), 0);
     // Feedback in flight was for the old size: drop it.
     const std::size_t bytes = std::size_t(fb_w_) * std::size_t(fb_h_) * 8;
     for (auto& r : readbacks_) {
       delete_fence(r.fence);
-      if (r.buffer) glDeleteBuffers(1, &r.buffer);
-      glCreateBuffers(1, &r.buffer);
-      glNamedBufferStorage(r.buffer, GLsizeiptr(bytes), nullptr, GL_MAP_READ_BIT);
+      glCreateBuffers(1, r.buffer.out());
+      glNamedBufferStorage(r.buffer.get(), GLsizeiptr(bytes), nullptr, GL_MAP_READ_BIT);
       r.bytes = bytes;
     }
     ring_pos_ = 0;
@@ -429,11 +416,11 @@ class VirtualTexture::Impl {
     if (!fence_done(rb.fence, 1'000'000'000ull)) return 0;
     delete_fence(rb.fence);
     const auto* words = static_cast<const std::uint32_t*>(
-        glMapNamedBufferRange(rb.buffer, 0, GLsizeiptr(rb.bytes), GL_MAP_READ_BIT));
+        glMapNamedBufferRange(rb.buffer.get(), 0, GLsizeiptr(rb.bytes), GL_MAP_READ_BIT));
     if (!words) return 0;
     auto requests = feedback_.process(std::span(words, rb.bytes / 4), bias_.bias());
     wanted_generation_ = rb.view_generation;
-    glUnmapNamedBuffer(rb.buffer);
+    glUnmapNamedBuffer(rb.buffer.get());
     if (!requests) return 0;
     wanted_ = std::move(*requests);
     bias_.update(wanted_.size());
@@ -521,7 +508,7 @@ class VirtualTexture::Impl {
       }
       if (!mapped) {
         mapped = static_cast<std::uint8_t*>(
-            glMapNamedBufferRange(ring.buffer, 0, GLsizeiptr(options_.upload_bytes),
+            glMapNamedBufferRange(ring.buffer.get(), 0, GLsizeiptr(options_.upload_bytes),
                                   GL_MAP_WRITE_BIT | GL_MAP_INVALIDATE_BUFFER_BIT));
         if (!mapped) break;
       }
@@ -540,8 +527,8 @@ class VirtualTexture::Impl {
       if (e_is_root) i = 0;  // the tiles held back for the root may go now
     }
     if (mapped) {
-      glUnmapNamedBuffer(ring.buffer);
-      glBindBuffer(GL_PIXEL_UNPACK_BUFFER, ring.buffer);
+      glUnmapNamedBuffer(ring.buffer.get());
+      glBindBuffer(GL_PIXEL_UNPACK_BUFFER, ring.buffer.get());
       glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
       glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
       const bool compressed = format_ == PixelFormat::bc1;
@@ -550,12 +537,12 @@ class VirtualTexture::Impl {
         const GLint y = GLint((s.slot / slots_per_row_) * slot_size_);
         const auto* offset = reinterpret_cast<const void*>(s.offset);
         if (compressed) {  // slot origins and sizes are multiples of the 4 x 4 block
-          glCompressedTextureSubImage2D(physical_tex_, 0, x, y, GLsizei(slot_size_),
+          glCompressedTextureSubImage2D(physical_tex_.get(), 0, x, y, GLsizei(slot_size_),
                                         GLsizei(slot_size_), physical_format(format_),
                                         GLsizei(tile_bytes_), offset);
         } else {
-          glTextureSubImage2D(physical_tex_, 0, x, y, GLsizei(slot_size_), GLsizei(slot_size_),
-                              GL_RGBA, GL_UNSIGNED_BYTE, offset);
+          glTextureSubImage2D(physical_tex_.get(), 0, x, y, GLsizei(slot_size_),
+                              GLsizei(slot_size_), GL_RGBA, GL_UNSIGNED_BYTE, offset);
         }
       }
       glBindBuffer(GL_PIXEL_UNPACK_BUFFER, 0);
@@ -585,8 +572,8 @@ class VirtualTexture::Impl {
     const std::uint32_t w = table_.window();
     for (const auto& s : spans) {
       const auto layer = table_.layer(s.layer);
-      glTextureSubImage3D(page_tex_, 0, GLint(s.x0), GLint(s.row), s.layer, GLsizei(s.x1 - s.x0), 1,
-                          1, GL_RED_INTEGER, GL_UNSIGNED_INT,
+      glTextureSubImage3D(page_tex_.get(), 0, GLint(s.x0), GLint(s.row), s.layer,
+                          GLsizei(s.x1 - s.x0), 1, 1, GL_RED_INTEGER, GL_UNSIGNED_INT,
                           layer.data() + std::size_t(s.row) * w + s.x0);
     }
   }
@@ -623,9 +610,10 @@ class VirtualTexture::Impl {
 
   std::unordered_map<std::string, Programs> programs_;  // by scene GLSL
   std::optional<Error> last_error_;
-  GLuint debug_prog_ = 0, vao_ = 0;
-  GLuint page_tex_ = 0, physical_tex_ = 0, color_tex_ = 0, feedback_tex_ = 0;
-  GLuint color_fbo_ = 0, feedback_fbo_ = 0;
+  GlProgram debug_prog_;
+  GlVertexArray vao_;
+  GlTexture page_tex_, physical_tex_, color_tex_, feedback_tex_;
+  GlFramebuffer color_fbo_, feedback_fbo_;
   std::uint32_t slot_size_ = 0, slots_per_row_ = 0, atlas_w_ = 0, atlas_h_ = 0;
   std::uint64_t tile_bytes_ = 0;
   int width_ = 0, height_ = 0, fb_w_ = 0, fb_h_ = 0;
@@ -686,7 +674,7 @@ Result<std::unique_ptr<VirtualTexture>> VirtualTexture::create(
   if (epoxy_gl_version() < 45) {
     return Error{ErrorCode::unsupported, "the virtual texture needs a current OpenGL 4.5 context"};
   }
-  // The tiles' format follows the tileset's codec (DESIGN.md §3: a property of the tileset).
+  // The tiles' format follows the tileset's codec (a property of the tileset).
   const CodecId codec = client->info().info.codec;
   const PixelFormat format = codec == CodecId::bc1 ? PixelFormat::bc1 : PixelFormat::rgba8;
   if (format == PixelFormat::bc1) {
@@ -715,18 +703,22 @@ VirtualTexture::VirtualTexture(std::unique_ptr<Impl> impl) : impl_(std::move(imp
 VirtualTexture::~VirtualTexture() = default;
 
 FrameStats VirtualTexture::render(const Scene& scene, int width, int height) {
+  VTS_GL_CALL_SITE("VirtualTexture::render");
   return impl_->render(scene, width, height);
 }
 FrameStats VirtualTexture::render(const PlaneView& view, int width, int height) {
+  VTS_GL_CALL_SITE("VirtualTexture::render");
   return impl_->render(PlaneScene(view), width, height);
 }
 Image VirtualTexture::read_image() const {
+  VTS_GL_CALL_SITE("VirtualTexture::read_image");
   return impl_->read_image();
 }
 std::optional<Error> VirtualTexture::last_error() const {
   return impl_->last_error();
 }
 void VirtualTexture::blit_to_screen(int width, int height) const {
+  VTS_GL_CALL_SITE("VirtualTexture::blit_to_screen");
   impl_->blit_to_screen(width, height);
 }
 const std::vector<TileRequest>& VirtualTexture::last_wanted() const {
@@ -750,9 +742,11 @@ const VirtualTextureOptions& VirtualTexture::options() const {
   return const_cast<Impl&>(*impl_).options();
 }
 std::uint64_t VirtualTexture::page_table_gpu_bytes() const {
+  VTS_GL_CALL_SITE("VirtualTexture::page_table_gpu_bytes");
   return impl_->page_table_gpu_bytes();
 }
 std::uint64_t VirtualTexture::physical_gpu_bytes() const {
+  VTS_GL_CALL_SITE("VirtualTexture::physical_gpu_bytes");
   return impl_->physical_gpu_bytes();
 }
 PixelFormat VirtualTexture::tile_format() const {

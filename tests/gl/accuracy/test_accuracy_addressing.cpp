@@ -9,9 +9,9 @@
 #include <variant>
 #include <vector>
 
-#include "vts/accuracy/addressing_detail.hpp"
 #include "gl_fixture.hpp"
 #include "vts/accuracy/accuracy.hpp"
+#include "vts/accuracy/addressing_detail.hpp"
 
 namespace vts::test {
 namespace {

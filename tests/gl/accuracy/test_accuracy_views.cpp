@@ -1,8 +1,8 @@
-// The feedback and filtering tables of `vts bench accuracy` (accuracy/include/vts/accuracy/accuracy.hpp)
-// in quick mode on a 512x256 Earth archive, the size ctest runs the whole bench on: the figures
-// must say what the measurements mean (1/1 finds every tile it needs, coarser feedback never finds
-// more, anisotropic filtering is closer to the supersampled truth on an oblique view ...), and bad
-// input must give an error.
+// The feedback and filtering tables of `vts bench accuracy`
+// (accuracy/include/vts/accuracy/accuracy.hpp) in quick mode on a 512x256 Earth archive, the size
+// ctest runs the whole bench on: the figures must say what the measurements mean (1/1 finds every
+// tile it needs, coarser feedback never finds more, anisotropic filtering is closer to the
+// supersampled truth on an oblique view ...), and bad input must give an error.
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -19,8 +19,9 @@
 
 #include "gl_fixture.hpp"
 #include "vts/accuracy/accuracy.hpp"
-#include "vts/renderer/reference.hpp"
 #include "vts/builder/builder.hpp"
+#include "vts/builder/image_io.hpp"
+#include "vts/renderer/reference.hpp"
 
 namespace fs = std::filesystem;
 using vts::accuracy::AccuracyContext;
@@ -36,7 +37,7 @@ class AccuracyViews : public ::testing::Test {
     fs::create_directories(*dir_);
     // The Earth at 512x256 (a 4x4 box filter of the 2048x1024 image), tile 64, border 4: what
     // the bench's quick mode builds.
-    auto earth = vts::renderer::read_png("/usr/share/xplanet/images/earth.jpg");
+    auto earth = vts::read_rgba8("/usr/share/xplanet/images/earth.jpg");
     if (!earth.ok()) {
       setup_error_ = earth.error().to_string();
       return;
@@ -48,13 +49,14 @@ class AccuracyViews : public ::testing::Test {
         for (int c = 0; c < 4; ++c) {
           int sum = 0;
           for (int dy = 0; dy < f; ++dy)
-            for (int dx = 0; dx < f; ++dx) sum += earth->at(x * f + dx, y * f + dy)[c];
+            for (int dx = 0; dx < f; ++dx)
+              sum += earth->rgba[(std::size_t(y * f + dy) * earth->width + x * f + dx) * 4 + c];
           small.at(x, y)[c] = std::uint8_t((sum + f * f / 2) / (f * f));
         }
       }
     }
     const fs::path input = *dir_ / "earth512.png";
-    if (auto s = vts::renderer::write_png(input, small); !s.ok()) {
+    if (auto s = vts::write_png(input, small.width, small.height, small.rgba); !s.ok()) {
       setup_error_ = s.error().to_string();
       return;
     }

@@ -1,6 +1,6 @@
 // The CPU reference renderer against real archives of the synthetic source, whose texels encode
-// their own level coordinates (vts/builder/synthetic.hpp), so every expected pixel is known exactly;
-// plus the image metrics and the PNG round trip.
+// their own level coordinates (vts/builder/synthetic.hpp), so every expected pixel is known
+// exactly; plus the image metrics and the PNG round trip.
 #include "vts/renderer/reference.hpp"
 
 #include <gtest/gtest.h>
@@ -16,6 +16,7 @@
 #include <string>
 
 #include "vts/builder/builder.hpp"
+#include "vts/builder/image_io.hpp"
 #include "vts/builder/synthetic.hpp"
 
 namespace fs = std::filesystem;
@@ -412,7 +413,7 @@ TEST(ReferenceImageDiff, IdenticalImagesHaveInfinitePsnrAndOnePixelIsCounted) {
   EXPECT_FALSE(compare_images(a, broken).ok());
 }
 
-TEST(ReferencePng, RoundTripsExactlyAndErrorsNameThePath) {
+TEST(ImageIo, PngRoundTripsExactlyAndErrorsNameThePath) {
   const fs::path dir =
       fs::temp_directory_path() / ("vts-reference-png-" + std::to_string(::getpid()));
   fs::create_directories(dir);
@@ -420,19 +421,19 @@ TEST(ReferencePng, RoundTripsExactlyAndErrorsNameThePath) {
   for (std::size_t i = 0; i < img.rgba.size(); ++i)
     img.rgba[i] = static_cast<std::uint8_t>((i * 89 + 7) ^ (i >> 3));
   const fs::path p = dir / "round.png";
-  Status w = write_png(p, img);
+  Status w = write_png(p, img.width, img.height, img.rgba);
   ASSERT_TRUE(w.ok()) << w.error().to_string();
-  auto back = read_png(p);
+  auto back = read_rgba8(p);
   ASSERT_TRUE(back.ok()) << back.error().to_string();
   EXPECT_EQ(back->width, 13);
   EXPECT_EQ(back->height, 9);
   EXPECT_EQ(back->rgba, img.rgba);
 
   const fs::path nowhere = dir / "no-such-dir" / "x.png";
-  Status bad = write_png(nowhere, img);
+  Status bad = write_png(nowhere, img.width, img.height, img.rgba);
   ASSERT_FALSE(bad.ok());
   EXPECT_NE(bad.error().message.find(nowhere.string()), std::string::npos) << bad.error().message;
-  auto missing = read_png(nowhere);
+  auto missing = read_rgba8(nowhere);
   ASSERT_FALSE(missing.ok());
   EXPECT_EQ(missing.error().code, ErrorCode::not_found);
   EXPECT_NE(missing.error().message.find(nowhere.string()), std::string::npos);

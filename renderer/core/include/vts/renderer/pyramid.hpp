@@ -1,5 +1,5 @@
 // The renderer's view of a tile pyramid: how many levels, and how many tiles exist per axis at
-// each level (DESIGN.md §3). It is the small part of vts::Geometry that the page table, the slot
+// each level. It is the small part of vts::Geometry that the page table, the slot
 // cache and the feedback reduction need, in a form that can be built without texel sizes (tests,
 // synthetic pyramids) and that enforces the renderer's own level limit, kMaxLevels.
 //

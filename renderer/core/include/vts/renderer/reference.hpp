@@ -1,44 +1,10 @@
-// The CPU reference renderer of the plane scene: what the GPU renderer's screenshots are judged
-// against. It follows the sampling rules of camera.hpp in double precision, reading texels straight
-// from a PMTiles archive, plus the image metrics and PNG input/output the comparison needs.
+// The CPU reference renderer: what the GPU renderer's screenshots are judged against. It renders
+// any scene by the sampling rules of camera.hpp in double precision, reading texels straight from
+// a PMTiles archive, and compares images. The rules in full (derivatives, anisotropy, sparse
+// archives, bc1) are in docs/RENDERER.md, "The CPU reference renderer".
 //
-// PyramidSampler reads texels of any level of an archive: it finds the tile holding a texel,
-// decodes it (keeping the last few decoded tiles in an LRU) and reads the texel from the stored
-// tile's content area. render_reference() renders one PlaneCamera view with it:
-//   - (u, v) = camera.hit(px + 0.5, py + 0.5); background (kBackground) when the ray misses the
-//     plane, when (u, v) is not finite, or when it lies outside [0, W) x [0, H);
-//   - derivatives are the fine 2x2-quad differences of (u, v) (columns px & ~1 and px | 1 of the
-//     pixel's row for d/dx, rows py & ~1 and py | 1 of its column for d/dy; a partner beyond the
-//     viewport's edge is still evaluated, as GPU helper invocations are). When a partner's ray
-//     misses the plane, that derivative is the analytic one of the hit mapping at the pixel's own
-//     centre (the limit of the difference; finite whenever the pixel itself hits the plane);
-//   - rho = max(|d(u,v)/dx|, |d(u,v)/dy|), c = max_level - log2(rho) - bias clamped to
-//     [0, max_level]; rho == 0 or NaN, or a NaN c (NaN bias), means the finest level, and
-//     rho == +inf or bias == +inf the coarsest;
-//   - anisotropic filtering (anisotropy > 1): with lx = |d(u,v)/dx|, ly = |d(u,v)/dy|, major and
-//     minor their larger and smaller, taps = anisotropic_taps(lx, ly, anisotropy) and, when
-//     taps > 1, rho = max(major / taps, minor) instead; tap i of taps is taken at
-//     (u, v) + a ((i + 0.5) / taps - 0.5), a the derivative of the major axis (d/dx on a tie),
-//     u wrapped by the scene's period or else, like v, moved to the edge texel's centre (0.5 or
-//     W - 0.5) when outside the image; the taps' colours are averaged in linear light;
-//   - trilinear between floor(c) and floor(c) + 1 (weight frac(c) on the finer), each level
-//     sampled bilinearly at (u, v) / 2^(max_level - L), blended in linear light, encoded to sRGB
-//     with the exact IEC 61966-2-1 formulas, rounded to nearest; alpha is written as 255.
-//
-// Sparse archives: a tile absent from the archive is replaced by its nearest existing ancestor,
-// texel by texel: the texel returned is the ancestor's texel (x >> k, y >> k) k levels up (not a
-// sample filtered at the ancestor's level, as a GPU fallback would take, so images of sparse
-// regions are a guide, not an exact reference); every such texel read is counted in
-// stats().fallback_texels. A tile that is present but unreadable (corrupt, wrong size, not in the
-// tileset's pixel format) is an error, and so is an archive whose codec this build lacks.
-//
-// BC1 archives: each bc1 tile is decoded to rgba8 with vts::bc1_to_rgba8() before its texels are
-// read, so the reference samples what a GPU sampling the S3TC blocks reads (up to the rounding of
-// the interpolated colours, where GPUs may differ by one code), in sRGB like the rgba8 path.
-//
-// Errors are returned as Result/Status values and name the archive or image file. Thread safety:
-// a PyramidSampler is not thread-safe (its tile cache mutates on every read); use one per thread.
-// compare_images() and the free functions are pure or touch only their own files.
+// Errors name the archive. Thread safety: a PyramidSampler is not thread-safe (its tile cache
+// mutates on every read); use one per thread. compare_images() is pure.
 #pragma once
 
 #include <array>
@@ -163,11 +129,5 @@ struct ImageDiff {
 
 // invalid_argument when the sizes differ or a buffer does not hold width * height * 4 bytes.
 Result<ImageDiff> compare_images(const Image& a, const Image& b, int threshold = 8);
-
-// Writes an 8-bit RGBA PNG (whatever the extension), tagged sRGB.
-Status write_png(const std::filesystem::path& path, const Image& image);
-// Reads an image file (PNG, or any 8-bit format OpenImageIO reads) as RGBA8: grey is replicated,
-// a missing alpha channel becomes 255. not_found when the file does not exist.
-Result<Image> read_png(const std::filesystem::path& path);
 
 }  // namespace vts::renderer

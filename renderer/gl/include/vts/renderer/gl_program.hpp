@@ -7,12 +7,13 @@
 #include <string>
 
 #include "vts/protocol/result.hpp"
+#include "vts/renderer/gl_handle.hpp"
 
 namespace vts::renderer {
 
-// The linked program's name. unsupported naming `what` (e.g. "plane colour") and carrying the
-// compile or link log when the driver refuses either shader or the link; nothing is left behind.
-Result<unsigned> link_program(const std::string& vertex, const std::string& fragment,
-                              const std::string& what);
+// The linked program. unsupported naming `what` (e.g. "plane colour") and carrying the compile or
+// link log when the driver refuses either shader or the link; nothing is left behind.
+Result<GlProgram> link_program(const std::string& vertex, const std::string& fragment,
+                               const std::string& what);
 
 }  // namespace vts::renderer

@@ -1,25 +1,11 @@
-// The viewer's heads-up display: a few lines of text over a translucent dark box in the top-left
-// corner of a frame. The glyphs are stb_easy_font's (Debian libstb-dev): each character is a
-// handful of axis-aligned quads, so there is no font file, no glyph texture and no atlas; at an
-// integer scale every quad has integer corners and covers whole pixels, so the text is crisp.
-//
-// Two ways to draw it:
-//   - draw(): into a framebuffer (the window's default framebuffer, 0, by default) after the
-//     frame was blitted there: what the interactive viewer does every frame;
-//   - draw_onto(): over a CPU image (a screenshot). The image is uploaded into an offscreen
-//     RGBA8 target that the Hud owns, the HUD is drawn there exactly as on screen, and the result
-//     is read back. Screenshots keep the virtual texture's own frame (VirtualTexture::read_image)
-//     and only gain a HUD when asked, so the default screenshots stay comparable with the CPU
-//     reference renderer; and drawing over an image never depends on a hidden window's default
-//     framebuffer, whose pixels GL does not promise to keep.
+// The viewer's heads-up display: lines of text (stb_easy_font glyphs, no font file or texture)
+// over a translucent dark box in the top-left corner of a frame, drawn into a framebuffer with
+// draw() or over a CPU image with draw_onto() (docs/RENDERER.md, "HUD and keys").
 //
 // Colours are written as given, in the framebuffer's encoding (GL_FRAMEBUFFER_SRGB is off while
-// the HUD draws): sRGB-encoded values on the window, as in the Image of draw_onto(). The box is
-// kBoxColor blended over the frame (src-alpha, one-minus-src-alpha); the text is kTextColor,
-// opaque.
-//
-// Text: printable ASCII (32..126) only; any other byte (UTF-8 included) is drawn as '?'. At most
-// kMaxLines lines of kMaxLineChars characters are drawn; the rest is cut off.
+// the HUD draws): the box is kBoxColor blended over the frame, the text kTextColor, opaque.
+// Text: printable ASCII only (any other byte, UTF-8 included, is drawn as '?'); at most kMaxLines
+// lines of kMaxLineChars characters, the rest cut off.
 //
 // Thread safety: GL-thread only; create, use and destroy a Hud with its GL context current.
 #pragma once

@@ -1,23 +1,9 @@
-// The GPU side of sparse virtual texturing, and the per-frame loop that drives it
-// (docs/RENDERER.md).
-//
-// One VirtualTexture draws one tiled image (a vts::Geometry) on the plane scene. It owns:
-//   - the physical texture: an atlas of `slots` fixed slots of (T + 2B)^2 texels, in the format
-//     the tileset's codec decodes to (TileClient::info().info.codec): SRGB8_ALPHA8 for lossless
-//     rgba8 tiles, COMPRESSED_SRGB_ALPHA_S3TC_DXT1 for bc1 tiles (uploaded as they are, 8 bytes
-//     per 4 x 4 block, so T + 2B must be a multiple of 4);
-//   - the page table: an R32UI 2D array texture of kMaxLevels layers of W x W (ClipmapPageTable),
-//     read with texelFetch, updated only where it changed;
-//   - the feedback pass: the scene at 1/k resolution into an RG32UI target, read back through a
-//     ring of pixel-pack buffers guarded by fences (never a stalling glReadPixels);
-//   - the upload queue: decoded tiles from the client's worker pool, copied into slots through a
-//     ring of pixel-unpack buffers under a per-frame budget of tiles and bytes (the bytes of the
-//     tiles as uploaded: compressed blocks for bc1);
-//   - the CPU core: FeedbackProcessor, SlotCache (LRU with guards, root pinned), MipBiasController.
-//
-// render() runs one frame: readback of an older feedback frame -> requests (coarse first) ->
-// uploads within budget -> page-table windows recentred on the view -> dirty page-table spans
-// uploaded -> feedback pass -> colour pass into its own framebuffer (read_image(), or blit()).
+// The GPU side of sparse virtual texturing and its per-frame loop (docs/RENDERER.md, "The
+// pipeline"). One VirtualTexture draws one tiled image (a vts::Geometry) on a scene; it owns the
+// physical texture (a slot atlas in the tiles' format: SRGB8_ALPHA8 for rgba8, S3TC DXT1 for bc1),
+// the page table (an R32UI array texture, kMaxLevels layers of W x W), the feedback pass and its
+// fenced readback ring, the upload ring, and the CPU core (FeedbackProcessor, SlotCache,
+// MipBiasController). render() runs one frame into the texture's own framebuffer.
 //
 // Thread safety: GL-thread only; create, use and destroy it with its GlContext current.
 #pragma once

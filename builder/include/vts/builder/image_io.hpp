@@ -1,0 +1,30 @@
+// Image files as 8-bit RGBA through OpenImageIO: the PNG writer of screenshots and accuracy
+// plots, and the reader of any 8-bit image OpenImageIO opens. Straight alpha both ways.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <span>
+#include <vector>
+
+#include "vts/protocol/result.hpp"
+
+namespace vts {
+
+// width x height pixels, 4 bytes each, rows top to bottom.
+struct Rgba8Image {
+  int width = 0, height = 0;
+  std::vector<std::uint8_t> rgba;
+};
+
+// Writes an 8-bit RGBA PNG (whatever the extension), tagged sRGB. invalid_argument when `rgba`
+// does not hold width * height * 4 bytes; io when the file cannot be written.
+Status write_png(const std::filesystem::path& path, int width, int height,
+                 std::span<const std::uint8_t> rgba);
+
+// Reads an image file (PNG, or any 8-bit format OpenImageIO reads) as RGBA8: grey is replicated,
+// a missing alpha channel becomes 255. not_found when the file does not exist; corrupt when it
+// cannot be decoded; unsupported beyond 32768 pixels a side or 4 channels.
+Result<Rgba8Image> read_rgba8(const std::filesystem::path& path);
+
+}  // namespace vts
