@@ -4,8 +4,8 @@
 
 #include "commands.hpp"
 #include "progress.hpp"
-#include "vts/protocol/inspect.hpp"
 #include "vts/builder/extract.hpp"
+#include "vts/protocol/inspect.hpp"
 
 namespace vts::cli {
 
@@ -21,54 +21,46 @@ Result<std::shared_ptr<pmtiles::Reader>> open_archive(const std::string& path) {
   return r;
 }
 
-int run_info(const std::string& path, bool json) {
-  auto reader = open_archive(path);
-  if (!reader) return report_error(reader.error());
-  auto summary = summarize_archive(**reader);
-  if (!summary) {
-    Error e = summary.error();
-    e.message = "'" + path + "': " + e.message;
-    return report_error(e);
-  }
-  const ArchiveSummary& s = *summary;
+void print_info_json(const std::string& path, const ArchiveSummary& s) {
   const Geometry& g = s.info.geometry;
-  if (json) {
-    nlohmann::json j;
-    j["path"] = path;
-    j["name"] = s.info.name;
-    j["description"] = s.info.description;
-    j["format_version"] = s.info.format_version;
-    j["width"] = g.width();
-    j["height"] = g.height();
-    j["tile_size"] = g.tile_size();
-    j["border"] = g.border();
-    j["stored_size"] = g.stored_size();
-    j["max_zoom"] = g.max_zoom();
-    j["codec"] = codec_name(s.info.codec);
-    j["color_space"] = s.info.color_space;
-    j["downsample"] = s.info.downsample;
-    j["sparse"] = s.info.sparse;
-    j["content_hash"] = s.info.content_hash;
-    j["tiles"] = s.addressed_tiles;
-    j["unique_tiles"] = s.unique_tiles;
-    j["entries"] = s.entries;
-    j["leaf_directories"] = s.leaf_directories;
-    j["bytes"] = s.file_bytes;
-    j["tile_bytes"] = s.stored_bytes;
-    j["addressed_bytes"] = s.addressed_bytes;
-    j["dedup_ratio"] = s.dedup_ratio;
-    j["bytes_per_tile"] = s.addressed_tiles ? double(s.addressed_bytes) / s.addressed_tiles : 0.0;
-    j["levels"] = nlohmann::json::array();
-    for (const auto& l : s.levels)
-      j["levels"].push_back({{"z", l.z},
-                             {"width", l.width},
-                             {"height", l.height},
-                             {"tiles", l.tiles_present},
-                             {"tiles_possible", l.tiles_possible},
-                             {"bytes", l.bytes}});
-    std::printf("%s\n", j.dump(2).c_str());
-    return 0;
-  }
+  nlohmann::json j;
+  j["path"] = path;
+  j["name"] = s.info.name;
+  j["description"] = s.info.description;
+  j["format_version"] = s.info.format_version;
+  j["width"] = g.width();
+  j["height"] = g.height();
+  j["tile_size"] = g.tile_size();
+  j["border"] = g.border();
+  j["stored_size"] = g.stored_size();
+  j["max_zoom"] = g.max_zoom();
+  j["codec"] = codec_name(s.info.codec);
+  j["color_space"] = s.info.color_space;
+  j["downsample"] = s.info.downsample;
+  j["sparse"] = s.info.sparse;
+  j["content_hash"] = s.info.content_hash;
+  j["tiles"] = s.addressed_tiles;
+  j["unique_tiles"] = s.unique_tiles;
+  j["entries"] = s.entries;
+  j["leaf_directories"] = s.leaf_directories;
+  j["bytes"] = s.file_bytes;
+  j["tile_bytes"] = s.stored_bytes;
+  j["addressed_bytes"] = s.addressed_bytes;
+  j["dedup_ratio"] = s.dedup_ratio;
+  j["bytes_per_tile"] = s.addressed_tiles ? double(s.addressed_bytes) / s.addressed_tiles : 0.0;
+  j["levels"] = nlohmann::json::array();
+  for (const auto& l : s.levels)
+    j["levels"].push_back({{"z", l.z},
+                           {"width", l.width},
+                           {"height", l.height},
+                           {"tiles", l.tiles_present},
+                           {"tiles_possible", l.tiles_possible},
+                           {"bytes", l.bytes}});
+  std::printf("%s\n", j.dump(2).c_str());
+}
+
+void print_info_text(const std::string& path, const ArchiveSummary& s) {
+  const Geometry& g = s.info.geometry;
   std::printf("%s\n", path.c_str());
   std::printf("  name         %s\n", s.info.name.c_str());
   std::printf("  image        %llu x %llu texels, %s, downsampled %s\n",
@@ -89,6 +81,21 @@ int run_info(const std::string& path, bool json) {
     std::printf("  %5d %12llu %12llu %10llu %12s\n", l.z, (unsigned long long)l.width,
                 (unsigned long long)l.height, (unsigned long long)l.tiles_present,
                 human_bytes(l.bytes).c_str());
+}
+
+int run_info(const std::string& path, bool json) {
+  auto reader = open_archive(path);
+  if (!reader) return report_error(reader.error());
+  auto summary = summarize_archive(**reader);
+  if (!summary) {
+    Error e = summary.error();
+    e.message = "'" + path + "': " + e.message;
+    return report_error(e);
+  }
+  if (json)
+    print_info_json(path, *summary);
+  else
+    print_info_text(path, *summary);
   return 0;
 }
 

@@ -1,5 +1,4 @@
 // vts build: image(s) or the synthetic source → PMTiles pyramid archive.
-#include <csignal>
 #include <cstdio>
 #include <nlohmann/json.hpp>
 
@@ -10,22 +9,6 @@
 namespace vts::cli {
 
 namespace {
-
-std::atomic<bool> g_cancel{false};
-
-extern "C" void on_signal(int) {
-  g_cancel.store(true);
-}
-
-// SIGINT/SIGTERM ask the build to stop cleanly (no output file is left); a second signal kills.
-void install_cancel_handlers() {
-  struct sigaction sa {};
-  sa.sa_handler = on_signal;
-  sa.sa_flags = SA_RESETHAND;
-  sigemptyset(&sa.sa_mask);
-  sigaction(SIGINT, &sa, nullptr);
-  sigaction(SIGTERM, &sa, nullptr);
-}
 
 template <typename T>
 bool parse_pair(const std::string& text, char sep, T& a, T& b) {
@@ -56,97 +39,113 @@ struct BuildArgs {
   bool json = false, quiet = false;
 };
 
-int run_build(const BuildArgs& a) {
+// The synthetic source's options: --synthetic WxH, --region, --region-level.
+Result<SyntheticSpec> synthetic_spec(const BuildArgs& a) {
+  SyntheticSpec s;
+  if (!parse_pair(a.synthetic, 'x', s.width, s.height))
+    return make_error(ErrorCode::invalid_argument,
+                      "--synthetic '" + a.synthetic + "' is not of the form WxH");
+  if (!a.region.empty()) {
+    unsigned long long r[4];
+    int consumed = 0;
+    if (std::sscanf(a.region.c_str(), "%llu,%llu,%llu,%llu%n", &r[0], &r[1], &r[2], &r[3],
+                    &consumed) != 4 ||
+        consumed != static_cast<int>(a.region.size()))
+      return make_error(
+          ErrorCode::invalid_argument,
+          "--region '" + a.region + "' is not of the form x0,y0,x1,y1 (finest-level texels)");
+    s.region = TexelRect{r[0], r[1], r[2], r[3]};
+  }
+  s.region_level = a.region_level;
+  return s;
+}
+
+Result<BuildOptions> build_options(const BuildArgs& a) {
   BuildOptions o;
   for (const auto& i : a.inputs) o.inputs.emplace_back(i);
   o.output = a.output;
   o.tile_size = a.tile;
   o.border = a.border;
   auto codec = parse_codec_name(a.codec);
-  if (!codec) return report_error(codec.error());
+  if (!codec) return codec.error();
   o.codec = *codec;
   o.encode.zstd_level = a.zstd_level;
   o.encode.filter = a.filter == "none"       ? FilterChoice::none
                     : a.filter == "gradient" ? FilterChoice::gradient
                                              : FilterChoice::automatic;
   auto bc1 = parse_bc1_quality(a.bc1_quality);
-  if (!bc1) return report_error(bc1.error());
+  if (!bc1) return bc1.error();
   o.encode.bc1 = *bc1;
-  if (auto f = parse_downsample_filter(a.downsample)) {
-    o.downsample = *f;
-  } else {
-    return report_error(make_error(ErrorCode::invalid_argument,
-                                   "--downsample '" + a.downsample + "' is not box or lanczos3"));
-  }
+  auto filter = parse_downsample_filter(a.downsample);
+  if (!filter)
+    return make_error(ErrorCode::invalid_argument,
+                      "--downsample '" + a.downsample + "' is not box or lanczos3");
+  o.downsample = *filter;
   o.threads = a.threads;
   o.name = a.name;
   if (!a.grid.empty() && !parse_pair(a.grid, 'x', o.grid_columns, o.grid_rows))
-    return report_error(make_error(ErrorCode::invalid_argument,
-                                   "--grid '" + a.grid + "' is not of the form CxR, e.g. 4x2"));
+    return make_error(ErrorCode::invalid_argument,
+                      "--grid '" + a.grid + "' is not of the form CxR, e.g. 4x2");
   if (!a.synthetic.empty()) {
-    SyntheticSpec s;
-    if (!parse_pair(a.synthetic, 'x', s.width, s.height))
-      return report_error(make_error(ErrorCode::invalid_argument,
-                                     "--synthetic '" + a.synthetic + "' is not of the form WxH"));
-    if (!a.region.empty()) {
-      unsigned long long r[4];
-      int consumed = 0;
-      if (std::sscanf(a.region.c_str(), "%llu,%llu,%llu,%llu%n", &r[0], &r[1], &r[2], &r[3],
-                      &consumed) != 4 ||
-          consumed != static_cast<int>(a.region.size()))
-        return report_error(make_error(
-            ErrorCode::invalid_argument,
-            "--region '" + a.region + "' is not of the form x0,y0,x1,y1 (finest-level texels)"));
-      s.region = TexelRect{r[0], r[1], r[2], r[3]};
-    }
-    s.region_level = a.region_level;
-    o.synthetic = s;
+    auto s = synthetic_spec(a);
+    if (!s) return s.error();
+    o.synthetic = *s;
   } else if (!a.region.empty()) {
-    return report_error(
-        make_error(ErrorCode::invalid_argument, "--region applies to --synthetic builds only"));
+    return make_error(ErrorCode::invalid_argument, "--region applies to --synthetic builds only");
   }
+  return o;
+}
 
+void print_json(const BuildArgs& a, const BuildOptions& o, const BuildReport& r) {
+  const Geometry& g = r.info.geometry;
+  nlohmann::json j;
+  j["output"] = a.output;
+  j["input"] = r.input_description;
+  j["width"] = g.width();
+  j["height"] = g.height();
+  j["tile_size"] = g.tile_size();
+  j["border"] = g.border();
+  j["max_zoom"] = g.max_zoom();
+  j["codec"] = codec_name(r.info.codec);
+  if (r.info.codec == CodecId::bc1) j["bc1_quality"] = bc1_quality_name(o.encode.bc1);
+  j["downsample"] = r.info.downsample;
+  j["tiles"] = r.stats.addressed_tiles;
+  j["unique_tiles"] = r.stats.tile_contents;
+  j["entries"] = r.stats.tile_entries;
+  j["tile_bytes"] = r.stats.tile_bytes;
+  j["file_bytes"] = r.stats.file_bytes;
+  j["seconds"] = r.seconds;
+  j["tiles_per_second"] = r.seconds > 0 ? double(r.stats.addressed_tiles) / r.seconds : 0.0;
+  std::printf("%s\n", j.dump(2).c_str());
+}
+
+void print_text(const BuildArgs& a, const BuildReport& r) {
+  const Geometry& g = r.info.geometry;
+  std::printf("built %s: %llux%llu, %d levels, %llu tiles (%llu unique), %s in %s (%.0f tiles/s)\n",
+              a.output.c_str(), (unsigned long long)g.width(), (unsigned long long)g.height(),
+              g.level_count(), (unsigned long long)r.stats.addressed_tiles,
+              (unsigned long long)r.stats.tile_contents, human_bytes(r.stats.file_bytes).c_str(),
+              human_duration(r.seconds).c_str(),
+              r.seconds > 0 ? double(r.stats.addressed_tiles) / r.seconds : 0.0);
+}
+
+int run_build(const BuildArgs& a) {
+  auto o = build_options(a);
+  if (!o) return report_error(o.error());
   ProgressBar bar("build", "tiles", !a.quiet && !a.json);
-  o.on_progress = [&](const BuildProgress& p) {
+  o->on_progress = [&](const BuildProgress& p) {
     bar.update(p.tiles_done, p.tiles_total,
                human_bytes(p.bytes_written) + (p.finishing ? "  writing archive..." : ""));
   };
-  install_cancel_handlers();
-  o.cancel = &g_cancel;
-  auto report = build_pyramid(o);
+  // SIGINT/SIGTERM ask the build to stop cleanly (no output file is left); a second one kills.
+  o->cancel = &install_stop_signals();
+  auto report = build_pyramid(*o);
   bar.finish();
   if (!report) return report_error(report.error());
-  const BuildReport& r = *report;
-  const Geometry& g = r.info.geometry;
-  if (a.json) {
-    nlohmann::json j;
-    j["output"] = a.output;
-    j["input"] = r.input_description;
-    j["width"] = g.width();
-    j["height"] = g.height();
-    j["tile_size"] = g.tile_size();
-    j["border"] = g.border();
-    j["max_zoom"] = g.max_zoom();
-    j["codec"] = codec_name(r.info.codec);
-    if (r.info.codec == CodecId::bc1) j["bc1_quality"] = bc1_quality_name(o.encode.bc1);
-    j["downsample"] = r.info.downsample;
-    j["tiles"] = r.stats.addressed_tiles;
-    j["unique_tiles"] = r.stats.tile_contents;
-    j["entries"] = r.stats.tile_entries;
-    j["tile_bytes"] = r.stats.tile_bytes;
-    j["file_bytes"] = r.stats.file_bytes;
-    j["seconds"] = r.seconds;
-    j["tiles_per_second"] = r.seconds > 0 ? double(r.stats.addressed_tiles) / r.seconds : 0.0;
-    std::printf("%s\n", j.dump(2).c_str());
-  } else if (!a.quiet) {
-    std::printf(
-        "built %s: %llux%llu, %d levels, %llu tiles (%llu unique), %s in %s (%.0f tiles/s)\n",
-        a.output.c_str(), (unsigned long long)g.width(), (unsigned long long)g.height(),
-        g.level_count(), (unsigned long long)r.stats.addressed_tiles,
-        (unsigned long long)r.stats.tile_contents, human_bytes(r.stats.file_bytes).c_str(),
-        human_duration(r.seconds).c_str(),
-        r.seconds > 0 ? double(r.stats.addressed_tiles) / r.seconds : 0.0);
-  }
+  if (a.json)
+    print_json(a, *o, *report);
+  else if (!a.quiet)
+    print_text(a, *report);
   return 0;
 }
 

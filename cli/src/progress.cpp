@@ -2,6 +2,7 @@
 
 #include <unistd.h>
 
+#include <cctype>
 #include <cstdio>
 
 namespace vts::cli {
@@ -66,6 +67,81 @@ std::string human_duration(double s) {
   else
     std::snprintf(buf, sizeof buf, "%dh%02dm", int(s) / 3600, (int(s) % 3600) / 60);
   return buf;
+}
+
+bool parse_u64(std::string_view s, std::uint64_t& out) {
+  if (s.empty() || s.size() > 19) return false;
+  std::uint64_t v = 0;
+  for (char c : s) {
+    if (c < '0' || c > '9') return false;
+    v = v * 10 + std::uint64_t(c - '0');
+  }
+  out = v;
+  return true;
+}
+
+Result<std::uint64_t> parse_byte_size(const std::string& text, std::string_view flag) {
+  auto bad = [&] {
+    return make_error(ErrorCode::invalid_argument, std::string(flag) + " '" + text +
+                                                       "' is not a positive size (e.g. 500M, 10G)");
+  };
+  std::size_t n = 0;
+  while (n < text.size() && text[n] >= '0' && text[n] <= '9') ++n;
+  std::uint64_t v = 0;
+  if (!parse_u64(std::string_view(text).substr(0, n), v) || v == 0) return bad();
+  std::string suffix = text.substr(n);
+  for (auto& c : suffix) c = char(std::toupper(static_cast<unsigned char>(c)));
+  int shift = 0;
+  if (!suffix.empty()) {
+    const std::string units = "KMGT";
+    const std::size_t u = units.find(suffix[0]);
+    if (u == std::string::npos) return suffix == "B" ? Result<std::uint64_t>(v) : bad();
+    shift = 10 * int(u + 1);
+    const std::string rest = suffix.substr(1);
+    if (!rest.empty() && rest != "B" && rest != "IB") return bad();
+  }
+  if (shift && v > (~std::uint64_t{0} >> shift)) return bad();
+  return v << shift;
+}
+
+Result<std::pair<int, int>> parse_level_range(const std::string& text, std::string_view flag) {
+  auto bad = [&](const std::string& why) {
+    return make_error(ErrorCode::invalid_argument, std::string(flag) + " '" + text + "' " + why +
+                                                       " (expected A-B or A, e.g. 0-5)");
+  };
+  const std::size_t dash = text.find('-');
+  std::uint64_t a = 0, b = 0;
+  const std::string_view t = text;
+  if (dash == std::string::npos) {
+    if (!parse_u64(t, a)) return bad("is not a level range");
+    b = a;
+  } else if (!parse_u64(t.substr(0, dash), a) || !parse_u64(t.substr(dash + 1), b)) {
+    return bad("is not a level range");
+  }
+  if (a > std::uint64_t(Geometry::kMaxZoom) || b > std::uint64_t(Geometry::kMaxZoom))
+    return bad("names a level beyond " + std::to_string(Geometry::kMaxZoom));
+  if (a > b) return bad("is empty: the first level is after the last");
+  return std::pair<int, int>{int(a), int(b)};
+}
+
+Result<TexelRect> parse_texel_rect(const std::string& text, std::string_view flag) {
+  std::uint64_t v[4];
+  std::size_t start = 0;
+  for (int i = 0; i < 4; ++i) {
+    const std::size_t comma = i < 3 ? text.find(',', start) : text.size();
+    if (comma == std::string::npos ||
+        !parse_u64(std::string_view(text).substr(start, comma - start), v[i]))
+      return make_error(ErrorCode::invalid_argument,
+                        std::string(flag) + " '" + text +
+                            "' is not of the form x0,y0,x1,y1 (finest-level texels)");
+    start = comma + 1;
+  }
+  TexelRect r{v[0], v[1], v[2], v[3]};
+  if (r.empty())
+    return make_error(
+        ErrorCode::invalid_argument,
+        std::string(flag) + " '" + text + "' is empty (x1 must exceed x0 and y1 exceed y0)");
+  return r;
 }
 
 }  // namespace vts::cli

@@ -1,10 +1,16 @@
-// A one-line progress bar on stderr (only when stderr is a terminal): percentage, counts, rate and
-// ETA, redrawn in place at most ten times a second.
+// Numbers for and from the terminal: a one-line progress bar on stderr (only when stderr is a
+// terminal: percentage, counts, rate and ETA, redrawn in place), human-readable sizes and
+// durations, and the parsers of counts and sizes given as arguments.
 #pragma once
 
 #include <chrono>
 #include <cstdint>
 #include <string>
+#include <string_view>
+#include <utility>
+
+#include "vts/protocol/geometry.hpp"
+#include "vts/protocol/result.hpp"
 
 namespace vts::cli {
 
@@ -26,5 +32,15 @@ class ProgressBar {
 
 std::string human_bytes(std::uint64_t bytes);
 std::string human_duration(double seconds);
+
+// Decimal digits only, no sign; false on overflow or anything else.
+bool parse_u64(std::string_view s, std::uint64_t& out);
+// A positive byte count with an optional binary suffix: 1048576, 512M, 10G, 2GiB, 64KB.
+// invalid_argument naming `flag` otherwise.
+Result<std::uint64_t> parse_byte_size(const std::string& text, std::string_view flag);
+// Levels "A-B" or "A" (one level), A <= B <= Geometry::kMaxZoom.
+Result<std::pair<int, int>> parse_level_range(const std::string& text, std::string_view flag);
+// x0,y0,x1,y1 in finest-level texels, half-open, non-empty.
+Result<TexelRect> parse_texel_rect(const std::string& text, std::string_view flag);
 
 }  // namespace vts::cli

@@ -26,6 +26,8 @@
 #include <tuple>
 #include <unordered_map>
 
+#include "vts/protocol/file_io.hpp"
+
 namespace vts::client {
 
 namespace {
@@ -43,27 +45,10 @@ Status init_curl_once() {
   return {};
 }
 
-bool iequals_prefix(std::string_view line, std::string_view prefix) {
-  if (line.size() < prefix.size()) return false;
-  for (std::size_t i = 0; i < prefix.size(); ++i) {
-    const char a = line[i] >= 'A' && line[i] <= 'Z' ? char(line[i] - 'A' + 'a') : line[i];
-    if (a != prefix[i]) return false;
-  }
-  return true;
-}
-
-std::string_view trim(std::string_view s) {
-  while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
-  while (!s.empty() &&
-         (s.back() == ' ' || s.back() == '\t' || s.back() == '\r' || s.back() == '\n'))
-    s.remove_suffix(1);
-  return s;
-}
-
 // "bytes first-last/total" (total may be "*"); false when malformed.
 bool parse_content_range(std::string_view v, std::uint64_t& first, std::uint64_t& last) {
   v = trim(v);
-  if (!iequals_prefix(v, "bytes ")) return false;
+  if (!istarts_with(v, "bytes ")) return false;
   v.remove_prefix(6);
   v = trim(v);
   const auto dash = v.find('-');
@@ -447,13 +432,13 @@ class Fetcher::Impl {
   static std::size_t on_header(char* data, std::size_t size, std::size_t n, void* user) {
     auto* t = static_cast<Transfer*>(user);
     const std::string_view line(data, size * n);
-    if (iequals_prefix(line, "http/")) {
+    if (istarts_with(line, "http/")) {
       // A new response (after a redirect or a 100 Continue): forget the previous one's headers.
       t->etag.clear();
       t->content_range.clear();
-    } else if (iequals_prefix(line, "etag:")) {
+    } else if (istarts_with(line, "etag:")) {
       t->etag = std::string(trim(line.substr(5)));
-    } else if (iequals_prefix(line, "content-range:")) {
+    } else if (istarts_with(line, "content-range:")) {
       t->content_range = std::string(trim(line.substr(14)));
     }
     return size * n;
@@ -499,7 +484,7 @@ class Fetcher::Impl {
     // where HTTP/2 is negotiated (ALPN, known right after the handshake). Over plain http:// the
     // answer would only come with the first response, so one stalled request would hold back
     // every other request to its host.
-    if (iequals_prefix(t->url, "https://")) curl_easy_setopt(e, CURLOPT_PIPEWAIT, 1L);
+    if (istarts_with(t->url, "https://")) curl_easy_setopt(e, CURLOPT_PIPEWAIT, 1L);
     // Tiles are already compressed: no Accept-Encoding, and no decoding of the stored bytes.
     curl_easy_setopt(e, CURLOPT_ACCEPT_ENCODING, static_cast<char*>(nullptr));
     curl_easy_setopt(e, CURLOPT_HTTP_CONTENT_DECODING, 0L);

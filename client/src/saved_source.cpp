@@ -2,14 +2,12 @@
 // so the tileset can be opened with the network gone (see saved_source.hpp).
 #include "vts/client/saved_source.hpp"
 
-#include <unistd.h>
-
 #include <cstdio>
 #include <ctime>
-#include <fstream>
 #include <nlohmann/json.hpp>
-#include <sstream>
 #include <system_error>
+
+#include "vts/protocol/file_io.hpp"
 
 namespace vts::client {
 
@@ -37,8 +35,7 @@ fs::path source_file(const fs::path& cache_dir, std::string_view location) {
 
 }  // namespace
 
-// Writes `info` for `location` atomically (temporary file + rename), so that another daemon or a
-// crash never leaves a half-written file behind.
+// Atomic, so that another daemon or a crash never leaves a half-written file behind.
 Status save_source_info(const fs::path& cache_dir, std::string_view location,
                         const SourceInfo& info) {
   const fs::path file = source_file(cache_dir, location);
@@ -57,34 +54,17 @@ Status save_source_info(const fs::path& cache_dir, std::string_view location,
       {"saved_unix", std::int64_t(std::time(nullptr))},
   };
   const std::string text = j.dump(2, ' ', false, json::error_handler_t::replace) + "\n";
-  const fs::path tmp = file.string() + ".tmp." + std::to_string(::getpid());
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    out.write(text.data(), std::streamsize(text.size()));
-    out.flush();
-    if (!out) {
-      fs::remove(tmp, ec);
-      return make_error(ErrorCode::io, "cannot write " + tmp.string());
-    }
-  }
-  fs::rename(tmp, file, ec);
-  if (ec) {
-    fs::remove(tmp, ec);
-    return make_error(ErrorCode::io, "cannot rename " + tmp.string() + " to " + file.string());
-  }
-  return {};
+  return write_file_atomically(file, text);
 }
 
 Result<SourceInfo> load_source_info(const fs::path& cache_dir, std::string_view location) {
   const fs::path file = source_file(cache_dir, location);
-  std::ifstream in(file, std::ios::binary);
-  if (!in)
+  auto text = read_file(file);
+  if (!text)
     return make_error(ErrorCode::not_found, "the cache in " + cache_dir.string() +
                                                 " holds no description of " +
                                                 std::string(location) + " (" + file.string() + ")");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  const json j = json::parse(ss.str(), nullptr, false);
+  const json j = json::parse(*text, nullptr, false);
   auto bad = [&](const std::string& why) {
     return make_error(ErrorCode::corrupt, file.string() + ": " + why);
   };

@@ -6,27 +6,10 @@
 
 #include "vts/client/source.hpp"
 #include "vts/protocol/codec.hpp"
+#include "vts/protocol/file_io.hpp"
 
 namespace vts::client {
 namespace {
-
-std::string_view trim(std::string_view s) {
-  while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
-  while (!s.empty() && (s.back() == ' ' || s.back() == '\t')) s.remove_suffix(1);
-  return s;
-}
-
-char lower(char c) {
-  return c >= 'A' && c <= 'Z' ? static_cast<char>(c - 'A' + 'a') : c;
-}
-
-bool starts_with_nocase(std::string_view s, std::string_view prefix) {
-  if (s.size() < prefix.size()) return false;
-  for (std::size_t i = 0; i < prefix.size(); ++i) {
-    if (lower(s[i]) != prefix[i]) return false;
-  }
-  return true;
-}
 
 int hex_value(char c) {
   if (c >= '0' && c <= '9') return c - '0';
@@ -116,14 +99,14 @@ Result<std::unique_ptr<TileSource>> open_source(std::string_view location, Sourc
   const std::string_view loc = trim(location);
   if (loc.empty()) return make_error(ErrorCode::invalid_argument, "empty tileset location");
 
-  if (starts_with_nocase(loc, "http://") || starts_with_nocase(loc, "https://")) {
+  if (istarts_with(loc, "http://") || istarts_with(loc, "https://")) {
     // The suffix is judged on the path alone: a query (a signed object-store URL) or a fragment
     // does not change what the resource is.
     const std::string_view path = loc.substr(0, loc.find_first_of("?#"));
     if (path.ends_with(".pmtiles")) return open_remote_archive(loc, std::move(options));
     return open_tilejson(loc, std::move(options));
   }
-  if (starts_with_nocase(loc, "file:")) {
+  if (istarts_with(loc, "file:")) {
     const std::optional<std::string> path = file_url_path(loc);
     if (!path) {
       return make_error(ErrorCode::invalid_argument,
@@ -137,8 +120,8 @@ Result<std::unique_ptr<TileSource>> open_source(std::string_view location, Sourc
   if (const std::size_t colon = loc.find("://"); colon != std::string_view::npos) {
     bool scheme = colon > 0;
     for (std::size_t i = 0; i < colon; ++i) {
-      const char c = lower(loc[i]);
-      scheme &= (c >= 'a' && c <= 'z') ||
+      const char c = loc[i];
+      scheme &= (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') ||
                 (i > 0 && ((c >= '0' && c <= '9') || c == '+' || c == '-' || c == '.'));
     }
     if (scheme) {

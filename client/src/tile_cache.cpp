@@ -273,6 +273,19 @@ class TileCache::Impl {
     if (ram_) ram_->put(TileKey{key_, id}, tile, pin);
   }
 
+  // A verified payload from the source, fresh now: into RAM and onto disk, each pinned as asked.
+  std::shared_ptr<const CachedTile> keep_fetched(TileId id, SourceTile&& t, bool ram_pin,
+                                                 bool disk_pin) {
+    auto tile = std::make_shared<CachedTile>();
+    tile->payload = std::move(t.payload);
+    tile->etag = std::move(t.etag);
+    tile->validated_unix = now_unix();
+    std::shared_ptr<const CachedTile> shared = std::move(tile);
+    remember(id, shared, ram_pin);
+    store_on_disk(id, shared, disk_pin);
+    return shared;
+  }
+
   // ---- disk stage (disk thread) ----
 
   void post_disk(bool read, std::function<void()> job) {
@@ -451,16 +464,9 @@ class TileCache::Impl {
         }
         auto p = snapshot(id, serial);
         const bool pin = p && p->pin;
-        auto tile = std::make_shared<CachedTile>();
-        tile->payload = std::move(t.payload);
-        tile->etag = std::move(t.etag);
-        tile->validated_unix = now_unix();
-        std::shared_ptr<const CachedTile> shared = std::move(tile);
-        remember(id, shared, pin);
-        store_on_disk(id, shared, pin);
         r.kind = PayloadResult::Kind::ok;
         r.from = PayloadResult::From::network;
-        r.tile = std::move(shared);
+        r.tile = keep_fetched(id, std::move(t), pin, pin);
         break;
       }
       case SourceTile::Kind::absent: {
@@ -542,13 +548,7 @@ class TileCache::Impl {
           stats_.corrupt_rejected.fetch_add(1, std::memory_order_relaxed);
           break;  // keep the old one
         }
-        auto fresh = std::make_shared<CachedTile>();
-        fresh->payload = std::move(t.payload);
-        fresh->etag = std::move(t.etag);
-        fresh->validated_unix = now_unix();
-        std::shared_ptr<const CachedTile> shared = std::move(fresh);
-        remember(id, shared, false);
-        store_on_disk(id, shared, pin);
+        keep_fetched(id, std::move(t), false, pin);
         break;
       }
       case SourceTile::Kind::absent: {

@@ -3,11 +3,7 @@
 // no external resources, so the file can be mailed, archived or opened offline as it is.
 #include "vts/loadtest/load_report.hpp"
 
-#include <fcntl.h>
-#include <unistd.h>
-
 #include <algorithm>
-#include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -15,11 +11,11 @@
 #include <functional>
 #include <limits>
 #include <optional>
-#include <random>
 #include <string_view>
 #include <utility>
 
 #include "vts/plot/svg_plot.hpp"
+#include "vts/protocol/file_io.hpp"
 
 namespace vts::client {
 namespace {
@@ -285,13 +281,21 @@ bool any_traffic(const LoadReport& r) {
   });
 }
 
-std::string latency_plot(const LoadReport& r) {
+// A plot over the run's seconds: x is the time since the start, y values print as %g.
+Plot per_second_plot(const char* id, const char* title, const char* y_label) {
   Plot plot;
-  plot.id = "plot-latency";
-  plot.title = "Request latency per second (p50, p90, p99)";
+  plot.id = id;
+  plot.title = title;
   plot.x_label = "time since start";
-  plot.y_label = "request latency";
+  plot.y_label = y_label;
   plot.x_format = seconds_label;
+  plot.y_format = [](double v) { return printf_string("%g", v); };
+  return plot;
+}
+
+std::string latency_plot(const LoadReport& r) {
+  Plot plot = per_second_plot("plot-latency", "Request latency per second (p50, p90, p99)",
+                              "request latency");
   plot.y_format = format_ns_tick;
   const std::pair<const char*, std::uint64_t LoadSecond::*> lines[] = {
       {"p50", &LoadSecond::p50_ns}, {"p90", &LoadSecond::p90_ns}, {"p99", &LoadSecond::p99_ns}};
@@ -367,14 +371,9 @@ std::string full_resolution_plot(const LoadReport& r) {
 }
 
 std::string throughput_plot(const LoadReport& r) {
-  Plot plot;
-  plot.id = "plot-throughput";
-  plot.title = "Throughput per second (requests and MB)";
-  plot.x_label = "time since start";
-  plot.y_label = "requests/s";
+  Plot plot =
+      per_second_plot("plot-throughput", "Throughput per second (requests and MB)", "requests/s");
   plot.y2_label = "MB/s";
-  plot.x_format = seconds_label;
-  plot.y_format = [](double v) { return printf_string("%g", v); };
   plot.y2_format = plot.y_format;
   const bool markers = r.seconds.size() <= 60;
   Series reqs{"requests_per_s", "requests/s", "#1f77b4", {}, false, markers};
@@ -399,13 +398,7 @@ std::string throughput_plot(const LoadReport& r) {
 }
 
 std::string errors_plot(const LoadReport& r) {
-  Plot plot;
-  plot.id = "plot-errors";
-  plot.title = "Errors per second";
-  plot.x_label = "time since start";
-  plot.y_label = "errors/s";
-  plot.x_format = seconds_label;
-  plot.y_format = [](double v) { return printf_string("%g", v); };
+  Plot plot = per_second_plot("plot-errors", "Errors per second", "errors/s");
   Series errors{"errors_per_s", "errors/s", "#d62728", {}, false, r.seconds.size() <= 60};
   double max_errors = 0;
   for (std::size_t i = 0; i < r.seconds.size(); ++i) {
@@ -661,9 +654,6 @@ std::string html_report(const LoadReport& r) {
 }
 
 Status write_html_report(const LoadReport& report, const fs::path& dir) {
-  auto io_error = [](const std::string& what, const fs::path& path, int err) {
-    return make_error(ErrorCode::io, what + " " + path.string() + ": " + std::strerror(err));
-  };
   std::error_code ec;
   fs::create_directories(dir, ec);
   if (ec) {
@@ -673,54 +663,7 @@ Status write_html_report(const LoadReport& report, const fs::path& dir) {
   if (!fs::is_directory(dir, ec)) {
     return make_error(ErrorCode::io, "the report folder " + dir.string() + " is not a folder");
   }
-  const std::string page = html_report(report);
-  const fs::path final_path = dir / "index.html";
-
-  // A unique temporary name with O_EXCL (not mkstemp, which forces mode 0600).
-  std::random_device rd;
-  std::mt19937_64 rng((std::uint64_t{rd()} << 32) ^ rd() ^ static_cast<std::uint64_t>(::getpid()));
-  fs::path tmp;
-  int fd = -1;
-  for (int attempt = 0; attempt < 100 && fd < 0; ++attempt) {
-    char suffix[24];
-    std::snprintf(suffix, sizeof suffix, "%08llx",
-                  static_cast<unsigned long long>(rng() & 0xFFFFFFFFull));
-    tmp = dir / (".index.html.tmp-" + std::string(suffix));
-    fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
-    if (fd < 0 && errno != EEXIST) return io_error("cannot create", tmp, errno);
-  }
-  if (fd < 0) return io_error("cannot create a temporary file like", tmp, EEXIST);
-
-  auto fail = [&](const std::string& what, const fs::path& path, int err) -> Status {
-    if (fd >= 0) ::close(fd);
-    ::unlink(tmp.c_str());
-    return io_error(what, path, err);
-  };
-  const char* data = page.data();
-  std::size_t left = page.size();
-  while (left > 0) {
-    const ssize_t n = ::write(fd, data, left);
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      return fail("cannot write", tmp, errno);
-    }
-    data += n;
-    left -= static_cast<std::size_t>(n);
-  }
-  if (::fsync(fd) != 0) return fail("cannot flush", tmp, errno);
-  const int closed = ::close(fd);
-  fd = -1;
-  if (closed != 0) return fail("cannot write", tmp, errno);
-  if (::rename(tmp.c_str(), final_path.c_str()) != 0) {
-    return fail("cannot rename the report to", final_path, errno);
-  }
-  // Make the rename durable too; the report is complete either way, so this is best effort.
-  const int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-  if (dfd >= 0) {
-    ::fsync(dfd);
-    ::close(dfd);
-  }
-  return {};
+  return write_file_atomically(dir / "index.html", html_report(report));
 }
 
 }  // namespace vts::client

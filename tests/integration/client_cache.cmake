@@ -1,4 +1,4 @@
-# Client caches (issue 4): the SQLite disk cache under kill -9, a full disk and two processes at
+# Client caches: the SQLite disk cache under kill -9, a full disk and two processes at
 # once, driven by `cache_torture` (fill / check) and checked with the real sqlite3 CLI.
 # Included by tests/integration/CMakeLists.txt (VTS_INTEGRATION_ENV, BASH_EXECUTABLE come from it).
 

@@ -1,4 +1,4 @@
-# Cache daemon (issue 4): `vts cache serve` in front of a real upstream (an in-process
+# Cache daemon: `vts cache serve` in front of a real upstream (an in-process
 # vts::HttpServer), driven by libcurl and raw sockets; and the server's AsyncTileProvider hook
 # with a fake provider. Included by tests/integration/CMakeLists.txt, which provides GTest and
 # PkgConfig::CURL.

@@ -1,4 +1,4 @@
-# Client fetcher (issue 4): the libcurl fetcher against FaultServer, an in-process upstream that
+# Client fetcher: the libcurl fetcher against FaultServer, an in-process upstream that
 # injects faults chosen by URL (drop, reset, stall, slow, truncate, corrupt, 5xx, Retry-After).
 # Included by tests/integration/CMakeLists.txt, which provides GTest and PkgConfig::CURL.
 

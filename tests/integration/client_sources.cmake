@@ -1,4 +1,4 @@
-# Tile sources (issue 4): the local-archive, TileJSON and remote-archive sources over loopback,
+# Tile sources: the local-archive, TileJSON and remote-archive sources over loopback,
 # against the real `vts serve` (HttpServer in process) and FaultServer as a plain static file
 # server with Range. Included by tests/integration/CMakeLists.txt after client_fetch.cmake, which
 # defines fault_server_lib.

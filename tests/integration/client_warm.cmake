@@ -1,4 +1,4 @@
-# vts warm (issue 4): the real `vts serve` on 127.0.0.1 port 0 warmed into a disk cache, which the
+# vts warm: the real `vts serve` on 127.0.0.1 port 0 warmed into a disk cache, which the
 # sqlite3 CLI then checks; kill -9 and SIGINT mid-warm. Included by tests/integration/CMakeLists.txt
 # (vts_integration_test comes from it).
 

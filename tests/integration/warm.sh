@@ -41,7 +41,7 @@ warm_json() {
 }
 
 # tile_list W H T Z0 Z1 X0 Y0 X1 Y1: "z x y" of every tile of levels Z0..Z1 over the finest-level
-# texel rectangle [X0,X1) x [Y0,Y1), from the geometry rules of DESIGN.md §3 restated here.
+# texel rectangle [X0,X1) x [Y0,Y1), by the pyramid geometry rules restated here.
 tile_list() {
   local w=$1 h=$2 t=$3 z0=$4 z1=$5 x0=$6 y0=$7 x1=$8 y1=$9 maxz=0 z s lw lh rx0 ry0 rx1 ry1 x y
   while (((t << maxz) < (w > h ? w : h))); do maxz=$((maxz + 1)); done

@@ -1,0 +1,241 @@
+// The cache daemon's provider and reconnecting upstream in process: a local archive built here is
+// the upstream, a real TileCache (RAM + disk) holds the tiles, and the answers are what the HTTP
+// front would turn into responses.
+#include "vts/client/cache_provider.hpp"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <filesystem>
+#include <future>
+#include <optional>
+
+#include "vts/builder/builder.hpp"
+#include "vts/client/source.hpp"
+
+namespace fs = std::filesystem;
+using namespace vts::client;
+using vts::ProvidedTile;
+using vts::ProvidedTileset;
+using vts::TileId;
+
+namespace {
+
+struct Dir {
+  fs::path path;
+  Dir() {
+    static std::atomic<int> n{0};
+    path = fs::temp_directory_path() /
+           ("vts-cache-provider-test-" + std::to_string(::getpid()) + "-" + std::to_string(n++));
+    fs::create_directories(path);
+  }
+  ~Dir() {
+    std::error_code ec;
+    fs::remove_all(path, ec);
+  }
+};
+
+// 1000 x 600 texels, levels 0-2; with a region, levels >= 1 hold only the tiles over it.
+fs::path build(const fs::path& out, std::optional<vts::TexelRect> region = std::nullopt,
+               std::uint64_t width = 1000) {
+  vts::BuildOptions o;
+  o.synthetic = vts::SyntheticSpec{width, 600, region, 1};
+  o.output = out;
+  o.threads = 1;
+  auto r = vts::build_pyramid(o);
+  EXPECT_TRUE(r.ok()) << r.error().to_string();
+  return out;
+}
+
+std::unique_ptr<TileSource> open(const fs::path& archive) {
+  auto s = open_source(archive.string());
+  EXPECT_TRUE(s.ok()) << s.error().to_string();
+  return s.ok() ? std::move(*s) : nullptr;
+}
+
+// A provider over `upstream` (online when `online` is given) with a RAM and a disk cache.
+struct Daemon {
+  std::shared_ptr<ReconnectingSource> upstream;
+  std::shared_ptr<CacheProvider> provider;
+  std::shared_ptr<const ProvidedTileset> tileset;
+
+  Daemon(const SourceInfo& info, std::unique_ptr<TileSource> online, const fs::path& location,
+         const fs::path& cache_dir, ReconnectingSource::Hooks hooks = {}) {
+    upstream =
+        std::make_shared<ReconnectingSource>(info, std::move(online), location.string(),
+                                             SourceOptions{}, std::chrono::milliseconds(20), hooks);
+    TileCacheOptions co;
+    co.ram_bytes = 16u << 20;
+    co.disk = DiskCacheOptions{};
+    co.disk->dir = cache_dir;
+    auto cache = TileCache::create(upstream, co);
+    EXPECT_TRUE(cache.ok()) << cache.error().to_string();
+    auto t = std::make_shared<ProvidedTileset>();
+    t->name = "earth";
+    t->info = info.info;
+    t->version = info.version;
+    tileset = t;
+    provider = std::make_shared<CacheProvider>(tileset, std::move(*cache), upstream);
+  }
+  ~Daemon() { EXPECT_TRUE(provider->shutdown().ok()); }
+
+  ProvidedTile get(TileId id) {
+    std::promise<ProvidedTile> p;
+    auto f = p.get_future();
+    provider->tile(tileset, id, [&p](ProvidedTile t) { p.set_value(std::move(t)); });
+    EXPECT_EQ(f.wait_for(std::chrono::seconds(10)), std::future_status::ready);
+    return f.get();
+  }
+};
+
+std::vector<std::uint8_t> payload_of(TileSource& source, TileId id) {
+  std::vector<std::uint8_t> out;
+  SourceRequest r;
+  r.id = id;
+  source.fetch(r, [&](SourceTile&& t) { out = std::move(t.payload); });
+  return out;
+}
+
+TEST(CacheProvider, FindsItsOneTilesetByName) {
+  Dir d;
+  const fs::path archive = build(d.path / "a.pmtiles");
+  auto local = open(archive);
+  const SourceInfo info = local->info();
+  Daemon daemon(info, std::move(local), archive, d.path / "cache");
+  EXPECT_EQ(daemon.provider->find("earth"), daemon.tileset);
+  EXPECT_EQ(daemon.provider->find("mars"), nullptr);
+  ASSERT_EQ(daemon.provider->all().size(), 1u);
+  EXPECT_EQ(daemon.provider->all()[0], daemon.tileset);
+}
+
+TEST(CacheProvider, ServesTheUpstreamsTileBytesThenFromTheCache) {
+  Dir d;
+  const fs::path archive = build(d.path / "a.pmtiles");
+  auto local = open(archive);
+  const std::vector<std::uint8_t> want = payload_of(*local, TileId{2, 1, 1});
+  ASSERT_FALSE(want.empty());
+  const SourceInfo info = local->info();
+  Daemon daemon(info, std::move(local), archive, d.path / "cache");
+
+  for (int i = 0; i < 2; ++i) {
+    const ProvidedTile t = daemon.get(TileId{2, 1, 1});
+    ASSERT_EQ(t.kind, ProvidedTile::Kind::ok) << t.message;
+    EXPECT_TRUE(t.keep) << "the payload's owner travels with it";
+    EXPECT_EQ(std::vector<std::uint8_t>(t.payload.begin(), t.payload.end()), want);
+  }
+  const std::string metrics = daemon.provider->metrics_text();
+  EXPECT_NE(metrics.find("vts_cache_gets_total 2\n"), std::string::npos) << metrics;
+  EXPECT_NE(metrics.find("vts_cache_upstream_fetches_total 1\n"), std::string::npos) << metrics;
+  EXPECT_NE(metrics.find("vts_cache_hits_total{level=\"ram\"} 1\n"), std::string::npos) << metrics;
+  EXPECT_NE(metrics.find("vts_cache_upstream_online 1\n"), std::string::npos) << metrics;
+}
+
+TEST(CacheProvider, ATileTheUpstreamLacksIsAbsent) {
+  Dir d;
+  const fs::path archive = build(d.path / "sparse.pmtiles", vts::TexelRect{0, 0, 256, 256});
+  auto local = open(archive);
+  const SourceInfo info = local->info();
+  Daemon daemon(info, std::move(local), archive, d.path / "cache");
+  EXPECT_EQ(daemon.get(TileId{2, 3, 2}).kind, ProvidedTile::Kind::absent);
+  EXPECT_EQ(daemon.get(TileId{2, 0, 0}).kind, ProvidedTile::Kind::ok);
+  EXPECT_NE(daemon.provider->metrics_text().find("vts_cache_absent_total 1\n"), std::string::npos);
+}
+
+TEST(CacheProvider, OfflineItServesWhatTheCacheHoldsAndTheRestIsUnavailable) {
+  Dir d;
+  const fs::path archive = build(d.path / "a.pmtiles");
+  auto local = open(archive);
+  const SourceInfo info = local->info();
+  {
+    Daemon online(info, std::move(local), archive, d.path / "cache");
+    ASSERT_EQ(online.get(TileId{0, 0, 0}).kind, ProvidedTile::Kind::ok);
+  }
+  // The upstream is gone: the daemon starts offline, from the same cache folder.
+  fs::rename(archive, d.path / "moved.pmtiles");
+  Daemon offline(info, nullptr, archive, d.path / "cache");
+  EXPECT_FALSE(offline.upstream->online());
+  EXPECT_EQ(offline.get(TileId{0, 0, 0}).kind, ProvidedTile::Kind::ok);
+  const ProvidedTile missing = offline.get(TileId{2, 1, 1});
+  EXPECT_EQ(missing.kind, ProvidedTile::Kind::unavailable);
+  EXPECT_FALSE(missing.message.empty());
+  const std::string metrics = offline.provider->metrics_text();
+  EXPECT_NE(metrics.find("vts_cache_upstream_online 0\n"), std::string::npos) << metrics;
+  EXPECT_NE(metrics.find("vts_cache_errors_total 1\n"), std::string::npos) << metrics;
+}
+
+TEST(CacheProvider, AnOfflineUpstreamGoesOnlineWhenTheSameTilesetOpensAgain) {
+  Dir d;
+  const fs::path archive = build(d.path / "a.pmtiles");
+  SourceInfo info = open(archive)->info();
+  fs::rename(archive, d.path / "moved.pmtiles");
+  std::promise<SourceInfo> back;
+  ReconnectingSource::Hooks hooks;
+  hooks.back_online = [&back](const SourceInfo& now) { back.set_value(now); };
+  Daemon daemon(info, nullptr, archive, d.path / "cache", hooks);
+  EXPECT_EQ(daemon.get(TileId{2, 1, 1}).kind, ProvidedTile::Kind::unavailable);
+
+  fs::rename(d.path / "moved.pmtiles", archive);
+  auto f = back.get_future();
+  ASSERT_EQ(f.wait_for(std::chrono::seconds(10)), std::future_status::ready);
+  EXPECT_EQ(f.get().key, info.key);
+  EXPECT_TRUE(daemon.upstream->online());
+  EXPECT_EQ(daemon.get(TileId{2, 1, 1}).kind, ProvidedTile::Kind::ok);
+}
+
+TEST(CacheProvider, AnUpstreamThatReopensWithAnotherTilesetStaysOffline) {
+  Dir d;
+  const fs::path archive = build(d.path / "a.pmtiles");
+  SourceInfo info = open(archive)->info();
+  fs::remove(archive);
+  build(archive, std::nullopt, 1200);  // same location (key), other geometry
+  std::promise<SourceInfo> changed;
+  std::atomic<bool> once{false};
+  ReconnectingSource::Hooks hooks;
+  hooks.changed = [&](const SourceInfo& now) {
+    if (!once.exchange(true)) changed.set_value(now);
+  };
+  Daemon daemon(info, nullptr, archive, d.path / "cache", hooks);
+  auto f = changed.get_future();
+  ASSERT_EQ(f.wait_for(std::chrono::seconds(10)), std::future_status::ready);
+  EXPECT_EQ(f.get().info.geometry.width(), 1200u);
+  EXPECT_FALSE(daemon.upstream->online());
+  EXPECT_EQ(daemon.upstream->info().info.geometry.width(), 1000u) << "info() never changes";
+}
+
+TEST(CacheProvider, AfterShutdownTheMetricsAreEmptyAndShutdownIsIdempotent) {
+  Dir d;
+  const fs::path archive = build(d.path / "a.pmtiles");
+  auto local = open(archive);
+  const SourceInfo info = local->info();
+  Daemon daemon(info, std::move(local), archive, d.path / "cache");
+  EXPECT_FALSE(daemon.provider->metrics_text().empty());
+  EXPECT_TRUE(daemon.provider->shutdown().ok());
+  EXPECT_TRUE(daemon.provider->metrics_text().empty());
+}
+
+TEST(CacheProvider, SameTilesetComparesKeyGeometryAndCodec) {
+  Dir d;
+  const SourceInfo a = open(build(d.path / "a.pmtiles"))->info();
+  SourceInfo other_key = a;
+  other_key.key += "x";
+  const SourceInfo wider = open(build(d.path / "b.pmtiles", std::nullopt, 1200))->info();
+  SourceInfo wider_same_key = wider;
+  wider_same_key.key = a.key;
+  EXPECT_TRUE(same_tileset(a, a));
+  EXPECT_FALSE(same_tileset(a, other_key));
+  EXPECT_FALSE(same_tileset(a, wider_same_key));
+}
+
+TEST(CacheProvider, TheDefaultNameIsTheLocationsLastSegmentWithoutItsExtension) {
+  EXPECT_EQ(default_tileset_name("http://host:8080/earth"), "earth");
+  EXPECT_EQ(default_tileset_name("http://host:8080/earth.json"), "earth");
+  EXPECT_EQ(default_tileset_name("https://h/tiles/earth.v2.pmtiles?sig=1#x"), "earth.v2");
+  EXPECT_EQ(default_tileset_name("/data/earth.pmtiles"), "earth");
+  EXPECT_EQ(default_tileset_name("http://host:8080/earth/"), "earth");
+  EXPECT_EQ(default_tileset_name("http://host:8080"), "");
+  EXPECT_EQ(default_tileset_name("http://host:8080/"), "");
+}
+
+}  // namespace

@@ -1,0 +1,120 @@
+// What `vts loadtest` runs, from its arguments (scenario.hpp): the target and cache choice, the
+// viewers' camera demand (the renderer's real presets and demand simulator), and the simulation
+// figures as JSON and as a terminal line.
+#include "vts/loadtest/scenario.hpp"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+
+namespace fs = std::filesystem;
+using namespace vts::client;
+
+namespace {
+
+TEST(Scenario, DaemonModeSendsRequestsThroughTheDaemon) {
+  LoadTestOptions o;
+  ASSERT_TRUE(apply_target({"http://origin/earth", "daemon", "", "http://daemon/earth"}, o).ok());
+  EXPECT_EQ(o.target, "http://daemon/earth");
+  EXPECT_EQ(o.cache, CacheMode::none);
+
+  LoadTestOptions direct;
+  ASSERT_TRUE(apply_target({"http://origin/earth", "ram", "", ""}, direct).ok());
+  EXPECT_EQ(direct.target, "http://origin/earth");
+  EXPECT_EQ(direct.cache, CacheMode::ram);
+}
+
+TEST(Scenario, DaemonModeWithoutADaemonAndDiskModeWithoutAFolderAreRefused) {
+  LoadTestOptions o;
+  const vts::Status daemon = apply_target({"http://origin/earth", "daemon", "", ""}, o);
+  ASSERT_FALSE(daemon.ok());
+  EXPECT_EQ(daemon.error().code, vts::ErrorCode::invalid_argument);
+  EXPECT_NE(daemon.error().message.find("--daemon"), std::string::npos);
+
+  const vts::Status disk = apply_target({"http://origin/earth", "disk", "", ""}, o);
+  ASSERT_FALSE(disk.ok());
+  EXPECT_EQ(disk.error().code, vts::ErrorCode::invalid_argument);
+  EXPECT_NE(disk.error().message.find("--cache-dir"), std::string::npos);
+
+  ASSERT_TRUE(apply_target({"http://origin/earth", "disk", "/tmp/x", ""}, o).ok());
+  EXPECT_EQ(o.cache, CacheMode::disk);
+  EXPECT_EQ(o.cache_dir, fs::path("/tmp/x"));
+}
+
+TEST(Scenario, APathThatIsNeitherAPresetNorAFileIsNotFoundAndTheErrorListsThePresets) {
+  auto g = vts::Geometry::create(4096, 2048);
+  ASSERT_TRUE(g.ok());
+  CameraDemandOptions c;
+  c.path = "flyovr";
+  auto d = camera_demand(*g, c);
+  ASSERT_FALSE(d.ok());
+  EXPECT_EQ(d.error().code, vts::ErrorCode::not_found);
+  EXPECT_NE(d.error().message.find("flyover"), std::string::npos) << d.error().message;
+}
+
+TEST(Scenario, AnUnparsableCameraPathFileIsNamedInTheError) {
+  const fs::path file =
+      fs::temp_directory_path() / ("vts-scenario-test-" + std::to_string(::getpid()) + ".json");
+  std::ofstream(file) << "{ not json";
+  auto g = vts::Geometry::create(4096, 2048);
+  ASSERT_TRUE(g.ok());
+  CameraDemandOptions c;
+  c.path = file.string();
+  auto d = camera_demand(*g, c);
+  fs::remove(file);
+  ASSERT_FALSE(d.ok());
+  EXPECT_EQ(d.error().message.rfind("camera path '" + file.string() + "': ", 0), 0u)
+      << d.error().message;
+}
+
+TEST(Scenario, APresetGivesEveryViewerCoarseFirstDemandStartingWithAMove) {
+  auto g = vts::Geometry::create(4096, 2048);
+  ASSERT_TRUE(g.ok());
+  CameraDemandOptions c;
+  c.path = "flyover";
+  c.viewers = 3;
+  c.duration_s = 2;
+  c.width = 320;
+  c.height = 200;
+  auto d = camera_demand(*g, c);
+  ASSERT_TRUE(d.ok()) << d.error().to_string();
+  EXPECT_EQ(d->path_name, "flyover");
+  for (std::uint32_t v = 0; v < c.viewers; ++v) {
+    auto first = d->demand(v, 0);
+    ASSERT_TRUE(first.ok()) << first.error().to_string();
+    EXPECT_TRUE(first->move) << "frame 0 starts a view";
+    ASSERT_FALSE(first->tiles.empty());
+    for (std::size_t i = 1; i < first->tiles.size(); ++i)
+      EXPECT_LE(first->tiles[i - 1].id.z, first->tiles[i].id.z) << "coarse first";
+  }
+}
+
+TEST(Scenario, TheSimulationFiguresAppearInTheJsonAndTheLine) {
+  LoadRunStats run;
+  run.frames = 120;
+  run.late_frames = 3;
+  run.moves_incomplete = 2;
+  run.idle_slots = 7;
+  run.abandoned = 1;
+  run.demand_cpu_ms_per_frame = 0.25;
+  CameraDemandOptions c;
+  c.width = 640;
+  c.height = 480;
+  const nlohmann::json j = simulation_json(run, c, "ram", 2);
+  EXPECT_EQ(j["viewer_frames"], 120);
+  EXPECT_EQ(j["late_frames"], 3);
+  EXPECT_EQ(j["idle_slots"], 7);
+  EXPECT_EQ(j["viewport"], nlohmann::json({640, 480}));
+  EXPECT_EQ(j["feedback_divisor"], 8);
+  EXPECT_EQ(j["cache"], "ram");
+  EXPECT_EQ(j["retries"], 2);
+
+  EXPECT_EQ(simulation_line(run, false),
+            "simulation: 120 viewer-frames (3 late), demand 0.25 ms/frame, 2 moves not at full "
+            "resolution in time, 1 abandoned at the end\n");
+  EXPECT_NE(simulation_line(run, true).find(", 7 idle slots\n"), std::string::npos);
+}
+
+}  // namespace
