@@ -526,15 +526,6 @@ Result<std::vector<Entry>> parse_directory(std::span<const std::uint8_t> bytes,
 
 // ---- compression --------------------------------------------------------------------------------
 
-namespace {
-
-Error unsupported_compression(Compression c) {
-  return make_error(ErrorCode::unsupported, "internal compression " +
-                                                std::to_string(static_cast<int>(c)) +
-                                                " is not supported (none, gzip or zstd)");
-}
-
-}  // namespace
 
 Result<std::vector<std::uint8_t>> compress(std::span<const std::uint8_t> bytes, Compression c) {
   switch (c) {
