@@ -16,22 +16,13 @@ namespace fs = std::filesystem;
 
 // Tileset names travel in URLs and are looked up in a table: keep them to a conservative,
 // unreserved-only alphabet so that no name needs escaping and none can mean a path.
+// Names come from file stems; one that breaks the rule is refused with the file to rename.
 Status validate_name(std::string_view name, const fs::path& path) {
-  auto bad = [&](const std::string& why) {
-    return Status(make_error(ErrorCode::invalid_argument,
-                             path.string() + ": tileset name \"" + std::string(name) + "\" " + why +
-                                 " (names are [A-Za-z0-9._-], at most 128 characters, "
-                                 "no leading dot; rename the file)"));
-  };
-  if (name.empty()) return bad("is empty");
-  if (name.size() > 128) return bad("is longer than 128 characters");
-  if (name.front() == '.') return bad("starts with a dot");
-  for (char c : name) {
-    const bool ok = (c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') ||
-                    c == '.' || c == '_' || c == '-';
-    if (!ok) return bad("contains a character outside [A-Za-z0-9._-]");
-  }
-  return {};
+  const std::string problem = tileset_name_problem(name);
+  if (problem.empty()) return {};
+  return make_error(ErrorCode::invalid_argument,
+                    path.string() + ": tileset name \"" + std::string(name) + "\" " + problem +
+                        " (" + std::string(kTilesetNameRule) + "; rename the file)");
 }
 
 using FileIdentity = TilesetRegistry::FileIdentity;
