@@ -195,6 +195,7 @@ class Fetcher::Impl {
     // The current attempt's response.
     std::vector<std::uint8_t> body;
     std::string etag;
+    std::string vts_error;
     std::string content_range;
     bool too_large = false;
     bool sized = false;  // body capacity reserved from Content-Length
@@ -450,9 +451,12 @@ class Fetcher::Impl {
     if (iequals_prefix(line, "http/")) {
       // A new response (after a redirect or a 100 Continue): forget the previous one's headers.
       t->etag.clear();
+      t->vts_error.clear();
       t->content_range.clear();
     } else if (iequals_prefix(line, "etag:")) {
       t->etag = std::string(trim(line.substr(5)));
+    } else if (iequals_prefix(line, "vts-error:")) {
+      t->vts_error = std::string(trim(line.substr(10)));
     } else if (iequals_prefix(line, "content-range:")) {
       t->content_range = std::string(trim(line.substr(14)));
     }
@@ -480,6 +484,7 @@ class Fetcher::Impl {
     }
     t->body.clear();
     t->etag.clear();
+    t->vts_error.clear();
     t->content_range.clear();
     t->too_large = false;
     t->sized = false;
@@ -726,6 +731,7 @@ class Fetcher::Impl {
     r.status = status;
     r.body = std::move(t->body);
     r.etag = std::move(t->etag);
+    r.vts_error = std::move(t->vts_error);
     r.attempts = t->attempts;
     return r;
   }
