@@ -176,6 +176,14 @@ TilesetRegistry::ReloadResult TilesetRegistry::reload(bool force) {
     }
     in_folders.insert(found->begin(), found->end());
   }
+  add_new_archives(in_folders, force, result);
+  refresh_loaded(folders, force, result);
+  return result;
+}
+
+// Opens the archives of `in_folders` that are not served yet.
+void TilesetRegistry::add_new_archives(const std::set<fs::path>& in_folders, bool force,
+                                       ReloadResult& result) {
   std::set<fs::path> known;
   for (const auto& t : all()) known.insert(t->path);
   for (const auto& path : in_folders) {
@@ -209,6 +217,11 @@ TilesetRegistry::ReloadResult TilesetRegistry::reload(bool force) {
     publish();
     ++result.added;
   }
+}
+
+// Removes tilesets whose archive left its folder; re-opens those whose file changed.
+void TilesetRegistry::refresh_loaded(const std::vector<fs::path>& folders, bool force,
+                                     ReloadResult& result) {
   // Open outside the lock so lookups are never blocked by archive I/O.
   for (const auto& old : all()) {
     std::error_code ec;
@@ -245,7 +258,6 @@ TilesetRegistry::ReloadResult TilesetRegistry::reload(bool force) {
       ++result.swapped;
     }
   }
-  return result;
 }
 
 void TilesetRegistry::publish() {
