@@ -180,6 +180,7 @@ class Fetcher::Impl {
     // The current attempt's response.
     std::vector<std::uint8_t> body;
     std::string etag;
+    std::string vts_error;
     std::string content_range;
     bool too_large = false;
     bool sized = false;  // body capacity reserved from Content-Length
@@ -435,9 +436,12 @@ class Fetcher::Impl {
     if (istarts_with(line, "http/")) {
       // A new response (after a redirect or a 100 Continue): forget the previous one's headers.
       t->etag.clear();
+      t->vts_error.clear();
       t->content_range.clear();
     } else if (istarts_with(line, "etag:")) {
       t->etag = std::string(trim(line.substr(5)));
+    } else if (istarts_with(line, "vts-error:")) {
+      t->vts_error = std::string(trim(line.substr(10)));
     } else if (istarts_with(line, "content-range:")) {
       t->content_range = std::string(trim(line.substr(14)));
     }
@@ -465,6 +469,7 @@ class Fetcher::Impl {
     }
     t->body.clear();
     t->etag.clear();
+    t->vts_error.clear();
     t->content_range.clear();
     t->too_large = false;
     t->sized = false;
@@ -711,6 +716,7 @@ class Fetcher::Impl {
     r.status = status;
     r.body = std::move(t->body);
     r.etag = std::move(t->etag);
+    r.vts_error = std::move(t->vts_error);
     r.attempts = t->attempts;
     return r;
   }

@@ -2,44 +2,29 @@
 // (docs/PROTOCOL.md §5) — `vts serve`, or any server or CDN holding our tiles under a URL template.
 //
 // Tiles are fetched from "tiles"[0]. `vts serve` puts the archive version in that template
-// (/{ts}@{version}/{z}/{x}/{y}), and answers 404 "... is not current ..." once the archive has been
-// rebuilt. Such a 404 makes the source fetch the TileJSON again (once per tile request; the
-// fetcher merges concurrent refetches into one transfer), switch every later request to the new
-// template, and retry the tile. The rebuilt tileset must keep its geometry and codec: SourceInfo
-// is immutable for the source's life, so a tileset that changed those fails with an error that
-// says to reopen it.
+// (/{ts}@{version}/{z}/{x}/{y}), and answers 404 with `Vts-Error: version-not-current` once the
+// archive has been rebuilt. Such a 404 makes the source fetch the TileJSON again (once per tile
+// request; the fetcher merges concurrent refetches into one transfer), switch every later request
+// to the new template, and retry the tile. The rebuilt tileset must keep its geometry and codec:
+// SourceInfo is immutable for the source's life, so a tileset that changed those fails with an
+// error that says to reopen it.
 //
 // Every callback runs on the fetcher's thread.
 #include <cstdint>
 #include <future>
 #include <limits>
 #include <mutex>
-#include <nlohmann/json.hpp>
 #include <unordered_map>
 #include <utility>
 
 #include "vts/client/source.hpp"
+#include "vts/protocol/file_io.hpp"
+#include "vts/protocol/tilejson.hpp"
 
 namespace vts::client {
 namespace {
 
-using nlohmann::json;
-
 constexpr std::size_t kMaxTileJsonBytes = 4u << 20;
-// What `vts serve` says in the 404 for a stale versioned URL (router.cpp tile_route).
-constexpr std::string_view kNotCurrent = "is not current";
-
-char lower(char c) {
-  return c >= 'A' && c <= 'Z' ? static_cast<char>(c - 'A' + 'a') : c;
-}
-
-bool starts_with_nocase(std::string_view s, std::string_view prefix) {
-  if (s.size() < prefix.size()) return false;
-  for (std::size_t i = 0; i < prefix.size(); ++i) {
-    if (lower(s[i]) != prefix[i]) return false;
-  }
-  return true;
-}
 
 // The first line of a (text) error body, at most 200 bytes, for messages.
 std::string first_line(const std::vector<std::uint8_t>& body) {
@@ -58,71 +43,11 @@ std::string http_failure(std::string_view what, const std::string& url, const Fe
   return m;
 }
 
-// Resolves a "tiles" entry against the TileJSON's URL (RFC 3986 §5.2, for the forms that
-// occur: absolute, scheme-relative, absolute-path and relative-path references).
-std::string resolve(const std::string& base, const std::string& ref) {
-  if (starts_with_nocase(ref, "http://") || starts_with_nocase(ref, "https://")) return ref;
-  const std::size_t scheme_end = base.find("://");
-  if (scheme_end == std::string::npos) return ref;
-  if (ref.substr(0, 2) == "//") return base.substr(0, scheme_end + 1) + ref;
-  const std::size_t authority_end = base.find_first_of("/?#", scheme_end + 3);
-  const std::string origin = base.substr(0, authority_end);
-  if (!ref.empty() && ref.front() == '/') return origin + ref;
-  if (authority_end == std::string::npos || base[authority_end] != '/') return origin + "/" + ref;
-  const std::string path = base.substr(0, base.find_first_of("?#", authority_end));
-  return path.substr(0, path.rfind('/') + 1) + ref;
-}
-
 void replace_all(std::string& s, std::string_view from, const std::string& to) {
   for (std::size_t pos = s.find(from); pos != std::string::npos; pos = s.find(from, pos)) {
     s.replace(pos, from.size(), to);
     pos += to.size();
   }
-}
-
-struct TileJson {
-  TilesetInfo info;
-  std::string tiles;    // resolved URL template
-  std::string version;  // "" when the TileJSON has none
-};
-
-Result<TileJson> parse_tilejson(const std::vector<std::uint8_t>& body, const std::string& url) {
-  const json j = json::parse(body.begin(), body.end(), nullptr, /*allow_exceptions=*/false);
-  if (j.is_discarded() || !j.is_object()) {
-    return make_error(ErrorCode::corrupt, url + " is not TileJSON (not a JSON object)");
-  }
-  auto tiles = j.find("tiles");
-  if (tiles == j.end() || !tiles->is_array() || tiles->empty() || !(*tiles)[0].is_string() ||
-      (*tiles)[0].get_ref<const std::string&>().empty()) {
-    return make_error(ErrorCode::corrupt,
-                      url + " is not TileJSON (no \"tiles\" array of URL templates)");
-  }
-  TileJson t;
-  t.tiles = resolve(url, (*tiles)[0].get<std::string>());
-  for (const char* p : {"{z}", "{x}", "{y}"}) {
-    if (t.tiles.find(p) == std::string::npos) {
-      return make_error(ErrorCode::corrupt,
-                        url + ": tile URL template \"" + t.tiles + "\" lacks " + p);
-    }
-  }
-  auto v = j.find("vtstream");
-  if (v == j.end() || !v->is_object()) {
-    return make_error(ErrorCode::unsupported,
-                      url + " is TileJSON but not a vtstream tileset (no \"vtstream\" object)");
-  }
-  // The "vtstream" object is the archive metadata's (plus "archive", which from_json ignores);
-  // name and description are TileJSON's own keys.
-  json meta = json::object();
-  for (const char* k : {"name", "description"}) {
-    if (auto it = j.find(k); it != j.end() && it->is_string()) meta[k] = *it;
-  }
-  meta["vtstream"] = *v;
-  Result<TilesetInfo> info =
-      TilesetInfo::from_json(meta.dump(-1, ' ', false, json::error_handler_t::replace));
-  if (!info) return make_error(info.error().code, url + ": " + info.error().message);
-  t.info = std::move(*info);
-  if (auto it = j.find("version"); it != j.end() && it->is_string()) t.version = *it;
-  return t;
 }
 
 FetchResult fetch_blocking(Fetcher& fetcher, FetchRequest request) {
@@ -290,11 +215,10 @@ class TileJsonSource final : public TileSource {
       case 204:
         return finish_kind(h, SourceTile::Kind::absent, transfer);
       case 404: {
-        const std::string line = first_line(r.body);
-        if (line.find(kNotCurrent) == std::string::npos) {
+        if (r.vts_error != kVersionNotCurrent) {
           return finish_kind(h, SourceTile::Kind::absent, transfer);
         }
-        return on_not_current(h, url, line);
+        return on_not_current(h, url, first_line(r.body));
       }
       default:
         return finish_error(h, make_error(ErrorCode::io, http_failure("GET", url, r)), transfer);
@@ -335,7 +259,7 @@ class TileJsonSource final : public TileSource {
       return finish_error(
           h, make_error(ErrorCode::io, http_failure("refetching TileJSON", json_url_, r)));
     }
-    Result<TileJson> tj = parse_tilejson(r.body, json_url_);
+    Result<TileJson> tj = read_tilejson(r.body, json_url_);
     if (!tj) return finish_error(h, std::move(tj).error());
     if (!same_tileset_shape(tj->info, info_.info)) {
       return finish_error(
@@ -379,7 +303,7 @@ Result<std::unique_ptr<TileSource>> open_tilejson(std::string_view url, SourceOp
   const std::size_t q = location.find('?');
   std::string path = location.substr(0, q);
   const std::string query = q == std::string::npos ? "" : location.substr(q);
-  if (!starts_with_nocase(path, "http://") && !starts_with_nocase(path, "https://")) {
+  if (!istarts_with(path, "http://") && !istarts_with(path, "https://")) {
     return make_error(ErrorCode::invalid_argument,
                       "TileJSON location " + location + " is not an http(s) URL");
   }
@@ -412,7 +336,7 @@ Result<std::unique_ptr<TileSource>> open_tilejson(std::string_view url, SourceOp
         ErrorCode::too_large,
         json_url + ": TileJSON of " + std::to_string(r.body.size()) + " bytes is too large");
   }
-  Result<TileJson> tj = parse_tilejson(r.body, json_url);
+  Result<TileJson> tj = read_tilejson(r.body, json_url);
   if (!tj) return std::move(tj).error();
 
   SourceInfo info;

@@ -55,6 +55,28 @@ int exit_code(ErrorCode code) noexcept {
   return 70;
 }
 
+int http_status(ErrorCode code) noexcept {
+  switch (code) {
+    case ErrorCode::ok:
+      return 200;
+    case ErrorCode::invalid_argument:
+      return 400;
+    case ErrorCode::not_found:
+      return 404;
+    case ErrorCode::cancelled:
+      return 503;
+    case ErrorCode::io:
+    case ErrorCode::corrupt:
+    case ErrorCode::truncated:
+    case ErrorCode::checksum:
+    case ErrorCode::unsupported:
+    case ErrorCode::too_large:
+    case ErrorCode::internal:
+      return 500;
+  }
+  return 500;
+}
+
 std::string Error::to_string() const {
   return std::string(error_code_name(code)) + ": " + message;
 }

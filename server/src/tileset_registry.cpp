@@ -16,22 +16,13 @@ namespace fs = std::filesystem;
 
 // Tileset names travel in URLs and are looked up in a table: keep them to a conservative,
 // unreserved-only alphabet so that no name needs escaping and none can mean a path.
+// Names come from file stems; one that breaks the rule is refused with the file to rename.
 Status validate_name(std::string_view name, const fs::path& path) {
-  auto bad = [&](const std::string& why) {
-    return Status(make_error(ErrorCode::invalid_argument,
-                             path.string() + ": tileset name \"" + std::string(name) + "\" " + why +
-                                 " (names are [A-Za-z0-9._-], at most 128 characters, "
-                                 "no leading dot; rename the file)"));
-  };
-  if (name.empty()) return bad("is empty");
-  if (name.size() > 128) return bad("is longer than 128 characters");
-  if (name.front() == '.') return bad("starts with a dot");
-  for (char c : name) {
-    const bool ok = (c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') ||
-                    c == '.' || c == '_' || c == '-';
-    if (!ok) return bad("contains a character outside [A-Za-z0-9._-]");
-  }
-  return {};
+  const std::string problem = tileset_name_problem(name);
+  if (problem.empty()) return {};
+  return make_error(ErrorCode::invalid_argument,
+                    path.string() + ": tileset name \"" + std::string(name) + "\" " + problem +
+                        " (" + std::string(kTilesetNameRule) + "; rename the file)");
 }
 
 using FileIdentity = TilesetRegistry::FileIdentity;
@@ -185,6 +176,14 @@ TilesetRegistry::ReloadResult TilesetRegistry::reload(bool force) {
     }
     in_folders.insert(found->begin(), found->end());
   }
+  add_new_archives(in_folders, force, result);
+  refresh_loaded(folders, force, result);
+  return result;
+}
+
+// Opens the archives of `in_folders` that are not served yet.
+void TilesetRegistry::add_new_archives(const std::set<fs::path>& in_folders, bool force,
+                                       ReloadResult& result) {
   std::set<fs::path> known;
   for (const auto& t : all()) known.insert(t->path);
   for (const auto& path : in_folders) {
@@ -218,6 +217,11 @@ TilesetRegistry::ReloadResult TilesetRegistry::reload(bool force) {
     publish();
     ++result.added;
   }
+}
+
+// Removes tilesets whose archive left its folder; re-opens those whose file changed.
+void TilesetRegistry::refresh_loaded(const std::vector<fs::path>& folders, bool force,
+                                     ReloadResult& result) {
   // Open outside the lock so lookups are never blocked by archive I/O.
   for (const auto& old : all()) {
     std::error_code ec;
@@ -254,7 +258,6 @@ TilesetRegistry::ReloadResult TilesetRegistry::reload(bool force) {
       ++result.swapped;
     }
   }
-  return result;
 }
 
 void TilesetRegistry::publish() {

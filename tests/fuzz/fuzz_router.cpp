@@ -1,7 +1,7 @@
-// Fuzz target for the request router: any method, target and header values must yield a
-// well-formed response — a status in 100..599, a body that is either owned or a view inside the
-// held archive mapping, a Content-Length that matches it, no body on 204/304, and no CR/LF/NUL in
-// any header (no response splitting). The input is split on '\n' into
+// Fuzz target for the request routers (route() and route_admin()): any method, target and header
+// values must yield a well-formed response — a status in 100..599, a body that is either owned or a
+// view inside the held archive mapping, a Content-Length that matches it, no body on 204/304, and
+// no CR/LF/NUL in any header (no response splitting). The input is split on '\n' into
 //   method, target, Host, If-None-Match, Range, If-Range, Origin, Authorization,
 //   Access-Control-Request-Method
 // (missing lines are absent headers). In the target, "X@cur" becomes "X@<current version of X>" so
@@ -143,6 +143,15 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   for (const auto* config : {&f.open_config, &f.strict_config}) {
     const vts::HttpResponse r = vts::route(req, f.registry, *config);
     check_response(req, r);
+  }
+  for (const bool ready : {false, true}) {
+    vts::AdminState admin;
+    admin.ready = ready;
+    admin.metrics_text = [] { return std::string("vts_up 1\n"); };
+    admin.max_target_bytes = 2048;
+    const vts::HttpResponse r = vts::route_admin(req, admin);
+    check_response(req, r);
+    check(r.route == vts::Route::admin);
   }
   return 0;
 }

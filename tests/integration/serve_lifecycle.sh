@@ -16,6 +16,14 @@ cat >"$WORK/config.json" <<JSON
 {"reload_interval_ms": 200, "threads": 2, "limits": {"drain_timeout_ms": 10000},
  "access": {"earth": {"tokens": ["s3cret"]}, "signed": {"hmac_keys": ["k3y-one", "k3y-two"]}}}
 JSON
+note "a config key that is not known stops vts serve with an error naming the key and the file"
+echo '{"reload_interval_ms": 200, "limits": {"idle_timeout": 5000}}' >"$WORK/typo.json"
+expect_clean_failure "$VTS" serve "$WORK/serve" --listen 127.0.0.1:0 --admin 127.0.0.1:0 \
+  --config "$WORK/typo.json"
+((RC == 2)) || fail "an unknown config key exited $RC, expected 2"
+grep -qF 'unknown key "limits.idle_timeout"' "$ERR" || fail "the error does not name the key: $(cat "$ERR")"
+grep -qF "$WORK/typo.json" "$ERR" || fail "the error does not name the file: $(cat "$ERR")"
+
 start_server "$WORK/serve" --config "$WORK/config.json"
 
 version() { curl -sf "$BASE/tiles.json" | sed -nE 's/.*"version" *: *"([0-9a-f]+)".*/\1/p'; }

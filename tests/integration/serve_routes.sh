@@ -120,6 +120,18 @@ for m in 'vts_http_requests_total{route="tile",status="200"}' \
 done
 expect_status 404 "$ADMIN_BASE/earth/0/0/0"
 expect_status 404 "$BASE/metrics"
+expect_status 405 -X POST "$ADMIN_BASE/metrics"
+curl -sf "$ADMIN_BASE/metrics" -o "$WORK/metrics2.txt"
+grep -qE '^vts_http_requests_total\{route="admin",status="404"\} 1$' "$WORK/metrics2.txt" ||
+  fail "admin answers are not counted under route=\"admin\""
+
+note "a stale version is a 404 with Vts-Error: version-not-current; other 404s have no Vts-Error"
+curl -s -D "$WORK/stale.txt" -o "$WORK/stale.body" "$BASE/earth@0123456789abcdef/0/0/0"
+head -1 "$WORK/stale.txt" | grep -q '^HTTP/1.1 404' || fail "stale version: $(head -1 "$WORK/stale.txt")"
+grep -qi '^vts-error: version-not-current' "$WORK/stale.txt" || fail "stale version lacks Vts-Error"
+grep -q 'is not current' "$WORK/stale.body" || fail "stale version lacks its message"
+curl -s -D "$WORK/missing.txt" -o /dev/null "$BASE/nosuch/0/0/0"
+! grep -qi '^vts-error:' "$WORK/missing.txt" || fail "an unknown tileset's 404 carries Vts-Error"
 
 note "access log"
 grep -q '"target":"/earth.json"' "$WORK/access.log" || fail "access log lacks /earth.json"

@@ -10,9 +10,9 @@
 #include <optional>
 #include <string>
 
+#include "vts/builder/builder.hpp"
 #include "vts/protocol/codec.hpp"
 #include "vts/protocol/pmtiles.hpp"
-#include "vts/builder/builder.hpp"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -186,7 +186,16 @@ TEST_F(Router, VersionedUrlOfAnotherArchiveIs404AndNotCached) {
   expect_plain_error(r, 404);
   EXPECT_EQ(header(r, "Cache-Control"), "no-store");
   EXPECT_NE(r.owned.find("not current"), std::string::npos) << r.owned;
-  EXPECT_EQ(get("/dense@" + tileset("sparse")->version + "/0/0/0").status, 404);
+  EXPECT_EQ(header(r, "Vts-Error"), "version-not-current");
+  auto other = get("/dense@" + tileset("sparse")->version + "/0/0/0");
+  EXPECT_EQ(other.status, 404);
+  EXPECT_EQ(header(other, "Vts-Error"), "version-not-current");
+}
+
+TEST_F(Router, OnlyAStaleVersionCarriesTheVersionNotCurrentSignal) {
+  for (const char* target : {"/dense/3/0/0", "/nosuch/0/0/0", "/dense/0/0/0"}) {
+    EXPECT_EQ(header(get(target), "Vts-Error"), std::nullopt) << target;
+  }
 }
 
 TEST_F(Router, TilesOutsideThePyramidAre404) {
@@ -254,6 +263,12 @@ TEST_F(Router, MalformedTargetsAre400WithAPlainMessage) {
     SCOPED_TRACE(std::string(target));
     expect_plain_error(r, 400);
   }
+}
+
+TEST_F(Router, TargetLongerThanTheConfiguredBoundIs414) {
+  config_.max_target_bytes = 100;
+  expect_plain_error(get("/dense/0/0/0?" + std::string(100, 'a')), 414);
+  EXPECT_EQ(get("/dense/0/0/0?" + std::string(80, 'a')).status, 200);
 }
 
 TEST_F(Router, OverlongTargetIs414) {
@@ -655,4 +670,91 @@ TEST(RouterDamage, ADamagedTileHeaderAnswers500NamingTheTileAndOtherTilesStillSe
   EXPECT_EQ(vts::route(req, registry, config).status, 200);
   std::error_code ec;
   fs::remove_all(dir, ec);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The admin listener
+
+class AdminRouter : public ::testing::Test {
+ protected:
+  vts::HttpResponse get(std::string_view target, vts::HttpMethod method = vts::HttpMethod::get) {
+    req_.method = method;
+    req_.target = target;
+    return vts::route_admin(req_, state_);
+  }
+  int metrics_calls_ = 0;
+  vts::AdminState state_{.ready = true,
+                         .metrics_text =
+                             [this] {
+                               ++metrics_calls_;
+                               return std::string("vts_up 1\n");
+                             },
+                         .max_target_bytes = 8192};
+  vts::HttpRequest req_;
+};
+
+TEST_F(AdminRouter, MetricsAreServedAsPrometheusTextAndNeverCached) {
+  auto r = get("/metrics");
+  EXPECT_EQ(r.status, 200);
+  EXPECT_EQ(r.route, vts::Route::admin);
+  EXPECT_EQ(r.owned, "vts_up 1\n");
+  EXPECT_EQ(r.content_length, r.owned.size());
+  EXPECT_EQ(header(r, "Content-Type"), "text/plain; version=0.0.4; charset=utf-8");
+  EXPECT_EQ(header(r, "Cache-Control"), "no-store");
+  EXPECT_EQ(metrics_calls_, 1);
+}
+
+TEST_F(AdminRouter, HealthSaysLoadingWith503UntilReady) {
+  state_.ready = false;
+  auto loading = get("/health");
+  EXPECT_EQ(loading.status, 503);
+  EXPECT_EQ(loading.owned, "loading\n");
+  EXPECT_EQ(header(loading, "Cache-Control"), "no-store");
+  state_.ready = true;
+  auto ok = get("/health?probe=1");
+  EXPECT_EQ(ok.status, 200);
+  EXPECT_EQ(ok.owned, "ok\n");
+  EXPECT_EQ(ok.route, vts::Route::admin);
+  EXPECT_EQ(metrics_calls_, 0) << "/health must not build the metrics text";
+}
+
+TEST_F(AdminRouter, HeadAnswersWithTheLengthButNoBodyToSend) {
+  auto r = get("/metrics", vts::HttpMethod::head);
+  EXPECT_EQ(r.status, 200);
+  EXPECT_TRUE(r.head_only);
+  EXPECT_EQ(r.content_length, std::string("vts_up 1\n").size());
+}
+
+TEST_F(AdminRouter, OtherPathsAre404AndOtherMethods405) {
+  for (const char* target : {"/", "/metrics/", "/healthz", "/dense/0/0/0"}) {
+    auto r = get(target);
+    expect_plain_error(r, 404);
+    EXPECT_EQ(r.route, vts::Route::admin) << target;
+  }
+  for (auto m : {vts::HttpMethod::options, vts::HttpMethod::other}) {
+    auto r = get("/metrics", m);
+    expect_plain_error(r, 405);
+    EXPECT_EQ(header(r, "Allow"), "GET, HEAD");
+    EXPECT_EQ(r.route, vts::Route::admin);
+  }
+  EXPECT_EQ(metrics_calls_, 0);
+}
+
+TEST_F(AdminRouter, TargetsAreCheckedAsOnTheTileListener) {
+  state_.max_target_bytes = 64;
+  auto long_target = get("/metrics?" + std::string(64, 'a'));
+  expect_plain_error(long_target, 414);
+  EXPECT_EQ(long_target.route, vts::Route::admin);
+  for (const char* target : {"metrics", "http://x/metrics", "/a%2fb", "/a b", ""}) {
+    auto r = get(target);
+    expect_plain_error(r, 400);
+    EXPECT_EQ(r.route, vts::Route::admin) << target;
+  }
+}
+
+TEST(RouteNames, EveryRouteHasAStableMetricsLabel) {
+  EXPECT_STREQ(vts::route_name(vts::Route::admin), "admin");
+  EXPECT_STREQ(vts::route_name(vts::Route::tile), "tile");
+  EXPECT_STREQ(vts::route_name(vts::Route::error), "error");
+  EXPECT_EQ(vts::kRouteCount, int(vts::Route::admin) + 1);
 }

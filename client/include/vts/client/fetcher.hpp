@@ -79,7 +79,8 @@ struct FetchResult {
   // and is retried.
   int status = 0;
   std::vector<std::uint8_t> body;
-  std::string etag;  // the ETag header as sent (quotes included); empty when absent
+  std::string etag;       // the ETag header as sent (quotes included); empty when absent
+  std::string vts_error;  // the Vts-Error header (docs/PROTOCOL.md); empty when absent
   // Set on transport failure (io / invalid_argument), retries exhausted on 5xx/429 (io, with
   // the last status kept), a too-long Retry-After (io), a body over max_body_bytes (too_large),
   // a ranged answer that never matched (truncated), or cancellation (cancelled). The message

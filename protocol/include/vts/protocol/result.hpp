@@ -1,7 +1,7 @@
 // Errors as values. Expected failures (a corrupt tile, a truncated archive, a missing file) are
 // returned as a Result carrying an ErrorCode and a human-readable message; exceptions are used only
-// at the CLI edge. The numeric values of ErrorCode are stable: they map to process exit codes (and,
-// later, to HTTP statuses) through one table, exit_code().
+// at the CLI edge. The numeric values of ErrorCode are stable: they map to process exit codes
+// through one table, exit_code(), and to HTTP statuses through another, http_status().
 #pragma once
 
 #include <cassert>
@@ -31,6 +31,10 @@ const char* error_code_name(ErrorCode code) noexcept;
 // Process exit code for an error: 0 for ok, 2 for invalid_argument, 3 for not_found, 4 for io,
 // 5 for corrupt/truncated/checksum, 6 for unsupported/too_large, 130 for cancelled, 70 internal.
 int exit_code(ErrorCode code) noexcept;
+// HTTP status for a request that failed with this code while a server read its own data: 200 for
+// ok, 400 invalid_argument, 404 not_found, 503 cancelled, and 500 for everything else (unreadable
+// or damaged data on the server is never the client's fault).
+int http_status(ErrorCode code) noexcept;
 
 struct Error {
   ErrorCode code = ErrorCode::internal;

@@ -1,7 +1,7 @@
 // The network layer of `vts serve`: an asynchronous HTTP/1.1 server (Boost.Beast/Asio) that parses
-// requests into vts::HttpRequest, answers them with vts::route() and writes the HttpResponse —
-// archive bodies with sendfile(2) from the archive file, so they are never copied in user space. A
-// second listener (admin) serves /metrics (Prometheus text) and /health.
+// requests into vts::HttpRequest, answers them with vts::route() (the admin listener, /metrics and
+// /health, with vts::route_admin()) and writes the HttpResponse — archive bodies with sendfile(2)
+// from the archive file, so they are never copied in user space. The router checks every target.
 //
 // Concurrency model (classic completion handlers, not coroutines — the pipelined read/write pair
 // of one connection is easier to express as two independent handler chains):

@@ -1,8 +1,9 @@
-// The HTTP semantics of `vts serve`, as a pure function from a parsed request to a response
+// The HTTP semantics of `vts serve`, as pure functions from a parsed request to a response
 // description — no sockets, so every route and status is unit-testable and fuzzable. The network
-// layer (http_server.hpp) parses bytes into HttpRequest, calls route(), and writes the
-// HttpResponse (its body may be a view into an archive mapping, kept alive by `hold`).
-// docs/PROTOCOL.md documents every route, header and status.
+// layer (http_server.hpp) parses bytes into HttpRequest, calls route() (tile listener) or
+// route_admin() (admin listener), and writes the HttpResponse (its body may be a view into an
+// archive mapping, kept alive by `hold`). docs/PROTOCOL.md documents every route, header and
+// status. All functions are thread-safe for concurrent calls.
 #pragma once
 
 #include <chrono>
@@ -35,6 +36,7 @@ struct RouterConfig {
   std::uint32_t max_age_seconds = 3600;  // Cache-Control max-age of unversioned tile URLs
   std::string public_base_url;           // for TileJSON tile URLs; empty = from the Host header
   std::map<std::string, TilesetAccess, std::less<>> access;  // by tileset name
+  std::size_t max_target_bytes = 8192;                       // longer request targets are 414
   // Clock for signed-URL expiry (seconds since the Unix epoch); tests substitute their own.
   std::int64_t (*now_unix_seconds)() = nullptr;
 };
@@ -55,8 +57,10 @@ struct HttpRequest {
   std::string_view access_control_request_method;
 };
 
-// Which route answered, for metrics labels (stable names).
-enum class Route : std::uint8_t { index, tilejson, tile, archive, preflight, error };
+// Which route answered, for metrics labels (stable names). `admin` is every answer of the admin
+// listener.
+enum class Route : std::uint8_t { index, tilejson, tile, archive, preflight, error, admin };
+inline constexpr int kRouteCount = 7;
 const char* route_name(Route r) noexcept;
 
 // route()'s marker for a tile that must come from the provider: what complete_deferred() needs
@@ -90,6 +94,17 @@ struct HttpResponse {
 // `provider` may be null (archives only, as `vts serve`).
 HttpResponse route(const HttpRequest& request, const TilesetRegistry& registry,
                    const RouterConfig& config, const AsyncTileProvider* provider = nullptr);
+
+// What the admin listener reports.
+struct AdminState {
+  bool ready = false;                         // /health: 200 "ok" when set, else 503 "loading"
+  std::function<std::string()> metrics_text;  // /metrics body; called for /metrics only
+  std::size_t max_target_bytes = 8192;        // longer request targets are 414
+};
+
+// The admin listener: GET/HEAD /metrics and /health (no-store), 404 for any other path, 405 for
+// other methods; every answer has route `admin`. The target is checked as route() checks it.
+HttpResponse route_admin(const HttpRequest& request, const AdminState& state);
 
 // Finishes a deferred response (`marker`, as route() returned it) with the provider's answer:
 // 200 / 304 / 204 / 404 / 502 / 503 (docs/PROTOCOL.md §11), keeping the marker's CORS headers

@@ -11,6 +11,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -71,6 +72,11 @@ class TilesetRegistry {
   using Map = std::map<std::string, std::shared_ptr<const Tileset>, std::less<>>;
   // Under mutex_: makes the current tilesets_ the snapshot find() reads.
   void publish();
+  // reload()'s two halves.
+  void add_new_archives(const std::set<std::filesystem::path>& in_folders, bool force,
+                        ReloadResult& result);
+  void refresh_loaded(const std::vector<std::filesystem::path>& folders, bool force,
+                      ReloadResult& result);
 
   mutable std::mutex mutex_;
   Map tilesets_;

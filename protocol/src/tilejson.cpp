@@ -1,0 +1,106 @@
+#include "vts/protocol/tilejson.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include "vts/protocol/file_io.hpp"
+
+namespace vts {
+namespace {
+
+using nlohmann::json;
+using nlohmann::ordered_json;
+
+ordered_json vtstream_object(std::string_view metadata_json, const TilesetInfo& info) {
+  const std::string made = metadata_json.empty() ? info.to_json() : std::string();
+  const std::string_view text = metadata_json.empty() ? std::string_view(made) : metadata_json;
+  ordered_json v = ordered_json::object();
+  auto meta = ordered_json::parse(text.begin(), text.end(), nullptr, false);
+  if (meta.is_object()) {
+    auto it = meta.find("vtstream");
+    if (it != meta.end() && it->is_object()) v = *it;
+  }
+  return v;
+}
+
+Error not_tilejson(const std::string& url, std::string_view why) {
+  return make_error(ErrorCode::corrupt, url + " is not TileJSON (" + std::string(why) + ")");
+}
+
+// The "tiles" template, resolved; an error when absent or lacking a placeholder.
+Result<std::string> tiles_template(const json& j, const std::string& url) {
+  auto tiles = j.find("tiles");
+  if (tiles == j.end() || !tiles->is_array() || tiles->empty() || !(*tiles)[0].is_string() ||
+      (*tiles)[0].get_ref<const std::string&>().empty()) {
+    return not_tilejson(url, "no \"tiles\" array of URL templates");
+  }
+  std::string t = resolve_url(url, (*tiles)[0].get<std::string>());
+  for (const char* p : {"{z}", "{x}", "{y}"}) {
+    if (t.find(p) == std::string::npos) {
+      return make_error(ErrorCode::corrupt, url + ": tile URL template \"" + t + "\" lacks " + p);
+    }
+  }
+  return t;
+}
+
+}  // namespace
+
+std::string write_tilejson(const TileJsonFields& f) {
+  const TilesetInfo& info = *f.info;
+  ordered_json v = vtstream_object(f.metadata_json, info);
+  if (!f.archive_url.empty()) v["archive"] = std::string(f.archive_url);
+  const ordered_json j = {
+      {"tilejson", "3.0.0"},
+      {"name", info.name.empty() ? std::string(f.tileset) : info.name},
+      {"description", info.description},
+      {"version", std::string(f.version)},
+      {"scheme", "xyz"},
+      {"tiles", {std::string(f.tiles_url)}},
+      {"minzoom", 0},
+      {"maxzoom", info.geometry.max_zoom()},
+      {"bounds", {-180, -90, 180, 90}},
+      {"vtstream", std::move(v)},
+  };
+  return j.dump(2, ' ', false, ordered_json::error_handler_t::replace) + "\n";
+}
+
+Result<TileJson> read_tilejson(std::span<const std::uint8_t> body, const std::string& url) {
+  const json j = json::parse(body.begin(), body.end(), nullptr, /*allow_exceptions=*/false);
+  if (j.is_discarded() || !j.is_object()) return not_tilejson(url, "not a JSON object");
+  TileJson t;
+  auto tiles = tiles_template(j, url);
+  if (!tiles) return std::move(tiles).error();
+  t.tiles = std::move(*tiles);
+  auto v = j.find("vtstream");
+  if (v == j.end() || !v->is_object()) {
+    return make_error(ErrorCode::unsupported,
+                      url + " is TileJSON but not a vtstream tileset (no \"vtstream\" object)");
+  }
+  // The "vtstream" object is the archive metadata's (plus "archive", which from_json ignores);
+  // name and description are TileJSON's own keys.
+  json meta = json::object();
+  for (const char* k : {"name", "description"}) {
+    if (auto it = j.find(k); it != j.end() && it->is_string()) meta[k] = *it;
+  }
+  meta["vtstream"] = *v;
+  Result<TilesetInfo> info =
+      TilesetInfo::from_json(meta.dump(-1, ' ', false, json::error_handler_t::replace));
+  if (!info) return make_error(info.error().code, url + ": " + info.error().message);
+  t.info = std::move(*info);
+  if (auto it = j.find("version"); it != j.end() && it->is_string()) t.version = *it;
+  return t;
+}
+
+std::string resolve_url(const std::string& base, const std::string& ref) {
+  if (istarts_with(ref, "http://") || istarts_with(ref, "https://")) return ref;
+  const std::size_t scheme_end = base.find("://");
+  if (scheme_end == std::string::npos) return ref;
+  if (ref.substr(0, 2) == "//") return base.substr(0, scheme_end + 1) + ref;
+  const std::size_t authority_end = base.find_first_of("/?#", scheme_end + 3);
+  const std::string origin = base.substr(0, authority_end);
+  if (!ref.empty() && ref.front() == '/') return origin + ref;
+  if (authority_end == std::string::npos || base[authority_end] != '/') return origin + "/" + ref;
+  const std::string path = base.substr(0, base.find_first_of("?#", authority_end));
+  return path.substr(0, path.rfind('/') + 1) + ref;
+}
+
+}  // namespace vts

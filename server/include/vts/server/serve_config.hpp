@@ -1,0 +1,36 @@
+// The `vts serve --config FILE` JSON file, applied on top of HttpServerOptions (command-line
+// flags then override it). Keys (every one optional; docs/PROTOCOL.md §10 lists them):
+//   listen, admin ("HOST:PORT"; admin null = no admin listener), threads, cors_origin, max_age,
+//   public_url, access_log, reload_interval_ms,
+//   access: {"<tileset>": {"tokens": [...], "hmac_keys": [...]}},
+//   limits: {max_header_bytes, max_target_bytes, max_connections, max_pipeline, min_send_rate,
+//            sendfile_min_bytes, idle_timeout_ms, header_timeout_ms, write_timeout_ms,
+//            drain_timeout_ms}.
+// A key not in this list, at any level, is an error naming the key and the file: a misspelt
+// limit must not silently leave the default in force.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <string_view>
+#include <utility>
+
+#include "vts/protocol/result.hpp"
+#include "vts/server/http_server.hpp"
+
+namespace vts {
+
+// "HOST:PORT", "[v6]:PORT" or ":PORT" (host 0.0.0.0). Error invalid_argument.
+Result<std::pair<std::string, std::uint16_t>> parse_endpoint(const std::string& s);
+
+// Reads `file` and applies it to `options`. Errors: io (unreadable), invalid_argument (not JSON,
+// a value of the wrong type, an unknown key, limits too small to serve anything), each naming
+// the file. On error `options` may be partly changed.
+Status apply_serve_config(const std::filesystem::path& file, HttpServerOptions& options);
+
+// The same for config text already read; `file` only names it in errors.
+Status apply_serve_config_text(std::string_view text, const std::string& file,
+                               HttpServerOptions& options);
+
+}  // namespace vts

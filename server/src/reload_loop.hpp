@@ -1,0 +1,47 @@
+// The background thread that keeps the registry current: registry.reload(false) every `interval`
+// (0 = never), registry.reload(true) on request. Swaps, additions, removals and refusals are
+// logged to stderr and counted in the metrics.
+#pragma once
+
+#include <chrono>
+#include <condition_variable>
+#include <memory>
+#include <mutex>
+#include <thread>
+
+#include "metrics.hpp"
+#include "vts/server/tileset_registry.hpp"
+
+namespace vts::http_detail {
+
+class ReloadLoop {
+ public:
+  // `registry` and `metrics` must outlive the loop.
+  ReloadLoop(TilesetRegistry& registry, Metrics& metrics, std::chrono::milliseconds interval)
+      : registry_(registry), metrics_(metrics), interval_(interval) {}
+  ReloadLoop(const ReloadLoop&) = delete;
+  ReloadLoop& operator=(const ReloadLoop&) = delete;
+  ~ReloadLoop() { stop(); }
+
+  void start();
+  // Asks for a reload (force: every tileset) and returns at once. Thread-safe.
+  void request(bool force);
+  // Ends the loop after the reload in progress, if any; returns at once. Thread-safe.
+  void quit();
+  // quit(), then waits for the thread. From the thread that called start().
+  void stop();
+
+ private:
+  void run();
+  void reload(bool force);
+
+  TilesetRegistry& registry_;
+  Metrics& metrics_;
+  const std::chrono::milliseconds interval_;
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  bool quit_ = false, pending_ = false, force_ = false;
+  std::thread thread_;
+};
+
+}  // namespace vts::http_detail

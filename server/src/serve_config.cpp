@@ -1,0 +1,146 @@
+#include "vts/server/serve_config.hpp"
+
+#include <array>
+#include <nlohmann/json.hpp>
+#include <stdexcept>
+
+#include "vts/protocol/file_io.hpp"
+
+namespace vts {
+namespace {
+
+using nlohmann::json;
+
+constexpr std::array<std::string_view, 10> kTopKeys = {
+    "listen",     "admin",      "threads", "cors_origin",        "max_age",
+    "public_url", "access_log", "access",  "reload_interval_ms", "limits"};
+constexpr std::array<std::string_view, 10> kLimitKeys = {
+    "max_header_bytes", "max_target_bytes",   "max_connections", "max_pipeline",
+    "min_send_rate",    "sendfile_min_bytes", "idle_timeout_ms", "header_timeout_ms",
+    "write_timeout_ms", "drain_timeout_ms"};
+constexpr std::array<std::string_view, 2> kAccessKeys = {"tokens", "hmac_keys"};
+
+Error config_error(const std::string& file, const std::string& why) {
+  return make_error(ErrorCode::invalid_argument, "config '" + file + "': " + why);
+}
+
+// Refuses a key of `object` (at `where`, e.g. "limits.") that is not in `known`.
+template <std::size_t N>
+Status check_keys(const json& object, const std::array<std::string_view, N>& known,
+                  const std::string& where, const std::string& file) {
+  if (!object.is_object()) return config_error(file, "\"" + where + "\" must be an object");
+  for (const auto& [key, value] : object.items()) {
+    bool ok = false;
+    for (std::string_view k : known) ok |= key == k;
+    if (!ok) {
+      std::string list;
+      for (std::string_view k : known) list += (list.empty() ? "" : ", ") + std::string(k);
+      return config_error(file, "unknown key \"" + where + key + "\" (known: " + list + ")");
+    }
+  }
+  return {};
+}
+
+Status apply_endpoint(const json& j, const char* key, std::string& host, std::uint16_t& port) {
+  if (!j.contains(key)) return {};
+  auto ep = parse_endpoint(j.at(key).get<std::string>());
+  if (!ep) return ep.error();
+  host = ep->first;
+  port = ep->second;
+  return {};
+}
+
+Status apply_access(const json& access, const std::string& file, RouterConfig& router) {
+  if (!access.is_object()) return config_error(file, "\"access\" must be an object");
+  for (const auto& [name, a] : access.items()) {
+    if (auto st = check_keys(a, kAccessKeys, "access." + name + ".", file); !st.ok()) return st;
+    TilesetAccess acc;
+    if (a.contains("tokens")) acc.bearer_tokens = a.at("tokens").get<std::vector<std::string>>();
+    if (a.contains("hmac_keys")) acc.hmac_keys = a.at("hmac_keys").get<std::vector<std::string>>();
+    router.access[name] = std::move(acc);
+  }
+  return {};
+}
+
+Status apply_limits(const json& l, const std::string& file, HttpServerLimits& L) {
+  if (auto st = check_keys(l, kLimitKeys, "limits.", file); !st.ok()) return st;
+  auto ms = [&](const char* key, std::chrono::milliseconds& v) {
+    if (l.contains(key)) v = std::chrono::milliseconds(l.at(key).get<long long>());
+  };
+  auto size = [&](const char* key, std::size_t& v) {
+    if (l.contains(key)) v = l.at(key).get<std::size_t>();
+  };
+  size("max_header_bytes", L.max_header_bytes);
+  size("max_target_bytes", L.max_target_bytes);
+  size("max_connections", L.max_connections);
+  size("max_pipeline", L.max_pipeline);
+  size("min_send_rate", L.min_send_rate);
+  size("sendfile_min_bytes", L.sendfile_min_bytes);
+  ms("idle_timeout_ms", L.idle_timeout);
+  ms("header_timeout_ms", L.header_timeout);
+  ms("write_timeout_ms", L.write_timeout);
+  ms("drain_timeout_ms", L.drain_timeout);
+  if (L.max_pipeline == 0 || L.max_header_bytes < 256 || L.max_target_bytes == 0)
+    return config_error(file, "limits too small to serve anything");
+  return {};
+}
+
+// Throws nlohmann::json::exception on a value of the wrong type.
+Status apply(const json& j, const std::string& file, HttpServerOptions& o) {
+  if (auto st = check_keys(j, kTopKeys, "", file); !st.ok()) return st;
+  if (auto st = apply_endpoint(j, "listen", o.listen_host, o.listen_port); !st.ok()) return st;
+  if (j.contains("admin") && j.at("admin").is_null()) {
+    o.admin_enabled = false;
+  } else if (auto st = apply_endpoint(j, "admin", o.admin_host, o.admin_port); !st.ok()) {
+    return st;
+  }
+  if (j.contains("threads")) o.threads = j.at("threads").get<int>();
+  if (j.contains("cors_origin")) o.router.cors_origin = j.at("cors_origin").get<std::string>();
+  if (j.contains("max_age")) o.router.max_age_seconds = j.at("max_age").get<std::uint32_t>();
+  if (j.contains("public_url")) o.router.public_base_url = j.at("public_url").get<std::string>();
+  if (j.contains("access_log")) o.access_log = j.at("access_log").get<std::string>();
+  if (j.contains("reload_interval_ms"))
+    o.reload_interval = std::chrono::milliseconds(j.at("reload_interval_ms").get<long long>());
+  if (j.contains("access"))
+    if (auto st = apply_access(j.at("access"), file, o.router); !st.ok()) return st;
+  if (j.contains("limits"))
+    if (auto st = apply_limits(j.at("limits"), file, o.limits); !st.ok()) return st;
+  return {};
+}
+
+}  // namespace
+
+Result<std::pair<std::string, std::uint16_t>> parse_endpoint(const std::string& s) {
+  const auto colon = s.rfind(':');
+  if (colon == std::string::npos || colon + 1 == s.size())
+    return make_error(ErrorCode::invalid_argument, "'" + s + "' is not HOST:PORT");
+  std::string host = s.substr(0, colon);
+  if (host.size() >= 2 && host.front() == '[' && host.back() == ']')
+    host = host.substr(1, host.size() - 2);
+  unsigned long port = 0;
+  try {
+    std::size_t used = 0;
+    port = std::stoul(s.substr(colon + 1), &used);
+    if (used != s.size() - colon - 1 || port > 65535) throw std::out_of_range("port");
+  } catch (const std::exception&) {  // std::stoul's: the CLI's parsing, kept exactly
+    return make_error(ErrorCode::invalid_argument, "'" + s + "': bad port");
+  }
+  return std::pair{host.empty() ? std::string("0.0.0.0") : host, std::uint16_t(port)};
+}
+
+Status apply_serve_config_text(std::string_view text, const std::string& file,
+                               HttpServerOptions& options) {
+  try {
+    return apply(json::parse(text), file, options);
+  } catch (const json::exception& e) {
+    return config_error(file, e.what());
+  }
+}
+
+Status apply_serve_config(const std::filesystem::path& file, HttpServerOptions& options) {
+  auto text = read_file(file);
+  if (!text) return make_error(ErrorCode::io, "cannot read config '" + file.string() + "'");
+  return apply_serve_config_text(*text, file.string(), options);
+}
+
+}  // namespace vts

@@ -1,0 +1,140 @@
+// TileJSON: what the server writes, the client reads back unchanged; the reader refuses documents
+// that are not ours with the URL and the reason; relative tile URLs resolve like a browser's.
+#include "vts/protocol/tilejson.hpp"
+
+#include <gtest/gtest.h>
+
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+namespace vts {
+namespace {
+
+using nlohmann::json;
+
+TilesetInfo sample() {
+  TilesetInfo info;
+  info.geometry = Geometry::create(86400, 43200, 512, 8).value();
+  info.codec = CodecId::lossless;
+  info.name = "Blue \"Marble\"";
+  info.description = "line one\nline two";
+  info.sparse = true;
+  return info;
+}
+
+std::vector<std::uint8_t> bytes(const std::string& s) {
+  return {s.begin(), s.end()};
+}
+
+Result<TileJson> read(const std::string& doc, const std::string& url = "http://h:1/earth.json") {
+  return read_tilejson(bytes(doc), url);
+}
+
+void expect_error(const Result<TileJson>& r, ErrorCode code, const std::string& needle) {
+  ASSERT_FALSE(r.ok()) << "expected an error mentioning " << needle;
+  EXPECT_EQ(r.error().code, code) << r.error().to_string();
+  EXPECT_NE(r.error().message.find(needle), std::string::npos) << r.error().to_string();
+  EXPECT_NE(r.error().message.find("http://h:1/earth.json"), std::string::npos)
+      << "the error names the document: " << r.error().to_string();
+}
+
+TEST(TileJson, WhatTheWriterWritesTheReaderReadsBack) {
+  const TilesetInfo info = sample();
+  const std::string doc =
+      write_tilejson({.tileset = "earth",
+                      .info = &info,
+                      .version = "0123456789abcdef",
+                      .tiles_url = "http://h:1/earth@0123456789abcdef/{z}/{x}/{y}",
+                      .metadata_json = info.to_json(),
+                      .archive_url = "http://h:1/earth.pmtiles"});
+  auto t = read(doc);
+  ASSERT_TRUE(t.ok()) << t.error().to_string();
+  EXPECT_EQ(t->tiles, "http://h:1/earth@0123456789abcdef/{z}/{x}/{y}");
+  EXPECT_EQ(t->version, "0123456789abcdef");
+  EXPECT_EQ(t->info.to_json(), info.to_json());
+}
+
+TEST(TileJson, TheWriterEmitsTileJson3WithTheVtstreamObject) {
+  const TilesetInfo info = sample();
+  const std::string doc = write_tilejson({.tileset = "earth",
+                                          .info = &info,
+                                          .version = "v1",
+                                          .tiles_url = "/earth/{z}/{x}/{y}",
+                                          .metadata_json = "",
+                                          .archive_url = "/earth.pmtiles"});
+  ASSERT_FALSE(doc.empty());
+  EXPECT_EQ(doc.back(), '\n');
+  const json j = json::parse(doc);
+  EXPECT_EQ(j["tilejson"], "3.0.0");
+  EXPECT_EQ(j["name"], "Blue \"Marble\"");
+  EXPECT_EQ(j["scheme"], "xyz");
+  EXPECT_EQ(j["tiles"], json::array({"/earth/{z}/{x}/{y}"}));
+  EXPECT_EQ(j["minzoom"], 0);
+  EXPECT_EQ(j["maxzoom"], info.geometry.max_zoom());
+  EXPECT_EQ(j["vtstream"]["archive"], "/earth.pmtiles");
+  EXPECT_EQ(j["vtstream"]["width"], 86400);
+}
+
+TEST(TileJson, AnUnnamedTilesetIsNamedAfterItsTilesetNameAndCarriesNoArchiveKeyWithoutAnArchive) {
+  TilesetInfo info = sample();
+  info.name.clear();
+  const json j = json::parse(write_tilejson(
+      {.tileset = "earth", .info = &info, .version = "", .tiles_url = "/t/{z}/{x}/{y}"}));
+  EXPECT_EQ(j["name"], "earth");
+  EXPECT_FALSE(j["vtstream"].contains("archive"));
+}
+
+TEST(TileJson, UnknownVtstreamKeysOfTheArchiveMetadataAreCopiedVerbatim) {
+  const TilesetInfo info = sample();
+  json meta = json::parse(info.to_json());
+  meta["vtstream"]["future_key"] = "kept";
+  const json j = json::parse(write_tilejson({.tileset = "earth",
+                                             .info = &info,
+                                             .version = "v",
+                                             .tiles_url = "/t/{z}/{x}/{y}",
+                                             .metadata_json = meta.dump()}));
+  EXPECT_EQ(j["vtstream"]["future_key"], "kept");
+}
+
+TEST(TileJson, RelativeTileUrlsResolveAgainstTheDocumentUrl) {
+  const TilesetInfo info = sample();
+  const std::string doc =
+      write_tilejson({.tileset = "e", .info = &info, .version = "", .tiles_url = "e/{z}/{x}/{y}"});
+  auto t = read(doc, "https://cdn.example/a/b/e.json?k=1");
+  ASSERT_TRUE(t.ok()) << t.error().to_string();
+  EXPECT_EQ(t->tiles, "https://cdn.example/a/b/e/{z}/{x}/{y}");
+  EXPECT_EQ(resolve_url("https://cdn.example/a/e.json", "/x/{z}"), "https://cdn.example/x/{z}");
+  EXPECT_EQ(resolve_url("https://cdn.example/a/e.json", "//other/{z}"), "https://other/{z}");
+  EXPECT_EQ(resolve_url("https://cdn.example/a/e.json", "HTTP://abs/{z}"), "HTTP://abs/{z}");
+  EXPECT_EQ(resolve_url("https://cdn.example", "t/{z}"), "https://cdn.example/t/{z}");
+}
+
+TEST(TileJson, TheReaderRefusesWhatIsNotTileJson) {
+  expect_error(read("not json"), ErrorCode::corrupt, "not a JSON object");
+  expect_error(read("[1, 2]"), ErrorCode::corrupt, "not a JSON object");
+  expect_error(read("{}"), ErrorCode::corrupt, "no \"tiles\" array");
+  expect_error(read(R"({"tiles": []})"), ErrorCode::corrupt, "no \"tiles\" array");
+  expect_error(read(R"({"tiles": [""]})"), ErrorCode::corrupt, "no \"tiles\" array");
+  expect_error(read(R"({"tiles": [7]})"), ErrorCode::corrupt, "no \"tiles\" array");
+  expect_error(read(R"({"tiles": ["/t/{z}/{x}"]})"), ErrorCode::corrupt, "lacks {y}");
+}
+
+TEST(TileJson, TheReaderRefusesTileJsonThatIsNotAVtstreamTileset) {
+  expect_error(read(R"({"tiles": ["/t/{z}/{x}/{y}"]})"), ErrorCode::unsupported,
+               "not a vtstream tileset");
+  expect_error(read(R"({"tiles": ["/t/{z}/{x}/{y}"], "vtstream": 3})"), ErrorCode::unsupported,
+               "no \"vtstream\" object");
+  auto broken = read(R"({"tiles": ["/t/{z}/{x}/{y}"], "vtstream": {"width": -1}})");
+  ASSERT_FALSE(broken.ok());
+  EXPECT_NE(broken.error().message.find("http://h:1/earth.json: "), std::string::npos)
+      << broken.error().to_string();
+}
+
+TEST(TileJson, TheVersionNotCurrentSignalIsAStableHeader) {
+  EXPECT_STREQ(kVtsErrorHeader, "Vts-Error");
+  EXPECT_EQ(kVersionNotCurrent, "version-not-current");
+}
+
+}  // namespace
+}  // namespace vts

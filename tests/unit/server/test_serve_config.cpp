@@ -1,0 +1,144 @@
+// The `vts serve --config` file: every documented key lands in HttpServerOptions, and anything
+// else (an unknown or misspelt key, a wrong type, bad JSON) is refused naming the key and file.
+#include "vts/server/serve_config.hpp"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+namespace vts {
+namespace {
+
+namespace fs = std::filesystem;
+
+Status apply(const std::string& text, HttpServerOptions& o) {
+  return apply_serve_config_text(text, "serve.json", o);
+}
+
+void expect_refused(const std::string& text, const std::string& needle) {
+  HttpServerOptions o;
+  const Status st = apply(text, o);
+  ASSERT_FALSE(st.ok()) << "accepted: " << text;
+  EXPECT_EQ(st.error().code, ErrorCode::invalid_argument);
+  EXPECT_NE(st.error().message.find("config 'serve.json'"), std::string::npos)
+      << st.error().message;
+  EXPECT_NE(st.error().message.find(needle), std::string::npos) << st.error().message;
+}
+
+TEST(ServeConfig, EveryDocumentedKeyIsApplied) {
+  HttpServerOptions o;
+  const Status st = apply(R"({
+    "listen": "0.0.0.0:8181", "admin": "[::1]:9191", "threads": 3, "cors_origin": "https://a.example",
+    "max_age": 77, "public_url": "https://tiles.example", "access_log": "-",
+    "reload_interval_ms": 250,
+    "access": {"earth": {"tokens": ["t1", "t2"], "hmac_keys": ["k"]}},
+    "limits": {"max_header_bytes": 4096, "max_target_bytes": 1024, "max_connections": 50,
+               "max_pipeline": 4, "min_send_rate": 1000, "sendfile_min_bytes": 65536,
+               "idle_timeout_ms": 1000, "header_timeout_ms": 2000, "write_timeout_ms": 3000,
+               "drain_timeout_ms": 4000}})",
+                          o);
+  ASSERT_TRUE(st.ok()) << st.error().to_string();
+  EXPECT_EQ(o.listen_host, "0.0.0.0");
+  EXPECT_EQ(o.listen_port, 8181);
+  EXPECT_EQ(o.admin_host, "::1");
+  EXPECT_EQ(o.admin_port, 9191);
+  EXPECT_TRUE(o.admin_enabled);
+  EXPECT_EQ(o.threads, 3);
+  EXPECT_EQ(o.router.cors_origin, "https://a.example");
+  EXPECT_EQ(o.router.max_age_seconds, 77u);
+  EXPECT_EQ(o.router.public_base_url, "https://tiles.example");
+  EXPECT_EQ(o.access_log, "-");
+  EXPECT_EQ(o.reload_interval, std::chrono::milliseconds(250));
+  ASSERT_EQ(o.router.access.count("earth"), 1u);
+  EXPECT_EQ(o.router.access["earth"].bearer_tokens, (std::vector<std::string>{"t1", "t2"}));
+  EXPECT_EQ(o.router.access["earth"].hmac_keys, (std::vector<std::string>{"k"}));
+  const auto& l = o.limits;
+  EXPECT_EQ(l.max_header_bytes, 4096u);
+  EXPECT_EQ(l.max_target_bytes, 1024u);
+  EXPECT_EQ(l.max_connections, 50u);
+  EXPECT_EQ(l.max_pipeline, 4u);
+  EXPECT_EQ(l.min_send_rate, 1000u);
+  EXPECT_EQ(l.sendfile_min_bytes, 65536u);
+  EXPECT_EQ(l.idle_timeout, std::chrono::milliseconds(1000));
+  EXPECT_EQ(l.header_timeout, std::chrono::milliseconds(2000));
+  EXPECT_EQ(l.write_timeout, std::chrono::milliseconds(3000));
+  EXPECT_EQ(l.drain_timeout, std::chrono::milliseconds(4000));
+}
+
+TEST(ServeConfig, AnEmptyObjectLeavesTheDefaults) {
+  HttpServerOptions o;
+  ASSERT_TRUE(apply("{}", o).ok());
+  const HttpServerOptions d;
+  EXPECT_EQ(o.listen_port, d.listen_port);
+  EXPECT_EQ(o.admin_enabled, d.admin_enabled);
+  EXPECT_EQ(o.limits.max_pipeline, d.limits.max_pipeline);
+  EXPECT_EQ(o.reload_interval, d.reload_interval);
+}
+
+TEST(ServeConfig, AdminNullTurnsTheAdminListenerOff) {
+  HttpServerOptions o;
+  ASSERT_TRUE(apply(R"({"admin": null})", o).ok());
+  EXPECT_FALSE(o.admin_enabled);
+}
+
+TEST(ServeConfig, UnknownKeysAreRefusedNamingTheKeyAndTheFile) {
+  expect_refused(R"({"reload_interval": 200})", "unknown key \"reload_interval\"");
+  expect_refused(R"({"limits": {"idle_timeout": 5}})", "unknown key \"limits.idle_timeout\"");
+  expect_refused(R"({"access": {"earth": {"token": ["x"]}}})",
+                 "unknown key \"access.earth.token\"");
+}
+
+TEST(ServeConfig, TheUnknownKeyErrorListsTheKnownKeys) {
+  expect_refused(R"({"listen": "127.0.0.1:1", "thread": 2})", "known: listen, admin, threads");
+}
+
+TEST(ServeConfig, WrongTypesBadJsonAndBadEndpointsAreRefused) {
+  expect_refused(R"({"threads": "two"})", "type");
+  expect_refused("{not json", "parse");
+  expect_refused(R"({"limits": []})", "\"limits.\" must be an object");
+  HttpServerOptions o;
+  const Status st = apply(R"({"listen": "localhost"})", o);
+  ASSERT_FALSE(st.ok());
+  EXPECT_NE(st.error().message.find("is not HOST:PORT"), std::string::npos);
+}
+
+TEST(ServeConfig, LimitsTooSmallToServeAnythingAreRefused) {
+  expect_refused(R"({"limits": {"max_pipeline": 0}})", "limits too small");
+  expect_refused(R"({"limits": {"max_header_bytes": 100}})", "limits too small");
+}
+
+TEST(ServeConfig, AFileIsReadAndAMissingOneIsAnIoErrorNamingIt) {
+  const fs::path dir =
+      fs::temp_directory_path() / ("vts-serve-config-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const fs::path file = dir / "serve.json";
+  std::ofstream(file) << R"({"threads": 5, "bogus": 1})";
+  HttpServerOptions o;
+  Status st = apply_serve_config(file, o);
+  ASSERT_FALSE(st.ok());
+  EXPECT_NE(st.error().message.find("config '" + file.string() + "'"), std::string::npos)
+      << st.error().message;
+  EXPECT_NE(st.error().message.find("\"bogus\""), std::string::npos) << st.error().message;
+  st = apply_serve_config(dir / "missing.json", o);
+  ASSERT_FALSE(st.ok());
+  EXPECT_EQ(st.error().code, ErrorCode::io);
+  EXPECT_NE(st.error().message.find("missing.json"), std::string::npos);
+  fs::remove_all(dir);
+}
+
+TEST(ServeEndpoint, HostPortFormsParse) {
+  EXPECT_EQ(parse_endpoint("127.0.0.1:80").value(),
+            std::pair(std::string("127.0.0.1"), std::uint16_t(80)));
+  EXPECT_EQ(parse_endpoint("[::1]:9").value(), std::pair(std::string("::1"), std::uint16_t(9)));
+  EXPECT_EQ(parse_endpoint(":8080").value(),
+            std::pair(std::string("0.0.0.0"), std::uint16_t(8080)));
+  for (const char* bad : {"nohost", "h:", "h:65536", "h:12x", "h:-1"}) {
+    EXPECT_FALSE(parse_endpoint(bad).ok()) << bad;
+  }
+}
+
+}  // namespace
+}  // namespace vts
