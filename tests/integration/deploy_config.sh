@@ -107,7 +107,12 @@ serve_base=$DAEMON_BASE
 expect_status 200 "$DAEMON_ADMIN/health"
 expect_status 200 "$serve_base/earth/0/0/0"
 kill -HUP "$serve_pid" # ExecReload
-sleep 0.3
+for ((i = 0; i < 200; i++)); do
+  grep -q 'SIGHUP: reloading' "$LOGS/serve.err" && break
+  kill -0 "$serve_pid" 2>/dev/null || break
+  sleep 0.05
+done
+grep -q 'SIGHUP: reloading' "$LOGS/serve.err" || fail "vts serve did not act on SIGHUP"
 kill -0 "$serve_pid" 2>/dev/null || fail "SIGHUP ended vts serve"
 expect_status 200 "$serve_base/earth/1/0/0"
 
