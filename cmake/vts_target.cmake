@@ -10,12 +10,29 @@ function(vts_configure_target target)
   endif()
 endfunction()
 
-# Applied globally (before any target) when VTS_SANITIZE is on, so that every library and test
-# in the tree is instrumented consistently.
-macro(vts_enable_sanitizers)
-  add_compile_options(-fsanitize=address,undefined -fno-omit-frame-pointer
-                      -fno-sanitize-recover=undefined)
-  add_link_options(-fsanitize=address,undefined)
+# vts_enable_sanitizers(<OFF|ON|address|thread>): applied globally (before any target) so that
+# every library and test in the tree is instrumented the same way. address (or ON) is ASan +
+# UBSan; thread is TSan (which cannot be combined with ASan). Sets VTS_SANITIZER to address,
+# thread or "" (none).
+macro(vts_enable_sanitizers kind)
+  string(TOLOWER "${kind}" _vts_sanitize)
+  set(VTS_SANITIZER "")
+  if(_vts_sanitize STREQUAL "address" OR _vts_sanitize STREQUAL "on")
+    add_compile_options(-fsanitize=address,undefined -fno-omit-frame-pointer
+                        -fno-sanitize-recover=undefined)
+    add_link_options(-fsanitize=address,undefined)
+    set(VTS_SANITIZER address)
+  elseif(_vts_sanitize STREQUAL "thread")
+    add_compile_options(-fsanitize=thread -fno-omit-frame-pointer)
+    if(CMAKE_CXX_COMPILER_ID STREQUAL "GNU")
+      # GCC warns that TSan does not model std::atomic_thread_fence, once per Asio handler.
+      add_compile_options(-Wno-tsan)
+    endif()
+    add_link_options(-fsanitize=thread)
+    set(VTS_SANITIZER thread)
+  elseif(NOT _vts_sanitize STREQUAL "off" AND NOT _vts_sanitize STREQUAL "")
+    message(FATAL_ERROR "VTS_SANITIZE=${kind}: expected OFF, address, thread (or ON)")
+  endif()
 endmacro()
 
 # vts_library(<name> [PUBLIC deps...] [PRIVATE deps...]): the library of the current folder,

@@ -1,13 +1,18 @@
 #!/usr/bin/env bash
 # The whole test suite, as CI runs it (.ci/run calls exactly this):
 #   1. scripts/setup.sh (packages; quick when already installed)
-#   2. build/      RelWithDebInfo: every ctest (unit, fuzz-corpus replays, integration)
-#   3. build-asan/ ASan + UBSan: the unit tests (ctest -L unit)
+#   2. clang-format --dry-run --Werror over every tracked *.cpp/*.hpp
+#   3. build-server/ the server-only `vts` (no builder, renderer, tests): the deploy test checks it
+#   4. build/      RelWithDebInfo, warnings are errors: every ctest (unit, fuzz-corpus replays,
+#                  integration)
+#   5. build-asan/ ASan + UBSan: only the unit-test executables and fuzz replays (ctest -L unit)
+#   6. build-tsan/ TSan: the unit tests of the multi-threaded libraries (server, client with the
+#                  fetcher, loadtest)
 # Keeps going after a failure so one run reports everything; exits non-zero if any step failed.
 # Logs of every step are kept in build-logs/.
 #
 #   bash scripts/test.sh
-#   VTS_TEST_SKIP_ASAN=1 bash scripts/test.sh    # quicker local run without the sanitizer build
+#   VTS_TEST_SKIP_ASAN=1 VTS_TEST_SKIP_TSAN=1 bash scripts/test.sh   # without the sanitizer builds
 set -uo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -94,8 +99,30 @@ configure() {
 # --- 1. set-up -----------------------------------------------------------------------------------
 step "setup" bash scripts/setup.sh
 
-# --- 2. main build: everything ------------------------------------------------------------------
-if step "configure build/" configure build -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+# --- 2. formatting ------------------------------------------------------------------------------
+# shellcheck disable=SC2317  # called through step()
+format_check() {
+  git ls-files -z '*.cpp' '*.hpp' | xargs -0 clang-format --dry-run --Werror
+}
+if git rev-parse --git-dir >/dev/null 2>&1; then
+  step "clang-format" format_check
+else
+  skip "clang-format" "not a git checkout"
+fi
+
+# --- 3. server-only build: the deployment's `vts` (checked by the deploy test) --------------------
+if step "configure build-server/" configure build-server -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+  -DVTS_BUILD_RENDERER=OFF -DVTS_BUILD_BUILDER=OFF -DVTS_BUILD_TESTS=OFF -DVTS_BUILD_BENCH=OFF \
+  -DVTS_WERROR=ON; then
+  if step "build build-server/ (vts)" cmake --build build-server -j"$JOBS" --target vts; then
+    export VTS_SERVER_ONLY="$ROOT/build-server/cli/vts"
+  fi
+else
+  skip "build build-server/ (vts)" "configure failed"
+fi
+
+# --- 4. main build: everything ------------------------------------------------------------------
+if step "configure build/" configure build -DCMAKE_BUILD_TYPE=RelWithDebInfo -DVTS_WERROR=ON \
   -DVTS_BUILD_RENDERER="${VTS_BUILD_RENDERER:-ON}"; then
   if step "build build/" cmake --build build -j"$JOBS"; then
     ctest_step "ctest build/" build
@@ -107,23 +134,44 @@ else
   skip "ctest build/" "configure failed"
 fi
 
-# --- 3. sanitizer build: unit tests under ASan + UBSan --------------------------------------------
+# sanitizer_build NAME DIR CTEST_EXCLUDE [CMAKE ARGS...]: configures DIR, builds only
+# `unit_tests` (the executables `ctest -L unit` runs) and runs ctest -L unit there, minus the tests
+# matching CTEST_EXCLUDE ("" = none).
+sanitizer_build() {
+  local name=$1 dir=$2 exclude=$3 ctest_args=(-L unit)
+  shift 3
+  [[ -n $exclude ]] && ctest_args+=(-E "$exclude")
+  if step "configure $dir/" configure "$dir" -DCMAKE_BUILD_TYPE=Debug -DCMAKE_CXX_FLAGS=-O1 \
+    -DVTS_BUILD_RENDERER=OFF -DVTS_BUILD_BENCH=OFF "$@"; then
+    if step "build $dir/ (unit_tests)" cmake --build "$dir" -j"$JOBS" --target unit_tests; then
+      ctest_step "ctest $dir/ -L unit ($name)" "$dir" "${ctest_args[@]}"
+    else
+      skip "ctest $dir/ -L unit ($name)" "build failed"
+    fi
+  else
+    skip "build $dir/ (unit_tests)" "configure failed"
+    skip "ctest $dir/ -L unit ($name)" "configure failed"
+  fi
+}
+
+# --- 5. sanitizer build: unit tests under ASan + UBSan --------------------------------------------
 if [[ ${VTS_TEST_SKIP_ASAN:-0} == 1 ]]; then
   skip "ASan+UBSan" "VTS_TEST_SKIP_ASAN=1"
 else
   export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:check_initialization_order=1:strict_init_order=1:detect_stack_use_after_return=1}
   export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
-  if step "configure build-asan/" configure build-asan -DCMAKE_BUILD_TYPE=Debug -DCMAKE_CXX_FLAGS=-O1 \
-    -DVTS_SANITIZE=ON -DVTS_BUILD_RENDERER="${VTS_BUILD_RENDERER:-ON}" -DVTS_BUILD_BENCH=OFF; then
-    if step "build build-asan/" cmake --build build-asan -j"$JOBS"; then
-      ctest_step "ctest build-asan/ -L unit" build-asan -L unit
-    else
-      skip "ctest build-asan/ -L unit" "build failed"
-    fi
-  else
-    skip "build build-asan/" "configure failed"
-    skip "ctest build-asan/ -L unit" "configure failed"
-  fi
+  sanitizer_build "ASan+UBSan" build-asan "" -DVTS_SANITIZE=address
+fi
+
+# --- 6. sanitizer build: the multi-threaded libraries' unit tests under TSan ----------------------
+if [[ ${VTS_TEST_SKIP_TSAN:-0} == 1 ]]; then
+  skip "TSan" "VTS_TEST_SKIP_TSAN=1"
+else
+  export TSAN_OPTIONS=${TSAN_OPTIONS:-second_deadlock_stack=1:history_size=4}
+  # The open-loop load tests assert wall-clock rates (idle slots, p90 latency) that TSan's 5-15x
+  # slowdown breaks; they run in build/.
+  sanitizer_build "TSan" build-tsan '^LoadTest\.OpenLoop' -DVTS_SANITIZE=thread \
+    "-DVTS_UNIT_TESTS=server;client;loadtest"
 fi
 
 # --- summary ---------------------------------------------------------------------------------------

@@ -4,8 +4,10 @@
 
 #include "commands.hpp"
 #include "progress.hpp"
-#include "vts/builder/extract.hpp"
 #include "vts/protocol/inspect.hpp"
+#ifdef VTS_HAVE_BUILDER
+#include "vts/builder/extract.hpp"
+#endif
 
 namespace vts::cli {
 
@@ -139,6 +141,7 @@ int run_verify(const std::string& path, bool json, unsigned threads) {
   return 0;
 }
 
+#ifdef VTS_HAVE_BUILDER
 struct ExtractArgs {
   std::string archive, tile, output;
   int level = -1;
@@ -172,6 +175,7 @@ int run_extract(const ExtractArgs& a) {
   if (!st) return report_error(st.error());
   return 0;
 }
+#endif
 
 }  // namespace
 
@@ -196,6 +200,7 @@ Runner add_verify(CLI::App& app) {
   return [path, json, threads] { return run_verify(*path, *json, *threads); };
 }
 
+#ifdef VTS_HAVE_BUILDER
 Runner add_extract(CLI::App& app) {
   auto a = std::make_shared<ExtractArgs>();
   CLI::App* c = app.add_subcommand(
@@ -210,5 +215,6 @@ Runner add_extract(CLI::App& app) {
       ->capture_default_str();
   return [a] { return run_extract(*a); };
 }
+#endif
 
 }  // namespace vts::cli

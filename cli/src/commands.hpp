@@ -15,10 +15,14 @@ namespace vts::cli {
 
 using Runner = std::function<int()>;
 
+#ifdef VTS_HAVE_BUILDER
 Runner add_build(CLI::App& app);
+#endif
 Runner add_info(CLI::App& app);
 Runner add_verify(CLI::App& app);
+#ifdef VTS_HAVE_BUILDER
 Runner add_extract(CLI::App& app);
+#endif
 Runner add_serve(CLI::App& app);
 Runner add_sign(CLI::App& app);
 Runner add_cache(CLI::App& app);  // vts cache serve (cmd_cache.cpp)

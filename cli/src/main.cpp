@@ -52,10 +52,14 @@ int main(int argc, char** argv) {
     vts::cli::Runner r = fn(app);
     runners.emplace_back(app.get_subcommands({})[before], std::move(r));
   };
+#ifdef VTS_HAVE_BUILDER
   add(&vts::cli::add_build);
+#endif
   add(&vts::cli::add_info);
   add(&vts::cli::add_verify);
+#ifdef VTS_HAVE_BUILDER
   add(&vts::cli::add_extract);
+#endif
   add(&vts::cli::add_serve);
   add(&vts::cli::add_sign);
   add(&vts::cli::add_cache);

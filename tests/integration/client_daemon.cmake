@@ -6,7 +6,8 @@
 add_executable(test_cache_daemon ${CMAKE_CURRENT_LIST_DIR}/test_cache_daemon.cpp)
 vts_configure_target(test_cache_daemon)
 target_link_libraries(test_cache_daemon PRIVATE vts::server vts::builder vts::client vts::protocol
-                                                PkgConfig::CURL GTest::gtest_main Threads::Threads)
+                                                vts::test_support PkgConfig::CURL
+                                                GTest::gtest_main Threads::Threads)
 target_compile_definitions(test_cache_daemon PRIVATE VTS_EXECUTABLE="$<TARGET_FILE:vts>")
 add_dependencies(test_cache_daemon vts)
 # One ctest per gtest case: integration.daemon.<Suite>.<Case>. They start servers and daemons on

@@ -17,10 +17,8 @@ target_link_libraries(fault_server PRIVATE fault_server_lib Threads::Threads)
 
 add_executable(test_fetcher ${CMAKE_CURRENT_LIST_DIR}/test_fetcher.cpp)
 vts_configure_target(test_fetcher)
-target_link_libraries(test_fetcher PRIVATE vts::client vts::protocol fault_server_lib
-                                           GTest::gtest_main Threads::Threads)
-target_compile_definitions(test_fetcher PRIVATE VTS_EXECUTABLE="$<TARGET_FILE:vts>")
-add_dependencies(test_fetcher vts)
+target_link_libraries(test_fetcher PRIVATE vts::client vts::protocol vts::test_support
+                                           fault_server_lib GTest::gtest_main Threads::Threads)
 # One ctest per gtest case: integration.fetch.<Suite>.<Case>. Several measure delays (backoff,
 # Retry-After, prompt cancellation), so they run alone.
 gtest_discover_tests(test_fetcher

@@ -4,8 +4,9 @@
 # defines fault_server_lib.
 add_executable(test_sources ${CMAKE_CURRENT_LIST_DIR}/test_sources.cpp)
 vts_configure_target(test_sources)
-target_link_libraries(test_sources PRIVATE vts::client vts::server vts::builder vts::protocol fault_server_lib
-                                           GTest::gtest_main Threads::Threads)
+target_link_libraries(test_sources PRIVATE vts::client vts::server vts::builder vts::protocol
+                                           vts::test_support fault_server_lib GTest::gtest_main
+                                           Threads::Threads)
 # One ctest per gtest case: integration.sources.<Suite>.<Case>.
 gtest_discover_tests(test_sources
   TEST_PREFIX integration.sources.

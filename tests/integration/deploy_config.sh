@@ -107,7 +107,12 @@ serve_base=$DAEMON_BASE
 expect_status 200 "$DAEMON_ADMIN/health"
 expect_status 200 "$serve_base/earth/0/0/0"
 kill -HUP "$serve_pid" # ExecReload
-sleep 0.3
+for ((i = 0; i < 200; i++)); do
+  grep -q 'SIGHUP: reloading' "$LOGS/serve.err" && break
+  kill -0 "$serve_pid" 2>/dev/null || break
+  sleep 0.05
+done
+grep -q 'SIGHUP: reloading' "$LOGS/serve.err" || fail "vts serve did not act on SIGHUP"
 kill -0 "$serve_pid" 2>/dev/null || fail "SIGHUP ended vts serve"
 expect_status 200 "$serve_base/earth/1/0/0"
 
@@ -123,6 +128,32 @@ DAEMON_PID=$serve_pid
 stop_unit_line serve
 
 # ---- Dockerfile, compose, Kubernetes ----------------------------------------------------------------
+# The image's binary is the server-only build (-DVTS_BUILD_BUILDER=OFF): scripts/test.sh builds it
+# and names it in VTS_SERVER_ONLY. It must not need OpenImageIO; its DT_NEEDED entries are the
+# runtime packages. Without it, the test build's vts stands in (it has `vts build`, so
+# OpenImageIO is allowed there).
+if [[ -n ${VTS_SERVER_ONLY:-} ]]; then
+  [[ -x $VTS_SERVER_ONLY ]] || fail "VTS_SERVER_ONLY=$VTS_SERVER_ONLY is not an executable"
+  IMAGE_VTS=$VTS_SERVER_ONLY
+  note "server-only binary: $IMAGE_VTS"
+  if readelf -d "$IMAGE_VTS" | grep -i 'NEEDED.*openimageio'; then
+    fail "the server-only vts needs OpenImageIO (readelf -d above)"
+  fi
+  if ldd "$IMAGE_VTS" | grep -i openimageio; then
+    fail "the server-only vts loads OpenImageIO (ldd above)"
+  fi
+  "$IMAGE_VTS" --help >"$LOGS/server-only-help.txt" || fail "the server-only vts --help failed"
+  grep -qE '^ +serve' "$LOGS/server-only-help.txt" || fail "the server-only vts has no serve"
+  if grep -qE '^ +(build|extract)\b' "$LOGS/server-only-help.txt"; then
+    fail "the server-only vts still has build/extract"
+  fi
+  SERVER_ONLY=1
+else
+  note "VTS_SERVER_ONLY unset: checking the test build's vts (scripts/test.sh sets it)"
+  IMAGE_VTS=$VTS
+  SERVER_ONLY=0
+fi
+
 note "the binary's shared libraries: packages for the runtime image"
 needed_pkgs=()
 while read -r lib; do
@@ -133,11 +164,11 @@ while read -r lib; do
   pkg=${pkg%%:*}
   [[ -n $pkg ]] || fail "no Debian package owns $real ($lib)"
   needed_pkgs+=("$lib=$pkg")
-done < <(readelf -d "$VTS" | sed -nE 's/.*\(NEEDED\).*\[(.*)\]/\1/p')
+done < <(readelf -d "$IMAGE_VTS" | sed -nE 's/.*\(NEEDED\).*\[(.*)\]/\1/p')
 note "${needed_pkgs[*]}"
 
 note "Dockerfile, compose.yaml, k8s/*.yaml: parsed and consistent"
-VTS_NEEDED="${needed_pkgs[*]}" "$PY" - "$DEPLOY" <<'PYTHON' || fail "deploy/ files are inconsistent (above)"
+VTS_NEEDED="${needed_pkgs[*]}" SERVER_ONLY=$SERVER_ONLY "$PY" - "$DEPLOY" <<'PYTHON' || fail "deploy/ files are inconsistent (above)"
 import os, re, sys, yaml
 
 deploy = sys.argv[1]
@@ -158,6 +189,7 @@ check(froms and froms[0][0].startswith("debian:12") and froms[0][1] == "build",
       "Dockerfile: build stage FROM debian:12 AS build")
 check(froms and froms[-1][0].startswith("debian:12"), "Dockerfile: runtime stage on Debian 12")
 check("-DVTS_BUILD_RENDERER=OFF" in joined, "Dockerfile: cmake -DVTS_BUILD_RENDERER=OFF")
+check("-DVTS_BUILD_BUILDER=OFF" in joined, "Dockerfile: cmake -DVTS_BUILD_BUILDER=OFF")
 runtime = joined.split("FROM " + froms[-1][0], 1)[-1] if froms else ""
 m = re.search(r"apt-get install[^&]*", runtime)
 runtime_pkgs = set(m.group(0).split()) if m else set()
@@ -169,9 +201,14 @@ for entry in os.environ["VTS_NEEDED"].split():
     # links GLFW and libepoxy for `vts view`, which the image's binary does not have.
     if pkg in ("libglfw3", "libepoxy0"):
         continue
+    # Likewise the test build's `vts build` links OpenImageIO, which the server-only image lacks.
+    if os.environ["SERVER_ONLY"] != "1" and pkg.startswith("libopenimageio"):
+        continue
     check(pkg in runtime_pkgs, f"Dockerfile: runtime stage lacks {pkg} (for {lib})")
 for gl in ("libgl1", "libglfw3", "libepoxy0", "libglx0", "libegl1"):
     check(gl not in runtime_pkgs, f"Dockerfile: GL package {gl} in the runtime image")
+for pkg in runtime_pkgs:
+    check(not pkg.startswith("libopenimageio"), f"Dockerfile: {pkg} in the server-only image")
 check(re.search(r"^COPY --from=build \S+/cli/vts /usr/local/bin/vts$", runtime, re.M),
       "Dockerfile: runtime copies only the vts binary from the build stage")
 user = re.findall(r"^USER\s+(\S+)", runtime, re.M)

@@ -161,7 +161,15 @@ rm -f "$WORK/probe/done"
   done
 ) &
 prober=$!
-sleep 0.3
+# probes_of VERSION: how many answers the prober has logged for VERSION.
+probes_of() { grep -c " $1 " "$WORK/probe/log" 2>/dev/null || true; }
+# The prober is under way (two rounds of the old version) before the rollout starts ...
+for ((i = 0; i < 400; i++)); do
+  (($(probes_of "$V1") >= 4)) && break
+  kill -0 "$prober" 2>/dev/null || break
+  sleep 0.05
+done
+(($(probes_of "$V1") >= 4)) || fail "the prober logged no answers before the rollout"
 for r in 1 2; do
   cp "$WORK/earth_v2.pmtiles" "$WORK/replica$r/.earth.pmtiles.tmp"
   mv "$WORK/replica$r/.earth.pmtiles.tmp" "$WORK/replica$r/earth.pmtiles"
@@ -182,7 +190,12 @@ for ((i = 0; i < 100; i++)); do
 done
 [[ $(tilejson_version "$F/earth.json") == "$V2" ]] || fail "the front still hands out version $V1"
 rollout_ms=$((($(date +%s%N) - rolled) / 1000000))
-sleep 0.5
+# ... and runs until it has seen two rounds of the new one.
+for ((i = 0; i < 400; i++)); do
+  (($(probes_of "$V2") >= 4)) && break
+  kill -0 "$prober" 2>/dev/null || break
+  sleep 0.05
+done
 touch "$WORK/probe/done"
 timeout 20 tail --pid="$prober" -f /dev/null || fail "the prober did not stop"
 wait "$prober" || true

@@ -31,9 +31,12 @@
 #include <thread>
 #include <vector>
 
-#include "vts/protocol/pmtiles.hpp"
 #include "vts/builder/builder.hpp"
+#include "vts/protocol/pmtiles.hpp"
 #include "vts/server/http_server.hpp"
+#include "vts/test/archive.hpp"
+#include "vts/test/server.hpp"
+#include "vts/test/temp_dir.hpp"
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
@@ -42,42 +45,24 @@ namespace {
 
 // ---- archives ---------------------------------------------------------------------------------
 
-struct Archive {
-  fs::path path;
-  std::shared_ptr<vts::pmtiles::Reader> reader;
-  std::vector<vts::TileId> tiles;  // every stored tile
+struct Archive : vts::test::OpenedArchive {
   vts::TilesetInfo info;
 };
 
-fs::path test_dir() {
-  static const fs::path d = [] {
-    auto p = fs::temp_directory_path() / ("vts-daemon-test." + std::to_string(::getpid()));
-    fs::create_directories(p);
-    return p;
-  }();
+const vts::test::TempDir& test_dir_guard() {
+  static const vts::test::TempDir d("vts-daemon-test");
   return d;
+}
+const fs::path& test_dir() {
+  return test_dir_guard().path();
 }
 
 Archive build(const std::string& name, std::optional<vts::TexelRect> region) {
+  const auto o = vts::test::synthetic_options(test_dir() / "archives" / (name + ".pmtiles"), 1500,
+                                              1000, region, 2);
   Archive a;
-  fs::create_directories(test_dir() / "archives");
-  a.path = test_dir() / "archives" / (name + ".pmtiles");
-  vts::BuildOptions o;
-  o.synthetic = vts::SyntheticSpec{1500, 1000, region, 2};
-  o.output = a.path;
-  o.threads = 2;
-  auto r = vts::build_pyramid(o);
-  if (!r) throw std::runtime_error(r.error().to_string());
-  a.info = r->info;
-  auto reader = vts::pmtiles::Reader::open(a.path);
-  if (!reader) throw std::runtime_error(reader.error().to_string());
-  a.reader = *reader;
-  auto st = a.reader->for_each_entry([&](const vts::pmtiles::Entry& e) {
-    for (std::uint32_t i = 0; i < e.run_length; ++i)
-      a.tiles.push_back(*vts::pmtiles::tile_id_to_zxy(e.tile_id + i));
-    return true;
-  });
-  if (!st.ok()) throw std::runtime_error(st.error().to_string());
+  a.info = vts::test::build_archive(o).info;
+  static_cast<vts::test::OpenedArchive&>(a) = vts::test::open_archive(o.output);
   return a;
 }
 
@@ -98,51 +83,29 @@ std::string payload_of(const Archive& a, vts::TileId t) {
   return std::string(reinterpret_cast<const char*>(p->data()), p->size());
 }
 
-struct Cleanup : ::testing::Environment {
-  void TearDown() override {
-    std::error_code ec;
-    fs::remove_all(test_dir(), ec);
-  }
-};
-const auto* const kCleanup = ::testing::AddGlobalTestEnvironment(new Cleanup);
-
 // ---- an in-process server ----------------------------------------------------------------------
 
+// The server over `archives` with `provider`, on `port` (0 = any).
 class RunningServer {
  public:
   RunningServer(std::vector<fs::path> archives, std::shared_ptr<vts::AsyncTileProvider> provider,
-                std::uint16_t port = 0) {
+                std::uint16_t port = 0)
+      : server_(std::move(archives), options(std::move(provider), port), port != 0) {}
+  void stop() { server_.stop(); }
+  std::uint16_t port() const { return server_.port(); }
+  std::string base() const { return server_.base_url(); }
+
+ private:
+  static vts::HttpServerOptions options(std::shared_ptr<vts::AsyncTileProvider> provider,
+                                        std::uint16_t port) {
     vts::HttpServerOptions o;
     o.listen_port = port;
     o.admin_enabled = false;
-    o.handle_signals = false;
     o.threads = 2;
     o.provider = std::move(provider);
-    auto registry = std::make_shared<vts::TilesetRegistry>();
-    if (!archives.empty()) {
-      auto st = registry->load(archives);
-      if (!st.ok()) throw std::runtime_error(st.error().to_string());
-    }
-    auto s = vts::HttpServer::create(std::move(o), registry);
-    if (!s) throw std::runtime_error(s.error().to_string());
-    server_ = std::move(*s);
-    port_ = server_->port();
-    thread_ = std::thread([this] { server_->run(); });
+    return o;
   }
-  ~RunningServer() { stop(); }
-  void stop() {
-    if (thread_.joinable()) {
-      server_->stop();
-      thread_.join();
-    }
-  }
-  std::uint16_t port() const { return port_; }
-  std::string base() const { return "http://127.0.0.1:" + std::to_string(port_); }
-
- private:
-  std::unique_ptr<vts::HttpServer> server_;
-  std::uint16_t port_ = 0;
-  std::thread thread_;
+  vts::test::RunningServer server_;
 };
 
 // ---- HTTP clients ------------------------------------------------------------------------------

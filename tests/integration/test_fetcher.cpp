@@ -1,6 +1,6 @@
 // The client's Fetcher against FaultServer on loopback: byte-exact tiles and ranges, priority
 // order, merging, cancellation, retries and their limits, load, shutdown and bad input. The archive
-// comes from the real builder (`vts build --synthetic`, VTS_EXECUTABLE) and every body is compared
+// comes from the real builder, in process, and every body is compared
 // with what pmtiles::Reader returns. Faults are chosen by URL (see fault_server.hpp).
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -21,6 +21,8 @@
 #include "fault_server.hpp"
 #include "vts/client/fetcher.hpp"
 #include "vts/protocol/pmtiles.hpp"
+#include "vts/test/archive.hpp"
+#include "vts/test/temp_dir.hpp"
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
@@ -34,44 +36,18 @@ using Clock = std::chrono::steady_clock;
 
 namespace {
 
-struct Archive {
-  fs::path dir;
-  fs::path path;
-  std::shared_ptr<vts::pmtiles::Reader> reader;
-  std::vector<vts::TileId> tiles;
-};
-
-// One synthetic archive for the whole process (built once): "a", served as /a/{z}/{x}/{y}.
-const Archive& archive() {
-  static Archive a = [] {
-    Archive r;
-    r.dir = fs::temp_directory_path() / ("vts-fetch-test." + std::to_string(getpid()));
-    fs::create_directories(r.dir);
-    r.path = r.dir / "a.pmtiles";
-    const std::string cmd = std::string(VTS_EXECUTABLE) + " build --synthetic 1024x512 -o " +
-                            r.path.string() + " >/dev/null 2>&1";
-    if (std::system(cmd.c_str()) != 0) throw std::runtime_error("vts build failed: " + cmd);
-    auto reader = vts::pmtiles::Reader::open(r.path);
-    if (!reader) throw std::runtime_error(reader.error().to_string());
-    r.reader = *reader;
-    auto st = r.reader->for_each_entry([&](const vts::pmtiles::Entry& e) {
-      for (std::uint32_t i = 0; i < e.run_length; ++i)
-        r.tiles.push_back(*vts::pmtiles::tile_id_to_zxy(e.tile_id + i));
-      return true;
-    });
-    if (!st.ok()) throw std::runtime_error(st.error().to_string());
-    return r;
-  }();
-  return a;
+// One synthetic archive for the whole process (built once, in process): "a", served as
+// /a/{z}/{x}/{y}.
+const vts::test::TempDir& archive_dir() {
+  static const vts::test::TempDir d("vts-fetch-test");
+  return d;
 }
 
-struct ArchiveCleanup : ::testing::Environment {
-  void TearDown() override {
-    std::error_code ec;
-    fs::remove_all(archive().dir, ec);
-  }
-};
-const auto* const kCleanup = ::testing::AddGlobalTestEnvironment(new ArchiveCleanup);
+const vts::test::OpenedArchive& archive() {
+  static const vts::test::OpenedArchive a = vts::test::build_and_open(
+      vts::test::synthetic_options(archive_dir() / "a.pmtiles", 1024, 512));
+  return a;
+}
 
 std::vector<std::uint8_t> tile_bytes(vts::TileId id) {
   auto t = archive().reader->get(id);

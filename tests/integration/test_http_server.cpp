@@ -1,6 +1,6 @@
 // The HTTP server under load and abuse, in process: a real HttpServer on 127.0.0.1 port 0 (stopped
-// by a scope guard), real libcurl clients and raw sockets. Archives come from `vts build
-// --synthetic` (VTS_EXECUTABLE); every tile body is compared with what pmtiles::Reader returns.
+// by a scope guard), real libcurl clients and raw sockets. The archive comes from the real
+// builder in process; every tile body is compared with what pmtiles::Reader returns.
 #include <arpa/inet.h>
 #include <curl/curl.h>
 #include <gtest/gtest.h>
@@ -21,84 +21,44 @@
 
 #include "vts/protocol/pmtiles.hpp"
 #include "vts/server/http_server.hpp"
+#include "vts/test/archive.hpp"
+#include "vts/test/server.hpp"
+#include "vts/test/temp_dir.hpp"
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 
 namespace {
 
-struct Archive {
-  fs::path dir;
-  fs::path path;
-  std::shared_ptr<vts::pmtiles::Reader> reader;
-  std::vector<vts::TileId> tiles;
-};
+// One synthetic archive for the whole file (built once, in process).
+const vts::test::TempDir& archive_dir() {
+  static const vts::test::TempDir d("vts-http-test");
+  return d;
+}
 
-// One synthetic archive for the whole file (built once).
-const Archive& archive() {
-  static Archive a = [] {
-    Archive r;
-    r.dir = fs::temp_directory_path() / ("vts-http-test." + std::to_string(getpid()));
-    fs::create_directories(r.dir);
-    r.path = r.dir / "syn.pmtiles";
-    const std::string cmd = std::string(VTS_EXECUTABLE) + " build --synthetic 6000x3000 -o " +
-                            r.path.string() + " >/dev/null 2>&1";
-    if (std::system(cmd.c_str()) != 0) throw std::runtime_error("vts build failed: " + cmd);
-    auto reader = vts::pmtiles::Reader::open(r.path);
-    if (!reader) throw std::runtime_error(reader.error().to_string());
-    r.reader = *reader;
-    auto st = r.reader->for_each_entry([&](const vts::pmtiles::Entry& e) {
-      for (std::uint32_t i = 0; i < e.run_length; ++i)
-        r.tiles.push_back(*vts::pmtiles::tile_id_to_zxy(e.tile_id + i));
-      return true;
-    });
-    if (!st.ok()) throw std::runtime_error(st.error().to_string());
-    return r;
-  }();
+const vts::test::OpenedArchive& archive() {
+  static const vts::test::OpenedArchive a = vts::test::build_and_open(
+      vts::test::synthetic_options(archive_dir() / "syn.pmtiles", 6000, 3000));
   return a;
 }
 
-struct ArchiveCleanup : ::testing::Environment {
-  void TearDown() override {
-    std::error_code ec;
-    fs::remove_all(archive().dir, ec);
-  }
-};
-const auto* const kCleanup = ::testing::AddGlobalTestEnvironment(new ArchiveCleanup);
-
-// A server running on its own thread for the scope of a test.
+// The server over archive(), admin listener on port 0, for the scope of a test.
 class RunningServer {
  public:
-  explicit RunningServer(vts::HttpServerOptions o) {
-    o.listen_port = 0;
-    o.admin_port = 0;
-    o.handle_signals = false;
-    registry_ = std::make_shared<vts::TilesetRegistry>();
-    auto st = registry_->load({archive().path});
-    if (!st.ok()) throw std::runtime_error(st.error().to_string());
-    auto s = vts::HttpServer::create(std::move(o), registry_);
-    if (!s) throw std::runtime_error(s.error().to_string());
-    server_ = std::move(*s);
-    thread_ = std::thread([this] { server_->run(); });
-  }
-  ~RunningServer() { stop_and_join(); }
+  explicit RunningServer(vts::HttpServerOptions o)
+      : server_({archive().path}, admin_on_port_0(std::move(o))) {}
   // Stops the server and waits for run() to return; returns how long that took.
-  std::chrono::steady_clock::duration stop_and_join() {
-    const auto start = std::chrono::steady_clock::now();
-    if (thread_.joinable()) {
-      server_->stop();
-      thread_.join();
-    }
-    return std::chrono::steady_clock::now() - start;
-  }
-  vts::HttpServer& operator*() { return *server_; }
-  vts::HttpServer* operator->() { return server_.get(); }
-  std::string base() const { return "http://127.0.0.1:" + std::to_string(server_->port()); }
+  std::chrono::steady_clock::duration stop_and_join() { return server_.stop(); }
+  vts::HttpServer& operator*() { return server_.server(); }
+  vts::HttpServer* operator->() { return &server_.server(); }
+  std::string base() const { return server_.base_url(); }
 
  private:
-  std::shared_ptr<vts::TilesetRegistry> registry_;
-  std::unique_ptr<vts::HttpServer> server_;
-  std::thread thread_;
+  static vts::HttpServerOptions admin_on_port_0(vts::HttpServerOptions o) {
+    o.admin_port = 0;
+    return o;
+  }
+  vts::test::RunningServer server_;
 };
 
 std::size_t append(char* p, std::size_t size, std::size_t n, void* user) {

@@ -18,11 +18,14 @@
 #include <vector>
 
 #include "fault_server.hpp"
+#include "vts/builder/builder.hpp"
 #include "vts/client/source.hpp"
 #include "vts/client/tile_cache.hpp"
 #include "vts/protocol/pmtiles.hpp"
-#include "vts/builder/builder.hpp"
 #include "vts/server/http_server.hpp"
+#include "vts/test/archive.hpp"
+#include "vts/test/server.hpp"
+#include "vts/test/temp_dir.hpp"
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
@@ -39,12 +42,9 @@ namespace {
 // its test needs).
 
 const fs::path& dir() {
-  static const fs::path d = [] {
-    fs::path p = fs::temp_directory_path() / ("vts-sources-test." + std::to_string(::getpid()));
-    fs::create_directories(p / "served");
-    return p;
-  }();
-  return d;
+  static const vts::test::TempDir d("vts-sources-test");
+  [[maybe_unused]] static const bool served = fs::create_directories(d / "served");
+  return d.path();
 }
 
 struct Cleanup : ::testing::Environment {
@@ -55,15 +55,11 @@ void build(const fs::path& out, std::uint64_t w, std::uint64_t h,
            std::optional<vts::TexelRect> region = std::nullopt, int region_level = 6,
            std::uint32_t tile = 256, std::uint32_t border = 4,
            vts::FilterChoice filter = vts::FilterChoice::automatic) {
-  vts::BuildOptions o;
-  o.synthetic = vts::SyntheticSpec{w, h, region, region_level};
-  o.output = out;
+  vts::BuildOptions o = vts::test::synthetic_options(out, w, h, region, region_level);
   o.tile_size = tile;
   o.border = border;
   o.encode.filter = filter;
-  o.threads = 2;
-  auto r = vts::build_pyramid(o);
-  if (!r) throw std::runtime_error("build " + out.string() + ": " + r.error().to_string());
+  vts::test::build_archive(o);
 }
 
 // Archives served by `vts serve` live in dir()/served (the registry loads the folder).
@@ -99,35 +95,23 @@ const fs::path& leafy_archive() {
 // `vts serve` on its own thread for the life of the process (or of a test, for special configs).
 class RunningServer {
  public:
-  explicit RunningServer(vts::RouterConfig router = {}) {
-    syn_archive();
-    sparse_archive();
-    vts::HttpServerOptions o;
-    o.listen_port = 0;
-    o.admin_enabled = false;
-    o.handle_signals = false;
-    o.threads = 2;
-    o.reload_interval = 0ms;
-    o.router = std::move(router);
-    registry_ = std::make_shared<vts::TilesetRegistry>();
-    auto st = registry_->load({dir() / "served"});
-    if (!st.ok()) throw std::runtime_error(st.error().to_string());
-    auto s = vts::HttpServer::create(std::move(o), registry_);
-    if (!s) throw std::runtime_error(s.error().to_string());
-    server_ = std::move(*s);
-    thread_ = std::thread([this] { server_->run(); });
-  }
-  ~RunningServer() {
-    server_->stop();
-    thread_.join();
-  }
-  std::string base() const { return "http://127.0.0.1:" + std::to_string(server_->port()); }
-  vts::TilesetRegistry& registry() { return *registry_; }
+  explicit RunningServer(vts::RouterConfig router = {})
+      : server_(served(), options(std::move(router))) {}
+  std::string base() const { return server_.base_url(); }
+  vts::TilesetRegistry& registry() { return server_.registry(); }
 
  private:
-  std::shared_ptr<vts::TilesetRegistry> registry_;
-  std::unique_ptr<vts::HttpServer> server_;
-  std::thread thread_;
+  static std::vector<fs::path> served() {
+    syn_archive();
+    sparse_archive();
+    return {dir() / "served"};
+  }
+  static vts::HttpServerOptions options(vts::RouterConfig router) {
+    vts::HttpServerOptions o = vts::test::RunningServer::quiet_options();
+    o.router = std::move(router);
+    return o;
+  }
+  vts::test::RunningServer server_;
 };
 
 // The shared server, stopped by Cleanup before static destruction.
@@ -155,8 +139,6 @@ FaultServer& static_server(const fs::path& archive, const std::string& name) {
 
 void Cleanup::TearDown() {
   g_serve.reset();
-  std::error_code ec;
-  fs::remove_all(dir(), ec);
 }
 const auto* const kCleanup = ::testing::AddGlobalTestEnvironment(new Cleanup);
 

@@ -8,10 +8,11 @@
 #include <fstream>
 #include <random>
 
-#include "vts/protocol/pmtiles.hpp"
 #include "vts/builder/downsample.hpp"
 #include "vts/builder/extract.hpp"
 #include "vts/builder/synthetic.hpp"
+#include "vts/protocol/pmtiles.hpp"
+#include "vts/test/temp_dir.hpp"
 
 namespace vts {
 namespace {
@@ -19,20 +20,7 @@ namespace {
 namespace fs = std::filesystem;
 namespace OIIO = OIIO_NAMESPACE;
 
-struct TempDir {
-  fs::path path;
-  TempDir() {
-    path = fs::temp_directory_path() /
-           ("vts-builder-" + std::to_string(::getpid()) + "-" + std::to_string(counter()++));
-    fs::create_directories(path);
-  }
-  ~TempDir() { fs::remove_all(path); }
-  static int& counter() {
-    static int c = 0;
-    return c;
-  }
-  fs::path operator/(const std::string& n) const { return path / n; }
-};
+using TempDir = vts::test::TempDir;
 
 struct Rgba {
   std::uint64_t w = 0, h = 0;
@@ -516,7 +504,7 @@ TEST(Builder, FailedBuildLeavesNoFileBehind) {
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.error().code, ErrorCode::cancelled);
   std::vector<std::string> left;
-  for (const auto& e : fs::directory_iterator(dir.path))
+  for (const auto& e : fs::directory_iterator(dir.path()))
     if (e.path().filename() != "junk.png") left.push_back(e.path().filename().string());
   EXPECT_TRUE(left.empty()) << left.front();
 }

@@ -15,11 +15,12 @@
 #include <numbers>
 #include <random>
 
+#include "vts/builder/builder.hpp"
+#include "vts/builder/downsample.hpp"
 #include "vts/protocol/codec.hpp"
 #include "vts/protocol/pmtiles.hpp"
 #include "vts/protocol/tileset.hpp"
-#include "vts/builder/builder.hpp"
-#include "vts/builder/downsample.hpp"
+#include "vts/test/temp_dir.hpp"
 
 namespace vts {
 namespace {
@@ -291,14 +292,7 @@ TEST(DownsampleFilter, BeatsBoxOnARealPhotograph) {
   }
 }
 
-struct TempDir {
-  fs::path path;
-  TempDir() {
-    path = fs::temp_directory_path() / ("vts-dsfilter-" + std::to_string(::getpid()));
-    fs::create_directories(path);
-  }
-  ~TempDir() { fs::remove_all(path); }
-};
+using TempDir = vts::test::TempDir;
 
 TEST(DownsampleFilter, BuilderCascadeEqualsTheWholeImageReduction) {
   // An odd-sized image with alpha, small tiles so that there are many levels and tile rows: every
@@ -306,7 +300,7 @@ TEST(DownsampleFilter, BuilderCascadeEqualsTheWholeImageReduction) {
   // stays within one code of the double-precision reference.
   TempDir dir;
   const Image src = test_pattern(333, 197, 7, true);
-  const fs::path in = dir.path / "in.png";
+  const fs::path in = dir.path() / "in.png";
   {
     auto out = OIIO::ImageOutput::create(in.string());
     ASSERT_TRUE(out);
@@ -318,7 +312,7 @@ TEST(DownsampleFilter, BuilderCascadeEqualsTheWholeImageReduction) {
   for (DownsampleFilter f : {DownsampleFilter::lanczos3, DownsampleFilter::box}) {
     BuildOptions o;
     o.inputs = {in};
-    o.output = dir.path / (std::string(downsample_filter_name(f)) + ".pmtiles");
+    o.output = dir.path() / (std::string(downsample_filter_name(f)) + ".pmtiles");
     o.tile_size = 16;
     o.border = 4;
     o.downsample = f;

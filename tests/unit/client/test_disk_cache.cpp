@@ -2,6 +2,7 @@
 // directly with SQLite (linked through vts::client) to look behind the cache's back: to check the
 // schema and totals, and to damage rows the way a failing disk would.
 #include "vts/client/disk_cache.hpp"
+#include "vts/test/temp_dir.hpp"
 
 #include <gtest/gtest.h>
 #include <sqlite3.h>
@@ -44,23 +45,8 @@ TileId tid(std::uint32_t x, std::uint32_t y = 0, std::uint8_t z = 12) {
   return TileId{z, x, y};
 }
 
-// A fresh folder under testing::TempDir(), removed at the end of the test.
-class TempFolder {
- public:
-  TempFolder() {
-    std::string pattern = (fs::path(testing::TempDir()) / "vts-disk-cache-XXXXXX").string();
-    if (!mkdtemp(pattern.data())) ADD_FAILURE() << "mkdtemp failed";
-    path_ = pattern;
-  }
-  ~TempFolder() {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
-  const fs::path& path() const { return path_; }
-
- private:
-  fs::path path_;
-};
+// A fresh folder, removed at the end of the test.
+using TempFolder = vts::test::TempDir;
 
 // A direct SQLite connection to a cache's database, for looking behind the cache's back.
 class RawDb {

@@ -9,11 +9,12 @@
 #include <regex>
 #include <string>
 
+#include "vts/builder/builder.hpp"
 #include "vts/client/source.hpp"
 #include "vts/protocol/codec.hpp"
 #include "vts/protocol/pmtiles.hpp"
-#include "vts/builder/builder.hpp"
 #include "vts/server/tileset_registry.hpp"
+#include "vts/test/temp_dir.hpp"
 
 namespace fs = std::filesystem;
 using vts::client::SourceTile;
@@ -23,18 +24,12 @@ namespace {
 class SourceLocal : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    dir_ = new fs::path(fs::temp_directory_path() /
-                        ("vts-source-local-test-" + std::to_string(::getpid())));
-    fs::create_directories(*dir_);
+    dir_ = new vts::test::TempDir("vts-source-local-test");
     build("dense", std::nullopt);
     // Sparse: at z = 2 (the finest level) only tile (0,0) exists.
     build("sparse", vts::TexelRect{0, 0, 256, 256});
   }
-  static void TearDownTestSuite() {
-    std::error_code ec;
-    fs::remove_all(*dir_, ec);
-    delete dir_;
-  }
+  static void TearDownTestSuite() { delete dir_; }
   static void build(const std::string& name, std::optional<vts::TexelRect> region) {
     vts::BuildOptions o;
     o.synthetic = vts::SyntheticSpec{600, 300, region, 2};
@@ -52,7 +47,7 @@ class SourceLocal : public ::testing::Test {
     return s.ok() ? std::move(*s) : nullptr;
   }
 
-  static inline fs::path* dir_ = nullptr;
+  static inline vts::test::TempDir* dir_ = nullptr;
 };
 
 // Fetches synchronously (a local source answers inside fetch()).
@@ -204,7 +199,7 @@ TEST_F(SourceLocal, InfoDescribesTheArchiveLikeTheServer) {
 
 TEST_F(SourceLocal, KeyIsTheAbsolutePathHoweverTheArchiveWasNamed) {
   const fs::path cwd = fs::current_path();
-  fs::current_path(*dir_);
+  fs::current_path(dir_->path());
   auto relative = vts::client::open_source("./sub/../dense.pmtiles");
   fs::current_path(cwd);
   ASSERT_TRUE(relative.ok()) << relative.error().to_string();
@@ -222,7 +217,7 @@ TEST_F(SourceLocal, KeyIsTheAbsolutePathHoweverTheArchiveWasNamed) {
 TEST_F(SourceLocal, FileUrlsArePercentDecoded) {
   const fs::path spaced = *dir_ / "with space.pmtiles";
   fs::copy_file(path("dense"), spaced, fs::copy_options::overwrite_existing);
-  std::string url = "file://" + dir_->string() + "/with%20space.pmtiles";
+  std::string url = "file://" + dir_->path().string() + "/with%20space.pmtiles";
   auto s = vts::client::open_source(url);
   ASSERT_TRUE(s.ok()) << s.error().to_string();
   EXPECT_EQ((*s)->info().key, "file:" + spaced.string());
@@ -247,9 +242,10 @@ TEST_F(SourceLocal, FileThatIsNotAnArchiveErrorNamesThePath) {
     EXPECT_EQ(s.error().code, vts::ErrorCode::corrupt) << s.error().to_string();
     EXPECT_NE(s.error().message.find(text.string()), std::string::npos) << s.error().message;
   }
-  auto dir = vts::client::open_source(dir_->string());
+  auto dir = vts::client::open_source(dir_->path().string());
   ASSERT_FALSE(dir.ok());
-  EXPECT_NE(dir.error().message.find(dir_->string()), std::string::npos) << dir.error().message;
+  EXPECT_NE(dir.error().message.find(dir_->path().string()), std::string::npos)
+      << dir.error().message;
 }
 
 TEST_F(SourceLocal, ArchiveOfAnotherToolIsRefusedNamingThePath) {

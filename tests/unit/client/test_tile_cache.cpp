@@ -13,10 +13,12 @@
 #include <mutex>
 #include <thread>
 
+#include "vts/builder/builder.hpp"
 #include "vts/client/tile_client.hpp"
 #include "vts/protocol/codec.hpp"
 #include "vts/protocol/pmtiles.hpp"
-#include "vts/builder/builder.hpp"
+#include "vts/test/clock.hpp"
+#include "vts/test/temp_dir.hpp"
 
 namespace fs = std::filesystem;
 using namespace vts::client;
@@ -24,19 +26,7 @@ using vts::TileId;
 
 namespace {
 
-struct Dir {
-  fs::path path;
-  Dir() {
-    static std::atomic<int> n{0};
-    path = fs::temp_directory_path() /
-           ("vts-tile-cache-test-" + std::to_string(::getpid()) + "-" + std::to_string(n++));
-    fs::create_directories(path);
-  }
-  ~Dir() {
-    std::error_code ec;
-    fs::remove_all(path, ec);
-  }
-};
+using Dir = vts::test::TempDir;
 
 fs::path build(const fs::path& out, std::optional<vts::TexelRect> region = std::nullopt) {
   vts::BuildOptions o;
@@ -190,7 +180,7 @@ TileCacheOptions with_disk(const fs::path& dir) {
 
 TEST(TileCache, EveryTileComesByteExactFromTheSourceThenDiskThenRam) {
   Dir d;
-  const auto archive = build(d.path / "a.pmtiles");
+  const auto archive = build(d.path() / "a.pmtiles");
   auto reader = vts::pmtiles::Reader::open(archive);
   std::vector<TileId> ids;
   ASSERT_TRUE((*reader)
@@ -209,7 +199,7 @@ TEST(TileCache, EveryTileComesByteExactFromTheSourceThenDiskThenRam) {
     if (expected_from != PayloadResult::From::ram) {
       cache.reset();
       source = held(archive);
-      auto c = TileCache::create(source, with_disk(d.path / "cache"));
+      auto c = TileCache::create(source, with_disk(d.path() / "cache"));
       ASSERT_TRUE(c.ok()) << c.error().to_string();
       cache = std::move(*c);
     }
@@ -243,7 +233,7 @@ TEST(TileCache, EveryTileComesByteExactFromTheSourceThenDiskThenRam) {
 
 TEST(TileCache, ConcurrentGetsOfOneTileAreMergedIntoOneFetch) {
   Dir d;
-  const auto archive = build(d.path / "a.pmtiles");
+  const auto archive = build(d.path() / "a.pmtiles");
   auto source = held(archive);
   auto cache = take(TileCache::create(source, {}));
   Got got;
@@ -260,7 +250,7 @@ TEST(TileCache, ConcurrentGetsOfOneTileAreMergedIntoOneFetch) {
 
 TEST(TileCache, CancellingTheLastWaiterCancelsTheFetchButOthersKeepIt) {
   Dir d;
-  const auto archive = build(d.path / "a.pmtiles");
+  const auto archive = build(d.path() / "a.pmtiles");
   auto source = held(archive);
   auto cache = take(TileCache::create(source, {}));
   Got a, b;
@@ -279,9 +269,9 @@ TEST(TileCache, CancellingTheLastWaiterCancelsTheFetchButOthersKeepIt) {
 
 TEST(TileCache, ACorruptPayloadIsRefetchedAndNeverCachedOrDelivered) {
   Dir d;
-  const auto archive = build(d.path / "a.pmtiles");
+  const auto archive = build(d.path() / "a.pmtiles");
   auto source = held(archive);
-  auto cache = take(TileCache::create(source, with_disk(d.path / "cache")));
+  auto cache = take(TileCache::create(source, with_disk(d.path() / "cache")));
   // One bad answer: refetched, then the good bytes.
   source->corrupt_ = 1;
   Got got;
@@ -310,7 +300,7 @@ TEST(TileCache, ACorruptPayloadIsRefetchedAndNeverCachedOrDelivered) {
 TEST(TileCache, AbsentTilesAreRememberedAndNotAskedForAgain) {
   Dir d;
   // Sparse: only the top-left finest tile exists.
-  const auto archive = build(d.path / "s.pmtiles", vts::TexelRect{0, 0, 256, 256});
+  const auto archive = build(d.path() / "s.pmtiles", vts::TexelRect{0, 0, 256, 256});
   auto source = held(archive);
   auto cache = take(TileCache::create(source, {}));
   Got got;
@@ -326,7 +316,7 @@ TEST(TileCache, AbsentTilesAreRememberedAndNotAskedForAgain) {
 
 TEST(TileCache, AStaleTileIsServedAtOnceThenRevalidatedInTheBackground) {
   Dir d;
-  const auto archive = build(d.path / "a.pmtiles");
+  const auto archive = build(d.path() / "a.pmtiles");
   auto source = held(archive);
   TileCacheOptions o;
   o.revalidate_after = std::chrono::seconds(0);
@@ -347,17 +337,17 @@ TEST(TileCache, AStaleTileIsServedAtOnceThenRevalidatedInTheBackground) {
 
 TEST(TileCache, DiskReadsAreNotBlockedByAStuckNetwork) {
   Dir d;
-  const auto archive = build(d.path / "a.pmtiles");
+  const auto archive = build(d.path() / "a.pmtiles");
   {
     auto source = held(archive);
-    auto cache = take(TileCache::create(source, with_disk(d.path / "cache")));
+    auto cache = take(TileCache::create(source, with_disk(d.path() / "cache")));
     Got got;
     cache->get(TileId{0, 0, 0}, {}, got.callback());
     drain(*source, got, 1);
     ASSERT_TRUE(cache->flush().ok());
   }
   auto source = held(archive);
-  TileCacheOptions o = with_disk(d.path / "cache");
+  TileCacheOptions o = with_disk(d.path() / "cache");
   o.ram_bytes = 0;
   auto cache = take(TileCache::create(source, o));
   // Many network requests stay unanswered ...
@@ -366,8 +356,7 @@ TEST(TileCache, DiskReadsAreNotBlockedByAStuckNetwork) {
   // ... while a tile on disk is delivered.
   Got got;
   cache->get(TileId{0, 0, 0}, {}, got.callback());
-  for (int i = 0; i < 200 && got.size() == 0; ++i)
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  vts::test::wait_until([&] { return got.size() > 0; });
   ASSERT_EQ(got.size(), 1u);
   EXPECT_EQ(got.results[0].from, PayloadResult::From::disk);
   EXPECT_EQ(stuck.size(), 0u);
@@ -376,7 +365,7 @@ TEST(TileCache, DiskReadsAreNotBlockedByAStuckNetwork) {
 
 TEST(TileClient, AncestorsAreFetchedFirstAndEveryTileIsDecodedExactly) {
   Dir d;
-  const auto archive = build(d.path / "a.pmtiles");
+  const auto archive = build(d.path() / "a.pmtiles");
   auto source = held(archive);
   auto client = take(TileClient::create(source, {}));
   client->request(TileId{2, 3, 1}, 1.0);
@@ -406,14 +395,14 @@ TEST(TileClient, AncestorsAreFetchedFirstAndEveryTileIsDecodedExactly) {
 
 TEST(TileClient, DecodedTilesWaitWithinTheirByteBudget) {
   Dir d;
-  const auto archive = build(d.path / "a.pmtiles");
+  const auto archive = build(d.path() / "a.pmtiles");
   auto source = held(archive);
   TileClientOptions o;
   o.decoded_bytes = 1;  // one tile at a time
   auto client = take(TileClient::create(source, o));
   for (std::uint32_t x = 0; x < 4; ++x) client->request(TileId{2, x, 0});
   source->release();
-  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  vts::test::wait_until([&] { return client->stats().decoded >= 1; });
   const auto s = client->stats();
   EXPECT_EQ(s.decoded, 1u);  // the others wait for room
   int n = 0;
@@ -426,7 +415,7 @@ TEST(TileClient, DecodedTilesWaitWithinTheirByteBudget) {
 
 TEST(TileClient, CancelledTilesProduceNoEvent) {
   Dir d;
-  const auto archive = build(d.path / "a.pmtiles");
+  const auto archive = build(d.path() / "a.pmtiles");
   auto source = held(archive);
   auto client = take(TileClient::create(source, {}));
   client->request(TileId{2, 3, 2});

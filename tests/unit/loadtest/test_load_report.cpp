@@ -1,4 +1,5 @@
 #include "vts/loadtest/load_report.hpp"
+#include "vts/test/temp_dir.hpp"
 
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -85,24 +86,7 @@ std::string read_file(const fs::path& path) {
   return ss.str();
 }
 
-class TempDir {
- public:
-  TempDir() {
-    path_ = fs::temp_directory_path() /
-            ("vts-load-report-" + std::to_string(::getpid()) + "-" +
-             ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(path_);
-    fs::create_directories(path_);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
-  const fs::path& path() const { return path_; }
-
- private:
-  fs::path path_;
-};
+using TempDir = vts::test::TempDir;
 
 TEST(LoadReport, JsonCarriesTheRunScenarioAndTotals) {
   const LoadReport r = sample_report();

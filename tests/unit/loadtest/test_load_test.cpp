@@ -19,10 +19,13 @@
 #include <thread>
 #include <vector>
 
-#include "vts/protocol/pmtiles.hpp"
 #include "vts/builder/builder.hpp"
+#include "vts/protocol/pmtiles.hpp"
 #include "vts/server/http_server.hpp"
 #include "vts/server/tileset_registry.hpp"
+#include "vts/test/archive.hpp"
+#include "vts/test/server.hpp"
+#include "vts/test/temp_dir.hpp"
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
@@ -35,29 +38,15 @@ using Clock = std::chrono::steady_clock;
 
 // A folder for the suite's archives, removed at exit.
 const fs::path& dir() {
-  static const struct Dir {
-    fs::path path;
-    Dir() {
-      path = fs::temp_directory_path() / ("vts-load-test-" + std::to_string(::getpid()));
-      fs::create_directories(path / "served");
-    }
-    ~Dir() {
-      std::error_code ec;
-      fs::remove_all(path, ec);
-    }
-  } d;
-  return d.path;
+  static const vts::test::TempDir d("vts-load-test");
+  return d.path();
 }
 
 fs::path build(const fs::path& out) {
-  vts::BuildOptions o;
-  o.synthetic = vts::SyntheticSpec{2048, 2048, std::nullopt, 6};
+  vts::BuildOptions o = vts::test::synthetic_options(out, 2048, 2048);
   o.tile_size = 64;
   o.border = 2;
-  o.output = out;
-  o.threads = 2;
-  auto r = vts::build_pyramid(o);
-  EXPECT_TRUE(r.ok()) << r.error().to_string();
+  vts::test::build_archive(o);
   return out;
 }
 
@@ -111,34 +100,20 @@ double seconds_since(Clock::time_point t0) {
 // `vts serve` over the suite's "served" folder, in process on 127.0.0.1 port 0.
 class Server {
  public:
-  Server() {
-    archive();
-    vts::HttpServerOptions o;
-    o.listen_port = 0;
-    o.admin_enabled = false;
-    o.handle_signals = false;
-    o.threads = 1;
-    o.reload_interval = 0ms;
-    registry_ = std::make_shared<vts::TilesetRegistry>();
-    auto st = registry_->load({dir() / "served"});
-    if (!st.ok()) throw std::runtime_error(st.error().to_string());
-    auto s = vts::HttpServer::create(std::move(o), registry_);
-    if (!s.ok()) throw std::runtime_error(s.error().to_string());
-    server_ = std::move(*s);
-    thread_ = std::thread([this] { server_->run(); });
-  }
-  ~Server() {
-    server_->stop();
-    thread_.join();
-  }
-  std::string url(const std::string& name) const {
-    return "http://127.0.0.1:" + std::to_string(server_->port()) + "/" + name;
-  }
+  Server() : server_(served(), options()) {}
+  std::string url(const std::string& name) const { return server_.base_url() + "/" + name; }
 
  private:
-  std::shared_ptr<vts::TilesetRegistry> registry_;
-  std::unique_ptr<vts::HttpServer> server_;
-  std::thread thread_;
+  static std::vector<fs::path> served() {
+    archive();
+    return {dir() / "served"};
+  }
+  static vts::HttpServerOptions options() {
+    vts::HttpServerOptions o = vts::test::RunningServer::quiet_options();
+    o.threads = 1;
+    return o;
+  }
+  vts::test::RunningServer server_;
 };
 
 TEST(LoadTest, EveryViewerStreamsItsDemandOnceAndReachesFullResolution) {

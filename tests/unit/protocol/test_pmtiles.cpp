@@ -18,6 +18,7 @@
 #include <gtest/gtest.h>
 
 #include "vts/protocol/pmtiles.hpp"
+#include "vts/test/temp_dir.hpp"
 
 namespace vts::pmtiles {
 namespace {
@@ -35,28 +36,16 @@ Bytes read_all(const fs::path& p) {
 }
 
 // A fresh directory under the system temp dir, removed with everything in it.
-class TempDir {
+class TempDir : public vts::test::TempDir {
  public:
-  TempDir() {
-    std::random_device rd;
-    path_ = fs::temp_directory_path() /
-            ("vts-pmtiles-test-" + std::to_string(::getpid()) + "-" + std::to_string(rd()));
-    fs::create_directories(path_);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
-  const fs::path& path() const { return path_; }
+  TempDir() : vts::test::TempDir("vts-pmtiles-test") {}
   std::vector<std::string> names() const {
     std::vector<std::string> out;
-    for (const auto& e : fs::directory_iterator(path_)) out.push_back(e.path().filename().string());
+    for (const auto& e : fs::directory_iterator(path()))
+      out.push_back(e.path().filename().string());
     std::sort(out.begin(), out.end());
     return out;
   }
-
- private:
-  fs::path path_;
 };
 
 TileId zxy(std::uint64_t tile_id) {

@@ -13,6 +13,7 @@
 #include "vts/builder/builder.hpp"
 #include "vts/protocol/codec.hpp"
 #include "vts/protocol/pmtiles.hpp"
+#include "vts/test/temp_dir.hpp"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -26,21 +27,17 @@ std::int64_t fixed_now() {
 class Router : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    dir_ =
-        new fs::path(fs::temp_directory_path() / ("vts-router-test-" + std::to_string(::getpid())));
-    fs::create_directories(*dir_);
+    dir_ = new vts::test::TempDir("vts-router-test");
     build("dense", std::nullopt);
     // Sparse: only tile (0,0) exists at z = 2 (the finest level).
     build("sparse", vts::TexelRect{0, 0, 256, 256});
     build("secret", std::nullopt);
     registry_ = new vts::TilesetRegistry;
-    auto s = registry_->load({*dir_});
+    auto s = registry_->load({dir_->path()});
     ASSERT_TRUE(s.ok()) << s.error().to_string();
   }
   static void TearDownTestSuite() {
     delete registry_;
-    std::error_code ec;
-    fs::remove_all(*dir_, ec);
     delete dir_;
   }
   static void build(const std::string& name, std::optional<vts::TexelRect> region) {
@@ -70,7 +67,7 @@ class Router : public ::testing::Test {
     return registry_->find(name);
   }
 
-  static inline fs::path* dir_ = nullptr;
+  static inline vts::test::TempDir* dir_ = nullptr;
   static inline vts::TilesetRegistry* registry_ = nullptr;
   vts::RouterConfig config_;
   vts::HttpRequest req_;
@@ -633,9 +630,7 @@ TEST_F(Router, SignaturesDoNotOpenPublicTilesetsToAnythingNew) {
 }
 
 TEST(RouterDamage, ADamagedTileHeaderAnswers500NamingTheTileAndOtherTilesStillServe) {
-  const fs::path dir =
-      fs::temp_directory_path() / ("vts-router-damage-" + std::to_string(::getpid()));
-  fs::create_directories(dir);
+  const vts::test::TempDir dir("vts-router-damage");
   vts::BuildOptions o;
   o.synthetic = vts::SyntheticSpec{600, 300};
   o.output = dir / "d.pmtiles";
@@ -656,7 +651,7 @@ TEST(RouterDamage, ADamagedTileHeaderAnswers500NamingTheTileAndOtherTilesStillSe
     f.write("XXXX", 4);
   }
   vts::TilesetRegistry registry;
-  ASSERT_TRUE(registry.load({dir}).ok());
+  ASSERT_TRUE(registry.load({dir.path()}).ok());
   vts::RouterConfig config;
   vts::HttpRequest req;
   req.method = vts::HttpMethod::get;
@@ -668,8 +663,6 @@ TEST(RouterDamage, ADamagedTileHeaderAnswers500NamingTheTileAndOtherTilesStillSe
   EXPECT_TRUE(r.view.empty());
   req.target = "/d/2/0/0";
   EXPECT_EQ(vts::route(req, registry, config).status, 200);
-  std::error_code ec;
-  fs::remove_all(dir, ec);
 }
 
 // ---------------------------------------------------------------------------------------------

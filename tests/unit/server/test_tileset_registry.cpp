@@ -11,24 +11,13 @@
 #include <thread>
 
 #include "vts/builder/builder.hpp"
+#include "vts/test/temp_dir.hpp"
 
 namespace fs = std::filesystem;
 
 namespace {
 
-struct RegistryTempDir {
-  fs::path path;
-  RegistryTempDir() {
-    static std::atomic<int> counter{0};
-    path = fs::temp_directory_path() /
-           ("vts-registry-test-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
-    fs::create_directories(path);
-  }
-  ~RegistryTempDir() {
-    std::error_code ec;
-    fs::remove_all(path, ec);
-  }
-};
+using RegistryTempDir = vts::test::TempDir;
 
 void build_archive(const fs::path& out, std::uint64_t width, std::uint64_t height) {
   vts::BuildOptions o;
@@ -55,24 +44,24 @@ bool is_lower_hex16(const std::string& s) {
 
 TEST(TilesetRegistry, OpensAnArchiveNamedAfterItsStemWithAHexVersionAndFileIdentity) {
   RegistryTempDir dir;
-  build_archive(dir.path / "earth.pmtiles", 600, 300);
-  auto t = vts::open_tileset(dir.path / "earth.pmtiles");
+  build_archive(dir.path() / "earth.pmtiles", 600, 300);
+  auto t = vts::open_tileset(dir.path() / "earth.pmtiles");
   ASSERT_TRUE(t.ok()) << t.error().to_string();
   EXPECT_EQ((*t)->name, "earth");
   EXPECT_TRUE(is_lower_hex16((*t)->version)) << (*t)->version;
   EXPECT_EQ((*t)->info.geometry.width(), 600u);
-  EXPECT_EQ((*t)->file_size, fs::file_size(dir.path / "earth.pmtiles"));
+  EXPECT_EQ((*t)->file_size, fs::file_size(dir.path() / "earth.pmtiles"));
   EXPECT_NE((*t)->file_inode, 0u);
   EXPECT_NE((*t)->file_mtime_ns, 0);
 }
 
 TEST(TilesetRegistry, VersionIsStableForTheSameBytesAndDiffersForADifferentArchive) {
   RegistryTempDir dir;
-  build_archive(dir.path / "a.pmtiles", 600, 300);
-  build_archive(dir.path / "b.pmtiles", 500, 300);
-  auto a1 = vts::open_tileset(dir.path / "a.pmtiles");
-  auto a2 = vts::open_tileset(dir.path / "a.pmtiles");
-  auto b = vts::open_tileset(dir.path / "b.pmtiles");
+  build_archive(dir.path() / "a.pmtiles", 600, 300);
+  build_archive(dir.path() / "b.pmtiles", 500, 300);
+  auto a1 = vts::open_tileset(dir.path() / "a.pmtiles");
+  auto a2 = vts::open_tileset(dir.path() / "a.pmtiles");
+  auto b = vts::open_tileset(dir.path() / "b.pmtiles");
   ASSERT_TRUE(a1.ok() && a2.ok() && b.ok());
   EXPECT_EQ((*a1)->version, (*a2)->version);
   EXPECT_NE((*a1)->version, (*b)->version);
@@ -81,35 +70,35 @@ TEST(TilesetRegistry, VersionIsStableForTheSameBytesAndDiffersForADifferentArchi
 TEST(TilesetRegistry, RefusesFileNamesThatAreNotValidTilesetNames) {
   RegistryTempDir dir;
   for (const char* name : {".hidden.pmtiles", "with space.pmtiles", "caf\xc3\xa9.pmtiles"}) {
-    build_archive(dir.path / name, 300, 200);
-    auto t = vts::open_tileset(dir.path / name);
+    build_archive(dir.path() / name, 300, 200);
+    auto t = vts::open_tileset(dir.path() / name);
     ASSERT_FALSE(t.ok()) << name;
     EXPECT_EQ(t.error().code, vts::ErrorCode::invalid_argument);
     EXPECT_NE(t.error().message.find("tileset name"), std::string::npos) << t.error().message;
   }
   const std::string long_name(129, 'a');
-  build_archive(dir.path / (long_name + ".pmtiles"), 300, 200);
-  EXPECT_FALSE(vts::open_tileset(dir.path / (long_name + ".pmtiles")).ok());
+  build_archive(dir.path() / (long_name + ".pmtiles"), 300, 200);
+  EXPECT_FALSE(vts::open_tileset(dir.path() / (long_name + ".pmtiles")).ok());
 }
 
 TEST(TilesetRegistry, RefusesAFileThatIsNotAnArchive) {
   RegistryTempDir dir;
-  write_file(dir.path / "junk.pmtiles", "not an archive at all");
-  auto t = vts::open_tileset(dir.path / "junk.pmtiles");
+  write_file(dir.path() / "junk.pmtiles", "not an archive at all");
+  auto t = vts::open_tileset(dir.path() / "junk.pmtiles");
   ASSERT_FALSE(t.ok());
   EXPECT_NE(t.error().message.find("junk.pmtiles"), std::string::npos) << t.error().message;
 }
 
 TEST(TilesetRegistry, LoadsEveryArchiveOfAFolderButNotOtherFilesOrSubfolders) {
   RegistryTempDir dir;
-  build_archive(dir.path / "b.pmtiles", 300, 200);
-  build_archive(dir.path / "a.pmtiles", 300, 200);
-  write_file(dir.path / "notes.txt", "hello");
-  fs::create_directories(dir.path / "sub");
-  build_archive(dir.path / "sub" / "c.pmtiles", 300, 200);
+  build_archive(dir.path() / "b.pmtiles", 300, 200);
+  build_archive(dir.path() / "a.pmtiles", 300, 200);
+  write_file(dir.path() / "notes.txt", "hello");
+  fs::create_directories(dir.path() / "sub");
+  build_archive(dir.path() / "sub" / "c.pmtiles", 300, 200);
 
   vts::TilesetRegistry registry;
-  ASSERT_TRUE(registry.load({dir.path}).ok());
+  ASSERT_TRUE(registry.load({dir.path()}).ok());
   ASSERT_EQ(registry.size(), 2u);
   auto all = registry.all();
   EXPECT_EQ(all[0]->name, "a");
@@ -121,18 +110,18 @@ TEST(TilesetRegistry, LoadsEveryArchiveOfAFolderButNotOtherFilesOrSubfolders) {
 
 TEST(TilesetRegistry, LoadsFilesAndFoldersTogether) {
   RegistryTempDir dir;
-  fs::create_directories(dir.path / "f");
-  build_archive(dir.path / "f" / "one.pmtiles", 300, 200);
-  build_archive(dir.path / "two.pmtiles", 300, 200);
+  fs::create_directories(dir.path() / "f");
+  build_archive(dir.path() / "f" / "one.pmtiles", 300, 200);
+  build_archive(dir.path() / "two.pmtiles", 300, 200);
   vts::TilesetRegistry registry;
-  ASSERT_TRUE(registry.load({dir.path / "f", dir.path / "two.pmtiles"}).ok());
+  ASSERT_TRUE(registry.load({dir.path() / "f", dir.path() / "two.pmtiles"}).ok());
   EXPECT_EQ(registry.size(), 2u);
 }
 
 TEST(TilesetRegistry, LoadFailsNamingAPathThatDoesNotExist) {
   RegistryTempDir dir;
   vts::TilesetRegistry registry;
-  auto s = registry.load({dir.path / "missing.pmtiles"});
+  auto s = registry.load({dir.path() / "missing.pmtiles"});
   ASSERT_FALSE(s.ok());
   EXPECT_EQ(s.error().code, vts::ErrorCode::not_found);
   EXPECT_NE(s.error().message.find("missing.pmtiles"), std::string::npos);
@@ -141,35 +130,35 @@ TEST(TilesetRegistry, LoadFailsNamingAPathThatDoesNotExist) {
 TEST(TilesetRegistry, LoadFailsNamingAFolderWithoutArchives) {
   RegistryTempDir dir;
   vts::TilesetRegistry registry;
-  auto s = registry.load({dir.path});
+  auto s = registry.load({dir.path()});
   ASSERT_FALSE(s.ok());
-  EXPECT_NE(s.error().message.find(dir.path.string()), std::string::npos) << s.error().message;
+  EXPECT_NE(s.error().message.find(dir.path().string()), std::string::npos) << s.error().message;
 }
 
 TEST(TilesetRegistry, LoadRefusesDuplicateNamesAndChangesNothing) {
   RegistryTempDir dir;
-  fs::create_directories(dir.path / "x");
-  fs::create_directories(dir.path / "y");
-  build_archive(dir.path / "x" / "same.pmtiles", 300, 200);
-  build_archive(dir.path / "y" / "same.pmtiles", 300, 200);
-  build_archive(dir.path / "y" / "other.pmtiles", 300, 200);
+  fs::create_directories(dir.path() / "x");
+  fs::create_directories(dir.path() / "y");
+  build_archive(dir.path() / "x" / "same.pmtiles", 300, 200);
+  build_archive(dir.path() / "y" / "same.pmtiles", 300, 200);
+  build_archive(dir.path() / "y" / "other.pmtiles", 300, 200);
   vts::TilesetRegistry registry;
-  auto s = registry.load({dir.path / "x", dir.path / "y"});
+  auto s = registry.load({dir.path() / "x", dir.path() / "y"});
   ASSERT_FALSE(s.ok());
   EXPECT_NE(s.error().message.find("duplicate tileset name \"same\""), std::string::npos);
   EXPECT_EQ(registry.size(), 0u);
 
-  ASSERT_TRUE(registry.load({dir.path / "x"}).ok());
-  EXPECT_FALSE(registry.load({dir.path / "y" / "same.pmtiles"}).ok());
+  ASSERT_TRUE(registry.load({dir.path() / "x"}).ok());
+  EXPECT_FALSE(registry.load({dir.path() / "y" / "same.pmtiles"}).ok());
   EXPECT_EQ(registry.size(), 1u);
 }
 
 TEST(TilesetRegistry, ReloadWithoutChangesSwapsNothingAndForceReopensAll) {
   RegistryTempDir dir;
-  build_archive(dir.path / "a.pmtiles", 300, 200);
-  build_archive(dir.path / "b.pmtiles", 300, 200);
+  build_archive(dir.path() / "a.pmtiles", 300, 200);
+  build_archive(dir.path() / "b.pmtiles", 300, 200);
   vts::TilesetRegistry registry;
-  ASSERT_TRUE(registry.load({dir.path}).ok());
+  ASSERT_TRUE(registry.load({dir.path()}).ok());
   auto before = registry.find("a");
   auto r = registry.reload(false);
   EXPECT_EQ(r.swapped, 0);
@@ -184,18 +173,18 @@ TEST(TilesetRegistry, ReloadWithoutChangesSwapsNothingAndForceReopensAll) {
 
 TEST(TilesetRegistry, ReloadSwapsInAReplacedArchiveWhileTheOldSnapshotStaysReadable) {
   RegistryTempDir dir;
-  build_archive(dir.path / "a.pmtiles", 600, 300);
+  build_archive(dir.path() / "a.pmtiles", 600, 300);
   vts::TilesetRegistry registry;
-  ASSERT_TRUE(registry.load({dir.path / "a.pmtiles"}).ok());
+  ASSERT_TRUE(registry.load({dir.path() / "a.pmtiles"}).ok());
   auto old = registry.find("a");
   const auto old_tile = old->reader->get(vts::TileId{0, 0, 0});
   ASSERT_TRUE(old_tile.ok());
   const std::vector<std::uint8_t> old_bytes(old_tile->begin(), old_tile->end());
 
   // The builder writes under a temporary name and renames over the destination.
-  fs::create_directories(dir.path / "staging");
-  build_archive(dir.path / "staging" / "a.pmtiles", 500, 250);
-  fs::rename(dir.path / "staging" / "a.pmtiles", dir.path / "a.pmtiles");
+  fs::create_directories(dir.path() / "staging");
+  build_archive(dir.path() / "staging" / "a.pmtiles", 500, 250);
+  fs::rename(dir.path() / "staging" / "a.pmtiles", dir.path() / "a.pmtiles");
 
   auto r = registry.reload(false);
   EXPECT_EQ(r.swapped, 1);
@@ -212,13 +201,13 @@ TEST(TilesetRegistry, ReloadSwapsInAReplacedArchiveWhileTheOldSnapshotStaysReada
 
 TEST(TilesetRegistry, ReloadRefusesABrokenReplacementAndKeepsServingTheOldArchive) {
   RegistryTempDir dir;
-  build_archive(dir.path / "a.pmtiles", 600, 300);
+  build_archive(dir.path() / "a.pmtiles", 600, 300);
   vts::TilesetRegistry registry;
-  ASSERT_TRUE(registry.load({dir.path}).ok());
+  ASSERT_TRUE(registry.load({dir.path()}).ok());
   auto old = registry.find("a");
 
-  write_file(dir.path / "garbage.tmp", std::string(4096, 'x'));
-  fs::rename(dir.path / "garbage.tmp", dir.path / "a.pmtiles");
+  write_file(dir.path() / "garbage.tmp", std::string(4096, 'x'));
+  fs::rename(dir.path() / "garbage.tmp", dir.path() / "a.pmtiles");
   auto r = registry.reload(false);
   EXPECT_EQ(r.swapped, 0);
   ASSERT_EQ(r.failures.size(), 1u);
@@ -229,10 +218,10 @@ TEST(TilesetRegistry, ReloadRefusesABrokenReplacementAndKeepsServingTheOldArchiv
 
 TEST(TilesetRegistry, ReloadReportsADeletedArchiveLoadedByNameAndKeepsIt) {
   RegistryTempDir dir;
-  build_archive(dir.path / "a.pmtiles", 300, 200);
+  build_archive(dir.path() / "a.pmtiles", 300, 200);
   vts::TilesetRegistry registry;
-  ASSERT_TRUE(registry.load({dir.path / "a.pmtiles"}).ok());
-  fs::remove(dir.path / "a.pmtiles");
+  ASSERT_TRUE(registry.load({dir.path() / "a.pmtiles"}).ok());
+  fs::remove(dir.path() / "a.pmtiles");
   auto r = registry.reload(false);
   EXPECT_EQ(r.swapped, 0);
   EXPECT_EQ(r.removed, 0);
@@ -243,20 +232,20 @@ TEST(TilesetRegistry, ReloadReportsADeletedArchiveLoadedByNameAndKeepsIt) {
 
 TEST(TilesetRegistry, ReloadAddsArchivesThatAppearInAFolderAndRemovesThoseThatLeave) {
   RegistryTempDir dir;
-  build_archive(dir.path / "a.pmtiles", 300, 200);
+  build_archive(dir.path() / "a.pmtiles", 300, 200);
   vts::TilesetRegistry registry;
-  ASSERT_TRUE(registry.load({dir.path}).ok());
+  ASSERT_TRUE(registry.load({dir.path()}).ok());
   auto a = registry.find("a");
   ASSERT_NE(a, nullptr);
 
-  build_archive(dir.path / "b.pmtiles", 600, 300);
+  build_archive(dir.path() / "b.pmtiles", 600, 300);
   auto r = registry.reload(false);
   EXPECT_EQ(r.added, 1);
   EXPECT_TRUE(r.failures.empty());
   ASSERT_NE(registry.find("b"), nullptr);
   EXPECT_EQ(registry.find("b")->info.geometry.width(), 600u);
 
-  fs::remove(dir.path / "a.pmtiles");
+  fs::remove(dir.path() / "a.pmtiles");
   r = registry.reload(false);
   EXPECT_EQ(r.removed, 1);
   EXPECT_TRUE(r.failures.empty());
@@ -271,11 +260,11 @@ TEST(TilesetRegistry, ReloadAddsArchivesThatAppearInAFolderAndRemovesThoseThatLe
 
 TEST(TilesetRegistry, ReloadRefusesABrokenNewArchiveOnceUntilItsFileChanges) {
   RegistryTempDir dir;
-  build_archive(dir.path / "a.pmtiles", 300, 200);
+  build_archive(dir.path() / "a.pmtiles", 300, 200);
   vts::TilesetRegistry registry;
-  ASSERT_TRUE(registry.load({dir.path}).ok());
-  write_file(dir.path / "junk.tmp", std::string(4096, 'x'));
-  fs::rename(dir.path / "junk.tmp", dir.path / "junk.pmtiles");
+  ASSERT_TRUE(registry.load({dir.path()}).ok());
+  write_file(dir.path() / "junk.tmp", std::string(4096, 'x'));
+  fs::rename(dir.path() / "junk.tmp", dir.path() / "junk.pmtiles");
   auto r = registry.reload(false);
   EXPECT_EQ(r.added, 0);
   ASSERT_EQ(r.failures.size(), 1u);
@@ -285,8 +274,8 @@ TEST(TilesetRegistry, ReloadRefusesABrokenNewArchiveOnceUntilItsFileChanges) {
   EXPECT_TRUE(r.failures.empty());
   EXPECT_EQ(registry.find("junk"), nullptr);
   // ... but a valid archive put in its place is served.
-  build_archive(dir.path / "junk.tmp", 300, 200);
-  fs::rename(dir.path / "junk.tmp", dir.path / "junk.pmtiles");
+  build_archive(dir.path() / "junk.tmp", 300, 200);
+  fs::rename(dir.path() / "junk.tmp", dir.path() / "junk.pmtiles");
   r = registry.reload(false);
   EXPECT_EQ(r.added, 1);
   EXPECT_NE(registry.find("junk"), nullptr);
@@ -294,12 +283,12 @@ TEST(TilesetRegistry, ReloadRefusesABrokenNewArchiveOnceUntilItsFileChanges) {
 
 TEST(TilesetRegistry, ReloadRefusesANewArchiveWhoseNameIsTaken) {
   RegistryTempDir dir;
-  fs::create_directories(dir.path / "f");
-  build_archive(dir.path / "a.pmtiles", 300, 200);
-  build_archive(dir.path / "f" / "b.pmtiles", 300, 200);
+  fs::create_directories(dir.path() / "f");
+  build_archive(dir.path() / "a.pmtiles", 300, 200);
+  build_archive(dir.path() / "f" / "b.pmtiles", 300, 200);
   vts::TilesetRegistry registry;
-  ASSERT_TRUE(registry.load({dir.path / "a.pmtiles", dir.path / "f"}).ok());
-  build_archive(dir.path / "f" / "a.pmtiles", 600, 300);
+  ASSERT_TRUE(registry.load({dir.path() / "a.pmtiles", dir.path() / "f"}).ok());
+  build_archive(dir.path() / "f" / "a.pmtiles", 600, 300);
   auto r = registry.reload(false);
   EXPECT_EQ(r.added, 0);
   ASSERT_EQ(r.failures.size(), 1u);
@@ -309,9 +298,9 @@ TEST(TilesetRegistry, ReloadRefusesANewArchiveWhoseNameIsTaken) {
 
 TEST(TilesetRegistry, LookupsDuringReloadAlwaysSeeACompleteReadableTileset) {
   RegistryTempDir dir;
-  build_archive(dir.path / "a.pmtiles", 300, 200);
+  build_archive(dir.path() / "a.pmtiles", 300, 200);
   vts::TilesetRegistry registry;
-  ASSERT_TRUE(registry.load({dir.path}).ok());
+  ASSERT_TRUE(registry.load({dir.path()}).ok());
   std::atomic<bool> stop{false};
   std::thread reloader([&] {
     for (int i = 0; i < 20; ++i) EXPECT_EQ(registry.reload(true).swapped, 1);

@@ -1,0 +1,36 @@
+// Test archives built in process with the real builder (vts::build_pyramid), no subprocess.
+// Failures throw std::runtime_error: a test that cannot make its input cannot run.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <vector>
+
+#include "vts/builder/builder.hpp"
+#include "vts/protocol/pmtiles.hpp"
+
+namespace vts::test {
+
+// Options for a synthetic build of width x height texels written to `output` (two encoder
+// threads). Adjust the rest before passing it to build_archive().
+BuildOptions synthetic_options(const std::filesystem::path& output, std::uint64_t width,
+                               std::uint64_t height, std::optional<TexelRect> region = std::nullopt,
+                               int region_level = 6);
+
+// Builds the archive `options` describe (creating its folder); returns the build report.
+BuildReport build_archive(const BuildOptions& options);
+
+// An archive opened for reading, with every stored tile listed in directory order.
+struct OpenedArchive {
+  std::filesystem::path path;
+  std::shared_ptr<pmtiles::Reader> reader;
+  std::vector<TileId> tiles;
+};
+OpenedArchive open_archive(const std::filesystem::path& path);
+
+// build_archive() then open_archive().
+OpenedArchive build_and_open(const BuildOptions& options);
+
+}  // namespace vts::test
