@@ -202,9 +202,7 @@ int main(int argc, char** argv) {
       for (const auto id : ids) {
         bool hit = false;
         const auto t0 = Clock::now();
-        (*cache)->get(id, {}, [&](PayloadResult&& r) {
-          hit = r.from == PayloadResult::From::ram;
-        });
+        (*cache)->get(id, {}, [&](PayloadResult&& r) { hit = r.from == PayloadResult::From::ram; });
         ram_us.push_back(std::chrono::duration<double, std::micro>(Clock::now() - t0).count());
         if (!hit) return fail("tile " + id.to_string() + " was not a RAM hit");
       }

@@ -24,7 +24,7 @@ fi
 
 PACKAGES=(
   # toolchain and build
-  build-essential cmake ninja-build pkg-config git clang libclang-rt-14-dev clang-format
+  build-essential cmake ninja-build pkg-config git clang libclang-rt-14-dev clang-format ccache
   # libraries
   libopenimageio-dev libzstd-dev libxxhash-dev zlib1g-dev nlohmann-json3-dev libcli11-dev
   libspdlog-dev libfmt-dev libboost1.81-dev libssl-dev libcurl4-openssl-dev libsqlite3-dev

@@ -2,11 +2,12 @@
 # The whole test suite, as CI runs it (.ci/run calls exactly this):
 #   1. scripts/setup.sh (packages; quick when already installed)
 #   2. clang-format --dry-run --Werror over every tracked *.cpp/*.hpp
-#   3. build-server/ the server-only `vts` (no builder, renderer, tests): the deploy test checks it
-#   4. build/      RelWithDebInfo, warnings are errors: every ctest (unit, fuzz-corpus replays,
-#                  integration)
-#   5. build-asan/ ASan + UBSan: only the unit-test executables and fuzz replays (ctest -L unit)
-#   6. build-tsan/ TSan: the unit tests of the multi-threaded libraries (server, client with the
+#   3. build/      RelWithDebInfo, warnings are errors
+#   4. build-server/ the server-only `vts` (no builder, renderer, tests), which the deploy test
+#                  checks; with ccache (when installed) its library objects come from build/'s
+#   5. build/      every ctest (unit, fuzz-corpus replays, lint, integration)
+#   6. build-asan/ ASan + UBSan: only the unit-test executables and fuzz replays (ctest -L unit)
+#   7. build-tsan/ TSan: the unit tests of the multi-threaded libraries (server, client with the
 #                  fetcher, loadtest)
 # Keeps going after a failure so one run reports everything; exits non-zero if any step failed.
 # Logs of every step are kept in build-logs/.
@@ -93,8 +94,15 @@ configure() {
     echo "$dir was configured with another generator; reconfiguring from scratch"
     rm -rf "$dir/CMakeCache.txt" "$dir/CMakeFiles"
   fi
-  cmake -S "$ROOT" -B "$dir" -G Ninja "$@"
+  cmake -S "$ROOT" -B "$dir" -G Ninja "${LAUNCHER[@]}" "$@"
 }
+
+# ccache, when installed, lets builds with the same flags share objects (build/ and build-server/).
+LAUNCHER=()
+if command -v ccache >/dev/null 2>&1; then
+  export CCACHE_BASEDIR="$ROOT" CCACHE_DIR="${CCACHE_DIR:-$ROOT/build-ccache}"
+  LAUNCHER=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
+fi
 
 # --- 1. set-up -----------------------------------------------------------------------------------
 step "setup" bash scripts/setup.sh
@@ -110,7 +118,17 @@ else
   skip "clang-format" "not a git checkout"
 fi
 
-# --- 3. server-only build: the deployment's `vts` (checked by the deploy test) --------------------
+# --- 3. main build: everything ------------------------------------------------------------------
+MAIN_BUILT=0
+if step "configure build/" configure build -DCMAKE_BUILD_TYPE=RelWithDebInfo -DVTS_WERROR=ON \
+  -DVTS_BUILD_RENDERER="${VTS_BUILD_RENDERER:-ON}"; then
+  step "build build/" cmake --build build -j"$JOBS" && MAIN_BUILT=1
+else
+  skip "build build/" "configure failed"
+fi
+
+# --- 4. server-only build: the deployment's `vts` (checked by the deploy test) --------------------
+# The same flags as build/, so ccache serves every library object from the main build.
 if step "configure build-server/" configure build-server -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DVTS_BUILD_RENDERER=OFF -DVTS_BUILD_BUILDER=OFF -DVTS_BUILD_TESTS=OFF -DVTS_BUILD_BENCH=OFF \
   -DVTS_WERROR=ON; then
@@ -121,17 +139,11 @@ else
   skip "build build-server/ (vts)" "configure failed"
 fi
 
-# --- 4. main build: everything ------------------------------------------------------------------
-if step "configure build/" configure build -DCMAKE_BUILD_TYPE=RelWithDebInfo -DVTS_WERROR=ON \
-  -DVTS_BUILD_RENDERER="${VTS_BUILD_RENDERER:-ON}"; then
-  if step "build build/" cmake --build build -j"$JOBS"; then
-    ctest_step "ctest build/" build
-  else
-    skip "ctest build/" "build failed"
-  fi
+# --- 5. every test of the main build (the deploy test reads VTS_SERVER_ONLY) --------------------
+if ((MAIN_BUILT)); then
+  ctest_step "ctest build/" build
 else
-  skip "build build/" "configure failed"
-  skip "ctest build/" "configure failed"
+  skip "ctest build/" "build failed"
 fi
 
 # sanitizer_build NAME DIR CTEST_EXCLUDE [CMAKE ARGS...]: configures DIR, builds only
@@ -154,7 +166,7 @@ sanitizer_build() {
   fi
 }
 
-# --- 5. sanitizer build: unit tests under ASan + UBSan --------------------------------------------
+# --- 6. sanitizer build: unit tests under ASan + UBSan --------------------------------------------
 if [[ ${VTS_TEST_SKIP_ASAN:-0} == 1 ]]; then
   skip "ASan+UBSan" "VTS_TEST_SKIP_ASAN=1"
 else
@@ -163,7 +175,7 @@ else
   sanitizer_build "ASan+UBSan" build-asan "" -DVTS_SANITIZE=address
 fi
 
-# --- 6. sanitizer build: the multi-threaded libraries' unit tests under TSan ----------------------
+# --- 7. sanitizer build: the multi-threaded libraries' unit tests under TSan ----------------------
 if [[ ${VTS_TEST_SKIP_TSAN:-0} == 1 ]]; then
   skip "TSan" "VTS_TEST_SKIP_TSAN=1"
 else

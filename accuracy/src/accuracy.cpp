@@ -14,8 +14,8 @@
 #include <sstream>
 
 #include "vts/accuracy/accuracy.hpp"
-#include "vts/plot/svg_plot.hpp"
 #include "vts/builder/builder.hpp"
+#include "vts/plot/svg_plot.hpp"
 #include "vts/protocol/file_io.hpp"
 
 #ifdef VTS_ACCURACY_HAVE_GL

@@ -1,10 +1,10 @@
-// Table: downsample (accuracy/include/vts/accuracy/accuracy.hpp). For each of the builder's downsampling
-// filters (BuildOptions::downsample): the pyramid of ctx.input is built with it and every level
-// below the finest is read back from the archive and compared with a high-quality resize of the
-// full-resolution source straight to that level's size (OpenImageIO ImageBufAlgo::resize, in
-// linear light, premultiplied alpha) — with two reference filters, Lanczos-3 and Blackman-Harris,
-// so that no filter is judged only by a reference of its own kind — next to the build's time,
-// rate and bytes.
+// Table: downsample (accuracy/include/vts/accuracy/accuracy.hpp). For each of the builder's
+// downsampling filters (BuildOptions::downsample): the pyramid of ctx.input is built with it and
+// every level below the finest is read back from the archive and compared with a high-quality
+// resize of the full-resolution source straight to that level's size (OpenImageIO
+// ImageBufAlgo::resize, in linear light, premultiplied alpha) — with two reference filters,
+// Lanczos-3 and Blackman-Harris, so that no filter is judged only by a reference of its own kind —
+// next to the build's time, rate and bytes.
 #include <OpenImageIO/imagebuf.h>
 #include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/imageio.h>
@@ -21,11 +21,11 @@
 #include <vector>
 
 #include "vts/accuracy/accuracy.hpp"
+#include "vts/builder/builder.hpp"
+#include "vts/builder/downsample.hpp"
 #include "vts/protocol/codec.hpp"
 #include "vts/protocol/pmtiles.hpp"
 #include "vts/protocol/tileset.hpp"
-#include "vts/builder/builder.hpp"
-#include "vts/builder/downsample.hpp"
 
 namespace vts::accuracy {
 

@@ -46,7 +46,8 @@ int run_accuracy_bench(const BenchArgs& a) {
   if (a.json) {
     std::printf("%s\n", accuracy::to_json(*report).c_str());
   } else {
-    std::printf("%s", accuracy::to_markdown(*report, a.report.empty() ? "" : a.report + "/").c_str());
+    std::printf("%s",
+                accuracy::to_markdown(*report, a.report.empty() ? "" : a.report + "/").c_str());
   }
   int failed = 0;
   for (const auto& s : report->skipped) {

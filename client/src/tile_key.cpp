@@ -2,7 +2,9 @@
 
 namespace vts::client {
 
-std::string TileKey::to_string() const { return tileset + "/" + id.to_string(); }
+std::string TileKey::to_string() const {
+  return tileset + "/" + id.to_string();
+}
 
 std::size_t TileKeyHash::operator()(const TileKey& k) const noexcept {
   const std::size_t h = std::hash<std::string>{}(k.tileset);

@@ -526,7 +526,6 @@ Result<std::vector<Entry>> parse_directory(std::span<const std::uint8_t> bytes,
 
 // ---- compression --------------------------------------------------------------------------------
 
-
 Result<std::vector<std::uint8_t>> compress(std::span<const std::uint8_t> bytes, Compression c) {
   switch (c) {
     case Compression::none:

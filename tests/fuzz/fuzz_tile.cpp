@@ -8,7 +8,7 @@
 #include <cstdlib>
 #include <span>
 
-#include "../../protocol/src/codec_internal.hpp"
+#include "codec_internal.hpp"  // the codec's private entry points (protocol/src)
 #include "vts/protocol/codec.hpp"
 
 namespace {

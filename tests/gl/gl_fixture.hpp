@@ -11,12 +11,12 @@
 #include <optional>
 #include <string>
 
+#include "vts/builder/builder.hpp"
 #include "vts/client/source.hpp"
 #include "vts/client/tile_client.hpp"
 #include "vts/renderer/gl_context.hpp"
 #include "vts/renderer/reference.hpp"
 #include "vts/renderer/virtual_texture.hpp"
-#include "vts/builder/builder.hpp"
 
 namespace vts::test {
 

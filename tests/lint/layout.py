@@ -69,7 +69,7 @@ def check(ROOT):
     for path in every:
         rel = path.relative_to(ROOT)
         for inc in INCLUDE.findall(path.read_text(errors="replace")):
-            if inc.startswith("../") or "/src/" in inc or inc.startswith("src/"):
+            if inc.startswith("../") or "/src/" in inc or inc.startswith("src/"):  # noqa: E501
                 problems.append(f"{rel}: includes \"{inc}\" (another folder's private files)")
     for folder, (name, allowed) in LIBRARIES.items():
         for path in sources(folder):

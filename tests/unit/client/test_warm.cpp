@@ -250,7 +250,9 @@ TEST(Warm, ReportsProgressUpToTheTotalOnTheCallingThread) {
   for (std::size_t i = 0; i < seen.size(); ++i) {
     EXPECT_EQ(seen[i].total, report->tiles_total);
     EXPECT_LE(seen[i].done, seen[i].total);
-    if (i) EXPECT_GE(seen[i].done, seen[i - 1].done);
+    if (i > 0) {
+      EXPECT_GE(seen[i].done, seen[i - 1].done);
+    }
   }
 }
 

@@ -12,7 +12,7 @@
 #include <thread>
 #include <vector>
 
-#include "../../protocol/src/codec_internal.hpp"
+#include "codec_internal.hpp"  // the codec's private entry points (protocol/src)
 #include "vts/protocol/codec.hpp"
 
 namespace vts {

@@ -1,8 +1,8 @@
 // Internal to the addressing table (accuracy_addressing.cpp) and its test: the lines of the
-// virtual-texturing fragment shader (renderer/core/include/vts/renderer/shaders.hpp, main()) that the table's "ours"
-// pass runs, kept here word for word. The table checks at run time that each is still a part of
-// the production shader (whitespace aside), so it never publishes figures for code that is not
-// shipped.
+// virtual-texturing fragment shader (renderer/core/include/vts/renderer/shaders.hpp, main()) that
+// the table's "ours" pass runs, kept here word for word. The table checks at run time that each is
+// still a part of the production shader (whitespace aside), so it never publishes figures for code
+// that is not shipped.
 #pragma once
 
 #include <string>

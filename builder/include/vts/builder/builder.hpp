@@ -1,5 +1,6 @@
 // The pyramid builder behind `vts build`: cuts one image (or a C x R mosaic of images, or the
-// built-in synthetic source) into the tile pyramid of docs/ARCHITECTURE.md and writes a PMTiles archive.
+// built-in synthetic source) into the tile pyramid of docs/ARCHITECTURE.md and writes a PMTiles
+// archive.
 //
 // Streaming: the input is read in strips of scanlines by a reader thread; every level keeps only a
 // ring of T + 2B + 2 rows of its own width, from which it cuts one row of tiles at a time and makes
@@ -26,12 +27,12 @@
 #include <string>
 #include <vector>
 
+#include "vts/builder/downsample.hpp"
 #include "vts/protocol/codec.hpp"
 #include "vts/protocol/geometry.hpp"
 #include "vts/protocol/pmtiles.hpp"
 #include "vts/protocol/result.hpp"
 #include "vts/protocol/tileset.hpp"
-#include "vts/builder/downsample.hpp"
 
 namespace vts {
 

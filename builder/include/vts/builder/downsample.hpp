@@ -34,7 +34,6 @@ std::optional<DownsampleFilter> parse_downsample_filter(std::string_view name);
 // What TilesetInfo::downsample records for a build with f: "box-linear" / "lanczos3-linear".
 std::string downsample_method(DownsampleFilter f);
 
-
 // The box filter on one row pair: makes one row of `out_width` RGBA8 texels from rows a and b (b
 // may equal a at an odd bottom edge) of `in_width` texels: out[i] = mean of a[2i], a[2i+1], b[2i],
 // b[2i+1] with 2i+1 clamped to in_width - 1. out_width must be ceil(in_width / 2).

@@ -18,8 +18,8 @@
 //     move, among the frame's direct tiles (0 when the whole view was already resident; a coarse
 //     tile held from before shows nothing new and does not count); its time to full resolution
 //     runs until the latest arrival, at the first frame whose direct tiles are all resident
-//     (absent tiles count as resolved). A move that is not complete after `view_timeout`, or when the next move
-//     starts, is counted as incomplete and not in the histograms.
+//     (absent tiles count as resolved). A move that is not complete after `view_timeout`, or when
+//     the next move starts, is counted as incomplete and not in the histograms.
 //
 // Latency is measured from the intended send time, never from when a busy driver thread got
 // round to it, so a stalled server or a lagging load generator cannot hide latency (no
@@ -46,8 +46,8 @@
 #include <string>
 #include <vector>
 
-#include "vts/loadtest/load_report.hpp"
 #include "vts/client/source.hpp"
+#include "vts/loadtest/load_report.hpp"
 #include "vts/protocol/geometry.hpp"
 #include "vts/protocol/result.hpp"
 

@@ -19,7 +19,8 @@ void main() {
 )";
 
 // The virtual-texturing fragment code. Prepended: "#version 450 core", optionally
-// "#define FEEDBACK" and "#define ANISOTROPIC" (anisotropy > 1: the tap loop and its level), "uniform vec2 u_viewport;" and the scene's GLSL (Scene::glsl()).
+// "#define FEEDBACK" and "#define ANISOTROPIC" (anisotropy > 1: the tap loop and its level),
+// "uniform vec2 u_viewport;" and the scene's GLSL (Scene::glsl()).
 inline constexpr const char* kVirtualTextureFragment = R"(
 const int kMaxLevels = 24;
 
