@@ -5,7 +5,6 @@
 // Offline: whenever the upstream opens, its SourceInfo is saved in the cache folder. When it does
 // not open at start, the daemon serves what the cache holds (the rest: 503) from that saved
 // SourceInfo and keeps trying to reopen the upstream in the background.
-#include <sys/resource.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -32,14 +31,6 @@ struct CacheServeArgs {
   int reconnect_seconds = 30;
   bool no_admin = false;
 };
-
-void raise_fd_limit() {
-  rlimit rl{};
-  if (getrlimit(RLIMIT_NOFILE, &rl) == 0 && rl.rlim_cur < rl.rlim_max) {
-    rl.rlim_cur = rl.rlim_max;
-    setrlimit(RLIMIT_NOFILE, &rl);
-  }
-}
 
 Result<HttpServerOptions> server_options(const CacheServeArgs& a) {
   HttpServerOptions o;
@@ -180,7 +171,7 @@ int run_cache_serve(const CacheServeArgs& a) {
   if (!provider) return report_error(provider.error());
   o->provider = *provider;
 
-  raise_fd_limit();
+  raise_fd_limit_for_connections();
   const std::string host = o->listen_host, admin_host = o->admin_host;
   auto server = HttpServer::create(std::move(*o), std::make_shared<TilesetRegistry>());
   if (!server) {

@@ -1,6 +1,5 @@
 // vts serve: host tilesets over HTTP (server/include/vts/server/http_server.hpp). Glue only: the
 // config file is parsed by the server library (serve_config.hpp); flags override it.
-#include <sys/resource.h>
 
 #include <cstdio>
 
@@ -24,16 +23,6 @@ struct ServeArgs {
   bool print_ports = false;
   bool no_admin = false;
 };
-
-// Each connection is a file descriptor; raise the soft limit to the hard one so the connection
-// limit, not the process's descriptor limit, is what refuses clients.
-void raise_fd_limit() {
-  rlimit rl{};
-  if (getrlimit(RLIMIT_NOFILE, &rl) == 0 && rl.rlim_cur < rl.rlim_max) {
-    rl.rlim_cur = rl.rlim_max;
-    setrlimit(RLIMIT_NOFILE, &rl);
-  }
-}
 
 // The config file (if any), then the flags over it.
 Status make_options(const ServeArgs& a, HttpServerOptions& o) {
@@ -77,7 +66,7 @@ void print_listening(const HttpServer& s, const std::string& host, const std::st
 int run_serve(const ServeArgs& a) {
   HttpServerOptions o;
   if (auto st = make_options(a, o); !st.ok()) return report_error(st.error());
-  raise_fd_limit();
+  raise_fd_limit_for_connections();
   auto registry = std::make_shared<TilesetRegistry>();
   std::vector<std::filesystem::path> paths(a.paths.begin(), a.paths.end());
   if (auto st = registry->load(paths); !st.ok()) return report_error(st.error());

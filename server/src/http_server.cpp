@@ -4,6 +4,8 @@
 // log access_log.cpp; hot reload reload_loop.cpp.
 #include "vts/server/http_server.hpp"
 
+#include <sys/resource.h>
+
 #include <algorithm>
 #include <atomic>
 #include <boost/asio/io_context.hpp>
@@ -271,6 +273,14 @@ Result<std::unique_ptr<HttpServer>> HttpServer::create(HttpServerOptions options
   auto s = std::make_unique<Server>(std::move(options), std::move(registry));
   if (auto st = s->bind(); !st.ok()) return st.error();
   return std::unique_ptr<HttpServer>(std::move(s));
+}
+
+void raise_fd_limit_for_connections() noexcept {
+  rlimit rl{};
+  if (getrlimit(RLIMIT_NOFILE, &rl) == 0 && rl.rlim_cur < rl.rlim_max) {
+    rl.rlim_cur = rl.rlim_max;
+    setrlimit(RLIMIT_NOFILE, &rl);
+  }
 }
 
 }  // namespace vts

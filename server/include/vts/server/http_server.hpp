@@ -108,4 +108,8 @@ class HttpServer {
   virtual std::string metrics_text() const = 0;
 };
 
+// Each connection is a file descriptor: raises the process's soft descriptor limit to the hard
+// one, so the server's connection limit, not the process's, is what refuses clients. Best effort.
+void raise_fd_limit_for_connections() noexcept;
+
 }  // namespace vts
