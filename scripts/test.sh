@@ -100,7 +100,8 @@ configure() {
 # ccache, when installed, lets builds with the same flags share objects (build/ and build-server/).
 LAUNCHER=()
 if command -v ccache >/dev/null 2>&1; then
-  export CCACHE_BASEDIR="$ROOT" CCACHE_DIR="${CCACHE_DIR:-$ROOT/build-ccache}"
+  # NOHASHDIR: with -g, ccache would otherwise key each object on its build folder.
+  export CCACHE_BASEDIR="$ROOT" CCACHE_DIR="${CCACHE_DIR:-$ROOT/build-ccache}" CCACHE_NOHASHDIR=1
   LAUNCHER=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
 fi
 
