@@ -163,8 +163,26 @@ note "SIGINT during a 60 s run: exit 130 promptly, with the summary"
 "$VTS" loadtest "$BASE/earth" --viewers 2 --duration 60 --path jumps --quiet \
   >"$OUT" 2>"$ERR" </dev/null &
 LT_PID=$!
-sleep 1.5
+# Send the SIGINT once the run is under way: vts holds its SIGINT handler (a background job of a
+# non-interactive shell starts with SIGINT ignored, so a signal sent before the handler would be
+# lost) and the server has answered tile requests beyond those it had answered before.
+tiles_served() {
+  curl -s "$ADMIN_BASE/metrics" |
+    awk '/^vts_http_requests_total\{route="tile"/ { n += $2 } END { print n + 0 }'
+}
+before=$(tiles_served)
+started=0
+for ((i = 0; i < 600; i++)); do
+  kill -0 "$LT_PID" 2>/dev/null || break
+  cgt=$(awk '/^SigCgt:/ { print $2 }' "/proc/$LT_PID/status" 2>/dev/null)
+  if [[ -n $cgt ]] && (((16#$cgt >> 1) & 1)) && (($(tiles_served) > before + 20)); then
+    started=1
+    break
+  fi
+  sleep 0.05
+done
 kill -0 "$LT_PID" 2>/dev/null || { show_output; fail "vts loadtest ended before the SIGINT"; }
+((started)) || { show_output; fail "vts loadtest did not start its run within 30 s"; }
 sent=$(date +%s%N)
 kill -INT "$LT_PID"
 for ((i = 0; i < 200; i++)); do
