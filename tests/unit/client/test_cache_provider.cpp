@@ -14,6 +14,7 @@
 
 #include "vts/builder/builder.hpp"
 #include "vts/client/source.hpp"
+#include "vts/test/temp_dir.hpp"
 
 namespace fs = std::filesystem;
 using namespace vts::client;
@@ -23,18 +24,10 @@ using vts::TileId;
 
 namespace {
 
-struct Dir {
-  fs::path path;
-  Dir() {
-    static std::atomic<int> n{0};
-    path = fs::temp_directory_path() /
-           ("vts-cache-provider-test-" + std::to_string(::getpid()) + "-" + std::to_string(n++));
-    fs::create_directories(path);
-  }
-  ~Dir() {
-    std::error_code ec;
-    fs::remove_all(path, ec);
-  }
+// A private temporary folder (vts::test::TempDir) whose path the tests name `d.path`.
+struct Dir : vts::test::TempDir {
+  Dir() : TempDir("vts-cache-provider-test"), path(TempDir::path()) {}
+  const fs::path path;
 };
 
 // 1000 x 600 texels, levels 0-2; with a region, levels >= 1 hold only the tiles over it.
