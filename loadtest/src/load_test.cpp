@@ -150,8 +150,10 @@ struct Request {
   std::uint64_t key = 0;
   Clock::time_point intended{}, sent{};
   TileCache::Handle handle = 0;
-  // Open loop: dropped before its slot came. Set under the viewer's lock, read by the dispatcher
-  // under the queue's.
+  bool issued = false;  // handed to the cache (under the viewer's lock)
+  // Dropped by the view (or at the end of the run). Set under the viewer's lock, read by the
+  // dispatcher under the queue's. Once set, the request is counted as cancelled or abandoned,
+  // never also as a request, whatever its transfer brings.
   std::atomic<bool> cancelled{false};
 };
 
@@ -168,8 +170,9 @@ class Viewer {
 
   // One frame (driver thread). Returns the demand function's error, if any.
   Status frame(std::uint64_t f, Clock::time_point due);
-  // Open loop: sends a queued request in its slot (dispatcher thread).
-  void send(const std::shared_ptr<Request>& req, Clock::time_point slot);
+  // Open loop: sends a queued request in its slot (dispatcher thread); false when the view no
+  // longer wants it.
+  bool send(const std::shared_ptr<Request>& req, Clock::time_point slot);
   std::size_t in_flight() {
     std::lock_guard lock(mutex_);
     return inflight_.size();
@@ -194,7 +197,8 @@ class Viewer {
   std::uint64_t frames = 0;
 
  private:
-  void issue(const std::shared_ptr<Request>& req);
+  // Hands the request to the cache unless the view dropped it first (then false).
+  bool issue(const std::shared_ptr<Request>& req);
   void done(const std::shared_ptr<Request>& req, PayloadResult&& r);
   void evict(std::uint64_t frame);
 
@@ -268,6 +272,7 @@ Status Viewer::frame(std::uint64_t f, Clock::time_point due) {
   wanted.reserve(d->tiles.size() * 2);
   std::vector<std::shared_ptr<Request>> to_issue;
   std::vector<TileCache::Handle> to_cancel;
+  std::size_t cancelled = 0;  // issued requests dropped (wasted)
   std::size_t direct = 0, resolved = 0, fresh = 0;
   Clock::time_point first{Clock::time_point::max()}, last{Clock::time_point::min()};
   {
@@ -306,11 +311,11 @@ Status Viewer::frame(std::uint64_t f, Clock::time_point due) {
         continue;
       }
       it->second->cancelled = true;
+      if (it->second->issued) ++cancelled;
       if (it->second->handle != 0) to_cancel.push_back(it->second->handle);
       it = inflight_.erase(it);
     }
   }
-  const std::size_t cancelled = to_cancel.size();
   for (TileCache::Handle h : to_cancel) cache_->cancel(h);
   if (cancelled) engine_.metrics.cancelled(cancelled);
 
@@ -342,32 +347,37 @@ Status Viewer::frame(std::uint64_t f, Clock::time_point due) {
   return {};
 }
 
-void Viewer::issue(const std::shared_ptr<Request>& req) {
+bool Viewer::issue(const std::shared_ptr<Request>& req) {
+  {
+    std::lock_guard lock(mutex_);
+    if (req->cancelled) return false;
+    req->issued = true;
+    req->sent = Clock::now();
+  }
   GetOptions o;
   o.level = req->id.z;
-  req->sent = Clock::now();
   const TileCache::Handle h =
       cache_->get(req->id, o, [this, req](PayloadResult&& r) { done(req, std::move(r)); });
   std::lock_guard lock(mutex_);
   req->handle = h;
+  return true;
 }
 
-void Viewer::send(const std::shared_ptr<Request>& req, Clock::time_point slot) {
-  {
-    std::lock_guard lock(mutex_);
-    if (req->cancelled) return;
-  }
-  req->intended = slot;
-  issue(req);
+bool Viewer::send(const std::shared_ptr<Request>& req, Clock::time_point slot) {
+  req->intended = slot;  // the dispatcher's alone until issued
+  return issue(req);
 }
 
 void Viewer::done(const std::shared_ptr<Request>& req, PayloadResult&& r) {
   if (r.kind == PayloadResult::Kind::cancelled) return;
   const auto now = Clock::now();
+  bool counted = false;
   {
     std::lock_guard lock(mutex_);
     auto it = inflight_.find(req->key);
     if (it != inflight_.end() && it->second == req) inflight_.erase(it);
+    // Dropped while its answer was on its way: already counted as cancelled or abandoned.
+    counted = !req->cancelled;
     if (r.kind == PayloadResult::Kind::ok || r.kind == PayloadResult::Kind::absent) {
       arrived_[req->key] = now;
       backoff_.erase(req->key);
@@ -377,7 +387,7 @@ void Viewer::done(const std::shared_ptr<Request>& req, PayloadResult&& r) {
       b.until = now + std::chrono::milliseconds(125 << b.failures);
     }
   }
-  engine_.metrics.request_done(r, req->intended, req->sent, now);
+  if (counted) engine_.metrics.request_done(r, req->intended, req->sent, now);
 }
 
 void Viewer::evict(std::uint64_t frame) {
@@ -401,18 +411,18 @@ void Viewer::evict(std::uint64_t frame) {
 
 std::size_t Viewer::cancel_all() {
   std::vector<TileCache::Handle> handles;
+  std::size_t n = 0;  // issued: on their way
   {
     std::lock_guard lock(mutex_);
     for (auto& [k, r] : inflight_) {
       r->cancelled = true;
+      if (r->issued) ++n;
       if (r->handle) handles.push_back(r->handle);
     }
-    const std::size_t n = inflight_.size();
     inflight_.clear();
-    if (handles.empty()) return n;
   }
   for (auto h : handles) cache_->cancel(h);
-  return handles.size();
+  return n;
 }
 
 Status check(const LoadTestOptions& o) {
@@ -494,31 +504,40 @@ Result<LoadTestResult> run_load_test(const LoadTestOptions& options, const Deman
   }
 
   // Open loop: one request per slot, slot k at start + k / rate.
-  std::uint64_t idle_slots = 0;
+  std::uint64_t idle_slots = 0, startup_slots = 0;
   std::thread dispatcher;
   if (options.rate > 0) {
     dispatcher = std::thread([&] {
       const double period_s = 1.0 / options.rate;
+      bool sent_any = false;
       for (std::uint64_t k = 0;; ++k) {
         const auto slot = start + std::chrono::duration_cast<Clock::duration>(
                                       std::chrono::duration<double>(period_s * double(k)));
         if (slot >= end || engine.stopped()) break;
         std::this_thread::sleep_until(slot);
-        std::pair<Viewer*, std::shared_ptr<Request>> item{nullptr, nullptr};
-        {
-          std::lock_guard lock(engine.queue_mutex);
-          while (!engine.queue.empty()) {
-            item = std::move(engine.queue.front());
-            engine.queue.pop_front();
-            if (!item.second->cancelled) break;
-            item = {nullptr, nullptr};
+        // The next request still wanted; one the view drops between the pop and the send is
+        // not spent: the slot goes to the one after it.
+        bool sent = false;
+        for (;;) {
+          std::pair<Viewer*, std::shared_ptr<Request>> item{nullptr, nullptr};
+          {
+            std::lock_guard lock(engine.queue_mutex);
+            while (!engine.queue.empty() && !item.first) {
+              item = std::move(engine.queue.front());
+              engine.queue.pop_front();
+              if (item.second->cancelled) item = {nullptr, nullptr};
+            }
           }
+          if (!item.first) break;
+          if ((sent = item.first->send(item.second, slot))) break;
         }
-        if (!item.first) {
-          ++idle_slots;
+        if (!sent) {
+          // Before the first request the viewers are still working out their first frame: the
+          // generator starting up, not a demand that fails to fill the rate.
+          ++(sent_any ? idle_slots : startup_slots);
           continue;
         }
-        item.first->send(item.second, slot);
+        sent_any = true;
       }
     });
   }
@@ -577,6 +596,7 @@ Result<LoadTestResult> run_load_test(const LoadTestOptions& options, const Deman
   if (result.run.frames) result.run.demand_cpu_ms_per_frame /= double(result.run.frames);
   result.run.late_frames = late_frames.load();
   result.run.idle_slots = idle_slots;
+  result.run.startup_slots = startup_slots;
   engine.viewers.clear();  // closes every client stack (flushes disk caches)
 
   if (engine.error) return *engine.error;

@@ -154,6 +154,7 @@ nlohmann::json simulation_json(const LoadRunStats& run, const CameraDemandOption
           {"late_frames", run.late_frames},
           {"moves_incomplete", run.moves_incomplete},
           {"idle_slots", run.idle_slots},
+          {"startup_slots", run.startup_slots},
           {"abandoned", run.abandoned},
           {"demand_cpu_ms_per_frame", run.demand_cpu_ms_per_frame},
           {"viewport", {camera.width, camera.height}},
@@ -172,7 +173,10 @@ std::string simulation_line(const LoadRunStats& run, bool open_loop) {
       static_cast<unsigned long long>(run.frames), static_cast<unsigned long long>(run.late_frames),
       run.demand_cpu_ms_per_frame, static_cast<unsigned long long>(run.moves_incomplete),
       static_cast<unsigned long long>(run.abandoned),
-      open_loop ? (", " + std::to_string(run.idle_slots) + " idle slots").c_str() : "");
+      open_loop ? (", " + std::to_string(run.idle_slots) + " idle slots (" +
+                   std::to_string(run.startup_slots) + " more at start-up)")
+                      .c_str()
+                : "");
   return line;
 }
 

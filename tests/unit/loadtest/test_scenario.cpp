@@ -97,6 +97,7 @@ TEST(Scenario, TheSimulationFiguresAppearInTheJsonAndTheLine) {
   run.late_frames = 3;
   run.moves_incomplete = 2;
   run.idle_slots = 7;
+  run.startup_slots = 2;
   run.abandoned = 1;
   run.demand_cpu_ms_per_frame = 0.25;
   CameraDemandOptions c;
@@ -106,6 +107,7 @@ TEST(Scenario, TheSimulationFiguresAppearInTheJsonAndTheLine) {
   EXPECT_EQ(j["viewer_frames"], 120);
   EXPECT_EQ(j["late_frames"], 3);
   EXPECT_EQ(j["idle_slots"], 7);
+  EXPECT_EQ(j["startup_slots"], 2);
   EXPECT_EQ(j["viewport"], nlohmann::json({640, 480}));
   EXPECT_EQ(j["feedback_divisor"], 8);
   EXPECT_EQ(j["cache"], "ram");
@@ -114,7 +116,8 @@ TEST(Scenario, TheSimulationFiguresAppearInTheJsonAndTheLine) {
   EXPECT_EQ(simulation_line(run, false),
             "simulation: 120 viewer-frames (3 late), demand 0.25 ms/frame, 2 moves not at full "
             "resolution in time, 1 abandoned at the end\n");
-  EXPECT_NE(simulation_line(run, true).find(", 7 idle slots\n"), std::string::npos);
+  EXPECT_NE(simulation_line(run, true).find(", 7 idle slots (2 more at start-up)\n"),
+            std::string::npos);
 }
 
 }  // namespace

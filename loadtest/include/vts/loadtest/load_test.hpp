@@ -28,7 +28,9 @@
 //     frame's due time;
 //   - open loop (rate > 0): the viewers' requests join one queue that a dispatcher drains at
 //     exactly `rate` requests a second, whatever the responses; the intended time is the slot's
-//     time. A slot with nothing queued is counted (idle_slots): the demand did not fill the rate.
+//     time. A slot with nothing queued is counted: before the first request is sent as a
+//     start-up slot (the viewers still working out their first frame), after it as an idle slot
+//     (the demand did not fill the rate).
 // queue time = intended time to the request going on the wire (our queue, the fetcher's queue);
 // ttfb = intended time to the first response byte (network only); total = intended time to the
 // tile (or error) in hand. Cache hits have queue time and total, no ttfb.
@@ -104,7 +106,8 @@ struct LoadTestOptions {
 struct LoadRunStats {
   std::uint64_t frames = 0, late_frames = 0;
   std::uint64_t moves_incomplete = 0;  // timed out or superseded before full resolution
-  std::uint64_t idle_slots = 0;        // open loop: slots with nothing to send
+  std::uint64_t idle_slots = 0;        // open loop: slots with nothing to send after the first
+  std::uint64_t startup_slots = 0;     // open loop: slots that passed before the first request
   std::uint64_t abandoned = 0;         // still on their way at the end of the drain
   double demand_cpu_ms_per_frame = 0;  // mean time in the demand function
 };
