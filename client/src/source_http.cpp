@@ -14,9 +14,9 @@
 #include <future>
 #include <limits>
 #include <mutex>
-#include <unordered_map>
 #include <utility>
 
+#include "fetching_source.hpp"
 #include "vts/client/source.hpp"
 #include "vts/protocol/file_io.hpp"
 #include "vts/protocol/tilejson.hpp"
@@ -64,65 +64,39 @@ bool same_tileset_shape(const TilesetInfo& a, const TilesetInfo& b) {
          ga.tile_size() == gb.tile_size() && ga.border() == gb.border() && a.codec == b.codec;
 }
 
-class TileJsonSource final : public TileSource {
+struct TileJsonPending {
+  SourceRequest request;
+  SourceCallback callback;
+  Fetcher::Handle fetch = 0;
+  std::uint64_t generation = 0;  // of the template the current attempt used
+  bool refetched = false;        // TileJSON already refetched for this request
+  bool cancelled = false;
+};
+
+class TileJsonSource final : public FetchingSource<TileJsonPending> {
  public:
   TileJsonSource(std::unique_ptr<Fetcher> fetcher, SourceInfo info, std::string json_url,
                  TileJson tilejson)
-      : fetcher_(std::move(fetcher)), info_(std::move(info)), json_url_(std::move(json_url)) {
-    template_ = std::move(tilejson.tiles);
-    version_ = std::move(tilejson.version);
-  }
+      : FetchingSource(std::move(fetcher)),
+        info_(std::move(info)),
+        json_url_(std::move(json_url)),
+        template_(std::move(tilejson.tiles)),
+        version_(std::move(tilejson.version)) {}
 
-  ~TileJsonSource() override {
-    std::unique_ptr<Fetcher> fetcher;
-    {
-      std::lock_guard lock(mutex_);
-      closing_ = true;
-      fetcher = std::move(fetcher_);
-    }
-    // Cancels every transfer; their callbacks run now, each finishing its request.
-    fetcher.reset();
-  }
+  ~TileJsonSource() override { close(); }
 
   const SourceInfo& info() const override { return info_; }
   bool local() const override { return false; }
 
   Handle fetch(const SourceRequest& request, SourceCallback callback) override {
-    auto p = std::make_shared<Pending>();
-    p->request = request;
-    p->callback = std::move(callback);
     std::lock_guard lock(mutex_);
-    const Handle h = ++next_handle_;
-    pending_.emplace(h, p);
+    auto [h, p] = add_locked(request, std::move(callback));
     submit_tile(h, *p);
     return h;
   }
 
-  void cancel(Handle h) override {
-    Fetcher* fetcher = nullptr;
-    Fetcher::Handle fh = 0;
-    {
-      std::lock_guard lock(mutex_);
-      auto it = pending_.find(h);
-      if (it == pending_.end() || fetcher_ == nullptr) return;  // done, or closing
-      it->second->cancelled = true;
-      fetcher = fetcher_.get();
-      fh = it->second->fetch;
-    }
-    // The fetcher's callback for fh then finishes the request with Kind::cancelled; if it is
-    // already running, it sees `cancelled` before starting another step.
-    fetcher->cancel(fh);
-  }
-
  private:
-  struct Pending {
-    SourceRequest request;
-    SourceCallback callback;
-    Fetcher::Handle fetch = 0;
-    std::uint64_t generation = 0;  // of the template the current attempt used
-    bool refetched = false;        // TileJSON already refetched for this request
-    bool cancelled = false;
-  };
+  using Pending = TileJsonPending;
 
   // Caller holds mutex_. Starts the tile transfer with the current template.
   void submit_tile(Handle h, Pending& p) {
@@ -140,24 +114,6 @@ class TileJsonSource final : public TileSource {
         std::move(r), [this, h, url](FetchResult&& res) { on_tile(h, url, std::move(res)); });
   }
 
-  // Removes the request and runs its callback (outside the lock).
-  void finish(Handle h, SourceTile&& tile) {
-    std::shared_ptr<Pending> p;
-    {
-      std::lock_guard lock(mutex_);
-      auto it = pending_.find(h);
-      if (it == pending_.end()) return;
-      p = std::move(it->second);
-      pending_.erase(it);
-    }
-    // A cancel() that came in before this point wins over whatever the transfer brought.
-    if (p->cancelled && tile.kind != SourceTile::Kind::cancelled) {
-      tile = SourceTile{};
-      tile.kind = SourceTile::Kind::cancelled;
-    }
-    p->callback(std::move(tile));
-  }
-
   void finish_kind(Handle h, SourceTile::Kind kind,
                    std::optional<SourceTransfer> transfer = std::nullopt) {
     SourceTile t;
@@ -172,15 +128,6 @@ class TileJsonSource final : public TileSource {
     t.error = std::move(e);
     t.transfer = transfer;
     finish(h, std::move(t));
-  }
-
-  // Continues a request after a step, under the lock: nullptr when it was cancelled (or the
-  // source is closing), in which case the caller finishes it with Kind::cancelled.
-  Pending* resume(Handle h) {
-    auto it = pending_.find(h);
-    if (it == pending_.end()) return nullptr;
-    if (it->second->cancelled || closing_) return nullptr;
-    return it->second.get();
   }
 
   void on_tile(Handle h, const std::string& url, FetchResult&& r) {
@@ -282,17 +229,13 @@ class TileJsonSource final : public TileSource {
     submit_tile(h, *p);
   }
 
-  std::unique_ptr<Fetcher> fetcher_;  // null once closing
   const SourceInfo info_;
   const std::string json_url_;
 
-  std::mutex mutex_;
-  std::unordered_map<Handle, std::shared_ptr<Pending>> pending_;
-  Handle next_handle_ = 0;
+  // Guarded by mutex_.
   std::string template_;
   std::string version_;
   std::uint64_t generation_ = 0;
-  bool closing_ = false;
 };
 
 }  // namespace

@@ -37,9 +37,10 @@
 #include <map>
 #include <mutex>
 #include <thread>
-#include <unordered_map>
+#include <tuple>
 #include <utility>
 
+#include "fetching_source.hpp"
 #include "vts/client/source.hpp"
 #include "vts/protocol/pmtiles.hpp"
 
@@ -156,41 +157,38 @@ struct Opened {
   SourceInfo info;
 };
 
-class RemoteArchiveSource final : public TileSource {
+struct RemotePending {
+  SourceRequest request;
+  SourceCallback callback;
+  std::uint64_t tile_id = 0;
+  Fetcher::Handle fetch = 0;  // the transfer in progress; 0 when none
+  bool cancelled = false;
+};
+
+class RemoteArchiveSource final : public FetchingSource<RemotePending> {
  public:
   RemoteArchiveSource(std::unique_ptr<Fetcher> fetcher, std::string url, Opened opened,
                       std::size_t max_tile_bytes)
-      : fetcher_(std::move(fetcher)),
+      : FetchingSource(std::move(fetcher)),
         url_(std::move(url)),
         header_(opened.header),
         root_(std::move(opened.root)),
         info_(std::move(opened.info)),
         max_tile_bytes_(max_tile_bytes) {}
 
-  ~RemoteArchiveSource() override {
-    std::unique_ptr<Fetcher> fetcher;
-    {
-      std::lock_guard lock(mutex_);
-      closing_ = true;
-      fetcher = std::move(fetcher_);
-    }
-    // Cancels every transfer: their callbacks finish their requests now. Then deliverer_'s
-    // destructor (a member) runs the answers still queued.
-    fetcher.reset();
-  }
+  // Cancels every transfer: their callbacks finish their requests now. Then deliverer_'s
+  // destructor (a member) runs the answers still queued.
+  ~RemoteArchiveSource() override { close(); }
 
   const SourceInfo& info() const override { return info_; }
   bool local() const override { return false; }
 
   Handle fetch(const SourceRequest& request, SourceCallback callback) override {
-    auto p = std::make_shared<Pending>();
-    p->request = request;
-    p->callback = std::move(callback);
     Handle h = 0;
+    std::shared_ptr<Pending> p;
     {
       std::lock_guard lock(mutex_);
-      h = ++next_handle_;
-      pending_.emplace(h, p);
+      std::tie(h, p) = add_locked(request, std::move(callback));
     }
     const TileId id = request.id;
     const Geometry& g = info_.info.geometry;
@@ -204,50 +202,10 @@ class RemoteArchiveSource final : public TileSource {
     return h;
   }
 
-  void cancel(Handle h) override {
-    Fetcher* fetcher = nullptr;
-    Fetcher::Handle fh = 0;
-    {
-      std::lock_guard lock(mutex_);
-      auto it = pending_.find(h);
-      if (it == pending_.end() || fetcher_ == nullptr) return;  // done, or closing
-      it->second->cancelled = true;
-      fetcher = fetcher_.get();
-      fh = it->second->fetch;
-    }
-    // fh == 0: the answer is queued on the delivery thread, which reports the cancellation.
-    // Otherwise the fetcher's callback for fh finishes the request with Kind::cancelled; if it
-    // is already running, it sees `cancelled` before starting another step.
-    if (fh != 0) fetcher->cancel(fh);
-  }
-
  private:
-  struct Pending {
-    SourceRequest request;
-    SourceCallback callback;
-    std::uint64_t tile_id = 0;
-    Fetcher::Handle fetch = 0;  // the transfer in progress; 0 when none
-    bool cancelled = false;
-  };
+  using Pending = RemotePending;
 
   // ---- finishing a request (exactly once) ------------------------------------------------
-
-  // Removes the request and runs its callback (outside the lock), on the calling thread.
-  void finish(Handle h, SourceTile&& tile) {
-    std::shared_ptr<Pending> p;
-    {
-      std::lock_guard lock(mutex_);
-      auto it = pending_.find(h);
-      if (it == pending_.end()) return;
-      p = std::move(it->second);
-      pending_.erase(it);
-    }
-    if (p->cancelled && tile.kind != SourceTile::Kind::cancelled) {
-      tile = SourceTile{};
-      tile.kind = SourceTile::Kind::cancelled;
-    }
-    p->callback(std::move(tile));
-  }
 
   // finish() on the fetcher thread (we are in one of its callbacks) or the delivery thread.
   void deliver(Handle h, SourceTile&& tile, bool on_fetcher_thread) {
@@ -364,10 +322,8 @@ class RemoteArchiveSource final : public TileSource {
   void submit(Handle h, std::uint64_t offset, std::uint64_t length, bool on_fetcher_thread,
               FetchCallback callback) {
     std::unique_lock lock(mutex_);
-    auto it = pending_.find(h);
-    if (it == pending_.end()) return;
-    Pending& p = *it->second;
-    if (p.cancelled || closing_) {
+    Pending* p = resume(h);
+    if (p == nullptr) {
       lock.unlock();
       SourceTile t;
       t.kind = SourceTile::Kind::cancelled;
@@ -376,10 +332,10 @@ class RemoteArchiveSource final : public TileSource {
     FetchRequest r;
     r.url = url_;
     r.range = std::make_pair(offset, offset + length - 1);
-    r.level = p.request.level;
-    r.urgency = p.request.urgency;
+    r.level = p->request.level;
+    r.urgency = p->request.urgency;
     // The default merge key (URL + range) merges identical reads of a leaf or a shared payload.
-    p.fetch = fetcher_->submit(std::move(r), std::move(callback));
+    p->fetch = fetcher_->submit(std::move(r), std::move(callback));
   }
 
   void read_leaf(Handle h, const pmtiles::Entry& pointer, int depth, bool on_fetcher_thread) {
@@ -472,17 +428,13 @@ class RemoteArchiveSource final : public TileSource {
     auto operator<=>(const LeafKey&) const = default;
   };
 
-  std::unique_ptr<Fetcher> fetcher_;  // null once closing
   const std::string url_;
   const pmtiles::Header header_;
   const Directory root_;
   const SourceInfo info_;
   const std::size_t max_tile_bytes_;
 
-  std::mutex mutex_;
-  std::unordered_map<Handle, std::shared_ptr<Pending>> pending_;
-  Handle next_handle_ = 0;
-  bool closing_ = false;
+  // Guarded by mutex_.
   std::list<std::pair<LeafKey, Directory>> leaf_lru_;  // most recently used first
   std::map<LeafKey, std::list<std::pair<LeafKey, Directory>>::iterator> leaf_index_;
 

@@ -1,0 +1,103 @@
+// What the two network sources (TileJSON, remote archive) share: the table of requests in flight,
+// each finished exactly once, cancellation down to the fetcher's transfer, and closing.
+//
+// `Pending` is the source's own per-request state; it has at least
+//   SourceRequest request; SourceCallback callback;
+//   Fetcher::Handle fetch;  // the transfer in progress, 0 when none
+//   bool cancelled;
+// Every field of it, pending_, closing_ and fetcher_ are guarded by mutex_, which the source may
+// use for its own state too.
+//
+// A source calls close() first thing in its destructor: the fetcher's callbacks still reach the
+// source's own members while the transfers are cancelled.
+#pragma once
+
+#include <memory>
+#include <mutex>
+#include <unordered_map>
+#include <utility>
+
+#include "vts/client/fetcher.hpp"
+#include "vts/client/source.hpp"
+
+namespace vts::client {
+
+template <class Pending>
+class FetchingSource : public TileSource {
+ public:
+  // fh == 0: no transfer yet (the answer is on its way by another path, which reports the
+  // cancellation). Otherwise the fetcher's callback for fh finishes the request with
+  // Kind::cancelled; if it is already running, it sees `cancelled` before starting another step.
+  void cancel(Handle h) override {
+    Fetcher* fetcher = nullptr;
+    Fetcher::Handle fh = 0;
+    {
+      std::lock_guard lock(mutex_);
+      auto it = pending_.find(h);
+      if (it == pending_.end() || fetcher_ == nullptr) return;  // done, or closing
+      it->second->cancelled = true;
+      fetcher = fetcher_.get();
+      fh = it->second->fetch;
+    }
+    if (fh != 0) fetcher->cancel(fh);
+  }
+
+ protected:
+  explicit FetchingSource(std::unique_ptr<Fetcher> fetcher) : fetcher_(std::move(fetcher)) {}
+
+  // Cancels every transfer: their callbacks run now, each finishing its request.
+  void close() {
+    std::unique_ptr<Fetcher> fetcher;
+    {
+      std::lock_guard lock(mutex_);
+      closing_ = true;
+      fetcher = std::move(fetcher_);
+    }
+    fetcher.reset();
+  }
+
+  // A new request in the table; the caller holds mutex_.
+  std::pair<Handle, std::shared_ptr<Pending>> add_locked(const SourceRequest& request,
+                                                         SourceCallback callback) {
+    auto p = std::make_shared<Pending>();
+    p->request = request;
+    p->callback = std::move(callback);
+    const Handle h = ++next_handle_;
+    pending_.emplace(h, p);
+    return {h, std::move(p)};
+  }
+
+  // Removes the request and runs its callback (outside the lock), on the calling thread. A
+  // cancel() that came in before this point wins over whatever the transfer brought.
+  void finish(Handle h, SourceTile&& tile) {
+    std::shared_ptr<Pending> p;
+    {
+      std::lock_guard lock(mutex_);
+      auto it = pending_.find(h);
+      if (it == pending_.end()) return;
+      p = std::move(it->second);
+      pending_.erase(it);
+    }
+    if (p->cancelled && tile.kind != SourceTile::Kind::cancelled) {
+      tile = SourceTile{};
+      tile.kind = SourceTile::Kind::cancelled;
+    }
+    p->callback(std::move(tile));
+  }
+
+  // The request to continue after a step, under mutex_: nullptr when it is done, cancelled or the
+  // source is closing (the caller then finishes it with Kind::cancelled).
+  Pending* resume(Handle h) {
+    auto it = pending_.find(h);
+    if (it == pending_.end() || it->second->cancelled || closing_) return nullptr;
+    return it->second.get();
+  }
+
+  std::mutex mutex_;
+  std::unique_ptr<Fetcher> fetcher_;  // null once closing
+  std::unordered_map<Handle, std::shared_ptr<Pending>> pending_;
+  Handle next_handle_ = 0;
+  bool closing_ = false;
+};
+
+}  // namespace vts::client
