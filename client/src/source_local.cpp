@@ -1,6 +1,6 @@
-// The local-archive source: a pmtiles::Reader over a read-only mapping of the file. Every fetch is
-// answered synchronously, inside fetch(), with a copy of the stored payload — the mapping is the
-// reader's, and the caller keeps the payload beyond the source's lifetime. The answers mirror what
+// The local-archive source: a pmtiles::Reader over the file. Every fetch is answered
+// synchronously, inside fetch(), with the reader's copy of the stored payload (an archive modified
+// in place since it was opened answers with ErrorCode::changed, never with mixed bytes). The answers mirror what
 // `vts serve` would send for the same archive (docs/PROTOCOL.md §3): the same bytes, the same
 // ETag, absent where the server answers 204 or 404, an error where it answers 500.
 
@@ -42,7 +42,7 @@ class LocalSource final : public TileSource {
       t.kind = SourceTile::Kind::absent;
       return t;
     }
-    Result<std::span<const std::uint8_t>> payload = reader_->get(id);
+    Result<std::vector<std::uint8_t>> payload = reader_->get(id);
     if (!payload) {
       if (payload.error().code == ErrorCode::not_found) {
         t.kind = SourceTile::Kind::absent;
@@ -64,7 +64,7 @@ class LocalSource final : public TileSource {
       return t;
     }
     t.kind = SourceTile::Kind::ok;
-    t.payload.assign(payload->begin(), payload->end());
+    t.payload = std::move(*payload);
     return t;
   }
 
@@ -96,7 +96,7 @@ Result<std::unique_ptr<TileSource>> open_local_archive(const std::filesystem::pa
   SourceInfo si;
   si.info = std::move(*info);
   si.key = "file:" + absolute.string();
-  si.version = pmtiles::archive_version(**reader);  // as `vts serve` computes it
+  si.version = (*reader)->version();  // as `vts serve` computes it
   si.description_json = (*reader)->metadata_json();
   return std::unique_ptr<TileSource>(
       std::make_unique<LocalSource>(std::move(*reader), std::move(si), absolute.string()));

@@ -489,23 +489,6 @@ Status check_header(const pmtiles::Header& h, std::uint64_t first_read_size) {
   return {};
 }
 
-std::string archive_version(std::span<const std::uint8_t> header,
-                            std::span<const std::uint8_t> root,
-                            std::span<const std::uint8_t> metadata) {
-  // As `vts serve` computes it (docs/PROTOCOL.md §6), so every source of one archive agrees.
-  XXH3_state_t* state = XXH3_createState();
-  if (state == nullptr) return {};
-  XXH3_64bits_reset(state);
-  XXH3_64bits_update(state, header.data(), header.size());
-  XXH3_64bits_update(state, root.data(), root.size());
-  XXH3_64bits_update(state, metadata.data(), metadata.size());
-  const XXH64_hash_t hash = XXH3_64bits_digest(state);
-  XXH3_freeState(state);
-  char hex[17];
-  std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(hash));
-  return hex;
-}
-
 Error in_archive(const std::string& url, Error e) {
   e.message = url + ": " + e.message;
   return e;
@@ -588,7 +571,7 @@ Result<std::unique_ptr<TileSource>> open_remote_archive(std::string_view url_vie
   opened.info.info = std::move(*info);
   opened.info.key = url;
   opened.info.version =
-      archive_version(bytes.first(pmtiles::kHeaderSize), root_bytes, stored_metadata);
+      pmtiles::archive_version(bytes.first(pmtiles::kHeaderSize), root_bytes, stored_metadata);
   opened.info.description_json = std::move(metadata_json);
   return std::unique_ptr<TileSource>(std::make_unique<RemoteArchiveSource>(
       std::move(*fetcher), url, std::move(opened), options.fetcher.max_body_bytes));

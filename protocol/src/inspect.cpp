@@ -16,7 +16,7 @@ Result<ArchiveSummary> summarize_archive(const pmtiles::Reader& reader) {
   if (!info) return std::move(info).error();
   s.info = std::move(info).value();
   s.header = reader.header();
-  s.file_bytes = reader.bytes().size();
+  s.file_bytes = reader.size();
   const Geometry& g = s.info.geometry;
   for (int z = 0; z <= g.max_zoom(); ++z)
     s.levels.push_back({z, g.level_width(z), g.level_height(z), g.tile_count(z), 0, 0});

@@ -1,19 +1,29 @@
-// PMTiles v3 reader over a read-only memory mapping (or borrowed bytes).
+// PMTiles v3 reader over a file read with pread(2) (or over borrowed bytes).
+//
+// The file is never mapped: another process may truncate or overwrite it in place at any moment
+// (cp over it, truncate, rsync --inplace), and touching a mapped page past the new end of a file
+// raises SIGBUS, which would take a whole server down. Every read is a copy; after each read of a
+// file the reader checks with fstat(2) on its kept descriptor that the file still has the size
+// and modification time it had at open, so bytes of an archive that changed under it come back as
+// ErrorCode::changed, never as a mix of two archives. Renaming another file into place does not
+// touch ours: a reader keeps serving the inode it opened.
 //
 // Trust model: every byte of the archive is hostile. The header's sections are checked against
 // the file size once, at open; every directory entry is checked when it is followed (leaf pointers
-// against the leaf section, tile entries against the tile-data section); directory chains are cut
-// at kMaxDirectoryDepth, which also ends cycles. Decoded leaf directories are shared immutable
-// vectors held by a small LRU, so concurrent lookups never see a directory change under them.
+// against the leaf section, tile entries against the tile-data section); stored sizes are bounded
+// before anything is allocated; directory chains are cut at kMaxDirectoryDepth, which also ends
+// cycles. Decoded leaf directories are shared immutable vectors held by a small LRU, so
+// concurrent lookups never see a directory change under them.
 #include <fcntl.h>
-#include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
 #include <xxhash.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <limits>
 #include <list>
 #include <mutex>
@@ -25,36 +35,97 @@
 
 #include "vts/protocol/pmtiles.hpp"
 
-#include <xxhash.h>
-
-#include <cstdio>
-
 namespace vts::pmtiles {
 namespace {
 
 using Directory = std::shared_ptr<const std::vector<Entry>>;
 
-// A read-only mapping of a file, and the file itself kept open (servers send from it with
-// sendfile); unmapped and closed on destruction.
-class Mapping {
+// Where a reader's bytes come from.
+class ByteSource {
  public:
-  Mapping() = default;
-  Mapping(void* addr, std::size_t size, int fd) : addr_(addr), size_(size), fd_(fd) {}
-  Mapping(const Mapping&) = delete;
-  Mapping& operator=(const Mapping&) = delete;
-  ~Mapping() {
-    if (addr_ != nullptr) ::munmap(addr_, size_);
-    if (fd_ >= 0) ::close(fd_);
+  virtual ~ByteSource() = default;
+  virtual std::uint64_t size() const = 0;
+  // Reads exactly out.size() bytes at `offset`, which the caller has checked lie within size().
+  virtual Status read(std::uint64_t offset, std::span<std::uint8_t> out) const = 0;
+  virtual Status check_unchanged() const { return {}; }
+};
+
+class BorrowedBytes final : public ByteSource {
+ public:
+  explicit BorrowedBytes(std::span<const std::uint8_t> bytes) : bytes_(bytes) {}
+  std::uint64_t size() const override { return bytes_.size(); }
+  Status read(std::uint64_t offset, std::span<std::uint8_t> out) const override {
+    if (!out.empty()) std::memcpy(out.data(), bytes_.data() + offset, out.size());
+    return {};
   }
-  std::span<const std::uint8_t> bytes() const {
-    return {static_cast<const std::uint8_t*>(addr_), size_};
-  }
-  int fd() const { return fd_; }
 
  private:
-  void* addr_ = nullptr;
-  std::size_t size_ = 0;
-  int fd_ = -1;
+  std::span<const std::uint8_t> bytes_;
+};
+
+// A file kept open for the reader's life; closed on destruction.
+class FileBytes final : public ByteSource {
+ public:
+  FileBytes(int fd, const struct stat& st, std::string path)
+      : fd_(fd),
+        size_(static_cast<std::uint64_t>(st.st_size)),
+        mtime_(st.st_mtim),
+        path_(std::move(path)) {}
+  FileBytes(const FileBytes&) = delete;
+  FileBytes& operator=(const FileBytes&) = delete;
+  ~FileBytes() override { ::close(fd_); }
+
+  std::uint64_t size() const override { return size_; }
+
+  Status read(std::uint64_t offset, std::span<std::uint8_t> out) const override {
+    std::size_t done = 0;
+    while (done < out.size()) {
+      const ssize_t n =
+          ::pread(fd_, out.data() + done, out.size() - done, static_cast<off_t>(offset + done));
+      if (n < 0 && errno == EINTR) continue;
+      if (n < 0) {
+        return make_error(ErrorCode::io,
+                          "cannot read " + path_ + ": " + std::generic_category().message(errno));
+      }
+      if (n == 0) break;  // the file is shorter than when it was opened
+      done += static_cast<std::size_t>(n);
+    }
+    if (Status s = check_unchanged(); !s) return s;
+    if (done < out.size()) {  // shrunk and grown back within one clock tick: still a change
+      changed_.store(true);
+      return changed_error();
+    }
+    return {};
+  }
+
+  Status check_unchanged() const override {
+    if (changed_.load()) return changed_error();
+    struct stat st {};
+    if (::fstat(fd_, &st) != 0) {
+      return make_error(ErrorCode::io,
+                        "cannot stat " + path_ + ": " + std::generic_category().message(errno));
+    }
+    if (static_cast<std::uint64_t>(st.st_size) != size_ || st.st_mtim.tv_sec != mtime_.tv_sec ||
+        st.st_mtim.tv_nsec != mtime_.tv_nsec) {
+      changed_.store(true);
+      return changed_error();
+    }
+    return {};
+  }
+
+ private:
+  Error changed_error() const {
+    return make_error(ErrorCode::changed,
+                      path_ +
+                          " was modified in place after it was opened (size or modification "
+                          "time differ); reopen it");
+  }
+
+  const int fd_;
+  const std::uint64_t size_;
+  const timespec mtime_;
+  const std::string path_;
+  mutable std::atomic<bool> changed_{false};  // sticky: a file once changed stays changed
 };
 
 // Keeps the code of an error and puts context in front of its message.
@@ -82,16 +153,18 @@ struct LeafKeyHash {
 
 class ReaderImpl final : public Reader {
  public:
-  ReaderImpl(std::span<const std::uint8_t> bytes, std::unique_ptr<Mapping> mapping,
-             ReaderOptions options)
-      : bytes_(bytes), mapping_(std::move(mapping)), options_(options) {}
+  ReaderImpl(std::unique_ptr<ByteSource> source, ReaderOptions options)
+      : source_(std::move(source)), options_(options) {}
 
-  // Validates the header against the archive size and decodes the root directory and metadata.
+  // Validates the header against the archive size, reads and decodes the root directory and
+  // metadata, and works out the version.
   Status init() {
-    Result<Header> h = parse_header(bytes_);
+    const std::uint64_t size = source_->size();
+    std::vector<std::uint8_t> head(std::min<std::uint64_t>(size, kHeaderSize));
+    if (Status s = source_->read(0, head); !s) return s;
+    Result<Header> h = parse_header(head);
     if (!h) return std::move(h).error();
     header_ = *h;
-    const std::uint64_t size = bytes_.size();
     struct Section {
       const char* name;
       std::uint64_t offset, length;
@@ -117,66 +190,69 @@ class ReaderImpl final : public Reader {
     if (header_.root_dir_length == 0) {
       return make_error(ErrorCode::corrupt, "root directory has length 0");
     }
-    Result<Directory> root = decode_directory(header_.root_dir_offset, header_.root_dir_length);
+    Result<std::vector<std::uint8_t>> root_bytes =
+        read_section("root directory", header_.root_dir_offset, header_.root_dir_length,
+                     options_.max_directory_bytes);
+    if (!root_bytes) return std::move(root_bytes).error();
+    Result<Directory> root = decode_directory(*root_bytes);
     if (!root) return with_context("root directory", std::move(root).error());
     root_ = std::move(*root);
 
+    Result<std::vector<std::uint8_t>> meta_bytes = read_section(
+        "metadata", header_.metadata_offset, header_.metadata_length, options_.max_metadata_bytes);
+    if (!meta_bytes) return std::move(meta_bytes).error();
     if (header_.metadata_length > 0) {
       Result<std::vector<std::uint8_t>> meta =
-          decompress(bytes_.subspan(header_.metadata_offset, header_.metadata_length),
-                     header_.internal_compression, options_.max_metadata_bytes);
+          decompress(*meta_bytes, header_.internal_compression, options_.max_metadata_bytes);
       if (!meta) return with_context("metadata", std::move(meta).error());
       metadata_.assign(meta->begin(), meta->end());
     }
+
+    version_ = archive_version(head, *root_bytes, *meta_bytes);
     return {};
   }
 
   const Header& header() const override { return header_; }
   const std::string& metadata_json() const override { return metadata_; }
-  std::span<const std::uint8_t> bytes() const override { return bytes_; }
-  int file_descriptor() const override { return mapping_ ? mapping_->fd() : -1; }
+  const std::string& version() const override { return version_; }
+  std::uint64_t size() const override { return source_->size(); }
 
-  Result<std::span<const std::uint8_t>> get(TileId id) const override {
+  Status read(std::uint64_t offset, std::span<std::uint8_t> out) const override {
+    if (!within(offset, out.size(), source_->size())) {
+      return make_error(ErrorCode::invalid_argument,
+                        "bytes " + std::to_string(offset) + "+" + std::to_string(out.size()) +
+                            " lie beyond the archive's " + std::to_string(source_->size()));
+    }
+    return source_->read(offset, out);
+  }
+
+  Status check_unchanged() const override { return source_->check_unchanged(); }
+
+  Result<std::vector<std::uint8_t>> get(TileId id) const override {
     if (id.z > 31 || std::uint64_t{id.x} >= (std::uint64_t{1} << id.z) ||
         std::uint64_t{id.y} >= (std::uint64_t{1} << id.z)) {
       return make_error(ErrorCode::invalid_argument, "tile " + name(id) + " does not exist");
     }
-    Result<std::span<const std::uint8_t>> r = get_by_tile_id(zxy_to_tile_id(id.z, id.x, id.y));
+    Result<std::vector<std::uint8_t>> r = get_by_tile_id(zxy_to_tile_id(id.z, id.x, id.y));
     if (!r && r.error().code == ErrorCode::not_found) {
       return make_error(ErrorCode::not_found, "tile " + name(id) + " is not in the archive");
     }
     return r;
   }
 
-  Result<std::span<const std::uint8_t>> get_by_tile_id(std::uint64_t tile_id) const override {
-    // The root is borrowed; only leaves (which the cache may evict) are held by shared_ptr.
-    const std::vector<Entry>* dir = root_.get();
-    Directory leaf_holder;
-    for (int level = 0; level < kMaxDirectoryDepth; ++level) {
-      // The last entry with tile_id <= the wanted id is the only one that can hold it.
-      const auto it =
-          std::upper_bound(dir->begin(), dir->end(), tile_id,
-                           [](std::uint64_t id, const Entry& e) { return id < e.tile_id; });
-      if (it == dir->begin()) break;
-      const Entry e = *(it - 1);
-      if (e.run_length > 0) {
-        if (tile_id - e.tile_id >= e.run_length) break;
-        if (Status s = check_tile_entry(e); !s) return s.error();
-        return bytes_.subspan(header_.tile_data_offset + e.offset, e.length);
-      }
-      if (level + 1 == kMaxDirectoryDepth) {
-        return make_error(ErrorCode::corrupt, "directory cycle or too deep: tile id " +
-                                                  std::to_string(tile_id) +
-                                                  " still leads to a leaf directory after " +
-                                                  std::to_string(kMaxDirectoryDepth) + " levels");
-      }
-      Result<Directory> leaf = load_leaf(e);
-      if (!leaf) return std::move(leaf).error();
-      leaf_holder = std::move(*leaf);
-      dir = leaf_holder.get();
+  Result<std::vector<std::uint8_t>> get_by_tile_id(std::uint64_t tile_id) const override {
+    Result<Entry> e = find_entry(tile_id);
+    if (!e) return std::move(e).error();
+    if (e->length > options_.max_tile_bytes) {
+      return make_error(ErrorCode::too_large,
+                        "tile id " + std::to_string(tile_id) + " is " + std::to_string(e->length) +
+                            " bytes, over the limit of " + std::to_string(options_.max_tile_bytes));
     }
-    return make_error(ErrorCode::not_found,
-                      "tile id " + std::to_string(tile_id) + " is not in the archive");
+    std::vector<std::uint8_t> payload(e->length);
+    if (Status s = source_->read(header_.tile_data_offset + e->offset, payload); !s) {
+      return s.error();
+    }
+    return payload;
   }
 
   Status for_each_entry(const std::function<bool(const Entry&)>& visitor) const override {
@@ -204,6 +280,37 @@ class ReaderImpl final : public Reader {
     return std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
   }
 
+  Result<Entry> find_entry(std::uint64_t tile_id) const override {
+    // The root is borrowed; only leaves (which the cache may evict) are held by shared_ptr.
+    const std::vector<Entry>* dir = root_.get();
+    Directory leaf_holder;
+    for (int level = 0; level < kMaxDirectoryDepth; ++level) {
+      // The last entry with tile_id <= the wanted id is the only one that can hold it.
+      const auto it =
+          std::upper_bound(dir->begin(), dir->end(), tile_id,
+                           [](std::uint64_t id, const Entry& e) { return id < e.tile_id; });
+      if (it == dir->begin()) break;
+      const Entry e = *(it - 1);
+      if (e.run_length > 0) {
+        if (tile_id - e.tile_id >= e.run_length) break;
+        if (Status s = check_tile_entry(e); !s) return s.error();
+        return e;
+      }
+      if (level + 1 == kMaxDirectoryDepth) {
+        return make_error(ErrorCode::corrupt, "directory cycle or too deep: tile id " +
+                                                  std::to_string(tile_id) +
+                                                  " still leads to a leaf directory after " +
+                                                  std::to_string(kMaxDirectoryDepth) + " levels");
+      }
+      Result<Directory> leaf = load_leaf(e);
+      if (!leaf) return std::move(leaf).error();
+      leaf_holder = std::move(*leaf);
+      dir = leaf_holder.get();
+    }
+    return make_error(ErrorCode::not_found,
+                      "tile id " + std::to_string(tile_id) + " is not in the archive");
+  }
+
   Status check_tile_entry(const Entry& e) const {
     if (!within(e.offset, e.length, header_.tile_data_length)) {
       return make_error(ErrorCode::corrupt, "tile entry for tile id " + std::to_string(e.tile_id) +
@@ -215,18 +322,31 @@ class ReaderImpl final : public Reader {
     return {};
   }
 
-  // Decompresses and parses the directory at [offset, offset + length) of the archive, which the
-  // caller has bounds-checked.
-  Result<Directory> decode_directory(std::uint64_t offset, std::uint64_t length) const {
-    Result<std::vector<std::uint8_t>> raw = decompress(
-        bytes_.subspan(offset, length), header_.internal_compression, options_.max_directory_bytes);
+  // Reads a section (or a leaf) the caller has bounds-checked, refusing stored sizes over `limit`
+  // before allocating.
+  Result<std::vector<std::uint8_t>> read_section(const std::string& what, std::uint64_t offset,
+                                                 std::uint64_t length, std::size_t limit) const {
+    if (length > limit) {
+      return make_error(ErrorCode::too_large, what + " of " + std::to_string(length) +
+                                                  " bytes is over the limit of " +
+                                                  std::to_string(limit));
+    }
+    std::vector<std::uint8_t> bytes(length);
+    if (Status s = source_->read(offset, bytes); !s) return s.error();
+    return bytes;
+  }
+
+  // Decompresses and parses a directory as stored.
+  Result<Directory> decode_directory(std::span<const std::uint8_t> stored) const {
+    Result<std::vector<std::uint8_t>> raw =
+        decompress(stored, header_.internal_compression, options_.max_directory_bytes);
     if (!raw) return std::move(raw).error();
     Result<std::vector<Entry>> entries = parse_directory(*raw);
     if (!entries) return std::move(entries).error();
     return std::make_shared<const std::vector<Entry>>(std::move(*entries));
   }
 
-  // Bounds-checks a leaf pointer against the leaf section and decodes the leaf it points to.
+  // Bounds-checks a leaf pointer against the leaf section, reads and decodes the leaf.
   Result<Directory> decode_leaf(const Entry& pointer) const {
     const std::string where = "leaf directory at offset " + std::to_string(pointer.offset) +
                               " length " + std::to_string(pointer.length);
@@ -234,8 +354,11 @@ class ReaderImpl final : public Reader {
       return make_error(ErrorCode::corrupt, where + " extends past the leaf section (size " +
                                                 std::to_string(header_.leaf_dirs_length) + ")");
     }
-    Result<Directory> d =
-        decode_directory(header_.leaf_dirs_offset + pointer.offset, pointer.length);
+    Result<std::vector<std::uint8_t>> stored =
+        read_section(where, header_.leaf_dirs_offset + pointer.offset, pointer.length,
+                     options_.max_directory_bytes);
+    if (!stored) return std::move(stored).error();
+    Result<Directory> d = decode_directory(*stored);
     if (!d) return with_context(where, std::move(d).error());
     return d;
   }
@@ -311,11 +434,11 @@ class ReaderImpl final : public Reader {
     return {};
   }
 
-  std::span<const std::uint8_t> bytes_;
-  std::unique_ptr<Mapping> mapping_;  // null when the bytes are borrowed
+  std::unique_ptr<ByteSource> source_;
   ReaderOptions options_;
   Header header_;
   std::string metadata_;
+  std::string version_;
   Directory root_;
 
   mutable std::mutex cache_mutex_;
@@ -325,10 +448,9 @@ class ReaderImpl final : public Reader {
       cache_index_;
 };
 
-Result<std::shared_ptr<Reader>> make_reader(std::span<const std::uint8_t> bytes,
-                                            std::unique_ptr<Mapping> mapping,
+Result<std::shared_ptr<Reader>> make_reader(std::unique_ptr<ByteSource> source,
                                             ReaderOptions options) {
-  auto reader = std::make_shared<ReaderImpl>(bytes, std::move(mapping), options);
+  auto reader = std::make_shared<ReaderImpl>(std::move(source), options);
   if (Status s = reader->init(); !s) return s.error();
   return std::shared_ptr<Reader>(std::move(reader));
 }
@@ -342,7 +464,8 @@ Result<std::shared_ptr<Reader>> Reader::open(const std::filesystem::path& path,
         err == ENOENT ? ErrorCode::not_found : ErrorCode::io,
         std::string(what) + " " + path.string() + ": " + std::generic_category().message(err));
   };
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  // O_NONBLOCK: opening a FIFO must not wait for a writer (it is refused just below).
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
   if (fd < 0) return sys_error("cannot open", errno);
   struct stat st {};
   if (::fstat(fd, &st) != 0) {
@@ -358,37 +481,26 @@ Result<std::shared_ptr<Reader>> Reader::open(const std::filesystem::path& path,
     ::close(fd);
     return make_error(ErrorCode::truncated, path.string() + " is empty");
   }
-  const std::size_t size = static_cast<std::size_t>(st.st_size);
-  // MAP_PRIVATE + PROT_READ: we never write, and nobody else's writes through the mapping could
-  // reach us. (Truncating the file under a live reader is outside the contract: SIGBUS.)
-  void* addr = ::mmap(nullptr, size, PROT_READ, MAP_PRIVATE, fd, 0);
-  const int map_err = errno;
-  if (addr == MAP_FAILED) {
-    ::close(fd);
-    return sys_error("cannot map", map_err);
-  }
-  auto mapping = std::make_unique<Mapping>(addr, size, fd);
-  const std::span<const std::uint8_t> bytes = mapping->bytes();
-  Result<std::shared_ptr<Reader>> r = make_reader(bytes, std::move(mapping), options);
+  Result<std::shared_ptr<Reader>> r =
+      make_reader(std::make_unique<FileBytes>(fd, st, path.string()), options);
   if (!r) return with_context(path.string(), std::move(r).error());
   return r;
 }
 
 Result<std::shared_ptr<Reader>> Reader::open_bytes(std::span<const std::uint8_t> bytes,
                                                    ReaderOptions options) {
-  return make_reader(bytes, nullptr, options);
+  return make_reader(std::make_unique<BorrowedBytes>(bytes), options);
 }
 
-std::string archive_version(const Reader& reader) {
-  const auto bytes = reader.bytes();
-  const Header& h = reader.header();
-  // The reader has checked that these sections lie inside the archive.
+std::string archive_version(std::span<const std::uint8_t> header,
+                            std::span<const std::uint8_t> root,
+                            std::span<const std::uint8_t> metadata) {
   XXH3_state_t* state = XXH3_createState();
   if (state == nullptr) throw std::bad_alloc();
   XXH3_64bits_reset(state);
-  XXH3_64bits_update(state, bytes.data(), kHeaderSize);
-  XXH3_64bits_update(state, bytes.data() + h.root_dir_offset, h.root_dir_length);
-  XXH3_64bits_update(state, bytes.data() + h.metadata_offset, h.metadata_length);
+  XXH3_64bits_update(state, header.data(), header.size());
+  XXH3_64bits_update(state, root.data(), root.size());
+  XXH3_64bits_update(state, metadata.data(), metadata.size());
   const XXH64_hash_t hash = XXH3_64bits_digest(state);
   XXH3_freeState(state);
   char hex[17];

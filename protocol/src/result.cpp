@@ -26,6 +26,8 @@ const char* error_code_name(ErrorCode code) noexcept {
       return "cancelled";
     case ErrorCode::internal:
       return "internal";
+    case ErrorCode::changed:
+      return "changed";
   }
   return "unknown";
 }
@@ -47,6 +49,8 @@ int exit_code(ErrorCode code) noexcept {
     case ErrorCode::unsupported:
     case ErrorCode::too_large:
       return 6;
+    case ErrorCode::changed:
+      return 75;
     case ErrorCode::cancelled:
       return 130;
     case ErrorCode::internal:
@@ -64,6 +68,7 @@ int http_status(ErrorCode code) noexcept {
     case ErrorCode::not_found:
       return 404;
     case ErrorCode::cancelled:
+    case ErrorCode::changed:
       return 503;
     case ErrorCode::io:
     case ErrorCode::corrupt:

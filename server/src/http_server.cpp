@@ -266,9 +266,8 @@ class Server final : public HttpServer, public SessionHost {
 Result<std::unique_ptr<HttpServer>> HttpServer::create(HttpServerOptions options,
                                                        std::shared_ptr<TilesetRegistry> registry) {
   if (!registry) return make_error(ErrorCode::invalid_argument, "no tileset registry");
-  // sendfile(2) has no MSG_NOSIGNAL: a client that closes while its tile is on the way would kill
-  // the whole process with SIGPIPE. Like every server, ignore it (the write then fails with EPIPE
-  // and only that connection ends).
+  // Every write passes MSG_NOSIGNAL, but a library's may not: like every server, ignore SIGPIPE
+  // (a write to a closed connection then fails with EPIPE and only that connection ends).
   ::signal(SIGPIPE, SIG_IGN);
   auto s = std::make_unique<Server>(std::move(options), std::move(registry));
   if (auto st = s->bind(); !st.ok()) return st.error();

@@ -38,11 +38,14 @@ void ReloadLoop::run() {
     else
       cv_.wait(lock, [this] { return quit_ || pending_; });
     if (quit_) break;
+    if (!force_) cv_.wait_until(lock, last_ + kMinGap, [this] { return quit_ || force_; });
+    if (quit_) break;
     const bool force = force_;
     pending_ = force_ = false;
     lock.unlock();
     reload(force);
     lock.lock();
+    last_ = std::chrono::steady_clock::now();
   }
 }
 

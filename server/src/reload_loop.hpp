@@ -1,6 +1,8 @@
 // The background thread that keeps the registry current: registry.reload(false) every `interval`
-// (0 = never), registry.reload(true) on request. Swaps, additions, removals and refusals are
-// logged to stderr and counted in the metrics.
+// (0 = never), and on request (force: registry.reload(true)). Requests that arrive while a reload
+// runs are merged into the next one, and unforced ones wait until kMinGap after the previous
+// reload: requests for tiles of an archive being copied in place ask for one each. Swaps,
+// additions, removals and refusals are logged to stderr and counted in the metrics.
 #pragma once
 
 #include <chrono>
@@ -35,12 +37,15 @@ class ReloadLoop {
   void run();
   void reload(bool force);
 
+  static constexpr std::chrono::milliseconds kMinGap{100};
+
   TilesetRegistry& registry_;
   Metrics& metrics_;
   const std::chrono::milliseconds interval_;
   std::mutex mutex_;
   std::condition_variable cv_;
   bool quit_ = false, pending_ = false, force_ = false;
+  std::chrono::steady_clock::time_point last_{};  // when the previous reload ended
   std::thread thread_;
 };
 

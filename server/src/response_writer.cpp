@@ -1,6 +1,5 @@
 #include "response_writer.hpp"
 
-#include <sys/sendfile.h>
 #include <sys/socket.h>
 #include <sys/uio.h>
 
@@ -69,34 +68,26 @@ void serialise_head(const Outgoing& o, bool no_body, std::string& h) {
   h += "\r\n";
 }
 
-// Points the body at the archive's file (sendfile) or at memory.
-void point_body(Outgoing& o, std::size_t sendfile_min_bytes) {
-  const HttpResponse& r = o.response;
-  if (r.view.empty()) {
-    o.body = {r.owned.data(), r.owned.size()};
-    return;
-  }
-  o.body = {reinterpret_cast<const char*>(r.view.data()), r.view.size()};
-  const pmtiles::Reader* reader = r.hold ? r.hold->reader.get() : nullptr;
-  const auto whole = reader ? reader->bytes() : std::span<const std::uint8_t>{};
-  if (reader && reader->file_descriptor() >= 0 && r.view.data() >= whole.data() &&
-      r.view.data() + r.view.size() <= whole.data() + whole.size() &&
-      r.view.size() >= sendfile_min_bytes) {
-    o.file_fd = reader->file_descriptor();
-    o.file_offset = off_t(r.view.data() - whole.data());
-  }
-}
+constexpr std::size_t kFileChunkBytes = 256 * 1024;
 
 }  // namespace
 
-void prepare_response(Outgoing& o, std::size_t sendfile_min_bytes) {
+void prepare_response(Outgoing& o) {
   const HttpResponse& r = o.response;
   const bool no_body = r.status == 304 || r.status == 204 || (r.status >= 100 && r.status < 200);
   serialise_head(o, no_body, o.head);
-  if (!r.head_only && !no_body) {
-    point_body(o, sendfile_min_bytes);
-    assert(o.body.size() == r.content_length);
+  if (r.head_only || no_body) return;
+  o.body_size = r.content_length;
+  if (r.file_body) {
+    assert(r.hold && r.hold->reader);
+    o.file = r.hold->reader.get();
+    o.file_offset = r.file_offset;
+    return;
   }
+  o.body = r.view.empty()
+               ? std::span<const char>(r.owned.data(), r.owned.size())
+               : std::span<const char>(reinterpret_cast<const char*>(r.view.data()), r.view.size());
+  assert(o.body.size() == r.content_length);
 }
 
 std::size_t write_some(int sock, Outgoing& o, boost::system::error_code& ec) {
@@ -105,9 +96,9 @@ std::size_t write_some(int sock, Outgoing& o, boost::system::error_code& ec) {
   if (o.sent < o.head.size()) {
     const char* p = o.head.data() + o.sent;
     const std::size_t len = o.head.size() - o.sent;
-    if (o.file_fd >= 0) {
+    if (o.file != nullptr) {
       // The body follows from the file: MSG_MORE holds this partial segment for it.
-      n = ::send(sock, p, len, MSG_NOSIGNAL | MSG_MORE);
+      n = ::send(sock, p, len, MSG_NOSIGNAL | (o.body_size > 0 ? MSG_MORE : 0));
     } else {
       iovec iov[2] = {{const_cast<char*>(p), len},
                       {const_cast<char*>(o.body.data()), o.body.size()}};
@@ -116,15 +107,24 @@ std::size_t write_some(int sock, Outgoing& o, boost::system::error_code& ec) {
       msg.msg_iovlen = o.body.empty() ? 1 : 2;
       n = ::sendmsg(sock, &msg, MSG_NOSIGNAL);
     }
+  } else if (o.file != nullptr) {
+    const std::uint64_t done = o.sent - o.head.size();
+    if (done >= o.chunk_start + o.chunk.size()) {
+      const std::size_t len =
+          std::size_t(std::min<std::uint64_t>(kFileChunkBytes, o.body_size - done));
+      o.chunk.resize(len);
+      const std::span<std::uint8_t> out(reinterpret_cast<std::uint8_t*>(o.chunk.data()), len);
+      if (!o.file->read(o.file_offset + done, out)) {
+        ec = aerr::operation_aborted;
+        return 0;
+      }
+      o.chunk_start = done;
+    }
+    const std::size_t at = std::size_t(done - o.chunk_start);
+    n = ::send(sock, o.chunk.data() + at, o.chunk.size() - at, MSG_NOSIGNAL);
   } else {
     const std::size_t done = o.sent - o.head.size();
-    const std::size_t len = o.body.size() - done;
-    if (o.file_fd >= 0) {
-      off_t off = o.file_offset + off_t(done);
-      n = ::sendfile(sock, o.file_fd, &off, std::min<std::size_t>(len, std::size_t(1) << 30));
-    } else {
-      n = ::send(sock, o.body.data() + done, len, MSG_NOSIGNAL);
-    }
+    n = ::send(sock, o.body.data() + done, o.body.size() - done, MSG_NOSIGNAL);
   }
   if (n < 0) {
     const int err = errno;
@@ -133,7 +133,6 @@ std::size_t write_some(int sock, Outgoing& o, boost::system::error_code& ec) {
              : boost::system::error_code(err, boost::system::system_category());
     return 0;
   }
-  if (n == 0) ec = aerr::eof;  // a file shorter than its mapping: never for a valid reader
   return std::size_t(n);
 }
 

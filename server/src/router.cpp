@@ -1,6 +1,6 @@
 // The HTTP semantics of `vts serve` (docs/PROTOCOL.md): routing, tile and archive answers,
-// TileJSON and the index. Pure: no I/O, no allocation of tile bodies (tile and archive bodies are
-// views into the archive mapping). The target is checked in router_target.cpp, ranges in
+// TileJSON and the index. Pure but for reading tiles from their archive (pmtiles::Reader: a copy
+// per tile, kept by the response); archive bodies are a file region the network layer reads. The target is checked in router_target.cpp, ranges in
 // router_conditional.cpp, credentials in router_access.cpp, the admin listener in router_admin.cpp.
 #include "vts/server/router.hpp"
 
@@ -87,8 +87,25 @@ HttpResponse outside_pyramid(std::uint32_t z, std::uint32_t x, std::uint32_t y,
 
 // A tile the archive could not give: 204 (known-empty) for a missing tile of a sparse tileset,
 // else the status http_status() gives the error.
+// 503 for a tileset whose archive was modified in place since it was opened: the server reloads
+// its tilesets, and the client tries again shortly (by then against the archive that replaced
+// it, once that one is complete and valid).
+HttpResponse archive_changed(std::shared_ptr<const Tileset> t, const Error& e) {
+  HttpResponse r = error(503, "the archive of tileset " + t->name +
+                                  " is being replaced; try again shortly (" + e.message + ")");
+  add(r, "Retry-After", "1");
+  r.archive_changed = true;
+  r.hold = std::move(t);  // names the tileset in access logs
+  return r;
+}
+
 HttpResponse unreadable_tile(std::shared_ptr<const Tileset> t, TileId id, const Error& e,
                              const std::string& cc) {
+  if (e.code == ErrorCode::changed) {
+    HttpResponse r = archive_changed(std::move(t), e);
+    r.route = Route::tile;
+    return r;
+  }
   const int status = http_status(e.code);
   if (status == 404 && t->info.sparse) {
     HttpResponse r;
@@ -181,8 +198,12 @@ HttpResponse tilejson_route(const Tileset& t, const std::string& base, bool priv
 
 HttpResponse archive_route(const HttpRequest& request, std::shared_ptr<const Tileset> t,
                            const RouterConfig& config, bool priv) {
-  const auto bytes = t->reader->bytes();
-  const std::uint64_t size = bytes.size();
+  if (Status s = t->reader->check_unchanged(); !s) {
+    HttpResponse e = archive_changed(std::move(t), s.error());
+    e.route = Route::archive;
+    return e;
+  }
+  const std::uint64_t size = t->reader->size();
   const std::string etag = "\"" + t->version + "\"";
   HttpResponse r;
   r.route = Route::archive;
@@ -214,11 +235,12 @@ HttpResponse archive_route(const HttpRequest& request, std::shared_ptr<const Til
     add(r, "Content-Range",
         "bytes " + std::to_string(range.first) + "-" + std::to_string(range.last) + "/" +
             std::to_string(size));
-    r.view = bytes.subspan(range.first, range.last - range.first + 1);
+    r.file_offset = range.first;
+    r.content_length = range.last - range.first + 1;
   } else {
-    r.view = bytes;
+    r.content_length = size;
   }
-  r.content_length = r.view.size();
+  r.file_body = true;
   r.hold = std::move(t);
   return r;
 }
@@ -272,8 +294,10 @@ HttpResponse tile_route(const HttpRequest& request, std::shared_ptr<const Tilese
                                          : cache_control(priv, kImmutableMaxAge, true);
   auto payload = t->reader->get(id);
   if (!payload) return unreadable_tile(std::move(t), id, payload.error(), cc);
-  HttpResponse r = payload_response(*payload, request.if_none_match, cc, 500, id, t->name);
-  r.hold = std::move(t);  // keeps the mapping alive; names the tileset in access logs
+  auto bytes = std::make_shared<const std::vector<std::uint8_t>>(std::move(*payload));
+  HttpResponse r = payload_response(*bytes, request.if_none_match, cc, 500, id, t->name);
+  if (!r.view.empty()) r.keep = std::move(bytes);
+  r.hold = std::move(t);  // names the tileset in access logs
   return r;
 }
 

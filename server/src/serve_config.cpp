@@ -14,10 +14,9 @@ using nlohmann::json;
 constexpr std::array<std::string_view, 10> kTopKeys = {
     "listen",     "admin",      "threads", "cors_origin",        "max_age",
     "public_url", "access_log", "access",  "reload_interval_ms", "limits"};
-constexpr std::array<std::string_view, 10> kLimitKeys = {
-    "max_header_bytes", "max_target_bytes",   "max_connections", "max_pipeline",
-    "min_send_rate",    "sendfile_min_bytes", "idle_timeout_ms", "header_timeout_ms",
-    "write_timeout_ms", "drain_timeout_ms"};
+constexpr std::array<std::string_view, 9> kLimitKeys = {
+    "max_header_bytes", "max_target_bytes",  "max_connections",  "max_pipeline",    "min_send_rate",
+    "idle_timeout_ms",  "header_timeout_ms", "write_timeout_ms", "drain_timeout_ms"};
 constexpr std::array<std::string_view, 2> kAccessKeys = {"tokens", "hmac_keys"};
 
 Error config_error(const std::string& file, const std::string& why) {
@@ -75,7 +74,6 @@ Status apply_limits(const json& l, const std::string& file, HttpServerLimits& L)
   size("max_connections", L.max_connections);
   size("max_pipeline", L.max_pipeline);
   size("min_send_rate", L.min_send_rate);
-  size("sendfile_min_bytes", L.sendfile_min_bytes);
   ms("idle_timeout_ms", L.idle_timeout);
   ms("header_timeout_ms", L.header_timeout);
   ms("write_timeout_ms", L.write_timeout);

@@ -285,6 +285,7 @@ std::unique_ptr<Outgoing> Session::answer(RequestParser::value_type& req) {
     out->response = server_.admin_route(hr);
   } else {
     out->response = route(hr, server_.registry(), server_.options().router, server_.provider());
+    if (out->response.archive_changed) server_.request_reload(false);
   }
   if (!req.keep_alive() || server_.stopping()) out->close = true;
   // HTTP/1.0 keeps a connection open only when both sides say so.
@@ -374,7 +375,7 @@ void Session::finish_deferred(std::uint64_t seq, ProvidedTile tile) {
 }
 
 void Session::prepare(Outgoing& o) {
-  prepare_response(o, server_.options().limits.sendfile_min_bytes);
+  prepare_response(o);
 }
 
 // Writes queued responses in order until the queue is empty or the socket is full; then waits for
@@ -479,7 +480,7 @@ std::unique_ptr<Outgoing> Session::new_outgoing() {
 void Session::recycle(std::unique_ptr<Outgoing> o) {
   std::string head = std::move(o->head);
   head.clear();
-  *o = Outgoing{};  // releases what the response held (mapping, provided tile)
+  *o = Outgoing{};  // releases what the response held (tile bytes, tileset)
   o->head = std::move(head);
   spare_ = std::move(o);
 }

@@ -34,6 +34,8 @@ class SessionHost {
   virtual AccessLog& access_log() = 0;
   virtual bool stopping() const = 0;
   virtual HttpResponse admin_route(const HttpRequest& request) = 0;
+  // Asks for registry.reload(force) on the reload thread; returns at once.
+  virtual void request_reload(bool force) = 0;
   // From the session's destructor, on whatever thread runs it.
   virtual void remove_session(Session* s) = 0;
 

@@ -65,7 +65,7 @@ Result<std::shared_ptr<const Tileset>> open_tileset(const fs::path& path) {
 
   // Stat before opening: if the file is replaced in between, the recorded identity is the old
   // one, so the next reload sees a change and re-opens (never the reverse, which would pin a
-  // stale mapping forever).
+  // stale archive forever).
   auto id = identify(path);
   if (!id) return id.error();
 
@@ -83,7 +83,7 @@ Result<std::shared_ptr<const Tileset>> open_tileset(const fs::path& path) {
   t->path = path;
   t->reader = std::move(*reader);
   t->info = std::move(*info);
-  t->version = pmtiles::archive_version(*t->reader);
+  t->version = t->reader->version();
   t->file_size = id->size;
   t->file_mtime_ns = id->mtime_ns;
   t->file_inode = id->inode;
@@ -166,7 +166,7 @@ TilesetRegistry::ReloadResult TilesetRegistry::reload(bool force) {
     folders = folders_;
   }
   // Archives that appeared in a served folder are added; those that left it are removed (requests
-  // in flight finish on their mapping). Files given by name are never removed.
+  // in flight finish on their open file). Files given by name are never removed.
   std::set<fs::path> in_folders;
   for (const auto& folder : folders) {
     auto found = list_archives(folder);
@@ -242,14 +242,24 @@ void TilesetRegistry::refresh_loaded(const std::vector<fs::path>& folders, bool 
       continue;
     }
     if (!force && *id == identity_of(*old)) continue;
+    {
+      std::lock_guard lock(mutex_);
+      auto r = refused_.find(old->path);
+      if (!force && r != refused_.end() && r->second == *id) continue;  // refused as it is
+    }
     auto fresh = open_tileset(old->path);
     if (!fresh) {
+      // The previous archive keeps answering: whole when its file was replaced by a rename, with
+      // 503s (ErrorCode::changed) when it was modified in place, until a valid archive is there.
+      std::lock_guard lock(mutex_);
+      refused_[old->path] = *id;
       result.failures.push_back(make_error(
           fresh.error().code, fresh.error().message + " (new archive refused; tileset \"" +
-                                  old->name + "\" keeps serving the previous one)"));
+                                  old->name + "\" keeps the previous one)"));
       continue;
     }
     std::lock_guard lock(mutex_);
+    refused_.erase(old->path);
     auto it = tilesets_.find(old->name);
     // Swap only if nobody replaced the entry meanwhile (a concurrent reload).
     if (it != tilesets_.end() && it->second == old) {

@@ -1,8 +1,10 @@
 // Fuzz target: a PMTiles archive from untrusted bytes. Opens the input with Reader::open_bytes and
 // does what a server or `vts info` would: looks up a handful of tile ids (fixed ones and ones the
 // directories name), walks every entry and counts leaf directories. Also feeds the raw bytes to
-// the header and directory parsers directly. Any crash, sanitizer report, out-of-bounds view or
-// hang is a bug; errors are the expected outcome for most inputs.
+// the header and directory parsers directly. Any crash, sanitizer report or hang is a bug, and so
+// is a tile that is not the bytes its entry points at; errors are the expected outcome for most
+// inputs.
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <span>
@@ -15,10 +17,14 @@ namespace {
 using vts::pmtiles::Entry;
 using vts::pmtiles::Reader;
 
-// A returned tile must be a view inside the input.
-void check_view(std::span<const std::uint8_t> all, std::span<const std::uint8_t> tile) {
-  if (tile.data() < all.data() || tile.size() > all.size() ||
-      tile.data() + tile.size() > all.data() + all.size()) {
+// A returned tile must be a copy of the bytes its directory entry points at, inside the input.
+void check_tile(const Reader& reader, std::span<const std::uint8_t> all, std::uint64_t id,
+                const std::vector<std::uint8_t>& tile) {
+  auto e = reader.find_entry(id);
+  if (!e) __builtin_trap();
+  const std::uint64_t at = reader.header().tile_data_offset + e->offset;
+  if (e->length != tile.size() || at > all.size() || tile.size() > all.size() - at ||
+      !std::equal(tile.begin(), tile.end(), all.begin() + std::ptrdiff_t(at))) {
     __builtin_trap();
   }
 }
@@ -41,12 +47,14 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   const Reader& reader = **opened;
 
   for (std::uint64_t id = 0; id < 8; ++id) {
-    if (auto t = reader.get_by_tile_id(id)) check_view(bytes, *t);
+    if (auto t = reader.get_by_tile_id(id)) check_tile(reader, bytes, id, *t);
   }
   for (const vts::TileId t :
        {vts::TileId{0, 0, 0}, vts::TileId{1, 1, 0}, vts::TileId{3, 7, 7},
         vts::TileId{31, 0x7fffffff, 0}, vts::TileId{2, 4, 0}, vts::TileId{40, 0, 0}}) {
-    if (auto tile = reader.get(t)) check_view(bytes, *tile);
+    if (auto tile = reader.get(t)) {
+      check_tile(reader, bytes, vts::pmtiles::zxy_to_tile_id(t.z, t.x, t.y), *tile);
+    }
   }
 
   // Ids the archive itself mentions: the first and last tile of the first few runs, and the ids
@@ -59,7 +67,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   for (const Entry& e : seen) {
     for (std::uint64_t id :
          {e.tile_id - 1, e.tile_id, e.tile_id + e.run_length - 1, e.tile_id + e.run_length}) {
-      if (auto t = reader.get_by_tile_id(id)) check_view(bytes, *t);
+      if (auto t = reader.get_by_tile_id(id)) check_tile(reader, bytes, id, *t);
     }
   }
 

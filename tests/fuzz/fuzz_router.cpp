@@ -87,11 +87,12 @@ void check_response(const vts::HttpRequest& req, const vts::HttpResponse& r) {
   for (const auto& [name, value] : r.headers) {
     check(!name.empty() && clean_header_text(name) && clean_header_text(value));
   }
-  if (!r.view.empty()) {
-    check(r.hold != nullptr);
-    const auto whole = r.hold->reader->bytes();
-    check(r.view.data() >= whole.data() &&
-          r.view.data() + r.view.size() <= whole.data() + whole.size());
+  if (r.file_body) {
+    check(r.hold != nullptr && r.owned.empty() && r.view.empty());
+    check(r.file_offset <= r.hold->reader->size() &&
+          r.content_length <= r.hold->reader->size() - r.file_offset);
+  } else if (!r.view.empty()) {
+    check(r.keep != nullptr);
     check(r.content_length == r.view.size());
   } else {
     check(r.content_length == r.owned.size());

@@ -21,6 +21,7 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <span>
+#include <stdexcept>
 #include <thread>
 #include <vector>
 
@@ -45,7 +46,7 @@ struct Response {
   int status = 200;
   std::vector<std::string> headers;    // "Name: value"
   std::span<const std::uint8_t> view;  // the body, when it lives elsewhere (the archive)
-  std::string owned;                   // the body, when non-empty (text answers)
+  std::string owned;                   // the body, when non-empty (text answers, tiles)
 
   std::span<const std::uint8_t> body() const {
     if (owned.empty()) return view;
@@ -171,12 +172,20 @@ bool etag_matches(std::string_view header, std::string_view etag) {
   return false;
 }
 
+std::vector<std::uint8_t> whole_archive(const pmtiles::Reader& reader) {
+  std::vector<std::uint8_t> bytes(reader.size());
+  if (Status s = reader.read(0, bytes); !s) throw std::runtime_error(s.error().to_string());
+  return bytes;
+}
+
 }  // namespace
 
 class FaultServer::Impl {
  public:
   Impl(std::shared_ptr<pmtiles::Reader> reader, std::string name)
-      : reader_(std::move(reader)), name_(std::move(name)) {}
+      : reader_(std::move(reader)),
+        archive_bytes_(whole_archive(*reader_)),
+        name_(std::move(name)) {}
 
   ~Impl() { stop(); }
 
@@ -545,7 +554,7 @@ class FaultServer::Impl {
             r.status = 304;
             return r;
           }
-          r.view = *tile;
+          r.owned.assign(tile->begin(), tile->end());  // a copy the reader made: keep it
           return r;
         }
       }
@@ -554,7 +563,7 @@ class FaultServer::Impl {
   }
 
   Response serve_archive(const Request& req) const {
-    const std::span<const std::uint8_t> bytes = reader_->bytes();
+    const std::span<const std::uint8_t> bytes = archive_bytes_;
     const std::uint64_t size = bytes.size();
     Response r;
     r.headers.push_back("Content-Type: application/vnd.pmtiles");
@@ -601,6 +610,7 @@ class FaultServer::Impl {
   }
 
   std::shared_ptr<pmtiles::Reader> reader_;
+  const std::vector<std::uint8_t> archive_bytes_;  // the whole file, served for range requests
   std::string name_;
   int listen_fd_ = -1;
   int wake_[2] = {-1, -1};

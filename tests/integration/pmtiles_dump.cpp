@@ -95,7 +95,6 @@ int dump_tiles(const vts::pmtiles::Reader& reader, bool offsets) {
       !st) {
     return fail(st.error(), "walking directories");
   }
-  const auto archive = reader.bytes();
   for (const auto& e : entries) {
     for (std::uint64_t i = 0; i < e.run_length; ++i) {
       const std::uint64_t id = e.tile_id + i;
@@ -105,7 +104,7 @@ int dump_tiles(const vts::pmtiles::Reader& reader, bool offsets) {
       if (!payload) return fail(payload.error(), ("tile " + zxy->to_string()).c_str());
       const auto& t = *zxy;
       if (offsets) {
-        const auto abs = std::uint64_t(payload->data() - archive.data());
+        const auto abs = reader.header().tile_data_offset + e.offset;
         std::printf("%" PRIu64 " %u %u %u %" PRIu64 " %zu\n", id, unsigned(t.z), t.x, t.y, abs,
                     payload->size());
       } else {

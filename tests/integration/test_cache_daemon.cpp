@@ -328,8 +328,9 @@ class FakeProvider final : public vts::AsyncTileProvider {
         a.payload = *junk;
         a.keep = junk;
       } else {
-        a.payload = *payload;
-        a.keep = archive_.reader;  // the mapping outlives the response
+        auto bytes = std::make_shared<const std::vector<std::uint8_t>>(std::move(*payload));
+        a.payload = *bytes;
+        a.keep = bytes;  // the copy the reader made outlives the response
       }
     }
     if (a.kind == vts::ProvidedTile::Kind::unavailable) a.message = "origin down";

@@ -56,7 +56,7 @@ std::vector<std::uint8_t> tile_bytes(vts::TileId id) {
 }
 
 std::vector<std::uint8_t> archive_bytes(std::uint64_t first, std::uint64_t last) {
-  const auto all = archive().reader->bytes();
+  const auto all = vts::test::read_all(*archive().reader);
   return {all.begin() + std::ptrdiff_t(first), all.begin() + std::ptrdiff_t(last + 1)};
 }
 
@@ -209,7 +209,7 @@ TEST(Fetcher, ReturnsEveryTileByteExactWithItsETag) {
 TEST(Fetcher, ReturnsArchiveRangesByteExact) {
   auto server = start_server();
   auto fetcher = make_fetcher();
-  const std::uint64_t size = archive().reader->bytes().size();
+  const std::uint64_t size = archive().reader->size();
   ASSERT_GT(size, 1000u);
   const std::vector<std::pair<std::uint64_t, std::uint64_t>> ranges = {
       {0, 126}, {127, size / 2}, {size / 2, size / 2 + 99}, {size - 1, size - 1}, {0, size - 1}};

@@ -38,6 +38,12 @@ OpenedArchive open_archive(const std::filesystem::path& path) {
   return a;
 }
 
+std::vector<std::uint8_t> read_all(const pmtiles::Reader& reader) {
+  std::vector<std::uint8_t> bytes(reader.size());
+  if (Status s = reader.read(0, bytes); !s) throw std::runtime_error(s.error().to_string());
+  return bytes;
+}
+
 OpenedArchive build_and_open(const BuildOptions& options) {
   build_archive(options);
   return open_archive(options.output);

@@ -36,7 +36,7 @@ TEST(ServeConfig, EveryDocumentedKeyIsApplied) {
     "reload_interval_ms": 250,
     "access": {"earth": {"tokens": ["t1", "t2"], "hmac_keys": ["k"]}},
     "limits": {"max_header_bytes": 4096, "max_target_bytes": 1024, "max_connections": 50,
-               "max_pipeline": 4, "min_send_rate": 1000, "sendfile_min_bytes": 65536,
+               "max_pipeline": 4, "min_send_rate": 1000,
                "idle_timeout_ms": 1000, "header_timeout_ms": 2000, "write_timeout_ms": 3000,
                "drain_timeout_ms": 4000}})",
                           o);
@@ -61,7 +61,6 @@ TEST(ServeConfig, EveryDocumentedKeyIsApplied) {
   EXPECT_EQ(l.max_connections, 50u);
   EXPECT_EQ(l.max_pipeline, 4u);
   EXPECT_EQ(l.min_send_rate, 1000u);
-  EXPECT_EQ(l.sendfile_min_bytes, 65536u);
   EXPECT_EQ(l.idle_timeout, std::chrono::milliseconds(1000));
   EXPECT_EQ(l.header_timeout, std::chrono::milliseconds(2000));
   EXPECT_EQ(l.write_timeout, std::chrono::milliseconds(3000));

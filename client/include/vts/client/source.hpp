@@ -1,4 +1,4 @@
-// Where tiles come from, behind one asynchronous interface: a local archive (mmap), a tile server
+// Where tiles come from, behind one asynchronous interface: a local archive (pread), a tile server
 // described by TileJSON (`vts serve` or any server with our tiles), or a remote PMTiles archive
 // read with HTTP range requests (from `vts serve`'s .pmtiles route, nginx or an object store —
 // no tile server needed). The client stack (TileClient) decorates a source with caches,

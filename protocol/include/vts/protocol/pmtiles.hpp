@@ -113,13 +113,20 @@ class Writer {
 
 struct ReaderOptions {
   std::size_t leaf_cache_entries = 64;          // decoded leaf directories kept (LRU)
-  std::size_t max_directory_bytes = 64u << 20;  // decompressed size limit of one directory
-  std::size_t max_metadata_bytes = 16u << 20;   // decompressed size limit of the metadata
+  std::size_t max_directory_bytes = 64u << 20;  // size limit of one directory, stored or decoded
+  std::size_t max_metadata_bytes = 16u << 20;   // size limit of the metadata, stored or decoded
+  std::size_t max_tile_bytes = 256u << 20;      // a larger tile entry is too_large
 };
 
-// Reads an archive from a read-only memory mapping (or borrowed bytes). Construction validates the
-// header against the file size, decodes the root directory and the metadata; lookups validate
-// every entry they follow. All const member functions are thread-safe.
+// Reads an archive from a file with pread(2), never through a mapping, so that another process
+// truncating or overwriting the file in place cannot fault the reader's process (or from
+// borrowed bytes). Construction validates the header against the file size, reads and decodes
+// the root directory and the metadata; lookups validate every entry they follow. Every read of a
+// file is followed by a check that the file still has the size and modification time it had at
+// open: bytes of a file modified in place since are never returned, the read fails with
+// ErrorCode::changed instead (and every later one: a changed reader stays changed). Replacing the
+// file by renaming another over its path is not a change: the reader keeps reading the file it
+// opened. All const member functions are thread-safe.
 class Reader {
  public:
   static Result<std::shared_ptr<Reader>> open(const std::filesystem::path& path,
@@ -131,17 +138,25 @@ class Reader {
 
   virtual const Header& header() const = 0;
   virtual const std::string& metadata_json() const = 0;
-  // The whole archive as mapped.
-  virtual std::span<const std::uint8_t> bytes() const = 0;
-  // The archive file, open read-only for the reader's lifetime (so a server can sendfile() a
-  // view of bytes() from it: same inode as the mapping, even after the path is replaced); -1 for
-  // a reader over borrowed bytes. Do not close it.
-  virtual int file_descriptor() const = 0;
+  // archive_version() of this archive: what `vts serve` puts in versioned URLs and what the
+  // client sources report.
+  virtual const std::string& version() const = 0;
+  // The archive's size in bytes, as opened.
+  virtual std::uint64_t size() const = 0;
+  // Copies bytes [offset, offset + out.size()) of the archive into `out`: invalid_argument when
+  // they lie beyond size(), changed when the file was modified since open, io on a read error.
+  virtual Status read(std::uint64_t offset, std::span<std::uint8_t> out) const = 0;
+  // ok while the file is the one opened (always for borrowed bytes), else changed.
+  virtual Status check_unchanged() const = 0;
 
-  // The stored payload of a tile, a view into the mapping valid while the reader lives.
-  // not_found when the archive has no such tile; corrupt/truncated on a malformed directory.
-  virtual Result<std::span<const std::uint8_t>> get(TileId id) const = 0;
-  virtual Result<std::span<const std::uint8_t>> get_by_tile_id(std::uint64_t tile_id) const = 0;
+  // A copy of the stored payload of a tile. not_found when the archive has no such tile;
+  // corrupt/truncated on a malformed directory; too_large for an entry over max_tile_bytes;
+  // changed when the file was modified in place since open.
+  virtual Result<std::vector<std::uint8_t>> get(TileId id) const = 0;
+  virtual Result<std::vector<std::uint8_t>> get_by_tile_id(std::uint64_t tile_id) const = 0;
+  // The directory entry holding tile_id (its offset relative to the tile-data section, checked
+  // to lie within it), without reading the payload. Errors as get_by_tile_id().
+  virtual Result<Entry> find_entry(std::uint64_t tile_id) const = 0;
 
   // Visits every tile entry (run_length >= 1) in tile-id order, descending into leaf directories.
   // Stops and returns the error when a directory is malformed or visitor returns false (then ok).
@@ -150,9 +165,11 @@ class Reader {
   virtual Result<std::uint64_t> leaf_directory_count() const = 0;
 };
 
-// The archive's version: 16 lowercase hex digits of XXH3-64 (seed 0) over its header, root
-// directory and metadata bytes as stored (docs/PROTOCOL.md §6). Cheap: independent of the
-// archive's size. What `vts serve` puts in versioned URLs and what the client sources report.
-std::string archive_version(const Reader& reader);
+// The archive version of the header, root directory and metadata bytes as stored: 16 lowercase
+// hex digits of XXH3-64 (seed 0) over them, in that order (docs/PROTOCOL.md §6). What
+// Reader::version() reports and what a remote reader works out from its first read.
+std::string archive_version(std::span<const std::uint8_t> header,
+                            std::span<const std::uint8_t> root,
+                            std::span<const std::uint8_t> metadata);
 
 }  // namespace vts::pmtiles

@@ -1,7 +1,7 @@
 // The network layer of `vts serve`: an asynchronous HTTP/1.1 server (Boost.Beast/Asio) that parses
 // requests into vts::HttpRequest, answers them with vts::route() (the admin listener, /metrics and
-// /health, with vts::route_admin()) and writes the HttpResponse — archive bodies with sendfile(2)
-// from the archive file, so they are never copied in user space. The router checks every target.
+// /health, with vts::route_admin()) and writes the HttpResponse (response_writer.hpp: bodies from
+// memory; an archive region read a checked chunk at a time). The router checks every target.
 //
 // Concurrency model (classic completion handlers, not coroutines — the pipelined read/write pair
 // of one connection is easier to express as two independent handler chains):
@@ -57,9 +57,6 @@ struct HttpServerLimits {
   // A response must be written within write_timeout plus its size at this rate (bytes/s; 0 =
   // no rate bound): a reader that trickles cannot keep a connection for ever.
   std::size_t min_send_rate = 16 * 1024;
-  // Archive bodies at least this large are sent with sendfile(2); smaller ones are gathered with
-  // their header into one write.
-  std::size_t sendfile_min_bytes = 0;
   std::chrono::milliseconds drain_timeout{10000};
 };
 
@@ -87,8 +84,8 @@ class HttpServer {
  public:
   // Binds both listeners (so port() is known before run()). Fails with io when an address cannot
   // be bound, invalid_argument when it does not parse. The registry must outlive the server.
-  // Sets SIGPIPE to be ignored process-wide: tiles go out with sendfile(2), which cannot be asked
-  // not to raise it when a client has gone.
+  // Sets SIGPIPE to be ignored process-wide, as every server does: a write to a connection the
+  // client has closed then fails with EPIPE and ends only that connection.
   static Result<std::unique_ptr<HttpServer>> create(HttpServerOptions options,
                                                     std::shared_ptr<TilesetRegistry> registry);
   virtual ~HttpServer() = default;

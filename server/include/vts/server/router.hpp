@@ -1,8 +1,8 @@
 // The HTTP semantics of `vts serve`, as pure functions from a parsed request to a response
 // description — no sockets, so every route and status is unit-testable and fuzzable. The network
 // layer (http_server.hpp) parses bytes into HttpRequest, calls route() (tile listener) or
-// route_admin() (admin listener), and writes the HttpResponse (its body may be a view into an
-// archive mapping, kept alive by `hold`). docs/PROTOCOL.md documents every route, header and
+// route_admin() (admin listener), and writes the HttpResponse (its body: bytes in memory, or a
+// region of the archive `hold` names). docs/PROTOCOL.md documents every route, header and
 // status. All functions are thread-safe for concurrent calls.
 #pragma once
 
@@ -78,14 +78,20 @@ struct HttpResponse {
   // Excluding Content-Length. Names are string literals (static storage): a response is built
   // for every request, and a name never needs a copy.
   std::vector<std::pair<std::string_view, std::string>> headers;
-  // The body is either `owned` or `view` (a view into an archive mapping, or into bytes owned by
-  // `keep`); never both.
+  // The body is one of: `owned`; `view` (into bytes owned by `keep`: a tile read from an
+  // archive, a provided tile); or, with `file_body`, bytes [file_offset, file_offset +
+  // content_length) of `hold`'s archive, read as they are sent.
   std::string owned;
   std::span<const std::uint8_t> view;
-  std::shared_ptr<const Tileset> hold;  // keeps `view`'s mapping alive
-  std::shared_ptr<const void> keep;     // keeps a provided tile's `view` alive
-  std::uint64_t content_length = 0;     // of the full body (HEAD sends headers only)
-  bool head_only = false;               // HEAD: send headers, no body
+  std::shared_ptr<const Tileset> hold;  // the tileset answered from (access logs, file bodies)
+  std::shared_ptr<const void> keep;     // keeps `view`'s bytes alive
+  bool file_body = false;
+  std::uint64_t file_offset = 0;
+  std::uint64_t content_length = 0;  // of the full body (HEAD sends headers only)
+  // The tileset's archive was modified in place since it was opened: the answer is a 503, and
+  // the server should reload its tilesets now rather than at its next periodic check.
+  bool archive_changed = false;
+  bool head_only = false;  // HEAD: send headers, no body
   // Set (and nothing else but `route`, CORS headers and head_only) when the answer depends on
   // a provided tile: call provider->tile(), then complete_deferred() with its answer.
   std::shared_ptr<const DeferredTile> deferred;

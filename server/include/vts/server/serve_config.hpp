@@ -4,7 +4,7 @@
 //   public_url, access_log, reload_interval_ms,
 //   access: {"<tileset>": {"tokens": [...], "hmac_keys": [...]}},
 //   limits: {max_header_bytes, max_target_bytes, max_connections, max_pipeline, min_send_rate,
-//            sendfile_min_bytes, idle_timeout_ms, header_timeout_ms, write_timeout_ms,
+//            idle_timeout_ms, header_timeout_ms, write_timeout_ms,
 //            drain_timeout_ms}.
 // A key not in this list, at any level, is an error naming the key and the file: a misspelt
 // limit must not silently leave the default in force.

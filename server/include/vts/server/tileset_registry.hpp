@@ -1,7 +1,7 @@
 // The tilesets a server hosts, by name. A tileset is an opened archive plus what the HTTP layer
 // needs precomputed (metadata, version). Lookups return a shared_ptr snapshot: a request holds it
 // until its response is sent, so a hot reload can swap in a new archive while in-flight requests
-// finish on the old mapping. Names come from file stems and are looked up in a table — never
+// finish on the old archive. Names come from file stems and are looked up in a table — never
 // joined into a filesystem path.
 #pragma once
 
@@ -47,7 +47,7 @@ class TilesetRegistry {
 
   // Re-opens every tileset whose file changed (size, mtime or inode) or, with force, all of them.
   // A new archive that fails to open is refused and the old one kept (its error is returned in
-  // the list of failures). In loaded folders, archives that appeared are added and archives that
+  // the list of failures), and not tried again until the file changes again (or force). In loaded folders, archives that appeared are added and archives that
   // disappeared are removed; a new archive that is refused is not tried again until its file
   // changes (or force). Files loaded by name are never removed.
   struct ReloadResult {
@@ -81,7 +81,7 @@ class TilesetRegistry {
   mutable std::mutex mutex_;
   Map tilesets_;
   // find()'s lock-free path: an immutable copy of tilesets_ and a counter bumped on each change.
-  // (A thread's cached snapshot keeps a removed archive mapped until its next lookup.)
+  // (A thread's cached snapshot keeps a removed archive open until its next lookup.)
   std::shared_ptr<const Map> snapshot_;
   std::atomic<std::uint64_t> generation_{0};
   const std::uint64_t id_ = next_id();  // tells registries apart in the per-thread cache

@@ -30,6 +30,9 @@ struct OpenedArchive {
 };
 OpenedArchive open_archive(const std::filesystem::path& path);
 
+// Every byte of the archive `reader` opened (test archives are small); throws on a read error.
+std::vector<std::uint8_t> read_all(const pmtiles::Reader& reader);
+
 // build_archive() then open_archive().
 OpenedArchive build_and_open(const BuildOptions& options);
 
