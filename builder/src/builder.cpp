@@ -15,6 +15,7 @@
 #include "image_source.hpp"
 #include "vts/builder/downsample.hpp"
 #include "vts/builder/synthetic.hpp"
+#include "vts/protocol/file_io.hpp"
 #include "work_queue.hpp"
 
 namespace vts {
@@ -381,6 +382,7 @@ Result<BuildReport> build_pyramid(const BuildOptions& o) {
     return make_error(ErrorCode::invalid_argument, "give either input images or --synthetic");
   if (!o.synthetic && o.inputs.empty())
     return make_error(ErrorCode::invalid_argument, "no input image given");
+  if (Status s = check_output_is_not_an_input(o.output, o.inputs); !s) return s.error();
 
   std::unique_ptr<ImageSource> source;
   std::uint64_t width = 0, height = 0;

@@ -4,6 +4,7 @@
 
 #include "commands.hpp"
 #include "progress.hpp"
+#include "vts/protocol/file_io.hpp"
 #include "vts/protocol/inspect.hpp"
 #ifdef VTS_HAVE_BUILDER
 #include "vts/builder/extract.hpp"
@@ -153,6 +154,9 @@ int run_extract(const ExtractArgs& a) {
   if (a.tile.empty() == (a.level < 0))
     return report_error(
         make_error(ErrorCode::invalid_argument, "give exactly one of Z/X/Y or --level Z"));
+  const std::filesystem::path archive = a.archive;
+  if (Status s = check_output_is_not_an_input(a.output, {&archive, 1}); !s)
+    return report_error(s.error());
   auto reader = open_archive(a.archive);
   if (!reader) return report_error(reader.error());
   auto info = TilesetInfo::from_json((*reader)->metadata_json());

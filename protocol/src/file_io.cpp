@@ -78,6 +78,20 @@ Status write_file_atomically(const fs::path& path, std::string_view bytes) {
   return {};
 }
 
+Status check_output_is_not_an_input(const fs::path& output, std::span<const fs::path> inputs) {
+  for (const fs::path& input : inputs) {
+    std::error_code ec;
+    // False (with ec set) when either does not exist: a new output cannot be an input.
+    if (fs::equivalent(output, input, ec) && !ec) {
+      return make_error(ErrorCode::invalid_argument,
+                        "the output " + output.string() + " is the input " + input.string() +
+                            " (the same file): writing it would destroy the input; choose "
+                            "another output");
+    }
+  }
+  return {};
+}
+
 Result<std::string> read_file(const fs::path& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) return make_error(ErrorCode::not_found, path.string() + ": cannot be read");

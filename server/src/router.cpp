@@ -1,15 +1,19 @@
 // The HTTP semantics of `vts serve` (docs/PROTOCOL.md): routing, tile and archive answers,
 // TileJSON and the index. Pure but for reading tiles from their archive (pmtiles::Reader: a copy
-// per tile, kept by the response); archive bodies are a file region the network layer reads. The target is checked in router_target.cpp, ranges in
-// router_conditional.cpp, credentials in router_access.cpp, the admin listener in router_admin.cpp.
+// per tile, kept by the response); archive bodies are a file region the network layer reads. The
+// target is checked in router_target.cpp, ranges in router_conditional.cpp, credentials in
+// router_access.cpp, the admin listener in router_admin.cpp.
 #include "vts/server/router.hpp"
 
+#include <algorithm>
+#include <array>
 #include <cassert>
 #include <charconv>
 #include <map>
 #include <nlohmann/json.hpp>
 
 #include "router_internal.hpp"
+#include "vts/protocol/codec.hpp"
 #include "vts/protocol/file_io.hpp"
 #include "vts/protocol/tilejson.hpp"
 
@@ -292,6 +296,22 @@ HttpResponse tile_route(const HttpRequest& request, std::shared_ptr<const Tilese
 
   const std::string cc = version.empty() ? cache_control(priv, config.max_age_seconds, false)
                                          : cache_control(priv, kImmutableMaxAge, true);
+  if (!request.if_none_match.empty()) {
+    // The ETag is in the tile's header frame: read that first, the whole payload only when the
+    // client's copy is not current.
+    auto entry = t->reader->find_entry(pmtiles::zxy_to_tile_id(id.z, id.x, id.y));
+    if (!entry) return unreadable_tile(std::move(t), id, entry.error(), cc);
+    std::array<std::uint8_t, TileHeader::kFrameBytes> frame;
+    const std::span<std::uint8_t> head(frame.data(),
+                                       std::min<std::size_t>(frame.size(), entry->length));
+    Status read = t->reader->read(t->reader->header().tile_data_offset + entry->offset, head);
+    if (!read) return unreadable_tile(std::move(t), id, read.error(), cc);
+    HttpResponse r = payload_response(head, request.if_none_match, cc, 500, id, t->name);
+    if (r.status != 200) {  // 304, or a damaged header frame
+      r.hold = std::move(t);
+      return r;
+    }
+  }
   auto payload = t->reader->get(id);
   if (!payload) return unreadable_tile(std::move(t), id, payload.error(), cc);
   auto bytes = std::make_shared<const std::vector<std::uint8_t>>(std::move(*payload));

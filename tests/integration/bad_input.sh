@@ -19,6 +19,21 @@ expect_nothing_written() {
 
 before=$(dir_listing "$D")
 
+note "an output that is one of the inputs (by its own name or through a link)"
+cp "$EARTH" "$WORK/in.jpg"
+ln -s "$WORK/in.jpg" "$WORK/in-link.pmtiles"
+for out in "$WORK/in.jpg" "$WORK/in-link.pmtiles"; do
+  expect_clean_failure "$VTS" build "$WORK/in.jpg" -o "$out"
+  ((RC == 2)) || fail "vts build with its input as output exited $RC, expected 2"
+  grep -q 'is the input' "$ERR" || { show_output; fail "the error does not say the output is the input"; }
+  cmp -s "$EARTH" "$WORK/in.jpg" || fail "vts build -o $out changed its input"
+done
+"$VTS" build --synthetic 512x512 -o "$WORK/s.pmtiles" >/dev/null 2>&1 || fail "cannot build s.pmtiles"
+cp "$WORK/s.pmtiles" "$WORK/s.copy"
+expect_clean_failure "$VTS" extract "$WORK/s.pmtiles" --level 0 -o "$WORK/s.pmtiles"
+((RC == 2)) || fail "vts extract with its archive as output exited $RC, expected 2"
+cmp -s "$WORK/s.pmtiles" "$WORK/s.copy" || fail "vts extract -o ARCHIVE changed the archive"
+
 note "missing input file"
 expect_clean_failure "$VTS" build "$WORK/no-such-image.jpg" -o "$D/x.pmtiles"
 grep -q 'no-such-image' "$ERR" || { show_output; fail "the error does not name the missing file"; }

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <filesystem>
+#include <span>
 #include <string>
 #include <string_view>
 
@@ -15,6 +16,13 @@ namespace vts {
 // O_EXCL, mode 0666 & ~umask), fsyncs it, renames it over `path`, then fsyncs the folder (best
 // effort). On failure nothing but the old file is left. Error io, naming the file and the cause.
 Status write_file_atomically(const std::filesystem::path& path, std::string_view bytes);
+
+// invalid_argument, naming both, when `output` already exists as one of `inputs`: the same file
+// by any path, a symbolic link to it or a hard link (what a command would destroy by writing its
+// output over its own input). Every command that writes a file it also reads from checks this
+// before it writes anything.
+Status check_output_is_not_an_input(const std::filesystem::path& output,
+                                    std::span<const std::filesystem::path> inputs);
 
 // The whole file. Error not_found (missing or unreadable) or io, naming the file.
 Result<std::string> read_file(const std::filesystem::path& path);
