@@ -1,8 +1,8 @@
 // The local-archive source: a pmtiles::Reader over the file. Every fetch is answered
 // synchronously, inside fetch(), with the reader's copy of the stored payload (an archive modified
-// in place since it was opened answers with ErrorCode::changed, never with mixed bytes). The answers mirror what
-// `vts serve` would send for the same archive (docs/PROTOCOL.md §3): the same bytes, the same
-// ETag, absent where the server answers 204 or 404, an error where it answers 500.
+// in place since it was opened answers with ErrorCode::changed, never with mixed bytes). The
+// answers mirror what `vts serve` would send for the same archive (docs/PROTOCOL.md §3): the same
+// bytes, the same ETag, absent where the server answers 204 or 404, an error where it answers 500.
 
 #include <atomic>
 #include <system_error>
