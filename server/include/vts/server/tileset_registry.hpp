@@ -47,9 +47,9 @@ class TilesetRegistry {
 
   // Re-opens every tileset whose file changed (size, mtime or inode) or, with force, all of them.
   // A new archive that fails to open is refused and the old one kept (its error is returned in
-  // the list of failures), and not tried again until the file changes again (or force). In loaded folders, archives that appeared are added and archives that
-  // disappeared are removed; a new archive that is refused is not tried again until its file
-  // changes (or force). Files loaded by name are never removed.
+  // the list of failures). In loaded folders, archives that appeared are added and archives that
+  // disappeared are removed. A refused archive, new or replacing a loaded one, is not tried again
+  // until its file changes (or force). Files loaded by name are never removed.
   struct ReloadResult {
     int swapped = 0, added = 0, removed = 0;
     std::vector<Error> failures;
