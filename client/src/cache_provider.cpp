@@ -70,13 +70,16 @@ TileSource::Handle ReconnectingSource::fetch(const SourceRequest& request,
     h = ++next_handle_;
     inner_.emplace(h, Inner{source, 0});
   }
-  const Handle ih = source->fetch(request, [this, h, cb = std::move(callback)](SourceTile&& t) {
-    {
-      std::lock_guard lock(mutex_);
-      inner_.erase(h);
-    }
-    cb(std::move(t));
-  });
+  const Handle ih =
+      source->fetch(request, [this, h, source, cb = std::move(callback)](SourceTile&& t) {
+        {
+          std::lock_guard lock(mutex_);
+          inner_.erase(h);
+        }
+        if (t.kind == SourceTile::Kind::error && t.error && t.error->code == ErrorCode::changed)
+          go_offline(source);
+        cb(std::move(t));
+      });
   std::lock_guard lock(mutex_);
   if (auto it = inner_.find(h); it != inner_.end()) it->second.handle = ih;
   return h;
@@ -93,6 +96,19 @@ void ReconnectingSource::cancel(Handle h) {
     ih = it->second.handle;
   }
   if (ih) source->cancel(ih);
+}
+
+void ReconnectingSource::go_offline(const std::shared_ptr<TileSource>& failed) {
+  std::thread ended;
+  {
+    std::lock_guard lock(mutex_);
+    if (quit_ || !online_ || current_ != failed) return;  // already offline, or reopened
+    current_ = offline_source(info_);
+    online_ = false;
+    ended = std::move(reconnect_);  // the loop that brought it online has returned (or never ran)
+    reconnect_ = std::thread([this] { reconnect_loop(); });
+  }
+  if (ended.joinable()) ended.join();
 }
 
 void ReconnectingSource::reconnect_loop() {

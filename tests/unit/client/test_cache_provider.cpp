@@ -177,6 +177,39 @@ TEST(CacheProvider, AnOfflineUpstreamGoesOnlineWhenTheSameTilesetOpensAgain) {
   EXPECT_EQ(daemon.get(TileId{2, 1, 1}).kind, ProvidedTile::Kind::ok);
 }
 
+TEST(CacheProvider, AnArchiveOverwrittenInPlaceIsReopenedAndItsNewTilesServed) {
+  Dir d;
+  const fs::path archive = build(d.path / "a.pmtiles");
+  // The same tileset (name, geometry, codec) with other bytes: built with another zstd level.
+  vts::BuildOptions o;
+  o.synthetic = vts::SyntheticSpec{1000, 600, std::nullopt, 1};
+  o.output = d.path / "b" / "a.pmtiles";
+  o.threads = 1;
+  o.encode.zstd_level = 19;
+  fs::create_directories(d.path / "b");
+  ASSERT_TRUE(vts::build_pyramid(o).ok());
+  auto first = open(archive);
+  const SourceInfo info = first->info();
+  std::promise<SourceInfo> back;
+  ReconnectingSource::Hooks hooks;
+  hooks.back_online = [&back](const SourceInfo& now) { back.set_value(now); };
+  Daemon daemon(info, std::move(first), archive, d.path / "cache", hooks);
+  ASSERT_EQ(daemon.get(TileId{0, 0, 0}).kind, ProvidedTile::Kind::ok);
+
+  fs::copy_file(o.output, archive, fs::copy_options::overwrite_existing);  // in place
+  // The first request after the change meets it: never the old archive's offsets in the new file.
+  const ProvidedTile during = daemon.get(TileId{2, 1, 1});
+  EXPECT_NE(during.kind, ProvidedTile::Kind::ok);
+  auto f = back.get_future();
+  ASSERT_EQ(f.wait_for(std::chrono::seconds(10)), std::future_status::ready);
+  EXPECT_TRUE(daemon.upstream->online());
+  const ProvidedTile after = daemon.get(TileId{2, 1, 1});
+  ASSERT_EQ(after.kind, ProvidedTile::Kind::ok);
+  auto b = open(o.output);
+  EXPECT_EQ(std::vector<std::uint8_t>(after.payload.begin(), after.payload.end()),
+            payload_of(*b, TileId{2, 1, 1}));
+}
+
 TEST(CacheProvider, AnUpstreamThatReopensWithAnotherTilesetStaysOffline) {
   Dir d;
   const fs::path archive = build(d.path / "a.pmtiles");

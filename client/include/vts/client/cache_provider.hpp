@@ -30,7 +30,9 @@ bool same_tileset(const SourceInfo& a, const SourceInfo& b);
 // One TileSource whatever the upstream's state. Online: fetches go to the opened source. Offline
 // (`online` null at construction): fetches go to offline_source(info), which fails each at once
 // (the cache serves what it holds), while a background thread tries open_source(location) every
-// `retry`; it goes online once the upstream opens with the same tileset (same_tileset).
+// `retry`; it goes online once the upstream opens with the same tileset (same_tileset). An online
+// upstream that answers ErrorCode::changed (a local archive modified in place) goes offline the
+// same way, so the source follows the archive that replaced it once that one opens.
 // info() never changes: it is what the cache is keyed by. Thread-safe.
 class ReconnectingSource final : public TileSource {
  public:
@@ -59,6 +61,8 @@ class ReconnectingSource final : public TileSource {
     Handle handle;
   };
   std::shared_ptr<TileSource> current() const;
+  // Offline (and reconnecting) unless `failed` is no longer the current source.
+  void go_offline(const std::shared_ptr<TileSource>& failed);
   void reconnect_loop();
 
   const SourceInfo info_;
