@@ -2,7 +2,7 @@
 # Tile serving benchmark: `vts serve` against nginx serving the same tiles
 # extracted as static files (sendfile on, access_log off, 2 workers), on this machine in one run,
 # with wrk -t2 -c64 --latency and bench/random_tiles.lua:
-#   tiles  random existing tiles (GET /earth/z/x/y), bodies from the archive mapping / sendfile
+#   tiles  random existing tiles (GET /earth/z/x/y): vts reads each with pread, nginx sendfiles
 #   304    the same with a matching If-None-Match (each server's own ETags)
 #   range  random tile-sized Range reads of /earth.pmtiles (206)
 # Prints a markdown table (req/s, MB/s, p50, p99, ratio vs nginx) with machine, date and commit.
