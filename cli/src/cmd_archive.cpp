@@ -199,7 +199,8 @@ Runner add_verify(CLI::App& app) {
   CLI::App* c = app.add_subcommand(
       "verify", "Check every directory and decode every tile (checksums); exit 0 only if all good");
   c->add_option("archive", *path, "Archive (.pmtiles)")->required();
-  c->add_option("--threads", *threads, "Decoder threads (0 = all cores)");
+  c->add_option("--threads", *threads, "Decoder threads (0 = all cores)")
+      ->check(CLI::Range(0u, kMaxThreads));
   c->add_flag("--json", *json, "Print the report as JSON");
   return [path, json, threads] { return run_verify(*path, *json, *threads); };
 }

@@ -1,6 +1,8 @@
 // vts build: image(s) or the synthetic source → PMTiles pyramid archive.
 #include <cstdio>
+#include <limits>
 #include <nlohmann/json.hpp>
+#include <string_view>
 
 #include "commands.hpp"
 #include "progress.hpp"
@@ -10,13 +12,14 @@ namespace vts::cli {
 
 namespace {
 
+// "A<sep>B", both decimal digits only (no sign) within T's range.
 template <typename T>
 bool parse_pair(const std::string& text, char sep, T& a, T& b) {
-  unsigned long long x = 0, y = 0;
-  int consumed = 0;
-  std::string fmt = std::string("%llu") + sep + "%llu%n";
-  if (std::sscanf(text.c_str(), fmt.c_str(), &x, &y, &consumed) != 2 ||
-      consumed != static_cast<int>(text.size()))
+  const std::size_t at = text.find(sep);
+  std::uint64_t x = 0, y = 0;
+  if (at == std::string::npos || !parse_u64(std::string_view(text).substr(0, at), x) ||
+      !parse_u64(std::string_view(text).substr(at + 1), y) || x > std::numeric_limits<T>::max() ||
+      y > std::numeric_limits<T>::max())
     return false;
   a = static_cast<T>(x);
   b = static_cast<T>(y);
@@ -46,15 +49,9 @@ Result<SyntheticSpec> synthetic_spec(const BuildArgs& a) {
     return make_error(ErrorCode::invalid_argument,
                       "--synthetic '" + a.synthetic + "' is not of the form WxH");
   if (!a.region.empty()) {
-    unsigned long long r[4];
-    int consumed = 0;
-    if (std::sscanf(a.region.c_str(), "%llu,%llu,%llu,%llu%n", &r[0], &r[1], &r[2], &r[3],
-                    &consumed) != 4 ||
-        consumed != static_cast<int>(a.region.size()))
-      return make_error(
-          ErrorCode::invalid_argument,
-          "--region '" + a.region + "' is not of the form x0,y0,x1,y1 (finest-level texels)");
-    s.region = TexelRect{r[0], r[1], r[2], r[3]};
+    auto r = parse_texel_rect(a.region, "--region");
+    if (!r) return r.error();
+    s.region = *r;
   }
   s.region_level = a.region_level;
   return s;
@@ -174,12 +171,14 @@ Runner add_build(CLI::App& app) {
       ->check(CLI::IsMember({"box", "lanczos3"}))
       ->capture_default_str();
   c->add_option("--zstd-level", a->zstd_level, "zstd level (1..19)")
-      ->check(CLI::Range(-7, 22))
+      ->check(CLI::Range(1, 19))
       ->capture_default_str();
   c->add_option("--filter", a->filter, "Prediction filter before zstd: auto|none|gradient")
       ->check(CLI::IsMember({"auto", "none", "gradient"}))
       ->capture_default_str();
-  c->add_option("--threads", a->threads, "Encoder threads (0 = all cores)")->capture_default_str();
+  c->add_option("--threads", a->threads, "Encoder threads (0 = all cores)")
+      ->check(CLI::Range(0u, kMaxThreads))
+      ->capture_default_str();
   c->add_option("--grid", a->grid, "Inputs form a CxR mosaic, e.g. 4x2 (row-major order)");
   c->add_option("--synthetic", a->synthetic,
                 "Build the built-in coordinate-encoding source of WxH texels instead of inputs");
@@ -187,8 +186,11 @@ Runner add_build(CLI::App& app) {
                 "With --synthetic: only tiles over x0,y0,x1,y1 (finest texels) exist at levels "
                 ">= --region-level");
   c->add_option("--region-level", a->region_level, "First level restricted to --region")
+      ->check(CLI::Range(0, int(Geometry::kMaxZoom)))
       ->capture_default_str();
-  c->add_option("--name", a->name, "Tileset name (default: output file stem)");
+  c->add_option("--name", a->name, "Tileset name (default: output file stem)")
+      ->check(CLI::Validator(
+          [](std::string& name) { return name.empty() ? std::string("is empty") : ""; }, "NAME"));
   c->add_flag("--json", a->json, "Print the result as JSON");
   c->add_flag("-q,--quiet", a->quiet, "No progress bar or summary");
   return [a] { return run_build(*a); };

@@ -12,6 +12,7 @@
 #include <string>
 
 #include "commands.hpp"
+#include "progress.hpp"
 #include "vts/client/cache_provider.hpp"
 #include "vts/client/saved_source.hpp"
 #include "vts/client/source.hpp"
@@ -25,8 +26,7 @@ namespace {
 struct CacheServeArgs {
   std::string upstream, cache_dir, listen = "127.0.0.1:8081", admin = "127.0.0.1:9091", name;
   std::string access_log;
-  std::uint64_t cache_size = 1ull << 30;
-  std::uint64_t ram_size = 256ull << 20;
+  std::string cache_size = "1G", ram_size = "256M";
   int threads = 0;
   int reconnect_seconds = 30;
   bool no_admin = false;
@@ -133,10 +133,18 @@ Result<std::shared_ptr<client::CacheProvider>> make_provider(const CacheServeArg
       std::move(hooks));
 
   client::TileCacheOptions co;
-  co.ram_bytes = a.ram_size;
+  if (a.ram_size != "0") {
+    auto ram = parse_byte_size(a.ram_size, "--ram-size");
+    if (!ram) return ram.error();
+    co.ram_bytes = *ram;
+  } else {
+    co.ram_bytes = 0;
+  }
+  auto disk = parse_byte_size(a.cache_size, "--cache-size");
+  if (!disk) return disk.error();
   co.disk = client::DiskCacheOptions{};
   co.disk->dir = a.cache_dir;
-  co.disk->max_bytes = a.cache_size;
+  co.disk->max_bytes = *disk;
   auto cache = client::TileCache::create(upstream, co);
   if (!cache) return cache.error();
   return std::make_shared<client::CacheProvider>(tileset, std::move(*cache), upstream);
@@ -207,10 +215,8 @@ Runner add_cache(CLI::App& app) {
   c->add_flag("--no-admin", a->no_admin, "Do not open the admin listener");
   c->add_option("--cache-size", a->cache_size,
                 "Cap on the disk cache's payload bytes (suffix K/M/G/T: binary)")
-      ->transform(CLI::AsSizeValue(false))
       ->capture_default_str();
   c->add_option("--ram-size", a->ram_size, "RAM cache budget in bytes (suffix K/M/G; 0: none)")
-      ->transform(CLI::AsSizeValue(false))
       ->capture_default_str();
   c->add_option("--name", a->name,
                 "Tileset name in URLs (default: the upstream's last path segment without "

@@ -1,6 +1,5 @@
 // vts view: the sparse-virtual-texture viewer. Parsing and printing only: the viewer itself
 // (camera controls, HUD, frame loops, recorder) is vts::renderer::Viewer (viewer.hpp).
-//
 // Interactive by default; --headless --frames N renders N frames in a hidden window and prints
 // per-frame stats. Screenshots are the virtual texture's frame alone unless --hud.
 #include <cstdio>
@@ -211,7 +210,9 @@ Runner add_view(CLI::App& app) {
                 "it changed) that --camera-path replays");
   c->add_option("--width", a->width, "Frame width, pixels")->capture_default_str();
   c->add_option("--height", a->height, "Frame height, pixels")->capture_default_str();
-  c->add_option("--slots", a->slots, "Physical texture slots")->capture_default_str();
+  c->add_option("--slots", a->slots, "Physical texture slots")
+      ->check(CLI::Range(2u, renderer::VirtualTextureOptions::kMaxSlots))
+      ->capture_default_str();
   c->add_option("--window", a->window, "Page-table window per level (power of two)")
       ->capture_default_str();
   c->add_option("--feedback", a->feedback, "Feedback pass divisor")

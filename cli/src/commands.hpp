@@ -35,6 +35,10 @@ Runner add_bench(CLI::App& app);  // vts bench accuracy (cmd_bench.cpp): only wi
 Runner add_view(CLI::App& app);  // vts view (cmd_view.cpp): only when the renderer is built
 #endif
 
+// The most a --threads option takes (0 is one per core): far above any machine's cores, below
+// what makes thread creation fail.
+inline constexpr unsigned kMaxThreads = 1024;
+
 // "HOST:PORT" (HOST may be [IPv6] or empty for 0.0.0.0) for --listen / --admin.
 Result<std::pair<std::string, std::uint16_t>> parse_endpoint(const std::string& s);
 

@@ -646,8 +646,10 @@ Result<std::unique_ptr<VirtualTexture>> VirtualTexture::create(
     std::shared_ptr<client::TileClient> client, const Geometry& geometry,
     VirtualTextureOptions options) {
   if (!client) return Error{ErrorCode::invalid_argument, "no tile client"};
-  if (options.slots < 2) {
-    return Error{ErrorCode::invalid_argument, "the physical texture needs at least 2 slots"};
+  if (options.slots < 2 || options.slots > VirtualTextureOptions::kMaxSlots) {
+    return Error{ErrorCode::invalid_argument, "the physical texture needs 2 to " +
+                                                  std::to_string(VirtualTextureOptions::kMaxSlots) +
+                                                  " slots, not " + std::to_string(options.slots)};
   }
   if (!valid_divisor(options.feedback_divisor)) {
     return Error{ErrorCode::invalid_argument, "feedback divisor " +

@@ -32,7 +32,10 @@ enum class DebugView : std::uint8_t {
 };
 
 struct VirtualTextureOptions {
-  std::uint32_t slots = 256;  // physical slots, the root's included (>= 2)
+  // Physical slots, the root's included: 2 to kMaxSlots (a 1024 x 1024 grid of slots, beyond any
+  // GL's largest texture; create() checks the GL's own limit).
+  static constexpr std::uint32_t kMaxSlots = 1u << 20;
+  std::uint32_t slots = 256;
   std::uint32_t window = 64;  // page-table window W per level (power of two)
   int feedback_divisor = 8;   // k: the feedback pass renders at 1/k resolution (1, 2, 4, 8, 16)
   int readback_ring = 3;      // feedback frames in flight (>= 1)

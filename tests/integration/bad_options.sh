@@ -1,0 +1,57 @@
+#!/usr/bin/env bash
+# Numeric and text options out of range: every command refuses them at once with exit 2 and a
+# message naming the option, instead of crashing (SIGABRT on 100000 threads), wrapping (-5 read
+# as 2^64-5), reading /dev/zero until memory runs out, or printing a URL that cannot work.
+source "$(dirname "$0")/lib.sh"
+
+"$VTS" build --synthetic 512x512 -o "$WORK/s.pmtiles" >/dev/null 2>&1 || fail "cannot build s.pmtiles"
+big=9223372036854775807
+
+# expect_refused WHAT ARGS...: exit 2, and stderr mentions WHAT.
+expect_refused() {
+  local what=$1
+  shift
+  run "$@"
+  ((RC == 2)) || { show_output; fail "vts ${*:1:4} exited $RC, expected 2"; }
+  grep -qiF -- "$what" "$ERR" || { show_output; fail "vts ${*:1:4}: the error does not mention '$what'"; }
+}
+
+note "vts build"
+expect_refused --threads "$VTS" build --synthetic 512x512 -o "$WORK/x.pmtiles" --threads 100000
+expect_refused --grid "$VTS" build "$EARTH" "$EARTH" -o "$WORK/x.pmtiles" --grid 99999999999x1
+expect_refused --grid "$VTS" build "$EARTH" "$EARTH" -o "$WORK/x.pmtiles" --grid -2x1
+expect_refused --synthetic "$VTS" build --synthetic -5x5 -o "$WORK/x.pmtiles"
+expect_refused --synthetic "$VTS" build --synthetic 5x99999999999999999999 -o "$WORK/x.pmtiles"
+expect_refused --region "$VTS" build --synthetic 512x512 --region -1,0,5,5 -o "$WORK/x.pmtiles"
+expect_refused --region-level "$VTS" build --synthetic 512x512 --region-level 100 -o "$WORK/x.pmtiles"
+expect_refused --zstd-level "$VTS" build --synthetic 512x512 --zstd-level -7 -o "$WORK/x.pmtiles"
+expect_refused --zstd-level "$VTS" build --synthetic 512x512 --zstd-level 22 -o "$WORK/x.pmtiles"
+expect_refused --name "$VTS" build --synthetic 512x512 --name '' -o "$WORK/x.pmtiles"
+[[ ! -e $WORK/x.pmtiles ]] || fail "a refused build wrote its output"
+
+note "vts verify"
+expect_refused --threads "$VTS" verify "$WORK/s.pmtiles" --threads 100000
+
+note "vts sign"
+expect_refused --ttl "$VTS" sign /t/0/0/0 --key k --ttl "$big"
+expect_refused --ttl "$VTS" sign /t/0/0/0 --key k --ttl -100
+expect_refused --ttl "$VTS" sign /t/0/0/0 --key k --ttl 0
+expect_refused --expires "$VTS" sign /t/0/0/0 --key k --expires -5
+expect_refused --expires "$VTS" sign /t/0/0/0 --key k --expires 1000
+expect_refused path "$VTS" sign '/t/0 0/0' --key k
+expect_refused path "$VTS" sign $'/t/0/0/0\nX-Evil: 1' --key k
+expect_refused 'key file' "$VTS" sign /t/0/0/0 --key-file /dev/zero
+head -c 100000 /dev/urandom >"$WORK/huge.key"
+expect_refused 'key file' "$VTS" sign /t/0/0/0 --key-file "$WORK/huge.key"
+# The accepted forms still work: a path and a key give path?expires=...&sig=...
+out=$("$VTS" sign /t/0/0/0 --key k --ttl 60) || fail "vts sign refused a valid request"
+[[ $out =~ ^/t/0/0/0\?expires=[0-9]+\&sig=[0-9a-f]{64}$ ]] || fail "vts sign printed '$out'"
+
+note "vts cache serve and vts view"
+expect_refused --cache-size "$VTS" cache serve --upstream "$WORK/s.pmtiles" --cache-dir "$WORK/c" \
+  --listen 127.0.0.1:0 --no-admin --cache-size -5
+expect_refused --ram-size "$VTS" cache serve --upstream "$WORK/s.pmtiles" --cache-dir "$WORK/c" \
+  --listen 127.0.0.1:0 --no-admin --ram-size 12Q
+if "$VTS" view --help >/dev/null 2>&1; then
+  expect_refused --slots "$VTS" view "$WORK/s.pmtiles" --headless --slots 4294967295
+fi
