@@ -70,6 +70,7 @@ int run_serve(const ServeArgs& a) {
   auto registry = std::make_shared<TilesetRegistry>();
   std::vector<std::filesystem::path> paths(a.paths.begin(), a.paths.end());
   if (auto st = registry->load(paths); !st.ok()) return report_error(st.error());
+  if (auto st = check_access_names(o, *registry); !st.ok()) return report_error(st.error());
 
   const std::string host = o.listen_host, admin_host = o.admin_host;
   auto server = HttpServer::create(std::move(o), registry);

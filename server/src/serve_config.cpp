@@ -2,6 +2,7 @@
 
 #include <array>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <stdexcept>
 
 #include "vts/protocol/file_io.hpp"
@@ -56,6 +57,13 @@ Status apply_access(const json& access, const std::string& file, RouterConfig& r
     TilesetAccess acc;
     if (a.contains("tokens")) acc.bearer_tokens = a.at("tokens").get<std::vector<std::string>>();
     if (a.contains("hmac_keys")) acc.hmac_keys = a.at("hmac_keys").get<std::vector<std::string>>();
+    // An empty token or key would let anyone in (an empty bearer, a signature anyone can make).
+    for (const auto& t : acc.bearer_tokens)
+      if (t.empty()) return config_error(file, "access." + name + ".tokens holds an empty token");
+    for (const auto& k : acc.hmac_keys)
+      if (k.empty()) return config_error(file, "access." + name + ".hmac_keys holds an empty key");
+    if (acc.bearer_tokens.empty() && acc.hmac_keys.empty())
+      return config_error(file, "access." + name + " has no tokens and no hmac_keys");
     router.access[name] = std::move(acc);
   }
   return {};
@@ -63,24 +71,36 @@ Status apply_access(const json& access, const std::string& file, RouterConfig& r
 
 Status apply_limits(const json& l, const std::string& file, HttpServerLimits& L) {
   if (auto st = check_keys(l, kLimitKeys, "limits.", file); !st.ok()) return st;
-  auto ms = [&](const char* key, std::chrono::milliseconds& v) {
-    if (l.contains(key)) v = std::chrono::milliseconds(l.at(key).get<long long>());
+  // Every limit is a whole number, at least `min` (min_send_rate may be 0: no rate bound).
+  Status bad;
+  auto number = [&](const char* key, std::uint64_t min) -> std::optional<std::uint64_t> {
+    if (!l.contains(key) || !bad.ok()) return std::nullopt;
+    const json& v = l.at(key);
+    if (!v.is_number_integer() || (v.is_number_integer() && !v.is_number_unsigned()) ||
+        v.get<std::uint64_t>() < min) {
+      bad =
+          config_error(file, "limits." + std::string(key) + " is " + v.dump() +
+                                 ": it must be a whole number of at least " + std::to_string(min));
+      return std::nullopt;
+    }
+    return v.get<std::uint64_t>();
   };
-  auto size = [&](const char* key, std::size_t& v) {
-    if (l.contains(key)) v = l.at(key).get<std::size_t>();
+  auto size = [&](const char* key, std::size_t& out, std::uint64_t min = 1) {
+    if (auto v = number(key, min)) out = std::size_t(*v);
   };
-  size("max_header_bytes", L.max_header_bytes);
+  auto ms = [&](const char* key, std::chrono::milliseconds& out) {
+    if (auto v = number(key, 1)) out = std::chrono::milliseconds(*v);
+  };
+  size("max_header_bytes", L.max_header_bytes, 256);
   size("max_target_bytes", L.max_target_bytes);
   size("max_connections", L.max_connections);
   size("max_pipeline", L.max_pipeline);
-  size("min_send_rate", L.min_send_rate);
+  size("min_send_rate", L.min_send_rate, 0);
   ms("idle_timeout_ms", L.idle_timeout);
   ms("header_timeout_ms", L.header_timeout);
   ms("write_timeout_ms", L.write_timeout);
   ms("drain_timeout_ms", L.drain_timeout);
-  if (L.max_pipeline == 0 || L.max_header_bytes < 256 || L.max_target_bytes == 0)
-    return config_error(file, "limits too small to serve anything");
-  return {};
+  return bad;
 }
 
 // Throws nlohmann::json::exception on a value of the wrong type.
@@ -92,13 +112,27 @@ Status apply(const json& j, const std::string& file, HttpServerOptions& o) {
   } else if (auto st = apply_endpoint(j, "admin", o.admin_host, o.admin_port); !st.ok()) {
     return st;
   }
-  if (j.contains("threads")) o.threads = j.at("threads").get<int>();
+  if (j.contains("threads")) {
+    o.threads = j.at("threads").get<int>();
+    if (o.threads < 0 || o.threads > 256)
+      return config_error(file, "threads is " + std::to_string(o.threads) + ": 0 to 256");
+  }
   if (j.contains("cors_origin")) o.router.cors_origin = j.at("cors_origin").get<std::string>();
-  if (j.contains("max_age")) o.router.max_age_seconds = j.at("max_age").get<std::uint32_t>();
+  if (j.contains("max_age")) {
+    const json& v = j.at("max_age");
+    if (!v.is_number_unsigned() || v.get<std::uint64_t>() > 31536000)
+      return config_error(file, "max_age is " + v.dump() + ": 0 to 31536000 seconds");
+    o.router.max_age_seconds = v.get<std::uint32_t>();
+  }
   if (j.contains("public_url")) o.router.public_base_url = j.at("public_url").get<std::string>();
   if (j.contains("access_log")) o.access_log = j.at("access_log").get<std::string>();
-  if (j.contains("reload_interval_ms"))
-    o.reload_interval = std::chrono::milliseconds(j.at("reload_interval_ms").get<long long>());
+  if (j.contains("reload_interval_ms")) {
+    const long long ms = j.at("reload_interval_ms").get<long long>();
+    if (ms < 0)
+      return config_error(file, "reload_interval_ms is " + std::to_string(ms) +
+                                    ": at least 0 (0: no periodic check)");
+    o.reload_interval = std::chrono::milliseconds(ms);
+  }
   if (j.contains("access"))
     if (auto st = apply_access(j.at("access"), file, o.router); !st.ok()) return st;
   if (j.contains("limits"))
@@ -136,9 +170,27 @@ Status apply_serve_config_text(std::string_view text, const std::string& file,
 }
 
 Status apply_serve_config(const std::filesystem::path& file, HttpServerOptions& options) {
+  std::error_code ec;
+  if (std::filesystem::exists(file, ec) && !std::filesystem::is_regular_file(file, ec))
+    return make_error(ErrorCode::invalid_argument,
+                      "config '" + file.string() + "' is not a regular file");
   auto text = read_file(file);
   if (!text) return make_error(ErrorCode::io, "cannot read config '" + file.string() + "'");
   return apply_serve_config_text(*text, file.string(), options);
+}
+
+Status check_access_names(const HttpServerOptions& options, const TilesetRegistry& registry) {
+  for (const auto& [name, access] : options.router.access) {
+    if (!registry.find(name)) {
+      std::string served;
+      for (const auto& t : registry.all()) served += (served.empty() ? "" : ", ") + t->name;
+      return make_error(ErrorCode::invalid_argument,
+                        "the config protects tileset \"" + name +
+                            "\", which is not served (served: " + served +
+                            "): a misspelt name would leave the real tileset public");
+    }
+  }
+  return {};
 }
 
 }  // namespace vts

@@ -23,6 +23,12 @@ expect_clean_failure "$VTS" serve "$WORK/serve" --listen 127.0.0.1:0 --admin 127
 ((RC == 2)) || fail "an unknown config key exited $RC, expected 2"
 grep -qF 'unknown key "limits.idle_timeout"' "$ERR" || fail "the error does not name the key: $(cat "$ERR")"
 grep -qF "$WORK/typo.json" "$ERR" || fail "the error does not name the file: $(cat "$ERR")"
+note "an access entry for a tileset that is not served stops vts serve (it would stay public)"
+echo '{"access": {"eartj": {"tokens": ["s3cret"]}}}' >"$WORK/misspelt.json"
+expect_clean_failure "$VTS" serve "$WORK/serve" --listen 127.0.0.1:0 --admin 127.0.0.1:0 \
+  --config "$WORK/misspelt.json"
+((RC == 2)) || fail "an access entry for no tileset exited $RC, expected 2"
+grep -qF '"eartj"' "$ERR" || fail "the error does not name the tileset: $(cat "$ERR")"
 
 start_server "$WORK/serve" --config "$WORK/config.json"
 

@@ -105,8 +105,42 @@ TEST(ServeConfig, WrongTypesBadJsonAndBadEndpointsAreRefused) {
 }
 
 TEST(ServeConfig, LimitsTooSmallToServeAnythingAreRefused) {
-  expect_refused(R"({"limits": {"max_pipeline": 0}})", "limits too small");
-  expect_refused(R"({"limits": {"max_header_bytes": 100}})", "limits too small");
+  expect_refused(R"({"limits": {"max_pipeline": 0}})", "limits.max_pipeline is 0");
+  expect_refused(R"({"limits": {"max_header_bytes": 100}})", "at least 256");
+}
+
+TEST(ServeConfig, ZeroNegativeAndFractionalLimitsAreRefusedNamingTheLimit) {
+  for (const char* key : {"max_target_bytes", "max_connections", "max_pipeline", "idle_timeout_ms",
+                          "header_timeout_ms", "write_timeout_ms", "drain_timeout_ms"}) {
+    SCOPED_TRACE(key);
+    for (const char* value : {"0", "-5", "1.5", "\"10\""}) {
+      expect_refused(std::string(R"({"limits": {")") + key + "\": " + value + "}}",
+                     std::string("limits.") + key);
+    }
+  }
+  expect_refused(R"({"limits": {"min_send_rate": -1}})", "limits.min_send_rate");
+  HttpServerOptions o;
+  ASSERT_TRUE(apply(R"({"limits": {"min_send_rate": 0}})", o).ok());  // 0: no rate bound
+  EXPECT_EQ(o.limits.min_send_rate, 0u);
+}
+
+TEST(ServeConfig, EmptyCredentialsOutOfRangeSettingsAndAFolderAreRefused) {
+  expect_refused(R"({"access": {"earth": {"hmac_keys": [""]}}})", "empty key");
+  expect_refused(R"({"access": {"earth": {"tokens": ["ok", ""]}}})", "empty token");
+  expect_refused(R"({"access": {"earth": {}}})", "no tokens and no hmac_keys");
+  expect_refused(R"({"threads": -1})", "threads is -1");
+  expect_refused(R"({"threads": 100000})", "threads is 100000");
+  expect_refused(R"({"max_age": -5})", "max_age is -5");
+  expect_refused(R"({"reload_interval_ms": -100})", "reload_interval_ms is -100");
+  const fs::path dir =
+      fs::temp_directory_path() / ("vts-serve-config-dir-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  HttpServerOptions o;
+  const Status st = apply_serve_config(dir, o);
+  ASSERT_FALSE(st.ok());
+  EXPECT_EQ(st.error().code, ErrorCode::invalid_argument);
+  EXPECT_NE(st.error().message.find("not a regular file"), std::string::npos);
+  fs::remove_all(dir);
 }
 
 TEST(ServeConfig, AFileIsReadAndAMissingOneIsAnIoErrorNamingIt) {

@@ -18,19 +18,26 @@
 
 #include "vts/protocol/result.hpp"
 #include "vts/server/http_server.hpp"
+#include "vts/server/tileset_registry.hpp"
 
 namespace vts {
 
 // "HOST:PORT", "[v6]:PORT" or ":PORT" (host 0.0.0.0). Error invalid_argument.
 Result<std::pair<std::string, std::uint16_t>> parse_endpoint(const std::string& s);
 
-// Reads `file` and applies it to `options`. Errors: io (unreadable), invalid_argument (not JSON,
-// a value of the wrong type, an unknown key, limits too small to serve anything), each naming
-// the file. On error `options` may be partly changed.
+// Reads `file` and applies it to `options`. Errors: io (unreadable), invalid_argument (not a
+// regular file, not JSON, a value of the wrong type, an unknown key, an empty token or HMAC key, a
+// limit that is not a whole number at least its minimum, threads outside 0..256, max_age outside
+// a year, a negative reload interval), each naming the file. On error `options` may be partly
+// changed.
 Status apply_serve_config(const std::filesystem::path& file, HttpServerOptions& options);
 
 // The same for config text already read; `file` only names it in errors.
 Status apply_serve_config_text(std::string_view text, const std::string& file,
                                HttpServerOptions& options);
+
+// invalid_argument when an access entry of `options` names a tileset `registry` does not serve
+// (checked at start-up: a misspelt name would leave the real tileset public).
+Status check_access_names(const HttpServerOptions& options, const TilesetRegistry& registry);
 
 }  // namespace vts
