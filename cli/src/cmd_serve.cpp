@@ -70,6 +70,10 @@ int run_serve(const ServeArgs& a) {
   auto registry = std::make_shared<TilesetRegistry>();
   std::vector<std::filesystem::path> paths(a.paths.begin(), a.paths.end());
   if (auto st = registry->load(paths); !st.ok()) return report_error(st.error());
+  // Served without them, as a reload would; /health and /metrics list them too.
+  for (const auto& skipped : registry->skipped())
+    std::fprintf(stderr, "vts serve: skipped %s: %s\n", skipped.file.c_str(),
+                 skipped.error.message.c_str());
   if (auto st = check_access_names(o, *registry); !st.ok()) return report_error(st.error());
 
   const std::string host = o.listen_host, admin_host = o.admin_host;

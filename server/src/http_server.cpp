@@ -140,7 +140,8 @@ class Server final : public HttpServer, public SessionHost {
   void request_reload(bool force) override { reload_.request(force); }
 
   std::string metrics_text() const override {
-    return prometheus_text(metrics_, registry_->size(), options_.provider.get());
+    return prometheus_text(metrics_, registry_->size(), registry_->skipped().size(),
+                           options_.provider.get());
   }
 
   // -- SessionHost --
@@ -170,6 +171,7 @@ class Server final : public HttpServer, public SessionHost {
     AdminState state;
     state.ready = ready_.load();
     state.metrics_text = [this] { return metrics_text(); };
+    state.skipped = [this] { return registry_->skipped(); };
     state.max_target_bytes = options_.router.max_target_bytes;
     return route_admin(req, state);
   }

@@ -76,7 +76,7 @@ void Metrics::record(Route route, int status, std::uint64_t bytes, std::chrono::
 }
 
 std::string prometheus_text(const Metrics& m, std::size_t tilesets_loaded,
-                            const AsyncTileProvider* provider) {
+                            std::size_t archives_skipped, const AsyncTileProvider* provider) {
   std::string out;
   out.reserve(8192);
   append_requests(m, out);
@@ -91,6 +91,10 @@ std::string prometheus_text(const Metrics& m, std::size_t tilesets_loaded,
   const std::size_t provided = provider ? provider->all().size() : 0;
   append_single(out, "vts_tilesets_loaded", "gauge", "Tilesets being served.",
                 double(tilesets_loaded + provided));
+  append_single(out, "vts_archives_skipped", "gauge",
+                "Archive files in served folders not served as they are (refused at start or by "
+                "a reload; listed by /health).",
+                double(archives_skipped));
   char line[256];
   std::snprintf(line, sizeof line,
                 "# HELP vts_reloads_total Archive reloads, by result.\n"

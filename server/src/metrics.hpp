@@ -34,8 +34,9 @@ struct Metrics {
   void record(Route route, int status, std::uint64_t bytes, std::chrono::nanoseconds d);
 };
 
-// The exposition: every counter above, the tileset gauge, then the provider's own text.
+// The exposition: every counter above, the tileset gauges (served; archive files skipped, as
+// TilesetRegistry::skipped() lists them), then the provider's own text.
 std::string prometheus_text(const Metrics& m, std::size_t tilesets_loaded,
-                            const AsyncTileProvider* provider);
+                            std::size_t archives_skipped, const AsyncTileProvider* provider);
 
 }  // namespace vts::http_detail

@@ -5,23 +5,58 @@ namespace vts {
 
 using namespace router_detail;
 
+namespace {
+
+// `s` with control characters as \xHH: one line of the /health body, whatever a file is named.
+void append_line_safe(std::string& out, std::string_view s) {
+  for (const char c : s) {
+    const auto u = static_cast<unsigned char>(c);
+    if (u < 0x20 || u == 0x7f) {
+      out += "\\x";
+      out += "0123456789abcdef"[u >> 4];
+      out += "0123456789abcdef"[u & 15];
+    } else {
+      out += c;
+    }
+  }
+}
+
+std::string health_text(const AdminState& state) {
+  std::string body = state.ready ? "ok\n" : "loading\n";
+  if (!state.skipped) return body;
+  for (const auto& s : state.skipped()) {
+    body += "skipped ";
+    append_line_safe(body, s.file.string());
+    body += ": ";
+    append_line_safe(body, s.error.message);
+    body += '\n';
+  }
+  return body;
+}
+
+}  // namespace
+
 HttpResponse route_admin(const HttpRequest& request, const AdminState& state) {
   std::optional<HttpResponse> rejection;
   const auto target = parse_target(request.target, state.max_target_bytes, rejection);
+  // `OPTIONS *` (asterisk-form) is as valid a request here as on the tile listener; only its
+  // method is not served.
+  const bool asterisk = request.method == HttpMethod::options && request.target == "*";
   HttpResponse r;
-  if (!target) {
+  if (!target && !asterisk) {
     r = std::move(*rejection);
   } else if (request.method != HttpMethod::get && request.method != HttpMethod::head) {
     set_owned(r, "method not allowed\n", kTextType);
     r.status = 405;
     add(r, "Allow", "GET, HEAD");
+    add(r, "Cache-Control", "no-store");
   } else {
     if (target->raw_path == "/metrics") {
       set_owned(r, state.metrics_text ? state.metrics_text() : std::string(),
                 "text/plain; version=0.0.4; charset=utf-8");
     } else if (target->raw_path == "/health") {
       r.status = state.ready ? 200 : 503;
-      set_owned(r, state.ready ? "ok\n" : "loading\n", kTextType);
+      set_owned(r, health_text(state), kTextType);
     } else {
       r.status = 404;
       set_owned(r, "not found\n", kTextType);

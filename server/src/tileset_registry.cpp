@@ -17,12 +17,12 @@ namespace fs = std::filesystem;
 // Tileset names travel in URLs and are looked up in a table: keep them to a conservative,
 // unreserved-only alphabet so that no name needs escaping and none can mean a path.
 // Names come from file stems; one that breaks the rule is refused with the file to rename.
-Status validate_name(std::string_view name, const fs::path& path) {
+Status validate_name(std::string_view name) {
   const std::string problem = tileset_name_problem(name);
   if (problem.empty()) return {};
   return make_error(ErrorCode::invalid_argument,
-                    path.string() + ": tileset name \"" + std::string(name) + "\" " + problem +
-                        " (" + std::string(kTilesetNameRule) + "; rename the file)");
+                    "tileset name \"" + std::string(name) + "\" " + problem + " (" +
+                        std::string(kTilesetNameRule) + "; rename the file)");
 }
 
 using FileIdentity = TilesetRegistry::FileIdentity;
@@ -30,9 +30,8 @@ using FileIdentity = TilesetRegistry::FileIdentity;
 Result<FileIdentity> identify(const fs::path& path) {
   struct stat st {};
   if (::stat(path.c_str(), &st) != 0) {
-    return make_error(
-        ErrorCode::not_found,
-        path.string() + ": " + std::error_code(errno, std::generic_category()).message());
+    return make_error(ErrorCode::not_found,
+                      std::error_code(errno, std::generic_category()).message());
   }
   FileIdentity id;
   id.size = static_cast<std::uint64_t>(st.st_size);
@@ -57,11 +56,10 @@ bool in_folder(const fs::path& file, const std::vector<fs::path>& folders) {
   return false;
 }
 
-}  // namespace
-
-Result<std::shared_ptr<const Tileset>> open_tileset(const fs::path& path) {
+// open_tileset() without the file in its error messages (the callers name it).
+Result<std::shared_ptr<const Tileset>> open_archive(const fs::path& path) {
   const std::string name = path.stem().string();
-  if (Status s = validate_name(name, path); !s) return s.error();
+  if (Status s = validate_name(name); !s) return s.error();
 
   // Stat before opening: if the file is replaced in between, the recorded identity is the old
   // one, so the next reload sees a change and re-opens (never the reverse, which would pin a
@@ -72,11 +70,15 @@ Result<std::shared_ptr<const Tileset>> open_tileset(const fs::path& path) {
   pmtiles::ReaderOptions options;
   options.leaf_cache_entries = 4096;
   auto reader = pmtiles::Reader::open(path, options);
-  if (!reader)
-    return make_error(reader.error().code, path.string() + ": " + reader.error().message);
+  if (!reader) {  // the reader names the file first, "<file>: <reason>"
+    Error e = reader.error();
+    const std::string named = path.string() + ": ";
+    if (e.message.starts_with(named)) e.message.erase(0, named.size());
+    return e;
+  }
 
   auto info = TilesetInfo::from_json((*reader)->metadata_json());
-  if (!info) return make_error(info.error().code, path.string() + ": " + info.error().message);
+  if (!info) return info.error();
 
   auto t = std::make_shared<Tileset>();
   t->name = name;
@@ -88,6 +90,18 @@ Result<std::shared_ptr<const Tileset>> open_tileset(const fs::path& path) {
   t->file_mtime_ns = id->mtime_ns;
   t->file_inode = id->inode;
   return std::shared_ptr<const Tileset>(std::move(t));
+}
+
+Error naming(const fs::path& file, const Error& e) {
+  return make_error(e.code, file.string() + ": " + e.message);
+}
+
+}  // namespace
+
+Result<std::shared_ptr<const Tileset>> open_tileset(const fs::path& path) {
+  auto t = open_archive(path);
+  if (!t) return naming(path, t.error());
+  return t;
 }
 
 namespace {
@@ -107,54 +121,97 @@ Result<std::vector<fs::path>> list_archives(const fs::path& folder) {
 
 }  // namespace
 
-Status TilesetRegistry::load(const std::vector<fs::path>& paths) {
-  std::vector<fs::path> files, folders;
+namespace {
+
+// What load() found: files named, and archives listed in folders.
+struct LoadPlan {
+  std::vector<fs::path> named, listed, folders;
+};
+
+Result<LoadPlan> plan_load(const std::vector<fs::path>& paths) {
+  LoadPlan plan;
   for (const auto& p : paths) {
     std::error_code ec;
     const auto st = fs::status(p, ec);
     if (ec || !fs::exists(st)) {
       return make_error(ErrorCode::not_found, p.string() + ": no such file or folder");
     }
-    if (fs::is_directory(st)) {
-      auto found = list_archives(p);
-      if (!found) return found.error();
-      if (found->empty()) {
-        return make_error(ErrorCode::not_found,
-                          p.string() + ": folder holds no *.pmtiles archives");
-      }
-      files.insert(files.end(), found->begin(), found->end());
-      folders.push_back(p);
-    } else {
-      files.push_back(p);
+    if (!fs::is_directory(st)) {
+      plan.named.push_back(p);
+      continue;
     }
+    auto found = list_archives(p);
+    if (!found) return found.error();
+    if (found->empty()) {
+      return make_error(ErrorCode::not_found, p.string() + ": folder holds no *.pmtiles archives");
+    }
+    plan.listed.insert(plan.listed.end(), found->begin(), found->end());
+    plan.folders.push_back(p);
   }
+  return plan;
+}
 
-  // Open everything first, then commit: a failed load changes nothing.
-  std::map<std::string, std::shared_ptr<const Tileset>, std::less<>> opened;
-  for (const auto& f : files) {
+Error duplicate(const std::string& name, const fs::path& first, const fs::path& second) {
+  return make_error(ErrorCode::invalid_argument, "duplicate tileset name \"" + name + "\": " +
+                                                     first.string() + " and " + second.string());
+}
+
+// Every archive refused: load() has nothing to serve.
+Error nothing_to_serve(const std::vector<SkippedArchive>& skipped) {
+  std::string m = "no archive can be served; every one found was refused:";
+  for (const auto& s : skipped) m += "\n  " + s.file.string() + ": " + s.error.message;
+  return make_error(skipped.front().error.code, std::move(m));
+}
+
+}  // namespace
+
+Status TilesetRegistry::load(const std::vector<fs::path>& paths) {
+  auto plan = plan_load(paths);
+  if (!plan) return plan.error();
+  // Open everything first, then commit: a failed load changes nothing. Named files first, so
+  // that an archive of a folder never takes a name from a file the user named.
+  Map opened;
+  for (const auto& f : plan->named) {
     auto t = open_tileset(f);
     if (!t) return t.error();
     const std::string& name = (*t)->name;
-    auto dup = opened.find(name);
-    if (dup != opened.end()) {
-      return make_error(ErrorCode::invalid_argument, "duplicate tileset name \"" + name +
-                                                         "\": " + dup->second->path.string() +
-                                                         " and " + f.string());
-    }
+    if (auto dup = opened.find(name); dup != opened.end())
+      return duplicate(name, dup->second->path, f);
+    if (auto dup = find(name)) return duplicate(name, dup->path, f);
     opened.emplace(name, std::move(*t));
   }
-  std::lock_guard lock(mutex_);
-  for (const auto& [name, t] : opened) {
-    auto dup = tilesets_.find(name);
-    if (dup != tilesets_.end()) {
-      return make_error(ErrorCode::invalid_argument, "duplicate tileset name \"" + name +
-                                                         "\": " + dup->second->path.string() +
-                                                         " and " + t->path.string());
+  std::vector<std::pair<SkippedArchive, FileIdentity>> skipped;
+  for (const auto& f : plan->listed) {
+    auto id = identify(f);
+    if (!id) continue;  // gone since it was listed
+    auto t = open_archive(f);
+    if (t) {
+      const std::string& name = (*t)->name;
+      auto dup = opened.find(name);
+      auto served = find(name);
+      if (dup == opened.end() && !served) {
+        opened.emplace(name, std::move(*t));
+        continue;
+      }
+      const fs::path& first = dup != opened.end() ? dup->second->path : served->path;
+      t = make_error(ErrorCode::invalid_argument,
+                     "tileset name \"" + name + "\" is taken by " + first.string());
     }
+    skipped.push_back({{f, t.error()}, *id});
   }
+  if (opened.empty() && !skipped.empty()) {
+    std::vector<SkippedArchive> list;
+    for (const auto& s : skipped) list.push_back(s.first);
+    return nothing_to_serve(list);
+  }
+  std::lock_guard lock(mutex_);
+  for (const auto& [name, t] : opened)
+    if (auto dup = tilesets_.find(name); dup != tilesets_.end())
+      return duplicate(name, dup->second->path, t->path);  // a concurrent load
   tilesets_.merge(opened);
   publish();
-  folders_.insert(folders_.end(), folders.begin(), folders.end());
+  folders_.insert(folders_.end(), plan->folders.begin(), plan->folders.end());
+  for (auto& [s, id] : skipped) refuse(s.file, id, std::move(s.error));
   return {};
 }
 
@@ -168,17 +225,43 @@ TilesetRegistry::ReloadResult TilesetRegistry::reload(bool force) {
   // Archives that appeared in a served folder are added; those that left it are removed (requests
   // in flight finish on their open file). Files given by name are never removed.
   std::set<fs::path> in_folders;
+  bool listed_all = true;
   for (const auto& folder : folders) {
     auto found = list_archives(folder);
     if (!found) {
       result.failures.push_back(found.error());
+      listed_all = false;
       continue;
     }
     in_folders.insert(found->begin(), found->end());
   }
   add_new_archives(in_folders, force, result);
   refresh_loaded(folders, force, result);
+  if (listed_all) {
+    std::lock_guard lock(mutex_);
+    forget_gone_refusals(in_folders);
+  }
   return result;
+}
+
+void TilesetRegistry::refuse(const fs::path& file, const FileIdentity& id, Error error) {
+  refused_[file] = Refusal{id, std::move(error)};
+}
+
+void TilesetRegistry::forget_gone_refusals(const std::set<fs::path>& in_folders) {
+  std::set<fs::path> served;
+  for (const auto& [name, t] : tilesets_) served.insert(t->path);
+  std::erase_if(refused_, [&](const auto& r) {
+    return !in_folders.count(r.first) && !served.count(r.first);
+  });
+}
+
+std::vector<SkippedArchive> TilesetRegistry::skipped() const {
+  std::lock_guard lock(mutex_);
+  std::vector<SkippedArchive> out;
+  out.reserve(refused_.size());
+  for (const auto& [file, r] : refused_) out.push_back({file, r.error});
+  return out;
 }
 
 // Opens the archives of `in_folders` that are not served yet.
@@ -193,23 +276,25 @@ void TilesetRegistry::add_new_archives(const std::set<fs::path>& in_folders, boo
     {
       std::lock_guard lock(mutex_);
       auto r = refused_.find(path);
-      if (!force && r != refused_.end() && r->second == *id) continue;  // refused as it is
+      if (!force && r != refused_.end() && r->second.identity == *id) continue;  // as refused
     }
-    auto fresh = open_tileset(path);
+    auto fresh = open_archive(path);
     std::lock_guard lock(mutex_);
     if (!fresh) {
-      refused_[path] = *id;
-      result.failures.push_back(
-          make_error(fresh.error().code, fresh.error().message + " (new archive not served)"));
+      result.failures.push_back(naming(path, fresh.error()));
+      result.failures.back().message += " (new archive not served)";
+      refuse(path, *id, fresh.error());
       continue;
     }
     const std::string name = (*fresh)->name;
     if (auto dup = tilesets_.find(name); dup != tilesets_.end()) {
-      refused_[path] = *id;
       result.failures.push_back(make_error(ErrorCode::invalid_argument,
                                            "duplicate tileset name \"" + name +
                                                "\": " + dup->second->path.string() + " and " +
                                                path.string() + " (the new one is not served)"));
+      refuse(path, *id,
+             make_error(ErrorCode::invalid_argument,
+                        "tileset name \"" + name + "\" is taken by " + dup->second->path.string()));
       continue;
     }
     refused_.erase(path);
@@ -237,25 +322,28 @@ void TilesetRegistry::refresh_loaded(const std::vector<fs::path>& folders, bool 
     }
     auto id = identify(old->path);
     if (!id) {
-      result.failures.push_back(make_error(
-          id.error().code, id.error().message + " (tileset \"" + old->name + "\" kept as loaded)"));
+      result.failures.push_back(naming(old->path, id.error()));
+      result.failures.back().message += " (tileset \"" + old->name + "\" kept as loaded)";
       continue;
     }
     if (!force && *id == identity_of(*old)) continue;
     {
       std::lock_guard lock(mutex_);
       auto r = refused_.find(old->path);
-      if (!force && r != refused_.end() && r->second == *id) continue;  // refused as it is
+      if (!force && r != refused_.end() && r->second.identity == *id) continue;  // as refused
     }
-    auto fresh = open_tileset(old->path);
+    auto fresh = open_archive(old->path);
     if (!fresh) {
       // The previous archive keeps answering: whole when its file was replaced by a rename, with
       // 503s (ErrorCode::changed) when it was modified in place, until a valid archive is there.
+      const std::string kept =
+          " (new archive refused; tileset \"" + old->name + "\" keeps the previous one)";
       std::lock_guard lock(mutex_);
-      refused_[old->path] = *id;
-      result.failures.push_back(make_error(
-          fresh.error().code, fresh.error().message + " (new archive refused; tileset \"" +
-                                  old->name + "\" keeps the previous one)"));
+      result.failures.push_back(naming(old->path, fresh.error()));
+      result.failures.back().message += kept;
+      Error reason = fresh.error();
+      reason.message += kept;
+      refuse(old->path, *id, std::move(reason));
       continue;
     }
     std::lock_guard lock(mutex_);

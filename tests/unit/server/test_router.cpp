@@ -712,6 +712,23 @@ TEST_F(AdminRouter, HealthSaysLoadingWith503UntilReady) {
   EXPECT_EQ(metrics_calls_, 0) << "/health must not build the metrics text";
 }
 
+TEST_F(AdminRouter, HealthListsTheSkippedArchivesOneLineEach) {
+  state_.skipped = [] {
+    return std::vector<vts::SkippedArchive>{
+        {"/srv/half.pmtiles", vts::make_error(vts::ErrorCode::truncated, "archive is truncated")},
+        {"/srv/a\nb.pmtiles", vts::make_error(vts::ErrorCode::invalid_argument, "bad\rname")}};
+  };
+  auto r = get("/health");
+  EXPECT_EQ(r.status, 200) << "skipped archives do not make the server unhealthy";
+  EXPECT_EQ(r.owned,
+            "ok\n"
+            "skipped /srv/half.pmtiles: archive is truncated\n"
+            "skipped /srv/a\\x0ab.pmtiles: bad\\x0dname\n");
+  EXPECT_EQ(header(r, "Content-Type"), "text/plain; charset=utf-8");
+  state_.skipped = [] { return std::vector<vts::SkippedArchive>{}; };
+  EXPECT_EQ(get("/health").owned, "ok\n");
+}
+
 TEST_F(AdminRouter, HeadAnswersWithTheLengthButNoBodyToSend) {
   auto r = get("/metrics", vts::HttpMethod::head);
   EXPECT_EQ(r.status, 200);
@@ -732,6 +749,14 @@ TEST_F(AdminRouter, OtherPathsAre404AndOtherMethods405) {
     EXPECT_EQ(r.route, vts::Route::admin);
   }
   EXPECT_EQ(metrics_calls_, 0);
+}
+
+TEST_F(AdminRouter, OptionsWithTheAsteriskTargetIsAMethodNotServedNotABadTarget) {
+  auto r = get("*", vts::HttpMethod::options);
+  expect_plain_error(r, 405);
+  EXPECT_EQ(header(r, "Allow"), "GET, HEAD");
+  EXPECT_EQ(header(r, "Cache-Control"), "no-store") << "every admin answer";
+  expect_plain_error(get("*"), 400);
 }
 
 TEST_F(AdminRouter, TargetsAreCheckedAsOnTheTileListener) {

@@ -135,15 +135,14 @@ TEST(TilesetRegistry, LoadFailsNamingAFolderWithoutArchives) {
   EXPECT_NE(s.error().message.find(dir.path().string()), std::string::npos) << s.error().message;
 }
 
-TEST(TilesetRegistry, LoadRefusesDuplicateNamesAndChangesNothing) {
+TEST(TilesetRegistry, LoadRefusesDuplicateNamedFilesAndChangesNothing) {
   RegistryTempDir dir;
   fs::create_directories(dir.path() / "x");
   fs::create_directories(dir.path() / "y");
   build_archive(dir.path() / "x" / "same.pmtiles", 300, 200);
   build_archive(dir.path() / "y" / "same.pmtiles", 300, 200);
-  build_archive(dir.path() / "y" / "other.pmtiles", 300, 200);
   vts::TilesetRegistry registry;
-  auto s = registry.load({dir.path() / "x", dir.path() / "y"});
+  auto s = registry.load({dir.path() / "x" / "same.pmtiles", dir.path() / "y" / "same.pmtiles"});
   ASSERT_FALSE(s.ok());
   EXPECT_NE(s.error().message.find("duplicate tileset name \"same\""), std::string::npos);
   EXPECT_EQ(registry.size(), 0u);
@@ -151,6 +150,122 @@ TEST(TilesetRegistry, LoadRefusesDuplicateNamesAndChangesNothing) {
   ASSERT_TRUE(registry.load({dir.path() / "x"}).ok());
   EXPECT_FALSE(registry.load({dir.path() / "y" / "same.pmtiles"}).ok());
   EXPECT_EQ(registry.size(), 1u);
+}
+
+// A folder's archive whose name is taken is skipped, as a reload skips it: the first path wins.
+TEST(TilesetRegistry, LoadSkipsAFolderArchiveWhoseNameIsTaken) {
+  RegistryTempDir dir;
+  fs::create_directories(dir.path() / "x");
+  fs::create_directories(dir.path() / "y");
+  build_archive(dir.path() / "x" / "same.pmtiles", 300, 200);
+  build_archive(dir.path() / "y" / "same.pmtiles", 600, 300);
+  build_archive(dir.path() / "y" / "other.pmtiles", 300, 200);
+  vts::TilesetRegistry registry;
+  auto s = registry.load({dir.path() / "x", dir.path() / "y"});
+  ASSERT_TRUE(s.ok()) << s.error().to_string();
+  EXPECT_EQ(registry.size(), 2u);
+  EXPECT_EQ(registry.find("same")->info.geometry.width(), 300u);
+  const auto skipped = registry.skipped();
+  ASSERT_EQ(skipped.size(), 1u);
+  EXPECT_EQ(skipped[0].file, dir.path() / "y" / "same.pmtiles");
+  EXPECT_EQ(skipped[0].error.code, vts::ErrorCode::invalid_argument);
+  EXPECT_NE(
+      skipped[0].error.message.find("taken by " + (dir.path() / "x" / "same.pmtiles").string()),
+      std::string::npos)
+      << skipped[0].error.message;
+}
+
+// A half-copied archive or a file with an impossible name in a served folder must not keep the
+// others offline: they are skipped, each with its reason, exactly as a reload would skip them.
+TEST(TilesetRegistry, LoadServesAFolderWithoutItsBrokenOrBadlyNamedArchivesAndListsThem) {
+  RegistryTempDir dir;
+  build_archive(dir.path() / "good.pmtiles", 600, 300);
+  const auto size = fs::file_size(dir.path() / "good.pmtiles");
+  fs::copy_file(dir.path() / "good.pmtiles", dir.path() / "half.pmtiles");
+  fs::resize_file(dir.path() / "half.pmtiles", size / 2);
+  fs::copy_file(dir.path() / "good.pmtiles", dir.path() / "caf\xc3\xa9.pmtiles");
+
+  vts::TilesetRegistry registry;
+  auto s = registry.load({dir.path()});
+  ASSERT_TRUE(s.ok()) << s.error().to_string();
+  EXPECT_EQ(registry.size(), 1u);
+  EXPECT_NE(registry.find("good"), nullptr);
+  const auto skipped = registry.skipped();
+  ASSERT_EQ(skipped.size(), 2u);
+  // Sorted by file: "caf\xc3\xa9" < "half".
+  EXPECT_EQ(skipped[0].file, dir.path() / "caf\xc3\xa9.pmtiles");
+  EXPECT_EQ(skipped[0].error.code, vts::ErrorCode::invalid_argument);
+  EXPECT_NE(skipped[0].error.message.find("tileset name"), std::string::npos);
+  EXPECT_EQ(skipped[1].file, dir.path() / "half.pmtiles");
+  EXPECT_EQ(vts::exit_code(skipped[1].error.code), 5) << skipped[1].error.to_string();
+  for (const auto& k : skipped)  // the reason does not repeat the file: a listing names it
+    EXPECT_EQ(k.error.message.find(dir.path().string()), std::string::npos) << k.error.message;
+
+  // Not retried while they stay as they are; listed until they change.
+  auto r = registry.reload(false);
+  EXPECT_TRUE(r.failures.empty());
+  EXPECT_EQ(registry.skipped().size(), 2u);
+  // The half copy completed (renamed over it): served, and no longer listed.
+  fs::copy_file(dir.path() / "good.pmtiles", dir.path() / "half.tmp");
+  fs::rename(dir.path() / "half.tmp", dir.path() / "half.pmtiles");
+  r = registry.reload(false);
+  EXPECT_EQ(r.added, 1);
+  EXPECT_NE(registry.find("half"), nullptr);
+  ASSERT_EQ(registry.skipped().size(), 1u);
+  // The badly named one removed: forgotten.
+  fs::remove(dir.path() / "caf\xc3\xa9.pmtiles");
+  r = registry.reload(false);
+  EXPECT_TRUE(registry.skipped().empty());
+}
+
+TEST(TilesetRegistry, LoadStillFailsOnABrokenArchiveItWasNamed) {
+  RegistryTempDir dir;
+  build_archive(dir.path() / "good.pmtiles", 300, 200);
+  fs::copy_file(dir.path() / "good.pmtiles", dir.path() / "half.pmtiles");
+  fs::resize_file(dir.path() / "half.pmtiles", fs::file_size(dir.path() / "good.pmtiles") / 2);
+  vts::TilesetRegistry registry;
+  auto s = registry.load({dir.path() / "good.pmtiles", dir.path() / "half.pmtiles"});
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(vts::exit_code(s.error().code), 5);
+  EXPECT_NE(s.error().message.find("half.pmtiles"), std::string::npos) << s.error().message;
+  EXPECT_EQ(registry.size(), 0u);
+  EXPECT_TRUE(registry.skipped().empty());
+}
+
+// Nothing to serve is a failure, as a folder without archives is; the message lists each file.
+TEST(TilesetRegistry, LoadFailsWhenEveryArchiveFoundIsRefused) {
+  RegistryTempDir dir;
+  write_file(dir.path() / "junk.pmtiles", "not an archive at all");
+  build_archive(dir.path() / "caf\xc3\xa9.pmtiles", 300, 200);
+  vts::TilesetRegistry registry;
+  auto s = registry.load({dir.path()});
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.error().code, vts::ErrorCode::invalid_argument) << "the first file's code";
+  EXPECT_NE(s.error().message.find("no archive can be served"), std::string::npos);
+  EXPECT_NE(s.error().message.find("junk.pmtiles: "), std::string::npos) << s.error().message;
+  EXPECT_NE(s.error().message.find("caf\xc3\xa9.pmtiles: tileset name"), std::string::npos)
+      << s.error().message;
+  EXPECT_EQ(registry.size(), 0u);
+}
+
+TEST(TilesetRegistry, ReloadListsTheArchivesItRefusesAsSkipped) {
+  RegistryTempDir dir;
+  build_archive(dir.path() / "a.pmtiles", 300, 200);
+  vts::TilesetRegistry registry;
+  ASSERT_TRUE(registry.load({dir.path()}).ok());
+  EXPECT_TRUE(registry.skipped().empty());
+  write_file(dir.path() / "junk.pmtiles", std::string(4096, 'x'));
+  write_file(dir.path() / "garbage.tmp", std::string(4096, 'x'));
+  fs::rename(dir.path() / "garbage.tmp", dir.path() / "a.pmtiles");
+  auto r = registry.reload(false);
+  EXPECT_EQ(r.failures.size(), 2u);
+  const auto skipped = registry.skipped();
+  ASSERT_EQ(skipped.size(), 2u);
+  EXPECT_EQ(skipped[0].file, dir.path() / "a.pmtiles");
+  EXPECT_NE(skipped[0].error.message.find("keeps the previous one"), std::string::npos)
+      << skipped[0].error.message;
+  EXPECT_EQ(skipped[1].file, dir.path() / "junk.pmtiles");
+  EXPECT_NE(registry.find("a"), nullptr);
 }
 
 TEST(TilesetRegistry, ReloadWithoutChangesSwapsNothingAndForceReopensAll) {

@@ -35,21 +35,37 @@ struct Tileset {
   std::uint64_t file_inode = 0;
 };
 
-// Opens one archive as a tileset named after its file stem; validates metadata.
+// Opens one archive as a tileset named after its file stem; validates metadata. Errors name the
+// file ("<path>: <reason>").
 Result<std::shared_ptr<const Tileset>> open_tileset(const std::filesystem::path& path);
+
+// An archive file a registry does not serve as it is on disk: it does not open as a valid
+// archive, its stem is not a valid tileset name, or its name is taken (a served tileset whose new
+// file was refused keeps its previous archive; the reason says so). It is tried again once the
+// file changes (or on a forced reload), and forgotten once served or gone from its folder.
+struct SkippedArchive {
+  std::filesystem::path file;
+  Error error;  // its code, and the reason (which does not repeat the file)
+};
 
 // Thread-safe registry. Readers take snapshots; writers replace entries atomically.
 class TilesetRegistry {
  public:
   // Adds every archive named by `paths`: a *.pmtiles file, or a folder whose *.pmtiles files
-  // (not recursive) are each a tileset. Fails on the first unreadable archive or duplicate name.
+  // (not recursive) are each a tileset. A file named in `paths` must open: load fails on the
+  // first one that does not (or whose name is taken), changing nothing. An archive found in a
+  // folder that does not open, or whose name is taken, is skipped as reload() skips it: it is
+  // listed by skipped() and tried again once its file changes. Load fails (not_found) for a
+  // folder without *.pmtiles files, and when every archive found was skipped (with the first
+  // one's code and a message listing each file and its reason): it has nothing to serve.
   Status load(const std::vector<std::filesystem::path>& paths);
 
   // Re-opens every tileset whose file changed (size, mtime or inode) or, with force, all of them.
   // A new archive that fails to open is refused and the old one kept (its error is returned in
   // the list of failures). In loaded folders, archives that appeared are added and archives that
   // disappeared are removed. A refused archive, new or replacing a loaded one, is not tried again
-  // until its file changes (or force). Files loaded by name are never removed.
+  // until its file changes (or force), and listed by skipped() meanwhile. Files loaded by name
+  // are never removed.
   struct ReloadResult {
     int swapped = 0, added = 0, removed = 0;
     std::vector<Error> failures;
@@ -59,6 +75,8 @@ class TilesetRegistry {
   std::shared_ptr<const Tileset> find(std::string_view name) const;
   std::vector<std::shared_ptr<const Tileset>> all() const;  // sorted by name
   std::size_t size() const;
+  // The archive files refused as they are now, at load or by a reload, sorted by file.
+  std::vector<SkippedArchive> skipped() const;
 
   // What reload() compares to decide whether a file changed.
   struct FileIdentity {
@@ -89,8 +107,17 @@ class TilesetRegistry {
     static std::atomic<std::uint64_t> n{0};
     return ++n;
   }
-  std::vector<std::filesystem::path> folders_;             // loaded as folders
-  std::map<std::filesystem::path, FileIdentity> refused_;  // new archives refused, as seen
+  struct Refusal {
+    FileIdentity identity;  // of the file as it was refused
+    Error error;
+  };
+  // Under mutex_: records a refusal / forgets refusals of files that are neither in a folder's
+  // listing `in_folders` nor the file of a served tileset.
+  void refuse(const std::filesystem::path& file, const FileIdentity& id, Error error);
+  void forget_gone_refusals(const std::set<std::filesystem::path>& in_folders);
+
+  std::vector<std::filesystem::path> folders_;        // loaded as folders
+  std::map<std::filesystem::path, Refusal> refused_;  // archive files refused, as seen
 };
 
 }  // namespace vts
