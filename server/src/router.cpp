@@ -514,16 +514,30 @@ const char* route_name(Route r) noexcept {
   return "error";
 }
 
+namespace {
+
+// The CORS headers of every response of the tile listener (§8).
+void add_cors(HttpResponse& r, const RouterConfig& config) {
+  if (config.cors_origin.empty()) return;
+  add(r, "Access-Control-Allow-Origin", config.cors_origin);
+  if (config.cors_origin != "*") add(r, "Vary", "Origin");
+  if (r.route != Route::preflight) {
+    add(r, "Access-Control-Expose-Headers", "ETag, Content-Range, Content-Length");
+  }
+}
+
+}  // namespace
+
+HttpResponse unparsed_request_error(int status, std::string message, const RouterConfig* config) {
+  HttpResponse r = error(status, std::move(message));
+  if (config != nullptr) add_cors(r, *config);
+  return r;
+}
+
 HttpResponse route(const HttpRequest& request, const TilesetRegistry& registry,
                    const RouterConfig& config, const AsyncTileProvider* provider) {
   HttpResponse r = dispatch(request, registry, config, provider);
-  if (!config.cors_origin.empty()) {
-    add(r, "Access-Control-Allow-Origin", config.cors_origin);
-    if (config.cors_origin != "*") add(r, "Vary", "Origin");
-    if (r.route != Route::preflight) {
-      add(r, "Access-Control-Expose-Headers", "ETag, Content-Range, Content-Length");
-    }
-  }
+  add_cors(r, config);
   if (request.method == HttpMethod::head) r.head_only = true;
   // 204 and 304 carry no body by definition (RFC 9110 §15.3.5, §15.4.5).
   if (r.status == 204 || r.status == 304) {

@@ -64,14 +64,17 @@ void read_fields(const RequestParser::value_type& req, HttpRequest& hr) {
   }
 }
 
-HttpResponse plain_response(int status, std::string body) {
-  HttpResponse r;
-  r.status = status;
-  r.route = Route::error;
-  r.headers.emplace_back("Content-Type", "text/plain; charset=utf-8");
-  r.owned = std::move(body);
-  r.content_length = r.owned.size();
-  return r;
+// Why a parsed request cannot be answered, decided before routing: how it is framed (RFC 9112
+// §6.3: a transfer coding other than chunked last leaves the body's length unknown) and its Host
+// fields (§3.2: exactly one on HTTP/1.1, at most one before). nullptr when it can.
+const char* framing_problem(const RequestParser& parser) {
+  const auto& req = parser.get();
+  if (req.count(http::field::transfer_encoding) > 0 && !parser.chunked())
+    return "Transfer-Encoding must end with chunked; the body's length is unknown";
+  const std::size_t hosts = req.count(http::field::host);
+  if (hosts > 1) return "more than one Host header field";
+  if (hosts == 0 && req.version() >= 11) return "an HTTP/1.1 request needs a Host header field";
+  return nullptr;
 }
 
 }  // namespace
@@ -236,7 +239,8 @@ void Session::read_request() {
 
 void Session::fail_parse(int status, const char* message) {
   auto out = new_outgoing();
-  out->response = plain_response(status, message);
+  out->response =
+      unparsed_request_error(status, message, admin_ ? nullptr : &server_.options().router);
   out->start = Clock::now();
   out->close = true;
   read_done_ = true;
@@ -257,17 +261,17 @@ void Session::on_parse_error(error_code ec) {
     const auto parsed_target = parser_->get().target();
     if (parsed_target.size() > limits.max_target_bytes ||
         (parsed_target.empty() && line > limits.max_target_bytes + 16))
-      return fail_parse(414, "request target too long\n");
-    return fail_parse(431, "request header fields too large\n");
+      return fail_parse(414, "request target too long");
+    return fail_parse(431, "request header fields too large");
   }
-  if (ec == http::error::body_limit) return fail_parse(413, "request body not allowed\n");
+  if (ec == http::error::body_limit) return fail_parse(413, "request body not allowed");
   read_done_ = true;
   if (ec == http::error::end_of_stream || ec == asio::error::operation_aborted ||
       ec == asio::error::connection_reset || ec == asio::error::eof || !socket_.is_open()) {
     if (queue_.empty()) close();
     return;
   }
-  fail_parse(400, "bad request\n");
+  fail_parse(400, "bad request");
 }
 
 // Routes a parsed request (the router checks its target) into a queued response.
@@ -302,6 +306,9 @@ std::unique_ptr<Outgoing> Session::answer(RequestParser::value_type& req) {
 void Session::on_read(error_code ec) {
   if (closed_) return;
   if (ec) return on_parse_error(ec);
+  // Answered 400 and closed: the request's end (hence the next one's start) is unknown, or the
+  // request is ambiguous about whom it addresses.
+  if (const char* problem = framing_problem(*parser_)) return fail_parse(400, problem);
   auto out = answer(parser_->get());
   if (out->close) read_done_ = true;
   // Done with the request (its views end here): writing may parse the next one (see write_next).

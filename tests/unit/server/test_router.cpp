@@ -540,6 +540,24 @@ TEST_F(Router, PlainOptionsListsTheAllowedMethods) {
   }
 }
 
+TEST(UnparsedRequestError, IsAnErrorAsTheRouterGivesOneWithItsCorsHeaders) {
+  vts::RouterConfig config;
+  config.cors_origin = "https://app.example";
+  auto r = vts::unparsed_request_error(431, "request header fields too large", &config);
+  EXPECT_EQ(r.status, 431);
+  EXPECT_EQ(r.route, vts::Route::error);
+  EXPECT_EQ(r.owned, "request header fields too large\n");
+  EXPECT_EQ(r.content_length, r.owned.size());
+  EXPECT_EQ(header(r, "Content-Type"), "text/plain; charset=utf-8");
+  EXPECT_EQ(header(r, "Cache-Control"), "no-store");
+  EXPECT_EQ(header(r, "Access-Control-Allow-Origin"), "https://app.example");
+  EXPECT_EQ(header(r, "Vary"), "Origin");
+  EXPECT_EQ(header(r, "Access-Control-Expose-Headers"), "ETag, Content-Range, Content-Length");
+  auto admin = vts::unparsed_request_error(400, "bad request", nullptr);
+  EXPECT_EQ(header(admin, "Cache-Control"), "no-store");
+  EXPECT_FALSE(header(admin, "Access-Control-Allow-Origin").has_value());
+}
+
 // ---------------------------------------------------------------------------------------------
 // Access control
 

@@ -19,7 +19,9 @@
 //   readers). Expiry closes the connection.
 // - Limits: header bytes (431), target length (414), any request body (413), connections beyond
 //   `max_connections` are accepted and closed at once. A parse error answers 400/413/414/431 with
-//   `Connection: close` and closes after the response.
+//   `Connection: close` and closes after the response; so do a missing Host on HTTP/1.1, two Host
+//   fields, and a Transfer-Encoding not ending with chunked (400). Those answers are built by
+//   vts::unparsed_request_error(): no-store, and the router's CORS headers on the tile listener.
 // - stop() (SIGTERM/SIGINT when handle_signals): close the listeners, let every queued response
 //   finish (responses carry `Connection: close` from then on), close idle connections; after
 //   `drain_timeout` whatever is left is cut. run() then returns.

@@ -97,6 +97,13 @@ struct HttpResponse {
   std::shared_ptr<const DeferredTile> deferred;
 };
 
+// The answer to a request refused before it could be routed (the network layer: a request that
+// does not parse, is too large, or is framed or addressed wrongly — 400 / 413 / 414 / 431): an
+// error exactly as route() gives one — a text/plain `message` + "\n", Cache-Control: no-store,
+// route `error` — with the CORS headers route() adds under `config` (null: none, as on the admin
+// listener).
+HttpResponse unparsed_request_error(int status, std::string message, const RouterConfig* config);
+
 // `provider` may be null (archives only, as `vts serve`).
 HttpResponse route(const HttpRequest& request, const TilesetRegistry& registry,
                    const RouterConfig& config, const AsyncTileProvider* provider = nullptr);
