@@ -61,8 +61,7 @@ void ReloadLoop::reload(bool force) {
                  result.removed);
   for (const auto& e : result.failures) {
     metrics_.reloads_refused.fetch_add(1);
-    std::fprintf(stderr, "vts serve: reload refused, keeping the old archive: %s\n",
-                 e.to_string().c_str());
+    std::fprintf(stderr, "vts serve: reload refused: %s\n", e.to_string().c_str());
   }
 }
 
