@@ -270,7 +270,7 @@ class FakeProvider final : public vts::AsyncTileProvider {
     return {tileset_};
   }
   void tile(const std::shared_ptr<const vts::ProvidedTileset>&, vts::TileId id,
-            std::function<void(vts::ProvidedTile)> done) override {
+            std::function<void(vts::ProvidedTile)> done, std::stop_token) override {
     Plan plan;
     {
       std::lock_guard lock(mutex_);
