@@ -8,7 +8,8 @@
 #  2. 16 clients keep waiting on tiles of one 8x8 region: it holds at most --upstream-region-cap
 #     (8) transfers, so a tile elsewhere is still answered within 2 s.
 #  3. With --upstream-deadline 2, a held tile answers 503 after ~2 s and the origin sees the
-#     request closed.
+#     request closed; a second client of that tile leaving after 1 s did not end the shared fetch
+#     early (the first client's answer still took the whole deadline).
 # Extra arguments go to every `vts cache serve` (e.g. --upstream-region-cap 0 shows 2 failing).
 # shellcheck source=lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
@@ -20,7 +21,7 @@ require_tool curl
 PROXY_PID="" DAEMON_PID=""
 slow_cleanup() {
   for pid in "$DAEMON_PID" "$PROXY_PID"; do
-    [[ -n $pid ]] && kill -KILL "$pid" 2>/dev/null || true
+    if [[ -n $pid ]]; then kill -KILL "$pid" 2>/dev/null || true; fi
   done
   serve_cleanup
 }
@@ -124,10 +125,16 @@ kill "${waiting[@]}" 2>/dev/null || true
 wait "${waiting[@]}" 2>/dev/null || true
 stop_daemon
 
-note "a fetch the origin holds past --upstream-deadline 2: 503 after ~2 s, the request closed"
+note "a fetch the origin holds past --upstream-deadline 2: 503 after ~2 s, the request closed;"
+note "a second client of the same tile that leaves after 1 s does not cancel the shared fetch"
 start_daemon --upstream-deadline 2 "$@"
 aborted0=$(origin_count aborted)
+curl -s -o /dev/null --max-time 1 "$D/s/5/30/5" &
+leaver=$!
 t=$(timed_get "$D/s/5/30/5")
+wait "$leaver" || true
+cancelled=$(curl -s "$DA/metrics" | sed -nE 's/^vts_cache_cancelled_total ([0-9]+)$/\1/p')
+[[ $cancelled == 1 ]] || fail "vts_cache_cancelled_total is '$cancelled', expected 1 (the client that left)"
 code=${t%% *} secs=${t#* }
 note "5/30/5: HTTP $code in $secs s"
 [[ $code == 503 ]] || fail "a fetch past its deadline answered $code, expected 503"
@@ -140,4 +147,7 @@ done
 (($(origin_count aborted) > aborted0)) || fail "the origin's held request was not closed at the deadline"
 expect_fast "5/3/3 after the deadline" "$D/s/5/3/3"
 stop_daemon
+kill -TERM "$PROXY_PID"
+wait "$PROXY_PID" 2>/dev/null || true
+PROXY_PID=""
 note "PASS"
