@@ -97,8 +97,8 @@ struct FetchResult {
   std::string vts_error;  // the Vts-Error header (docs/PROTOCOL.md); empty when absent
   // Set on transport failure (io / invalid_argument), retries exhausted on 5xx/429 (io, with
   // the last status kept), a too-long Retry-After (io), a body over max_body_bytes (too_large),
-  // a ranged answer that never matched (truncated), or cancellation (cancelled). The message
-  // names the method, the URL and the reason, e.g.
+  // a ranged answer that never matched (truncated), a passed FetcherOptions::deadline (io), or
+  // cancellation (cancelled). The message names the method, the URL and the reason, e.g.
   // "GET http://127.0.0.1:1/x: connection refused after 5 attempts".
   std::optional<Error> error;
   // Attempts started for the transfer this handle was served by. (libcurl itself may resend a
