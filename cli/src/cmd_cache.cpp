@@ -28,7 +28,7 @@ struct CacheServeArgs {
   std::string access_log;
   std::string cache_size = "1G", ram_size = "256M";
   int threads = 0;
-  int reconnect_seconds = 30;
+  int reconnect_seconds = 30, deadline_seconds = 20, region_cap = 8;
   bool no_admin = false;
 };
 
@@ -107,6 +107,8 @@ Result<std::shared_ptr<client::CacheProvider>> make_provider(const CacheServeArg
   so.fetcher.max_attempts = 3;
   so.fetcher.connect_timeout = std::chrono::milliseconds(3000);
   so.fetcher.request_timeout = std::chrono::milliseconds(15000);
+  so.fetcher.deadline = std::chrono::seconds(a.deadline_seconds);
+  so.fetcher.max_in_flight_per_group = std::size_t(a.region_cap);
   std::unique_ptr<client::TileSource> online;
   auto info = open_upstream(a, so, online);
   if (!info) return info.error();
@@ -227,6 +229,14 @@ Runner add_cache(CLI::App& app) {
   c->add_option("--reconnect-interval", a->reconnect_seconds,
                 "Seconds between attempts to reopen an upstream that was down at start")
       ->check(CLI::Range(1, 86400))
+      ->capture_default_str();
+  c->add_option("--upstream-deadline", a->deadline_seconds,
+                "Seconds one upstream fetch may take, retries included (then 503)")
+      ->check(CLI::Range(1, 3600))
+      ->capture_default_str();
+  c->add_option("--upstream-region-cap", a->region_cap,
+                "Upstream fetches of one 8x8-tile region of a level at once (0: no cap)")
+      ->check(CLI::Range(0, 1024))
       ->capture_default_str();
   return [a, cache, c] {
     if (c->parsed()) return run_cache_serve(*a);

@@ -1,5 +1,8 @@
 #include "vts/client/cache_provider.hpp"
 
+#include <optional>
+#include <stop_token>
+
 namespace vts::client {
 
 bool same_tileset(const SourceInfo& a, const SourceInfo& b) {
@@ -163,7 +166,7 @@ ProvidedTile to_provided(PayloadResult&& r) {
     }
     case PayloadResult::Kind::cancelled:
       t.kind = ProvidedTile::Kind::unavailable;
-      t.message = "the cache daemon is shutting down";
+      t.message = "the request was cancelled (its client went away, or the daemon is stopping)";
       break;
   }
   return t;
@@ -190,10 +193,20 @@ std::vector<std::shared_ptr<const ProvidedTileset>> CacheProvider::all() const {
 }
 
 void CacheProvider::tile(const std::shared_ptr<const ProvidedTileset>&, TileId id,
-                         std::function<void(ProvidedTile)> done) {
-  cache_->get(id, GetOptions{}, [done = std::move(done)](PayloadResult&& r) mutable {
-    done(to_provided(std::move(r)));
-  });
+                         std::function<void(ProvidedTile)> done, std::stop_token abandon) {
+  // A client that goes away cancels its get; the cache cancels the upstream fetch when no other
+  // get waits for the tile. The stop callback lives as long as the get's callback (or this call):
+  // whichever lets go last unregisters it, with no lock held.
+  struct Watch {
+    std::optional<std::stop_callback<std::function<void()>>> on_abandon;
+  };
+  auto watch = std::make_shared<Watch>();
+  const TileCache::Handle h =
+      cache_->get(id, GetOptions{}, [done = std::move(done), watch](PayloadResult&& r) mutable {
+        done(to_provided(std::move(r)));
+      });
+  if (h != 0 && abandon.stop_possible())
+    watch->on_abandon.emplace(abandon, [cache = cache_.get(), h] { cache->cancel(h); });
 }
 
 std::string CacheProvider::metrics_text() const {
@@ -214,6 +227,10 @@ std::string CacheProvider::metrics_text() const {
           s.errors);
   counter(out, "vts_cache_corrupt_rejected_total", "Upstream payloads that failed verification.",
           s.corrupt_rejected);
+  counter(out, "vts_cache_cancelled_total",
+          "Gets abandoned by their client before the tile came (the upstream fetch is cancelled "
+          "once no get waits for it).",
+          s.cancelled);
   counter(out, "vts_cache_revalidations_total", "Stale tiles revalidated with the upstream.",
           s.revalidations);
   counter(out, "vts_cache_disk_write_errors_total", "Failed disk cache writes (e.g. disk full).",

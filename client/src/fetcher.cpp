@@ -127,6 +127,7 @@ class Fetcher::Impl {
     s.succeeded = stats_.succeeded.load();
     s.failed = stats_.failed.load();
     s.cancelled = stats_.cancelled.load();
+    s.expired = stats_.expired.load();
     s.in_flight = stats_.in_flight.load();
     s.queued = stats_.queued.load();
     s.bytes = stats_.bytes.load();
@@ -164,12 +165,14 @@ class Fetcher::Impl {
     std::string url;
     std::optional<std::pair<std::uint64_t, std::uint64_t>> range;
     std::string if_none_match;
+    std::string group;
     std::vector<Waiter> waiters;
     int level = 0;
     double urgency = 0;
     std::uint64_t seq = 0;
     State state = State::queued;
     Clock::time_point due;
+    Clock::time_point deadline = Clock::time_point::max();  // max: none
     int attempts = 0;
     // Timing: the first attempt's and the current attempt's start, and the current attempt's
     // first response byte (from libcurl's STARTTRANSFER time; unset when none arrived).
@@ -192,7 +195,7 @@ class Fetcher::Impl {
 
   struct Counters {
     std::atomic<std::uint64_t> submitted{0}, merged{0}, started{0}, retried{0}, succeeded{0},
-        failed{0}, cancelled{0}, in_flight{0}, queued{0}, bytes{0};
+        failed{0}, cancelled{0}, expired{0}, in_flight{0}, queued{0}, bytes{0};
   };
 
   void post(Command c) {
@@ -222,6 +225,7 @@ class Fetcher::Impl {
         break;
       }
       for (Command& c : commands) apply(c);
+      expire(Clock::now());
       promote_due(Clock::now());
       start_queued();
       int running = 0;
@@ -276,6 +280,7 @@ class Fetcher::Impl {
     t->url = std::move(req.url);
     t->range = req.range;
     t->if_none_match = std::move(req.if_none_match);
+    t->group = std::move(req.group);
     t->waiters.push_back(Waiter{h, std::move(cb), req.level, req.urgency, submitted});
     t->level = req.level;
     t->urgency = req.urgency;
@@ -298,6 +303,10 @@ class Fetcher::Impl {
     }
     t->state = State::queued;
     queue_.emplace(t->queue_key(), t);
+    if (options_.deadline.count() > 0) {
+      t->deadline = submitted + options_.deadline;
+      by_deadline_.emplace(std::make_pair(t->deadline, t->seq), t);
+    }
   }
 
   // A merged transfer runs at the most urgent priority of its handles.
@@ -380,6 +389,7 @@ class Fetcher::Impl {
         release_easy(t);
         break;
     }
+    forget_deadline(t);
     const std::string key = std::move(t->key);
     by_key_.erase(key);  // destroys t
   }
@@ -390,6 +400,33 @@ class Fetcher::Impl {
     idle_.push_back(t->easy);
     t->easy = nullptr;
     --in_flight_;
+    if (!t->group.empty())
+      if (auto g = group_in_flight_.find(t->group); g != group_in_flight_.end() && --g->second == 0)
+        group_in_flight_.erase(g);
+  }
+
+  void forget_deadline(Transfer* t) {
+    if (t->deadline != Clock::time_point::max()) by_deadline_.erase({t->deadline, t->seq});
+  }
+
+  // Fails every transfer whose deadline has passed, aborting its attempt in flight.
+  void expire(Clock::time_point now) {
+    while (!by_deadline_.empty() && by_deadline_.begin()->first.first <= now) {
+      Transfer* t = by_deadline_.begin()->second;
+      release_easy(t);
+      stats_.expired.fetch_add(1, std::memory_order_relaxed);
+      finish_error(t, make_error(ErrorCode::io,
+                                 describe(t,
+                                          "no answer within the deadline of " +
+                                              std::to_string(options_.deadline.count()) + " ms",
+                                          false)));
+    }
+  }
+
+  bool group_full(const Transfer* t) const {
+    if (options_.max_in_flight_per_group == 0 || t->group.empty()) return false;
+    const auto g = group_in_flight_.find(t->group);
+    return g != group_in_flight_.end() && g->second >= options_.max_in_flight_per_group;
   }
 
   void promote_due(Clock::time_point now) {
@@ -401,10 +438,15 @@ class Fetcher::Impl {
     }
   }
 
+  // In queue order, skipping transfers whose group is at its cap.
   void start_queued() {
-    while (in_flight_ < options_.max_in_flight && !queue_.empty()) {
-      Transfer* t = queue_.begin()->second;
-      queue_.erase(queue_.begin());
+    for (auto it = queue_.begin(); in_flight_ < options_.max_in_flight && it != queue_.end();) {
+      Transfer* t = it->second;
+      if (group_full(t)) {
+        ++it;
+        continue;
+      }
+      it = queue_.erase(it);
       start_attempt(t);
     }
   }
@@ -524,6 +566,7 @@ class Fetcher::Impl {
     }
     t->state = State::in_flight;
     ++in_flight_;
+    if (!t->group.empty()) ++group_in_flight_[t->group];
   }
 
   // Returns true when at least one attempt ended.
@@ -733,6 +776,7 @@ class Fetcher::Impl {
     assert(t->easy == nullptr);
     if (t->state == State::queued) queue_.erase(t->queue_key());
     if (t->state == State::waiting) waiting_.erase({t->due, t->seq});
+    forget_deadline(t);
     std::vector<Waiter> waiters = std::move(t->waiters);
     for (const Waiter& w : waiters) by_handle_.erase(w.handle);
     const bool t_started = t->attempts > 0;
@@ -763,8 +807,11 @@ class Fetcher::Impl {
   }
 
   int poll_timeout_ms() const {
-    if (waiting_.empty()) return 1000;
-    const auto until = waiting_.begin()->first.first - Clock::now();
+    Clock::time_point next = Clock::time_point::max();
+    if (!waiting_.empty()) next = waiting_.begin()->first.first;
+    if (!by_deadline_.empty()) next = std::min(next, by_deadline_.begin()->first.first);
+    if (next == Clock::time_point::max()) return 1000;
+    const auto until = next - Clock::now();
     const auto ms = std::chrono::ceil<std::chrono::milliseconds>(until).count();
     return int(std::clamp<std::int64_t>(ms, 0, 1000));
   }
@@ -817,6 +864,8 @@ class Fetcher::Impl {
   std::unordered_map<Handle, Transfer*> by_handle_;
   std::map<QueueKey, Transfer*> queue_;
   std::map<std::pair<Clock::time_point, std::uint64_t>, Transfer*> waiting_;
+  std::map<std::pair<Clock::time_point, std::uint64_t>, Transfer*> by_deadline_;
+  std::unordered_map<std::string, std::size_t> group_in_flight_;  // groups with transfers in flight
   std::vector<CURL*> idle_;
   std::size_t in_flight_ = 0;
   std::uint64_t next_seq_ = 0;

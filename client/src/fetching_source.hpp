@@ -14,6 +14,7 @@
 
 #include <memory>
 #include <mutex>
+#include <string>
 #include <unordered_map>
 #include <utility>
 
@@ -21,6 +22,14 @@
 #include "vts/client/source.hpp"
 
 namespace vts::client {
+
+// The fetcher group of a tile's transfers (FetchRequest::group): its level and its 8x8-tile
+// block, the unit of "one slow region of the origin". A viewer's screen spans a few blocks of a
+// level, so the per-group cap rarely binds it; a region the origin is slow to serve holds at
+// most the cap of the fetcher's slots.
+inline std::string region_group(const TileId& id) {
+  return std::to_string(id.z) + '/' + std::to_string(id.x >> 3) + '/' + std::to_string(id.y >> 3);
+}
 
 template <class Pending>
 class FetchingSource : public TileSource {

@@ -110,6 +110,7 @@ class TileJsonSource final : public FetchingSource<TileJsonPending> {
     r.if_none_match = p.request.if_none_match;
     r.level = p.request.level;
     r.urgency = p.request.urgency;
+    r.group = region_group(p.request.id);
     p.fetch = fetcher_->submit(
         std::move(r), [this, h, url](FetchResult&& res) { on_tile(h, url, std::move(res)); });
   }

@@ -334,6 +334,7 @@ class RemoteArchiveSource final : public FetchingSource<RemotePending> {
     r.range = std::make_pair(offset, offset + length - 1);
     r.level = p->request.level;
     r.urgency = p->request.urgency;
+    r.group = region_group(p->request.id);
     // The default merge key (URL + range) merges identical reads of a leaf or a shared payload.
     p->fetch = fetcher_->submit(std::move(r), std::move(callback));
   }

@@ -122,6 +122,7 @@ void Session::on_server_stop() {
 
 // Hard close (timeouts, errors, idle connections): pending operations complete with an error.
 void Session::close() {
+  abandon_.request_stop();
   closed_ = true;
   read_done_ = true;
   error_code ec;
@@ -179,7 +180,11 @@ void Session::wait_for_request() {
                             self->clear_read_deadline();
                             if (ec || n == 0) {
                               self->read_done_ = true;
-                              if (self->queue_.empty()) self->close();
+                              // Gone while tiles are owed: nobody waits for them (as nginx does).
+                              if (self->queue_.empty())
+                                self->close();
+                              else
+                                self->abandon_.request_stop();
                               return;
                             }
                             self->buffer_.commit(n);
@@ -268,7 +273,10 @@ void Session::on_parse_error(error_code ec) {
   read_done_ = true;
   if (ec == http::error::end_of_stream || ec == asio::error::operation_aborted ||
       ec == asio::error::connection_reset || ec == asio::error::eof || !socket_.is_open()) {
-    if (queue_.empty()) close();
+    if (queue_.empty())
+      close();
+    else
+      abandon_.request_stop();
     return;
   }
   fail_parse(400, "bad request");
@@ -359,7 +367,8 @@ void Session::start_deferred(const Outgoing& o) {
         asio::post(executor, [session = std::move(keep_alive), call = std::move(call), seq] {
           session->finish_deferred(seq, std::move(call->answer));
         });
-      });
+      },
+      abandon_.get_token());
   int expected = Call::kCalling;
   if (!call->state.compare_exchange_strong(expected, Call::kReturned, std::memory_order_acq_rel))
     finish_deferred(seq, std::move(call->answer));

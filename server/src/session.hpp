@@ -12,6 +12,7 @@
 #include <memory>
 #include <memory_resource>
 #include <optional>
+#include <stop_token>
 #include <string>
 
 #include "access_log.hpp"
@@ -110,6 +111,9 @@ class Session final : public std::enable_shared_from_this<Session>, public Swept
   bool closed_ = false;
   bool idle_wait_ = false;      // the outstanding read waits for the first byte of a request
   std::uint64_t next_seq_ = 0;  // of the next response queued
+  // Requested when the client has gone (its end of the connection closed, or we closed it): the
+  // provider's tiles still owed are abandoned (AsyncTileProvider::tile).
+  std::stop_source abandon_;
   std::string remote_;
 };
 

@@ -52,6 +52,14 @@ expect_refused --cache-size "$VTS" cache serve --upstream "$WORK/s.pmtiles" --ca
   --listen 127.0.0.1:0 --no-admin --cache-size -5
 expect_refused --ram-size "$VTS" cache serve --upstream "$WORK/s.pmtiles" --cache-dir "$WORK/c" \
   --listen 127.0.0.1:0 --no-admin --ram-size 12Q
+expect_refused --upstream-deadline "$VTS" cache serve --upstream "$WORK/s.pmtiles" \
+  --cache-dir "$WORK/c" --listen 127.0.0.1:0 --no-admin --upstream-deadline 0
+expect_refused --upstream-region-cap "$VTS" cache serve --upstream "$WORK/s.pmtiles" \
+  --cache-dir "$WORK/c" --listen 127.0.0.1:0 --no-admin --upstream-region-cap -1
+# The defaults PROTOCOL.md §11 states.
+"$VTS" cache serve --help >"$OUT" 2>&1 || true
+grep -qE -- '--upstream-deadline .*=20$' "$OUT" || fail "--upstream-deadline default is not 20"
+grep -qE -- '--upstream-region-cap .*=8$' "$OUT" || fail "--upstream-region-cap default is not 8"
 if "$VTS" view --help >/dev/null 2>&1; then
   expect_refused --slots "$VTS" view "$WORK/s.pmtiles" --headless --slots 4294967295
 fi

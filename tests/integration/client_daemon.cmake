@@ -16,3 +16,10 @@ gtest_discover_tests(test_cache_daemon
   TEST_PREFIX integration.daemon.
   DISCOVERY_TIMEOUT 60
   PROPERTIES LABELS integration RUN_SERIAL TRUE TIMEOUT 120)
+
+# `vts cache serve` in front of a slow region of a real `vts serve` (slow_origin.py): abandoned
+# fetches are cancelled down to libcurl, a slow region holds at most its cap, a deadline answers
+# 503. It asserts sub-2 s answers, so it runs alone.
+vts_integration_test(daemon.slow_origin_region_cannot_stall_other_misses cache_slow_origin.sh)
+set_tests_properties(integration.daemon.slow_origin_region_cannot_stall_other_misses PROPERTIES
+  RUN_SERIAL TRUE TIMEOUT 180)

@@ -270,12 +270,13 @@ class FakeProvider final : public vts::AsyncTileProvider {
     return {tileset_};
   }
   void tile(const std::shared_ptr<const vts::ProvidedTileset>&, vts::TileId id,
-            std::function<void(vts::ProvidedTile)> done) override {
+            std::function<void(vts::ProvidedTile)> done, std::stop_token abandon) override {
     Plan plan;
     {
       std::lock_guard lock(mutex_);
       if (auto it = plans_.find(id); it != plans_.end()) plan = it->second;
       ++calls_;
+      tokens_.push_back(std::move(abandon));
     }
     vts::ProvidedTile answer = make_answer(id, plan);
     switch (plan.mode) {
@@ -315,6 +316,13 @@ class FakeProvider final : public vts::AsyncTileProvider {
     std::lock_guard lock(mutex_);
     return calls_;
   }
+  // The requests whose abandon token the server has requested, by order of tile() call.
+  std::vector<bool> abandoned() const {
+    std::lock_guard lock(mutex_);
+    std::vector<bool> out;
+    for (const auto& t : tokens_) out.push_back(t.stop_requested());
+    return out;
+  }
 
  private:
   vts::ProvidedTile make_answer(vts::TileId id, const Plan& plan) const {
@@ -346,6 +354,7 @@ class FakeProvider final : public vts::AsyncTileProvider {
   std::vector<std::thread> threads_;
   std::vector<std::pair<std::function<void(vts::ProvidedTile)>, vts::ProvidedTile>> held_;
   int calls_ = 0;
+  std::vector<std::stop_token> tokens_;
 };
 
 // ---- the daemon process ------------------------------------------------------------------------
@@ -594,6 +603,41 @@ TEST(AsyncTileProvider, AnswerArrivingAfterTheClientLeftIsDropped) {
   EXPECT_EQ(f.status, 200);
   EXPECT_EQ(f.body, payload_of(dense(), t));
   server.stop();  // drains without waiting for anything
+}
+
+// The provider learns that nobody waits any more: a connection closed, or half-closed, while its
+// tiles are owed requests their abandon tokens; a connection still open does not.
+TEST(AsyncTileProvider, TilesOwedToAClientThatLeftAreAbandoned) {
+  auto provider = std::make_shared<FakeProvider>(dense(), "prov");
+  RunningServer server({}, provider);
+  const auto t = dense().tiles[0];
+  provider->set_plan(t, {FakeProvider::Mode::held});
+  const std::string get = "GET " + tile_path("prov", t) + " HTTP/1.1\r\nHost: a\r\n\r\n";
+  const int stays = connect_to(server.port()), closes = connect_to(server.port()),
+            half = connect_to(server.port());
+  ASSERT_TRUE(stays >= 0 && closes >= 0 && half >= 0);
+  ASSERT_TRUE(send_all(stays, get));
+  ASSERT_TRUE(provider->wait_held(1, 5s));
+  ASSERT_TRUE(send_all(closes, get + get));
+  ASSERT_TRUE(provider->wait_held(3, 5s));
+  ASSERT_TRUE(send_all(half, get));
+  ASSERT_TRUE(provider->wait_held(4, 5s));
+  ::close(closes);
+  ::shutdown(half, SHUT_WR);
+  const std::vector<bool> want = {false, true, true, true};
+  const auto until = std::chrono::steady_clock::now() + 5s;
+  while (provider->abandoned() != want && std::chrono::steady_clock::now() < until)
+    std::this_thread::sleep_for(2ms);
+  EXPECT_EQ(provider->abandoned(), want);
+  provider->release_held();  // the connection still open gets its tile
+  timeval tv{5, 0};
+  ::setsockopt(stays, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+  char buf[64] = {};
+  ASSERT_GT(::recv(stays, buf, sizeof buf - 1, 0), 12);
+  EXPECT_EQ(std::string(buf, 12), "HTTP/1.1 200");
+  ::close(stays);
+  ::close(half);
+  server.stop();
 }
 
 TEST(AsyncTileProvider, StopWaitsForAnAnswerStillOwed) {

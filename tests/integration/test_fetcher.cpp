@@ -374,6 +374,103 @@ TEST(Fetcher, CancellingAStalledTransferAbortsItPromptly) {
   EXPECT_EQ(server->attempts(target), 1);
 }
 
+TEST(Fetcher, CancellingARequestWaitingToRetryDropsTheRetry) {
+  auto server = start_server();
+  auto fetcher = make_fetcher();
+  // 503 with Retry-After: 1 keeps the transfer waiting a second before its next attempt.
+  const std::string target = "/fault/503ra1/a/0/0/0";
+  auto promise = std::make_shared<std::promise<FetchResult>>();
+  auto future = promise->get_future();
+  const auto h = fetcher->submit(get(server->base_url() + target),
+                                 [promise](FetchResult&& r) { promise->set_value(std::move(r)); });
+  ASSERT_TRUE(wait_until([&] { return server->attempts(target) == 1; }));
+  ASSERT_TRUE(wait_until([&] { return fetcher->stats().in_flight == 0; }));  // in its backoff
+  fetcher->cancel(h);
+  ASSERT_EQ(future.wait_for(500ms), std::future_status::ready);
+  EXPECT_TRUE(future.get().cancelled);
+  EXPECT_EQ(fetcher->stats().queued, 0u);
+  // The retry would have gone out after 1 s: it never does.
+  EXPECT_FALSE(wait_until([&] { return server->attempts(target) > 1; }, 1500ms));
+}
+
+TEST(Fetcher, DeadlineFailsAStalledTransferAndRemovesIt) {
+  auto server = start_server();
+  FetcherOptions o = quick_options();
+  o.request_timeout = 30000ms;
+  o.deadline = 500ms;
+  auto fetcher = make_fetcher(o);
+  const std::string url = server->base_url() + "/fault/stall/a/0/0/0";
+  const auto start = Clock::now();
+  const FetchResult r = fetch(*fetcher, get(url));
+  const auto took = Clock::now() - start;
+  EXPECT_GE(took, 450ms);
+  EXPECT_LT(took, 2s);
+  ASSERT_TRUE(r.error);
+  EXPECT_FALSE(r.cancelled);
+  EXPECT_EQ(r.error->code, vts::ErrorCode::io);
+  EXPECT_NE(r.error->message.find(url + ": no answer within the deadline of 500 ms"),
+            std::string::npos)
+      << r.error->message;
+  const Fetcher::Stats s = fetcher->stats();
+  EXPECT_EQ(s.expired, 1u);
+  EXPECT_EQ(s.failed, 1u);
+  EXPECT_EQ(s.in_flight, 0u);
+  EXPECT_EQ(s.queued, 0u);
+  EXPECT_EQ(server->attempts("/fault/stall/a/0/0/0"), 1);
+  // The fetcher goes on: the next request is served.
+  EXPECT_EQ(fetch(*fetcher, get(server->base_url() + "/a/0/0/0")).status, 200);
+}
+
+TEST(Fetcher, DeadlineCoversRetriesAndTheirBackoff) {
+  auto server = start_server();
+  FetcherOptions o = quick_options();
+  o.max_attempts = 1000;
+  o.deadline = 400ms;
+  auto fetcher = make_fetcher(o);
+  const auto start = Clock::now();
+  const FetchResult r = fetch(*fetcher, get(server->base_url() + "/fault/500/a/0/0/0"));
+  EXPECT_LT(Clock::now() - start, 2s);
+  ASSERT_TRUE(r.error);
+  EXPECT_GT(r.attempts, 1);
+  EXPECT_NE(r.error->message.find("deadline of 400 ms"), std::string::npos) << r.error->message;
+  EXPECT_EQ(fetcher->stats().expired, 1u);
+}
+
+TEST(Fetcher, AGroupAtItsCapWaitsWhileOtherGroupsStart) {
+  auto server = start_server();
+  FetcherOptions o = quick_options();
+  o.request_timeout = 30000ms;
+  o.max_in_flight = 8;
+  o.max_in_flight_per_group = 2;
+  Collector c;  // outlives the fetcher, whose destruction cancels the rest into it
+  auto fetcher = make_fetcher(o);
+  std::vector<Fetcher::Handle> slow;
+  const auto stall = [](int i) { return "/fault/stall/a/0/0/0?g=" + std::to_string(i); };
+  for (int i = 0; i < 6; ++i) {
+    FetchRequest r = get(server->base_url() + stall(i), /*level=*/-1);  // before anything else
+    r.group = "slow";
+    slow.push_back(fetcher->submit(std::move(r), c.callback("slow " + std::to_string(i))));
+  }
+  ASSERT_TRUE(wait_until([&] { return fetcher->stats().in_flight == 2; }));
+  // A request of another group starts at once and is served while the slow group waits.
+  FetchRequest other = get(server->base_url() + "/a/1/0/0");
+  other.group = "other";
+  const FetchResult r = fetch(*fetcher, other, 5s);
+  EXPECT_EQ(r.status, 200) << error_text(r);
+  const Fetcher::Stats s = fetcher->stats();
+  EXPECT_EQ(s.in_flight, 2u);
+  EXPECT_EQ(s.queued, 4u);
+  int started = 0;
+  for (int i = 0; i < 6; ++i) started += server->attempts(stall(i));
+  EXPECT_EQ(started, 2);
+  // Cancelling one of the group's transfers in flight lets its next one start.
+  fetcher->cancel(slow[0]);
+  fetcher->cancel(slow[1]);
+  EXPECT_TRUE(
+      wait_until([&] { return server->attempts(stall(2)) + server->attempts(stall(3)) == 2; }));
+  EXPECT_EQ(server->attempts(stall(4)) + server->attempts(stall(5)), 0);
+}
+
 TEST(Fetcher, RetriesTransientFailuresUntilTheyPass) {
   auto server = start_server();
   auto fetcher = make_fetcher();

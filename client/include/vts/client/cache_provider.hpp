@@ -8,6 +8,7 @@
 #include <functional>
 #include <memory>
 #include <mutex>
+#include <stop_token>
 #include <string>
 #include <string_view>
 #include <thread>
@@ -91,9 +92,10 @@ class CacheProvider final : public AsyncTileProvider {
 
   std::shared_ptr<const ProvidedTileset> find(std::string_view name) const override;
   std::vector<std::shared_ptr<const ProvidedTileset>> all() const override;
-  // Only before shutdown().
+  // Only before shutdown(). An `abandon` request cancels the cache get (its `done` then runs
+  // with unavailable), and with it the upstream fetch unless another get waits for that tile.
   void tile(const std::shared_ptr<const ProvidedTileset>& tileset, TileId id,
-            std::function<void(ProvidedTile)> done) override;
+            std::function<void(ProvidedTile)> done, std::stop_token abandon = {}) override;
   std::string metrics_text() const override;
 
   // Finishes pending gets (their `done`s run with unavailable), writes what the disk cache has

@@ -44,6 +44,16 @@ struct FetcherOptions {
   long low_speed_bytes = 1024;
   std::chrono::seconds low_speed_time{10};
   int max_attempts = 5;  // first try + retries (>= 1)
+  // Deadline of a transfer, from the submission of its first request: queueing, every attempt and
+  // every backoff included. When it passes, the attempt in flight is aborted (removed from
+  // libcurl), no retry follows, and every handle gets an io error "... deadline of N ms passed".
+  // 0: none (each attempt still has request_timeout).
+  std::chrono::milliseconds deadline{0};
+  // Cap on the transfers of one FetchRequest::group in flight at once (0: no cap). Queued
+  // transfers of a group at its cap wait while those of other groups start, so a slow group (one
+  // region of a tileset whose origin answers it slowly) can hold at most this many of the
+  // max_in_flight slots (and of the host's connections), never all of them.
+  std::size_t max_in_flight_per_group = 0;
   // Delay before retry n (n = 1, 2, ...): uniform in [0, min(backoff_max, backoff_base * 2^(n-1))]
   // ("full jitter"); a Retry-After on 429/503 raises it to at least that many seconds.
   std::chrono::milliseconds backoff_base{100}, backoff_max{10000};
@@ -62,6 +72,10 @@ struct FetchRequest {
   // submission order.
   int level = 0;
   double urgency = 0;
+  // Requests of one non-empty group share FetcherOptions::max_in_flight_per_group (the tile
+  // sources use the tile's region: its level and its 8x8-tile block). A merged transfer keeps the
+  // group of its first request.
+  std::string group;
   // Requests with equal keys are merged into one transfer. Empty: url + range + if_none_match
   // (the validator is part of the default key so that a 304 never reaches a caller who sent none).
   std::string merge_key;
@@ -83,8 +97,8 @@ struct FetchResult {
   std::string vts_error;  // the Vts-Error header (docs/PROTOCOL.md); empty when absent
   // Set on transport failure (io / invalid_argument), retries exhausted on 5xx/429 (io, with
   // the last status kept), a too-long Retry-After (io), a body over max_body_bytes (too_large),
-  // a ranged answer that never matched (truncated), or cancellation (cancelled). The message
-  // names the method, the URL and the reason, e.g.
+  // a ranged answer that never matched (truncated), a passed FetcherOptions::deadline (io), or
+  // cancellation (cancelled). The message names the method, the URL and the reason, e.g.
   // "GET http://127.0.0.1:1/x: connection refused after 5 attempts".
   std::optional<Error> error;
   // Attempts started for the transfer this handle was served by. (libcurl itself may resend a
@@ -132,10 +146,11 @@ class Fetcher {
   // (succeeded: callback without error; failed: with an error other than cancellation); started
   // counts attempts put on the wire, retried the attempts after the first; in_flight and queued
   // are transfers now on the wire / waiting (in the queue or for a retry); bytes is response-body
-  // bytes received over all attempts. Once idle: submitted == succeeded + failed + cancelled.
+  // bytes received over all attempts; expired counts transfers failed by their deadline (their
+  // handles are in failed). Once idle: submitted == succeeded + failed + cancelled.
   struct Stats {
     std::uint64_t submitted = 0, merged = 0, started = 0, retried = 0, succeeded = 0, failed = 0,
-                  cancelled = 0, in_flight = 0, queued = 0, bytes = 0;
+                  cancelled = 0, expired = 0, in_flight = 0, queued = 0, bytes = 0;
   };
   Stats stats() const;  // thread-safe; each counter is read atomically (not all at one instant)
 

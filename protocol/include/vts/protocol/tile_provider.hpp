@@ -8,6 +8,7 @@
 #include <functional>
 #include <memory>
 #include <span>
+#include <stop_token>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -62,8 +63,15 @@ class AsyncTileProvider {
   // calls `done` exactly once, from any thread — possibly before tile() returns. Must not block;
   // `done` does not block either (it posts to the connection's thread). Every `done` must have
   // been called or destroyed before the HttpServer using this provider is destroyed.
+  //
+  // `abandon` is requested when nobody waits for the answer any more (the HTTP front requests it
+  // when the client's connection ends, from the connection's thread): the provider should then
+  // give up the work done for this request alone (e.g. cancel an upstream fetch no other request
+  // shares) and call `done` soon, with any answer (it is dropped). A stop callback the provider
+  // registers on it runs on the requesting thread, must not block, and must not be destroyed
+  // while holding a lock that callback takes (std::stop_callback's destructor waits for it).
   virtual void tile(const std::shared_ptr<const ProvidedTileset>& tileset, TileId id,
-                    std::function<void(ProvidedTile)> done) = 0;
+                    std::function<void(ProvidedTile)> done, std::stop_token abandon = {}) = 0;
   // Extra Prometheus text appended to the server's /metrics (e.g. cache counters); may be empty.
   virtual std::string metrics_text() const { return {}; }
 };
