@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # `vts build` on bad input fails cleanly and writes nothing: no output file, no temporary files,
 # and an archive already under the output name is left exactly as it was.
-# Every command that reads an input file (build, info, verify, extract, serve, warm) refuses a
-# device or a FIFO at once with exit 2.
+# Every command that reads an input file (build, info, verify, extract, serve, warm, cache serve,
+# loadtest) refuses a device or a FIFO at once with exit 2.
 # shellcheck source=lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 
@@ -104,6 +104,9 @@ for input in /dev/zero "$WORK/fifo.pmtiles"; do
   expect_nothing_written
   expect_not_regular "$kind" "$input" "$VTS" serve "$input" --listen 127.0.0.1:0
   expect_not_regular "$kind" "$input" "$VTS" warm "$input" --cache-dir "$WORK/warm-cache"
+  expect_not_regular "$kind" "$input" "$VTS" cache serve --upstream "$input" \
+    --cache-dir "$WORK/daemon-cache" --listen 127.0.0.1:0 --no-admin
+  expect_not_regular "$kind" "$input" "$VTS" loadtest "$input" --duration 1
 done
 # Small files read whole (configs, keys) were already refused by their own checks; still at once.
 expect_refused_at_once "fifo.json" "$VTS" serve "$WORK/s.pmtiles" --listen 127.0.0.1:0 \
