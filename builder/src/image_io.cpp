@@ -4,6 +4,8 @@
 
 #include <string>
 
+#include "vts/protocol/file_io.hpp"
+
 namespace vts {
 
 namespace OIIO = OIIO_NAMESPACE;
@@ -42,9 +44,12 @@ Status write_png(const std::filesystem::path& path, int width, int height,
 }
 
 Result<Rgba8Image> read_rgba8(const std::filesystem::path& path) {
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec))
-    return make_error(ErrorCode::not_found, "cannot read " + quoted(path) + ": no such file");
+  // Not a FIFO or a device: OpenImageIO would wait for a writer, or read /dev/zero forever.
+  if (Status s = check_input_file(path); !s) {
+    if (s.error().code == ErrorCode::not_found)
+      return make_error(ErrorCode::not_found, "cannot read " + quoted(path) + ": no such file");
+    return s.error();
+  }
   OIIO::ImageSpec config;
   config.attribute("oiio:UnassociatedAlpha", 1);  // keep straight alpha: no premultiplying
   auto in = OIIO::ImageInput::open(path.string(), &config);

@@ -7,6 +7,7 @@
 #include <cstring>
 
 #include "vts/builder/downsample.hpp"
+#include "vts/protocol/file_io.hpp"
 
 namespace vts::detail {
 
@@ -66,9 +67,12 @@ struct ImageSource::Piece {
 namespace {
 
 Result<std::unique_ptr<OIIO::ImageInput>> open_input(const std::filesystem::path& path) {
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec))
-    return make_error(ErrorCode::not_found, "input '" + path.string() + "' does not exist");
+  // Not a FIFO or a device: OpenImageIO would wait for a writer, or read /dev/zero forever.
+  if (Status s = check_input_file(path); !s) {
+    if (s.error().code == ErrorCode::not_found)
+      return make_error(ErrorCode::not_found, "input '" + path.string() + "' does not exist");
+    return s.error();
+  }
   // Texels are stored with straight alpha (docs/FORMAT.md): ask readers whose files hold straight
   // alpha (PNG, TIFF with unassociated extra samples) not to premultiply it on the way in.
   OIIO::ImageSpec config;

@@ -1,6 +1,5 @@
 // vts build: image(s) or the synthetic source → PMTiles pyramid archive.
 #include <cstdio>
-#include <limits>
 #include <nlohmann/json.hpp>
 #include <string_view>
 
@@ -11,20 +10,6 @@
 namespace vts::cli {
 
 namespace {
-
-// "A<sep>B", both decimal digits only (no sign) within T's range.
-template <typename T>
-bool parse_pair(const std::string& text, char sep, T& a, T& b) {
-  const std::size_t at = text.find(sep);
-  std::uint64_t x = 0, y = 0;
-  if (at == std::string::npos || !parse_u64(std::string_view(text).substr(0, at), x) ||
-      !parse_u64(std::string_view(text).substr(at + 1), y) || x > std::numeric_limits<T>::max() ||
-      y > std::numeric_limits<T>::max())
-    return false;
-  a = static_cast<T>(x);
-  b = static_cast<T>(y);
-  return true;
-}
 
 struct BuildArgs {
   std::vector<std::string> inputs;

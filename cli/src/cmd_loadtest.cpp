@@ -178,7 +178,9 @@ Runner add_loadtest(CLI::App& app) {
       ->capture_default_str()
       ->check(CLI::Range(0, 10));
   c->add_option("--seed", a->seed, "Seed of the presets' places")->capture_default_str();
-  c->add_option("--threads", a->threads, "Driver threads (0: one per core)")->capture_default_str();
+  c->add_option("--threads", a->threads, "Driver threads (0: one per core)")
+      ->check(CLI::Range(0, int(kMaxThreads)))
+      ->capture_default_str();
   c->add_flag("--json", a->json, "Print the results as JSON");
   c->add_flag("--quiet", a->quiet, "No progress lines");
   return [a] {

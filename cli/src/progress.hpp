@@ -5,6 +5,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <limits>
 #include <string>
 #include <string_view>
 #include <utility>
@@ -35,6 +36,20 @@ std::string human_duration(double seconds);
 
 // Decimal digits only, no sign; false on overflow or anything else.
 bool parse_u64(std::string_view s, std::uint64_t& out);
+// "A<sep>B" (--grid CxR, --synthetic WxH), both decimal digits only (no sign) within T's range;
+// false otherwise, leaving a and b unchanged.
+template <typename T>
+bool parse_pair(const std::string& text, char sep, T& a, T& b) {
+  const std::size_t at = text.find(sep);
+  std::uint64_t x = 0, y = 0;
+  if (at == std::string::npos || !parse_u64(std::string_view(text).substr(0, at), x) ||
+      !parse_u64(std::string_view(text).substr(at + 1), y) || x > std::numeric_limits<T>::max() ||
+      y > std::numeric_limits<T>::max())
+    return false;
+  a = static_cast<T>(x);
+  b = static_cast<T>(y);
+  return true;
+}
 // A positive byte count with an optional binary suffix: 1048576, 512M, 10G, 2GiB, 64KB.
 // invalid_argument naming `flag` otherwise.
 Result<std::uint64_t> parse_byte_size(const std::string& text, std::string_view flag);

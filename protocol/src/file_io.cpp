@@ -1,15 +1,14 @@
 #include "vts/protocol/file_io.hpp"
 
 #include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
-#include <fstream>
 #include <random>
-#include <sstream>
 
 namespace vts {
 
@@ -23,6 +22,15 @@ Error io_error(const std::string& what, const fs::path& path, int err) {
 
 char lower(char c) noexcept {
   return c >= 'A' && c <= 'Z' ? static_cast<char>(c - 'A' + 'a') : c;
+}
+
+const char* file_kind(mode_t mode) noexcept {
+  if (S_ISDIR(mode)) return "directory";
+  if (S_ISCHR(mode)) return "character device";
+  if (S_ISBLK(mode)) return "block device";
+  if (S_ISFIFO(mode)) return "FIFO";
+  if (S_ISSOCK(mode)) return "socket";
+  return "special file";
 }
 
 bool is_space(char c) noexcept {
@@ -92,13 +100,55 @@ Status check_output_is_not_an_input(const fs::path& output, std::span<const fs::
   return {};
 }
 
+Result<int> open_input_file(const fs::path& path, struct stat* st_out) {
+  const auto sys_error = [&](const char* what, int err) {
+    return make_error(err == ENOENT ? ErrorCode::not_found : ErrorCode::io,
+                      std::string(what) + " " + path.string() + ": " + std::strerror(err));
+  };
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
+  if (fd < 0) return sys_error("cannot open", errno);
+  struct stat st {};
+  if (::fstat(fd, &st) != 0) {
+    const int err = errno;
+    ::close(fd);
+    return sys_error("cannot stat", err);
+  }
+  if (!S_ISREG(st.st_mode)) {
+    ::close(fd);
+    return make_error(ErrorCode::invalid_argument,
+                      "not a regular file: " + path.string() + " (" + file_kind(st.st_mode) + ")");
+  }
+  if (st_out != nullptr) *st_out = st;
+  return fd;
+}
+
+Status check_input_file(const fs::path& path) {
+  auto fd = open_input_file(path);
+  if (!fd) return std::move(fd).error();
+  ::close(*fd);
+  return {};
+}
+
 Result<std::string> read_file(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return make_error(ErrorCode::not_found, path.string() + ": cannot be read");
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  if (in.bad()) return make_error(ErrorCode::io, path.string() + ": read error");
-  return ss.str();
+  struct stat st {};
+  auto fd = open_input_file(path, &st);
+  if (!fd) return std::move(fd).error();
+  std::string text;
+  text.reserve(static_cast<std::size_t>(st.st_size));
+  char buf[1 << 16];
+  for (;;) {
+    const ssize_t n = ::read(*fd, buf, sizeof buf);
+    if (n == 0) break;
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      const int err = errno;
+      ::close(*fd);
+      return io_error("cannot read", path, err);
+    }
+    text.append(buf, static_cast<std::size_t>(n));
+  }
+  ::close(*fd);
+  return text;
 }
 
 std::string_view trim(std::string_view s) noexcept {

@@ -33,6 +33,7 @@
 #include <unordered_map>
 #include <utility>
 
+#include "vts/protocol/file_io.hpp"
 #include "vts/protocol/pmtiles.hpp"
 
 namespace vts::pmtiles {
@@ -459,24 +460,11 @@ Result<std::shared_ptr<Reader>> make_reader(std::unique_ptr<ByteSource> source,
 
 Result<std::shared_ptr<Reader>> Reader::open(const std::filesystem::path& path,
                                              ReaderOptions options) {
-  const auto sys_error = [&](const char* what, int err) {
-    return make_error(
-        err == ENOENT ? ErrorCode::not_found : ErrorCode::io,
-        std::string(what) + " " + path.string() + ": " + std::generic_category().message(err));
-  };
-  // O_NONBLOCK: opening a FIFO must not wait for a writer (it is refused just below).
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
-  if (fd < 0) return sys_error("cannot open", errno);
+  // Not a FIFO (open_input_file opens with O_NONBLOCK, so one never blocks), device or folder.
   struct stat st {};
-  if (::fstat(fd, &st) != 0) {
-    const int err = errno;
-    ::close(fd);
-    return sys_error("cannot stat", err);
-  }
-  if (!S_ISREG(st.st_mode)) {
-    ::close(fd);
-    return make_error(ErrorCode::io, path.string() + " is not a regular file");
-  }
+  auto opened = open_input_file(path, &st);
+  if (!opened) return std::move(opened).error();
+  const int fd = *opened;
   if (st.st_size == 0) {
     ::close(fd);
     return make_error(ErrorCode::truncated, path.string() + " is empty");

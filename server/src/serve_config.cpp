@@ -113,9 +113,12 @@ Status apply(const json& j, const std::string& file, HttpServerOptions& o) {
     return st;
   }
   if (j.contains("threads")) {
-    o.threads = j.at("threads").get<int>();
-    if (o.threads < 0 || o.threads > 256)
-      return config_error(file, "threads is " + std::to_string(o.threads) + ": 0 to 256");
+    // Checked as JSON before any conversion (get<int> wraps 4294967297 to 1 and truncates 2.5);
+    // a string or an object is refused by get<> as a type error.
+    const json& v = j.at("threads");
+    if (v.is_number() && (!v.is_number_unsigned() || v.get<std::uint64_t>() > 256))
+      return config_error(file, "threads is " + v.dump() + ": a whole number 0 to 256");
+    o.threads = v.get<int>();
   }
   if (j.contains("cors_origin")) o.router.cors_origin = j.at("cors_origin").get<std::string>();
   if (j.contains("max_age")) {
@@ -127,11 +130,12 @@ Status apply(const json& j, const std::string& file, HttpServerOptions& o) {
   if (j.contains("public_url")) o.router.public_base_url = j.at("public_url").get<std::string>();
   if (j.contains("access_log")) o.access_log = j.at("access_log").get<std::string>();
   if (j.contains("reload_interval_ms")) {
-    const long long ms = j.at("reload_interval_ms").get<long long>();
-    if (ms < 0)
-      return config_error(file, "reload_interval_ms is " + std::to_string(ms) +
-                                    ": at least 0 (0: no periodic check)");
-    o.reload_interval = std::chrono::milliseconds(ms);
+    const json& v = j.at("reload_interval_ms");
+    // At most a year, a whole number: a float is never converted (1e300 would be undefined).
+    if (v.is_number() && (!v.is_number_unsigned() || v.get<std::uint64_t>() > 31536000000ull))
+      return config_error(file, "reload_interval_ms is " + v.dump() +
+                                    ": a whole number 0 to 31536000000 (0: no periodic check)");
+    o.reload_interval = std::chrono::milliseconds(v.get<std::int64_t>());
   }
   if (j.contains("access"))
     if (auto st = apply_access(j.at("access"), file, o.router); !st.ok()) return st;

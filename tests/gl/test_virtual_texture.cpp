@@ -12,6 +12,7 @@
 #include <memory>
 #include <numbers>
 #include <string>
+#include <vector>
 
 #include "gl_fixture.hpp"
 #include "vts/builder/builder.hpp"
@@ -86,6 +87,57 @@ TEST_F(VirtualTextureTest, PlaneStraightDownMatchesTheReference) {
   ASSERT_GT(frames, 0) << "never complete: wanted " << st.wanted << ", missing "
                        << st.wanted_missing << ", pending " << st.pending;
   const ImageDiff d = against_reference(*vt, path, view, 256, 192, "straight");
+  EXPECT_GE(d.psnr_db, 40.0);
+  EXPECT_LE(d.max_abs, 16);
+}
+
+// Texels are straight RGBA; the viewer composites them over its black background, so a
+// transparent region shows the background (not the white RGB the file holds there), an opaque one
+// the image's colour, and a half-transparent one half of it, as the CPU reference does.
+TEST_F(VirtualTextureTest, AlphaIsCompositedOverTheBlackBackground) {
+  const int W = 512, H = 256;
+  std::vector<std::uint8_t> rgba(std::size_t(W) * H * 4);
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) {
+      std::uint8_t* p = &rgba[(std::size_t(y) * W + x) * 4];
+      const bool opaque = x < W / 2, half = y >= H / 2 && !opaque;
+      p[0] = opaque ? 200 : 255;
+      p[1] = opaque ? 40 : 255;
+      p[2] = opaque ? 20 : 255;
+      p[3] = opaque ? 255 : half ? 128 : 0;
+    }
+  }
+  const fs::path png = *dir_ / "alpha.png", path = *dir_ / "alpha.pmtiles";
+  ASSERT_TRUE(vts::write_png(png, W, H, rgba).ok());
+  vts::BuildOptions o;
+  o.inputs = {png};
+  o.output = path;
+  o.tile_size = 64;
+  o.border = 4;
+  o.threads = 2;
+  auto built = vts::build_pyramid(o);
+  ASSERT_TRUE(built.ok()) << built.error().to_string();
+  auto vt = open(path);
+  ASSERT_TRUE(vt);
+  // The whole image on a 256 x 128 viewport, 2 texels a pixel.
+  const PlaneView view{.center_u = 256, .center_v = 128, .texels_per_pixel = 2};
+  ASSERT_GT(converge(*vt, view, 256, 128, 300), 0);
+  const Image img = vt->read_image();
+  const auto near = [](const std::uint8_t* p, int r, int g, int b) {
+    return std::abs(p[0] - r) <= 2 && std::abs(p[1] - g) <= 2 && std::abs(p[2] - b) <= 2;
+  };
+  // Rows: screen row 30 is image row 60 (transparent half), row 100 is image row 200.
+  const std::uint8_t* opaque = img.at(60, 30);
+  const std::uint8_t* clear = img.at(200, 30);
+  const std::uint8_t* half = img.at(200, 100);
+  EXPECT_TRUE(near(opaque, 200, 40, 20))
+      << int(opaque[0]) << "," << int(opaque[1]) << "," << int(opaque[2]);
+  EXPECT_TRUE(near(clear, 0, 0, 0))
+      << int(clear[0]) << "," << int(clear[1]) << "," << int(clear[2]);
+  // White at alpha 128/255 over black, in linear light, encoded to sRGB: 188.
+  EXPECT_TRUE(near(half, 188, 188, 188))
+      << int(half[0]) << "," << int(half[1]) << "," << int(half[2]);
+  const ImageDiff d = against_reference(*vt, path, view, 256, 128, "alpha");
   EXPECT_GE(d.psnr_db, 40.0);
   EXPECT_LE(d.max_abs, 16);
 }

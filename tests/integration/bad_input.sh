@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # `vts build` on bad input fails cleanly and writes nothing: no output file, no temporary files,
 # and an archive already under the output name is left exactly as it was.
+# Every command that reads an input file (build, info, verify, extract, serve, warm, cache serve,
+# loadtest) refuses a device or a FIFO at once with exit 2.
 # shellcheck source=lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 
@@ -65,6 +67,51 @@ fi
 note "a directory as input"
 expect_clean_failure "$VTS" build "$WORK" -o "$D/x.pmtiles"
 expect_nothing_written
+
+note "a device or a FIFO as input: refused at once, naming the file (was: /dev/zero read forever, a FIFO blocked in open)"
+mkfifo "$WORK/fifo.png" "$WORK/fifo.pmtiles" "$WORK/fifo.json"
+# expect_refused_at_once TEXT CMD...: CMD must exit 2 (a clean error, not a crash) within 10 s
+# (a hang fails the test rather than stalling it) with TEXT in its message.
+expect_refused_at_once() {
+  local text=$1
+  shift
+  run timeout -k 2 10 "$@"
+  if ((RC != 2)) || ! grep -qF "$text" "$ERR"; then
+    show_output
+    fail "'$*' exited $RC (124: still running after 10 s), expected 2 and '$text'"
+  fi
+}
+# expect_not_regular KIND FILE CMD...: the message says FILE is not a regular file of kind KIND.
+expect_not_regular() {
+  local kind=$1 file=$2
+  shift 2
+  expect_refused_at_once "not a regular file: $file ($kind)" "$@"
+}
+for input in /dev/zero "$WORK/fifo.png"; do
+  kind="character device"
+  [[ $input == /dev/zero ]] || kind=FIFO
+  expect_not_regular "$kind" "$input" "$VTS" build "$input" -o "$D/x.pmtiles"
+  expect_nothing_written
+  expect_not_regular "$kind" "$input" "$VTS" build --grid 2x1 "$EARTH" "$input" -o "$D/x.pmtiles"
+  expect_nothing_written
+done
+for input in /dev/zero "$WORK/fifo.pmtiles"; do
+  kind="character device"
+  [[ $input == /dev/zero ]] || kind=FIFO
+  expect_not_regular "$kind" "$input" "$VTS" info "$input"
+  expect_not_regular "$kind" "$input" "$VTS" verify "$input"
+  expect_not_regular "$kind" "$input" "$VTS" extract "$input" --level 0 -o "$D/x.png"
+  expect_nothing_written
+  expect_not_regular "$kind" "$input" "$VTS" serve "$input" --listen 127.0.0.1:0
+  expect_not_regular "$kind" "$input" "$VTS" warm "$input" --cache-dir "$WORK/warm-cache"
+  expect_not_regular "$kind" "$input" "$VTS" cache serve --upstream "$input" \
+    --cache-dir "$WORK/daemon-cache" --listen 127.0.0.1:0 --no-admin
+  expect_not_regular "$kind" "$input" "$VTS" loadtest "$input" --duration 1
+done
+# Small files read whole (configs, keys) were already refused by their own checks; still at once.
+expect_refused_at_once "fifo.json" "$VTS" serve "$WORK/s.pmtiles" --listen 127.0.0.1:0 \
+  --config "$WORK/fifo.json"
+expect_refused_at_once "fifo.json" "$VTS" sign /s/0/0/0 --key-file "$WORK/fifo.json"
 
 note "an output directory that does not exist"
 expect_clean_failure "$VTS" build "$EARTH" -o "$WORK/no-such-dir/x.pmtiles"

@@ -32,6 +32,10 @@ expect_refused --name "$VTS" build --synthetic 512x512 --name '' -o "$WORK/x.pmt
 note "vts verify"
 expect_refused --threads "$VTS" verify "$WORK/s.pmtiles" --threads 100000
 
+note "vts loadtest"
+expect_refused --threads "$VTS" loadtest http://127.0.0.1:1/t --threads 100000
+expect_refused --threads "$VTS" loadtest http://127.0.0.1:1/t --threads -5
+
 note "vts sign"
 expect_refused --ttl "$VTS" sign /t/0/0/0 --key k --ttl "$big"
 expect_refused --ttl "$VTS" sign /t/0/0/0 --key k --ttl -100

@@ -245,7 +245,9 @@ Result<Image> render_with(PyramidSampler& sampler, int w, int h, double bias, in
       }
     }
     std::uint8_t* out = img.at(p.x, p.y);
-    for (int ch = 0; ch < 3; ++ch) out[ch] = encode_srgb8_exact(colour[ch]);
+    // Over the black background, as the shader composites: straight colour times alpha.
+    const double alpha = std::clamp(colour[3], 0.0, 1.0);
+    for (int ch = 0; ch < 3; ++ch) out[ch] = encode_srgb8_exact(colour[ch] * alpha);
     out[3] = 255;
     return true;
   };

@@ -1,9 +1,15 @@
 #include "vts/protocol/file_io.hpp"
 
 #include <gtest/gtest.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <chrono>
 
 #include <filesystem>
 #include <fstream>
+#include <string>
+#include <utility>
 #include <vector>
 
 #include "vts/test/temp_dir.hpp"
@@ -45,6 +51,49 @@ TEST(FileIo, ANewOrDifferentOutputIsAccepted) {
   EXPECT_TRUE(vts::check_output_is_not_an_input(dir / "new.pmtiles", inputs).ok());
   EXPECT_TRUE(vts::check_output_is_not_an_input(existing, inputs).ok());
   EXPECT_TRUE(vts::check_output_is_not_an_input(dir / "new.pmtiles", {}).ok());
+}
+
+// ---- open_input_file: only regular files are inputs ---------------------------------------------
+
+TEST(FileIo, ARegularFileOpensAndReadsWhole) {
+  const vts::test::TempDir dir("vts-file-io");
+  touch(dir / "in.json");
+  struct stat st {};
+  auto fd = vts::open_input_file(dir / "in.json", &st);
+  ASSERT_TRUE(fd.ok()) << fd.error().message;
+  EXPECT_EQ(st.st_size, 5);
+  ::close(*fd);
+  EXPECT_TRUE(vts::check_input_file(dir / "in.json").ok());
+  EXPECT_EQ(vts::read_file(dir / "in.json").value(), "bytes");
+}
+
+TEST(FileIo, AMissingInputIsNotFoundNamingIt) {
+  const vts::test::TempDir dir("vts-file-io");
+  auto fd = vts::open_input_file(dir / "missing.png");
+  ASSERT_FALSE(fd.ok());
+  EXPECT_EQ(fd.error().code, vts::ErrorCode::not_found);
+  EXPECT_NE(fd.error().message.find("missing.png"), std::string::npos) << fd.error().message;
+}
+
+// A FIFO without a writer would block a plain open() forever, /dev/zero never ends: both are
+// refused before a byte is read, as are folders, naming the file and its kind.
+TEST(FileIo, AFifoADeviceOrAFolderIsRefusedAtOnceNamingTheFileAndItsKind) {
+  const vts::test::TempDir dir("vts-file-io");
+  const fs::path fifo = dir / "fifo.pmtiles";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  const std::vector<std::pair<fs::path, std::string>> cases = {
+      {fifo, "(FIFO)"}, {"/dev/zero", "(character device)"}, {dir.path(), "(directory)"}};
+  for (const auto& [path, kind] : cases) {
+    SCOPED_TRACE(path.string());
+    const auto t0 = std::chrono::steady_clock::now();
+    for (const vts::Error& e :
+         {vts::open_input_file(path).error(), vts::check_input_file(path).error(),
+          vts::read_file(path).error()}) {
+      EXPECT_EQ(e.code, vts::ErrorCode::invalid_argument);
+      EXPECT_EQ(e.message, "not a regular file: " + path.string() + " " + kind);
+    }
+    EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(5));
+  }
 }
 
 }  // namespace

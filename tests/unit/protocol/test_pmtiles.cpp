@@ -823,7 +823,7 @@ TEST(Reader, ReportsMissingEmptyAndNonArchiveFiles) {
   auto r = Reader::open(dir.path() / "text.pmtiles");
   EXPECT_EQ(r.error().code, ErrorCode::corrupt);
   EXPECT_NE(r.error().message.find("text.pmtiles"), std::string::npos);
-  EXPECT_EQ(Reader::open(dir.path()).error().code, ErrorCode::io);
+  EXPECT_EQ(Reader::open(dir.path()).error().code, ErrorCode::invalid_argument);
 }
 
 TEST(Reader, ReadsAHandAssembledTwoLevelArchive) {

@@ -132,6 +132,11 @@ TEST(ServeConfig, EmptyCredentialsOutOfRangeSettingsAndAFolderAreRefused) {
   expect_refused(R"({"threads": 100000})", "threads is 100000");
   expect_refused(R"({"max_age": -5})", "max_age is -5");
   expect_refused(R"({"reload_interval_ms": -100})", "reload_interval_ms is -100");
+  // Found by fuzz_serve_config: converted before the check, these were accepted as 1, 2 and 0.
+  expect_refused(R"({"threads": 4294967297})", "threads is 4294967297");
+  expect_refused(R"({"threads": 2.5})", "threads is 2.5");
+  expect_refused(R"({"reload_interval_ms": 0.5})", "reload_interval_ms is 0.5");
+  expect_refused(R"({"reload_interval_ms": 1e300})", "reload_interval_ms is 1e+300");
   const fs::path dir =
       fs::temp_directory_path() / ("vts-serve-config-dir-" + std::to_string(::getpid()));
   fs::create_directories(dir);

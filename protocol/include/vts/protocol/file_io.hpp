@@ -9,6 +9,8 @@
 
 #include "vts/protocol/result.hpp"
 
+struct stat;
+
 namespace vts {
 
 // Replaces `path` with `bytes` atomically: a reader (or a crash) sees either the old file or the
@@ -24,7 +26,21 @@ Status write_file_atomically(const std::filesystem::path& path, std::string_view
 Status check_output_is_not_an_input(const std::filesystem::path& output,
                                     std::span<const std::filesystem::path> inputs);
 
-// The whole file. Error not_found (missing or unreadable) or io, naming the file.
+// Opens an input file for reading and returns its descriptor (O_CLOEXEC; the caller closes it),
+// with its fstat in `*st` when `st` is given. Opened with O_NONBLOCK, so a FIFO never blocks the
+// open() waiting for a writer; anything but a regular file (a FIFO, /dev/zero, a socket, a folder)
+// is then refused, before a byte is read: invalid_argument "not a regular file: PATH (KIND)".
+// Missing: not_found; any other refusal by the system: io. Every message names the file. Every
+// command that reads a file it was given (images, archives, configs) opens it through here, so
+// none can spin on an endless device or hang on a FIFO. O_NONBLOCK stays set on the descriptor,
+// which changes nothing for a regular file.
+Result<int> open_input_file(const std::filesystem::path& path, struct stat* st = nullptr);
+
+// open_input_file() then close: for an input that a library (OpenImageIO) opens by its name.
+Status check_input_file(const std::filesystem::path& path);
+
+// The whole file, opened through open_input_file(). Error not_found (missing), invalid_argument
+// (not a regular file) or io, naming the file.
 Result<std::string> read_file(const std::filesystem::path& path);
 
 // HTTP-style text: spaces and tabs (and CR/LF) trimmed from both ends; ASCII case-insensitive

@@ -27,9 +27,9 @@ Result<std::pair<std::string, std::uint16_t>> parse_endpoint(const std::string& 
 
 // Reads `file` and applies it to `options`. Errors: io (unreadable), invalid_argument (not a
 // regular file, not JSON, a value of the wrong type, an unknown key, an empty token or HMAC key, a
-// limit that is not a whole number at least its minimum, threads outside 0..256, max_age outside
-// a year, a negative reload interval), each naming the file. On error `options` may be partly
-// changed.
+// limit that is not a whole number at least its minimum, threads not a whole number 0..256, max_age
+// outside a year, a reload interval not a whole number of ms up to a year), each naming the file.
+// On error `options` may be partly changed.
 Status apply_serve_config(const std::filesystem::path& file, HttpServerOptions& options);
 
 // The same for config text already read; `file` only names it in errors.

@@ -204,7 +204,10 @@ void main() {
     int m = max(m0, m1);
     col.rgb = m < 0 ? vec3(1, 0, 1) : mix(col.rgb, kLevelTint[m % 8], 0.5);
   }
-  o_color = vec4(col.rgb, 1.0);
+  // Straight alpha (docs/FORMAT.md) over the viewer's black background (kBackground, the colour
+  // outside the image): a transparent texel shows what lies outside the image, never its own RGB.
+  // `col` is the filtered straight colour and alpha; the reference composites the same way.
+  o_color = vec4(col.rgb * col.a, 1.0);
 #endif
 }
 )";
