@@ -140,6 +140,7 @@ Result<std::shared_ptr<client::CacheProvider>> make_provider(const CacheServeArg
   } else {
     co.ram_bytes = 0;
   }
+  co.disk_report = [](const std::string& line) { warn(line); };
   auto disk = parse_byte_size(a.cache_size, "--cache-size");
   if (!disk) return disk.error();
   co.disk = client::DiskCacheOptions{};

@@ -20,8 +20,12 @@ HttpResponse route_admin(const HttpRequest& request, const AdminState& state) {
       set_owned(r, state.metrics_text ? state.metrics_text() : std::string(),
                 "text/plain; version=0.0.4; charset=utf-8");
     } else if (target->raw_path == "/health") {
-      r.status = state.ready ? 200 : 503;
-      set_owned(r, state.ready ? "ok\n" : "loading\n", kTextType);
+      r.status = state.ready && state.degraded.empty() ? 200 : 503;
+      set_owned(r,
+                !state.ready             ? std::string("loading\n")
+                : state.degraded.empty() ? std::string("ok\n")
+                                         : "degraded: " + state.degraded + "\n",
+                kTextType);
     } else {
       r.status = 404;
       set_owned(r, "not found\n", kTextType);

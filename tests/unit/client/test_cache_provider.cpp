@@ -14,6 +14,7 @@
 
 #include "vts/builder/builder.hpp"
 #include "vts/client/source.hpp"
+#include "vts/test/forge.hpp"
 #include "vts/test/temp_dir.hpp"
 
 namespace fs = std::filesystem;
@@ -123,6 +124,33 @@ TEST(CacheProvider, ServesTheUpstreamsTileBytesThenFromTheCache) {
   EXPECT_NE(metrics.find("vts_cache_upstream_fetches_total 1\n"), std::string::npos) << metrics;
   EXPECT_NE(metrics.find("vts_cache_hits_total{level=\"ram\"} 1\n"), std::string::npos) << metrics;
   EXPECT_NE(metrics.find("vts_cache_upstream_online 1\n"), std::string::npos) << metrics;
+}
+
+// A tile whose header contradicts the tileset (the upstream's archive holds a 64 x 64 tile, and
+// one declaring 8192 x 8192 texels in 8 KiB, in a tileset of 264 x 264 tiles) is refused like a
+// corrupt answer: a 502 for the requester, nothing cached, counted in /metrics; the daemon stays
+// healthy (it is the upstream that is broken).
+TEST(CacheProvider, ATileThatContradictsTheTilesetIsBadOriginAndNeverCached) {
+  Dir d;
+  const fs::path good = build(d.path / "good.pmtiles");
+  const fs::path forged = d.path / "forged.pmtiles";
+  vts::test::copy_archive_replacing(good, forged,
+                                    {{TileId{2, 1, 1}, vts::test::flat_tile(64, 64, 9)},
+                                     {TileId{2, 2, 1}, vts::test::flat_tile(8192, 8192, 9)}});
+  auto local = open(forged);
+  const SourceInfo info = local->info();
+  ASSERT_EQ(info.info.geometry.stored_size(), 264u);
+  Daemon daemon(info, std::move(local), forged, d.path / "cache");
+  for (const TileId id : {TileId{2, 1, 1}, TileId{2, 2, 1}, TileId{2, 1, 1}}) {
+    const ProvidedTile t = daemon.get(id);
+    EXPECT_EQ(t.kind, ProvidedTile::Kind::bad_origin) << id.to_string() << ": " << t.message;
+    EXPECT_NE(t.message.find("the tileset's tiles are 264x264"), std::string::npos) << t.message;
+  }
+  EXPECT_EQ(daemon.get(TileId{2, 0, 0}).kind, ProvidedTile::Kind::ok);
+  const std::string metrics = daemon.provider->metrics_text();
+  EXPECT_NE(metrics.find("vts_cache_tileset_mismatch_rejected_total 9\n"), std::string::npos)
+      << metrics;  // 3 gets x (1 + 2 re-fetches)
+  EXPECT_EQ(daemon.provider->health_problem(), "");
 }
 
 TEST(CacheProvider, ATileTheUpstreamLacksIsAbsent) {

@@ -103,7 +103,8 @@ HttpResponse route(const HttpRequest& request, const TilesetRegistry& registry,
 
 // What the admin listener reports.
 struct AdminState {
-  bool ready = false;                         // /health: 200 "ok" when set, else 503 "loading"
+  bool ready = false;    // /health: 200 "ok" when set, else 503 "loading"
+  std::string degraded;  // when ready and non-empty, /health is 503 "degraded: <this>"
   std::function<std::string()> metrics_text;  // /metrics body; called for /metrics only
   std::size_t max_target_bytes = 8192;        // longer request targets are 414
 };
