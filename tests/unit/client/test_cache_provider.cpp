@@ -14,7 +14,9 @@
 
 #include "vts/builder/builder.hpp"
 #include "vts/client/source.hpp"
+#include "vts/test/clock.hpp"
 #include "vts/test/forge.hpp"
+#include "vts/test/server.hpp"
 #include "vts/test/temp_dir.hpp"
 
 namespace fs = std::filesystem;
@@ -151,6 +153,56 @@ TEST(CacheProvider, ATileThatContradictsTheTilesetIsBadOriginAndNeverCached) {
   EXPECT_NE(metrics.find("vts_cache_tileset_mismatch_rejected_total 9\n"), std::string::npos)
       << metrics;  // 3 gets x (1 + 2 re-fetches)
   EXPECT_EQ(daemon.provider->health_problem(), "");
+}
+
+// Revalidation against a real upstream (`vts serve` on loopback): the daemon sends back, as
+// If-None-Match, the tag the upstream gave with the tile, and the upstream answers 304 (its own
+// metrics count it); the tile stays served, with the tag derived from its header frame (what the
+// router puts in ETag), which for this upstream is the same tag.
+TEST(CacheProvider, AStaleTileIsRevalidatedWithTheUpstreamsTagAndTheUpstreamAnswers304) {
+  Dir d;
+  const fs::path archive = build(d.path / "earth.pmtiles");
+  vts::test::RunningServer server({archive});
+  const std::string location = server.base_url() + "/earth";
+  auto opened = open_source(location);
+  ASSERT_TRUE(opened.ok()) << opened.error().to_string();
+  const SourceInfo info = (*opened)->info();
+  auto upstream = std::make_shared<ReconnectingSource>(
+      info, std::move(*opened), location, SourceOptions{}, std::chrono::milliseconds(20));
+  TileCacheOptions co;
+  co.disk = DiskCacheOptions{};
+  co.disk->dir = d.path / "cache";
+  co.revalidate_after = std::chrono::seconds(0);  // every hit is stale
+  auto cache = TileCache::create(upstream, co);
+  ASSERT_TRUE(cache.ok()) << cache.error().to_string();
+  TileCache* c = cache->get();
+  auto tileset = std::make_shared<ProvidedTileset>();
+  tileset->name = "earth";
+  tileset->info = info.info;
+  CacheProvider provider(tileset, std::move(*cache), upstream);
+  auto get = [&] {
+    std::promise<ProvidedTile> p;
+    auto f = p.get_future();
+    provider.tile(tileset, TileId{2, 1, 1}, [&p](ProvidedTile t) { p.set_value(std::move(t)); });
+    EXPECT_EQ(f.wait_for(std::chrono::seconds(10)), std::future_status::ready);
+    return f.get();
+  };
+  const ProvidedTile first = get();
+  ASSERT_EQ(first.kind, ProvidedTile::Kind::ok) << first.message;
+  const std::string derived = tile_etag(first.payload).value();
+  auto held = c->ram()->get(TileKey{info.key, TileId{2, 1, 1}});
+  ASSERT_TRUE(held);
+  EXPECT_EQ(held->etag, derived) << "vts serve's ETag is the derived tag";
+
+  const ProvidedTile second = get();  // a RAM hit, stale: revalidated in the background
+  ASSERT_EQ(second.kind, ProvidedTile::Kind::ok);
+  EXPECT_EQ(tile_etag(second.payload).value(), derived);
+  ASSERT_TRUE(vts::test::wait_until([&] { return c->stats().not_modified == 1; }))
+      << "revalidations " << c->stats().revalidations;
+  const std::string m = server.server().metrics_text();
+  EXPECT_NE(m.find("vts_http_requests_total{route=\"tile\",status=\"304\"} 1\n"), std::string::npos)
+      << m;
+  EXPECT_TRUE(provider.shutdown().ok());
 }
 
 TEST(CacheProvider, ATileTheUpstreamLacksIsAbsent) {
