@@ -29,6 +29,7 @@ struct CacheServeArgs {
   std::string cache_size = "1G", ram_size = "256M";
   int threads = 0;
   int reconnect_seconds = 30;
+  int revalidate_seconds = 3600;
   bool no_admin = false;
 };
 
@@ -141,6 +142,7 @@ Result<std::shared_ptr<client::CacheProvider>> make_provider(const CacheServeArg
     co.ram_bytes = 0;
   }
   co.disk_report = [](const std::string& line) { warn(line); };
+  co.revalidate_after = std::chrono::seconds(a.revalidate_seconds);
   auto disk = parse_byte_size(a.cache_size, "--cache-size");
   if (!disk) return disk.error();
   co.disk = client::DiskCacheOptions{};
@@ -225,6 +227,10 @@ Runner add_cache(CLI::App& app) {
   c->add_option("--threads", a->threads, "I/O threads (default: one per core)")
       ->check(CLI::Range(0, 256));
   c->add_option("--access-log", a->access_log, "JSON-lines access log: FILE, or - for stdout");
+  c->add_option("--revalidate-after", a->revalidate_seconds,
+                "Seconds after which a cached tile is revalidated with the upstream when served")
+      ->check(CLI::Range(0, 31536000))
+      ->capture_default_str();
   c->add_option("--reconnect-interval", a->reconnect_seconds,
                 "Seconds between attempts to reopen an upstream that was down at start")
       ->check(CLI::Range(1, 86400))
