@@ -25,10 +25,9 @@ namespace {
 
 struct CacheServeArgs {
   std::string upstream, cache_dir, listen = "127.0.0.1:8081", admin = "127.0.0.1:9091", name;
-  std::string access_log;
-  std::string cache_size = "1G", ram_size = "256M";
-  int threads = 0;
-  int reconnect_seconds = 30, deadline_seconds = 20, region_cap = 8;
+  std::string access_log, cache_size = "1G", ram_size = "256M";
+  int threads = 0, reconnect_seconds = 30, deadline_seconds = 20, region_cap = 8;
+  int revalidate_seconds = 3600;
   bool no_admin = false;
 };
 
@@ -135,13 +134,14 @@ Result<std::shared_ptr<client::CacheProvider>> make_provider(const CacheServeArg
       std::move(hooks));
 
   client::TileCacheOptions co;
+  co.ram_bytes = 0;
   if (a.ram_size != "0") {
     auto ram = parse_byte_size(a.ram_size, "--ram-size");
     if (!ram) return ram.error();
     co.ram_bytes = *ram;
-  } else {
-    co.ram_bytes = 0;
   }
+  co.disk_report = [](const std::string& line) { warn(line); };
+  co.revalidate_after = std::chrono::seconds(a.revalidate_seconds);
   auto disk = parse_byte_size(a.cache_size, "--cache-size");
   if (!disk) return disk.error();
   co.disk = client::DiskCacheOptions{};
@@ -159,15 +159,12 @@ void shutdown(client::CacheProvider& provider) {
 
 void print_listening(const CacheServeArgs& a, const HttpServer& s, const std::string& host,
                      const std::string& admin_host, const std::string& name, bool online) {
-  const std::string state = online ? "" : " (upstream offline: serving the cache)";
-  if (s.admin_port())
-    std::printf(
-        "vts cache serve: listening on http://%s:%u (admin http://%s:%u), tileset %s from %s%s\n",
-        host.c_str(), unsigned(s.port()), admin_host.c_str(), unsigned(s.admin_port()),
-        name.c_str(), a.upstream.c_str(), state.c_str());
-  else
-    std::printf("vts cache serve: listening on http://%s:%u, tileset %s from %s%s\n", host.c_str(),
-                unsigned(s.port()), name.c_str(), a.upstream.c_str(), state.c_str());
+  const std::string admin =
+      s.admin_port() ? " (admin http://" + admin_host + ":" + std::to_string(s.admin_port()) + ")"
+                     : "";
+  std::printf("vts cache serve: listening on http://%s:%u%s, tileset %s from %s%s\n", host.c_str(),
+              unsigned(s.port()), admin.c_str(), name.c_str(), a.upstream.c_str(),
+              online ? "" : " (upstream offline: serving the cache)");
   std::fflush(stdout);
 }
 
@@ -226,6 +223,10 @@ Runner add_cache(CLI::App& app) {
   c->add_option("--threads", a->threads, "I/O threads (default: one per core)")
       ->check(CLI::Range(0, 256));
   c->add_option("--access-log", a->access_log, "JSON-lines access log: FILE, or - for stdout");
+  c->add_option("--revalidate-after", a->revalidate_seconds,
+                "Seconds after which a cached tile is revalidated with the upstream when served")
+      ->check(CLI::Range(0, 31536000))
+      ->capture_default_str();
   c->add_option("--reconnect-interval", a->reconnect_seconds,
                 "Seconds between attempts to reopen an upstream that was down at start")
       ->check(CLI::Range(1, 86400))

@@ -235,11 +235,27 @@ std::string CacheProvider::metrics_text() const {
           s.revalidations);
   counter(out, "vts_cache_disk_write_errors_total", "Failed disk cache writes (e.g. disk full).",
           s.disk_write_errors);
+  counter(out, "vts_cache_tileset_mismatch_rejected_total",
+          "Tiles refused because their header contradicts the tileset (size, codec, format).",
+          s.mismatch_rejected);
+  out +=
+      "# HELP vts_cache_disk_writes_failing Whether disk cache writes are failing now (1) or not "
+      "(0).\n# TYPE vts_cache_disk_writes_failing gauge\nvts_cache_disk_writes_failing " +
+      std::string(cache_->disk_health().failing ? "1" : "0") + "\n";
   out +=
       "# HELP vts_cache_upstream_online Whether the upstream is open (1) or not (0).\n"
       "# TYPE vts_cache_upstream_online gauge\nvts_cache_upstream_online " +
       std::string(upstream_->online() ? "1" : "0") + "\n";
   return out;
+}
+
+std::string CacheProvider::health_problem() const {
+  if (!cache_) return {};
+  const DiskHealth h = cache_->disk_health();
+  if (!h.failing) return {};
+  return "disk cache writes failing since " + std::to_string(h.failing_since_unix) +
+         " (unix time): " + std::to_string(h.failed_writes) + " failed writes; the last: " +
+         (h.last_error ? h.last_error->to_string() : std::string("unknown"));
 }
 
 Status CacheProvider::shutdown() {

@@ -141,11 +141,10 @@ class TileJsonSource final : public FetchingSource<TileJsonPending> {
     switch (r.status) {
       case 200: {
         t.kind = SourceTile::Kind::ok;
+        // The server's own tag, the one it will recognise in If-None-Match; empty when it sends
+        // none (a tag made here from the payload would be one it never issued: a revalidation
+        // then asks unconditionally).
         t.etag = std::move(r.etag);
-        if (t.etag.empty()) {
-          // Not `vts serve` (it always sends one): make the tag every source would give.
-          if (Result<std::string> e = tile_etag(r.body)) t.etag = std::move(*e);
-        }
         t.payload = std::move(r.body);
         return finish(h, std::move(t));
       }

@@ -35,7 +35,8 @@ class TileCache::Impl {
       : source_(std::move(source)),
         options_(std::move(options)),
         disk_(std::move(disk)),
-        key_(source_->info().key) {
+        key_(source_->info().key),
+        spec_(source_->info().info.tile_spec()) {
     if (options_.ram_bytes > 0) ram_ = std::make_unique<RamCache>(options_.ram_bytes);
     if (disk_) disk_thread_ = std::thread([this] { disk_loop(); });
   }
@@ -197,6 +198,7 @@ class TileCache::Impl {
     s.revalidations = stats_.revalidations.load();
     s.not_modified = stats_.not_modified.load();
     s.disk_write_errors = stats_.disk_write_errors.load();
+    s.mismatch_rejected = stats_.mismatch_rejected.load();
     s.cancelled = stats_.cancelled.load();
     return s;
   }
@@ -206,6 +208,10 @@ class TileCache::Impl {
   std::optional<Error> last_disk_error() const {
     std::lock_guard lock(mutex_);
     return last_disk_error_;
+  }
+  DiskHealth disk_health() const {
+    std::lock_guard lock(health_mutex_);
+    return health_;
   }
 
  private:
@@ -286,6 +292,25 @@ class TileCache::Impl {
     return shared;
   }
 
+  // Whether a payload may be stored or handed out: it verifies (header + checksum) and its
+  // header agrees with the tileset (size, codec, pixel format: check_tile_against). A refusal
+  // from the network is counted (corrupt_rejected, and mismatch_rejected for a tile of another
+  // shape); a disk row that fails is dropped by the caller and fetched again.
+  Status acceptable(std::span<const std::uint8_t> payload, std::string_view from) {
+    auto header = verify_tile(payload);
+    Status s;
+    bool mismatch = false;
+    if (!header) {
+      s = header.error();
+    } else if (s = check_tile_against(*header, spec_); !s) {
+      mismatch = true;
+    }
+    if (s.ok()) return s;
+    if (from == "network") stats_.corrupt_rejected.fetch_add(1, std::memory_order_relaxed);
+    if (mismatch) stats_.mismatch_rejected.fetch_add(1, std::memory_order_relaxed);
+    return s;
+  }
+
   // ---- disk stage (disk thread) ----
 
   void post_disk(bool read, std::function<void()> job) {
@@ -344,7 +369,7 @@ class TileCache::Impl {
       CachedTile& t = **row;
       // The disk cache checked its row checksum; the payload's own is checked too, so that not
       // even a tile stored by an older or buggy writer is handed out unverified.
-      if (verify_tile(t.payload)) {
+      if (acceptable(t.payload, "disk")) {
         if (p->pin && !t.pinned) note_disk(disk_->set_pinned(key_, id, true));
         auto tile = std::make_shared<const CachedTile>(std::move(t));
         stats_.disk_hits.fetch_add(1, std::memory_order_relaxed);
@@ -366,12 +391,67 @@ class TileCache::Impl {
   }
 
   // A failed disk write (disk full, I/O error) never fails a get: the tile was delivered from
-  // RAM or the network; the error is counted and kept for reporting.
-  void note_disk(const Status& s) {
-    if (s.ok()) return;
+  // RAM or the network; the error is counted, kept for reporting and marks the disk failing.
+  // `stored`: a tile was written, which proves the disk takes writes again.
+  void note_disk(const Status& s, bool stored = false) {
+    if (s.ok()) {
+      if (stored) disk_recovered();
+      return;
+    }
     stats_.disk_write_errors.fetch_add(1, std::memory_order_relaxed);
-    std::lock_guard lock(mutex_);
-    last_disk_error_ = s.error();
+    {
+      std::lock_guard lock(mutex_);
+      last_disk_error_ = s.error();
+    }
+    // Not the disk's fault: a tile too large for the cap, a row evicted before its update.
+    const ErrorCode c = s.error().code;
+    if (c != ErrorCode::too_large && c != ErrorCode::not_found) disk_failed(s.error());
+  }
+
+  // Rate-limited reporting (TileCacheOptions::disk_report): the first failure at once; after
+  // that at most one line per interval, counting the failures it stands for. A spell of failures
+  // that was reported gets a line when it ends; so a disk that keeps flipping between failing and
+  // working costs at most about two lines per interval.
+  void disk_failed(const Error& e) {
+    std::string line;
+    {
+      std::lock_guard lock(health_mutex_);
+      const auto now = options_.clock ? options_.clock() : std::chrono::steady_clock::now();
+      ++health_.failed_writes;
+      ++unreported_failures_;
+      health_.last_error = e;
+      if (!health_.failing) {
+        health_.failing = true;
+        health_.failing_since_unix = now_unix();
+      }
+      if (last_report_ && now - *last_report_ < options_.disk_report_interval) return;
+      line = unreported_failures_ == health_.failed_writes && health_.failed_writes == 1
+                 ? "disk cache write failed; tiles are served but not kept on disk until writes "
+                   "succeed again: " +
+                       e.to_string()
+                 : "disk cache writes failing: " + std::to_string(unreported_failures_) +
+                       " failed writes since the last report, " +
+                       std::to_string(health_.failed_writes) +
+                       " in a row; the last: " + e.to_string();
+      unreported_failures_ = 0;
+      last_report_ = now;
+      spell_reported_ = true;
+    }
+    if (options_.disk_report) options_.disk_report(line);
+  }
+
+  void disk_recovered() {
+    std::string line;
+    {
+      std::lock_guard lock(health_mutex_);
+      if (!health_.failing) return;
+      if (spell_reported_)
+        line = "disk cache writes succeed again, after " + std::to_string(health_.failed_writes) +
+               " failed writes";
+      health_ = DiskHealth{};
+      spell_reported_ = false;
+    }
+    if (options_.disk_report && !line.empty()) options_.disk_report(line);
   }
 
   // Queued, then written in batches of many tiles per transaction by the disk thread.
@@ -392,9 +472,9 @@ class TileCache::Impl {
     Status s = disk_->put_batch(key_, items);
     if (!s && batch.size() > 1) {
       // One bad tile (too large, no room for a pin) must not cost the others: one by one.
-      for (const auto& p : batch) note_disk(disk_->put(key_, p.id, *p.tile, p.pin));
+      for (const auto& p : batch) note_disk(disk_->put(key_, p.id, *p.tile, p.pin), true);
     } else {
-      note_disk(s);
+      note_disk(s, true);
     }
     batch.clear();
   }
@@ -445,8 +525,7 @@ class TileCache::Impl {
     r.transfer = t.transfer;
     switch (t.kind) {
       case SourceTile::Kind::ok: {
-        if (auto v = verify_tile(t.payload); !v) {
-          stats_.corrupt_rejected.fetch_add(1, std::memory_order_relaxed);
+        if (Status v = acceptable(t.payload, "network"); !v) {
           int attempts = 0;
           {
             std::lock_guard lock(mutex_);
@@ -456,10 +535,11 @@ class TileCache::Impl {
           }
           if (attempts <= options_.corrupt_retries) return fetch(id, serial);
           r.kind = PayloadResult::Kind::error;
-          r.error =
-              make_error(ErrorCode::checksum,
-                         "tile " + id.to_string() + " from " + key_ + " failed verification " +
-                             std::to_string(attempts) + " times: " + v.error().message);
+          // Either way the upstream sent bytes that cannot be used (to_provided: 502).
+          r.error = make_error(
+              v.error().code == ErrorCode::corrupt ? ErrorCode::corrupt : ErrorCode::checksum,
+              "tile " + id.to_string() + " from " + key_ + " failed verification " +
+                  std::to_string(attempts) + " times: " + v.error().message);
           break;
         }
         auto p = snapshot(id, serial);
@@ -544,10 +624,7 @@ class TileCache::Impl {
         break;
       }
       case SourceTile::Kind::ok: {
-        if (!verify_tile(t.payload)) {
-          stats_.corrupt_rejected.fetch_add(1, std::memory_order_relaxed);
-          break;  // keep the old one
-        }
+        if (!acceptable(t.payload, "network")) break;  // keep the old one
         keep_fetched(id, std::move(t), false, pin);
         break;
       }
@@ -569,6 +646,7 @@ class TileCache::Impl {
   std::unique_ptr<RamCache> ram_;
   std::unique_ptr<DiskCache> disk_;
   const std::string key_;
+  const TileSpec spec_;  // what every tile of the source's tileset is
 
   mutable std::mutex mutex_;
   std::condition_variable idle_cv_;
@@ -581,6 +659,11 @@ class TileCache::Impl {
   std::size_t outstanding_ = 0;  // source callbacks not yet run
   bool stopping_ = false;
   std::optional<Error> last_disk_error_;
+  mutable std::mutex health_mutex_;
+  DiskHealth health_;
+  std::uint64_t unreported_failures_ = 0;  // failed writes no report line has counted yet
+  std::optional<std::chrono::steady_clock::time_point> last_report_;
+  bool spell_reported_ = false;  // the current failing spell has had a line
 
   // Disk stage: one thread (SQLite has one connection per DiskCache), reads before writes.
   std::thread disk_thread_;
@@ -593,7 +676,7 @@ class TileCache::Impl {
   struct {
     std::atomic<std::uint64_t> gets{0}, ram_hits{0}, disk_hits{0}, network_fetches{0}, absent{0},
         errors{0}, corrupt_rejected{0}, revalidations{0}, not_modified{0}, disk_write_errors{0},
-        cancelled{0};
+        cancelled{0}, mismatch_rejected{0};
   } stats_;
 };
 
@@ -635,6 +718,9 @@ DiskCache* TileCache::disk() {
 }
 std::optional<Error> TileCache::last_disk_error() const {
   return impl_->last_disk_error();
+}
+DiskHealth TileCache::disk_health() const {
+  return impl_->disk_health();
 }
 
 }  // namespace vts::client

@@ -14,7 +14,9 @@ namespace vts::client {
 class TileClient::Impl {
  public:
   Impl(std::unique_ptr<TileCache> cache, TileClientOptions options)
-      : cache_(std::move(cache)), options_(std::move(options)) {
+      : cache_(std::move(cache)),
+        options_(std::move(options)),
+        spec_(cache_->info().info.tile_spec()) {
     const int n = std::max(1, options_.decode_threads);
     for (int i = 0; i < n; ++i) workers_.emplace_back([this] { decode_loop(); });
   }
@@ -173,7 +175,8 @@ class TileClient::Impl {
       TileEvent e;
       e.id = job.id;
       e.from = job.payload.from;
-      auto image = decode_tile(job.payload.tile->payload);
+      // The tileset's size and codec bound the decode (the cache refused other tiles already).
+      auto image = decode_tile(job.payload.tile->payload, spec_);
       if (image) {
         e.kind = TileEvent::Kind::decoded;
         e.image = std::move(*image);
@@ -206,6 +209,7 @@ class TileClient::Impl {
 
   std::unique_ptr<TileCache> cache_;
   TileClientOptions options_;
+  const TileSpec spec_;  // what the tileset's tiles are
   mutable std::mutex mutex_;
   std::condition_variable decode_cv_, space_cv_, events_cv_;
   std::map<TileId, Slot> inflight_;

@@ -442,6 +442,34 @@ Result<TileHeader> verify_tile(std::span<const std::uint8_t> payload) {
   return verify_impl(payload);
 }
 
+Status check_tile_against(const TileHeader& header, const TileSpec& spec) {
+  if (header.codec != spec.codec)
+    return make_error(ErrorCode::corrupt, std::string("tile uses codec ") +
+                                              codec_name(header.codec) + ", the tileset " +
+                                              codec_name(spec.codec));
+  const PixelFormat format = spec.codec == CodecId::bc1 ? PixelFormat::bc1 : PixelFormat::rgba8;
+  if (header.format != format)
+    return make_error(ErrorCode::corrupt, "tile declares pixel format " +
+                                              std::to_string(static_cast<int>(header.format)) +
+                                              ", the tileset's " + codec_name(spec.codec) +
+                                              " tiles are " +
+                                              std::to_string(static_cast<int>(format)));
+  if (header.width != spec.width || header.height != spec.height)
+    return make_error(ErrorCode::corrupt,
+                      "tile declares " + std::to_string(header.width) + "x" +
+                          std::to_string(header.height) + " texels, the tileset's tiles are " +
+                          std::to_string(spec.width) + "x" + std::to_string(spec.height));
+  return {};
+}
+
+Result<TileHeader> verify_tile(std::span<const std::uint8_t> payload, const TileSpec& spec) {
+  // The header alone first: a tile of the wrong shape is refused without hashing its body.
+  auto header = parse_tile_header(payload);
+  if (!header) return header;
+  if (Status s = check_tile_against(*header, spec); !s) return s.error();
+  return verify_impl(payload);
+}
+
 const Codec* find_codec(CodecId id) noexcept {
   switch (id) {
     case CodecId::lossless:
@@ -461,6 +489,13 @@ Result<TileImage> decode_tile(std::span<const std::uint8_t> payload) {
                                                   codec_name(header->codec) +
                                                   " is not implemented in this build");
   return codec->decode(payload);
+}
+
+Result<TileImage> decode_tile(std::span<const std::uint8_t> payload, const TileSpec& spec) {
+  auto header = parse_tile_header(payload);
+  if (!header) return std::move(header).error();
+  if (Status s = check_tile_against(*header, spec); !s) return s.error();
+  return decode_tile(payload);
 }
 
 namespace detail {

@@ -105,20 +105,9 @@ Result<VerifyReport> verify_archive(
       if (!bytes) {
         err = bytes.error();
       } else {
-        auto img = decode_tile(*bytes);
-        if (!img) {
-          err = img.error();
-        } else if (img->width != g.stored_size() || img->height != g.stored_size()) {
-          err = make_error(ErrorCode::corrupt, "tile is " + std::to_string(img->width) + "x" +
-                                                   std::to_string(img->height) +
-                                                   " texels, the tileset stores " +
-                                                   std::to_string(g.stored_size()) + "x" +
-                                                   std::to_string(g.stored_size()));
-        } else if (auto h = parse_tile_header(*bytes); h && h->codec != info->codec) {
-          err = make_error(ErrorCode::corrupt, std::string("tile uses codec ") +
-                                                   codec_name(h->codec) + ", the tileset " +
-                                                   codec_name(info->codec));
-        }
+        // Size, codec and pixel format against the tileset (before the decode allocates).
+        auto img = decode_tile(*bytes, info->tile_spec());
+        if (!img) err = img.error();
       }
       if (err) {
         std::lock_guard lock(m);

@@ -170,6 +170,7 @@ class Server final : public HttpServer, public SessionHost {
   HttpResponse admin_route(const HttpRequest& req) override {
     AdminState state;
     state.ready = ready_.load();
+    if (state.ready && options_.provider) state.degraded = options_.provider->health_problem();
     state.metrics_text = [this] { return metrics_text(); };
     state.skipped = [this] { return registry_->skipped(); };
     state.max_target_bytes = options_.router.max_target_bytes;

@@ -22,7 +22,9 @@ void append_line_safe(std::string& out, std::string_view s) {
 }
 
 std::string health_text(const AdminState& state) {
-  std::string body = state.ready ? "ok\n" : "loading\n";
+  std::string body = !state.ready             ? std::string("loading\n")
+                     : state.degraded.empty() ? std::string("ok\n")
+                                              : "degraded: " + state.degraded + "\n";
   if (!state.skipped) return body;
   for (const auto& s : state.skipped()) {
     body += "skipped ";
@@ -55,7 +57,7 @@ HttpResponse route_admin(const HttpRequest& request, const AdminState& state) {
       set_owned(r, state.metrics_text ? state.metrics_text() : std::string(),
                 "text/plain; version=0.0.4; charset=utf-8");
     } else if (target->raw_path == "/health") {
-      r.status = state.ready ? 200 : 503;
+      r.status = state.ready && state.degraded.empty() ? 200 : 503;
       set_owned(r, health_text(state), kTextType);
     } else {
       r.status = 404;

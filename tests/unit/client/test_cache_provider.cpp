@@ -14,6 +14,9 @@
 
 #include "vts/builder/builder.hpp"
 #include "vts/client/source.hpp"
+#include "vts/test/clock.hpp"
+#include "vts/test/forge.hpp"
+#include "vts/test/server.hpp"
 #include "vts/test/temp_dir.hpp"
 
 namespace fs = std::filesystem;
@@ -123,6 +126,83 @@ TEST(CacheProvider, ServesTheUpstreamsTileBytesThenFromTheCache) {
   EXPECT_NE(metrics.find("vts_cache_upstream_fetches_total 1\n"), std::string::npos) << metrics;
   EXPECT_NE(metrics.find("vts_cache_hits_total{level=\"ram\"} 1\n"), std::string::npos) << metrics;
   EXPECT_NE(metrics.find("vts_cache_upstream_online 1\n"), std::string::npos) << metrics;
+}
+
+// A tile whose header contradicts the tileset (the upstream's archive holds a 64 x 64 tile, and
+// one declaring 8192 x 8192 texels in 8 KiB, in a tileset of 264 x 264 tiles) is refused like a
+// corrupt answer: a 502 for the requester, nothing cached, counted in /metrics; the daemon stays
+// healthy (it is the upstream that is broken).
+TEST(CacheProvider, ATileThatContradictsTheTilesetIsBadOriginAndNeverCached) {
+  Dir d;
+  const fs::path good = build(d.path / "good.pmtiles");
+  const fs::path forged = d.path / "forged.pmtiles";
+  vts::test::copy_archive_replacing(good, forged,
+                                    {{TileId{2, 1, 1}, vts::test::flat_tile(64, 64, 9)},
+                                     {TileId{2, 2, 1}, vts::test::flat_tile(8192, 8192, 9)}});
+  auto local = open(forged);
+  const SourceInfo info = local->info();
+  ASSERT_EQ(info.info.geometry.stored_size(), 264u);
+  Daemon daemon(info, std::move(local), forged, d.path / "cache");
+  for (const TileId id : {TileId{2, 1, 1}, TileId{2, 2, 1}, TileId{2, 1, 1}}) {
+    const ProvidedTile t = daemon.get(id);
+    EXPECT_EQ(t.kind, ProvidedTile::Kind::bad_origin) << id.to_string() << ": " << t.message;
+    EXPECT_NE(t.message.find("the tileset's tiles are 264x264"), std::string::npos) << t.message;
+  }
+  EXPECT_EQ(daemon.get(TileId{2, 0, 0}).kind, ProvidedTile::Kind::ok);
+  const std::string metrics = daemon.provider->metrics_text();
+  EXPECT_NE(metrics.find("vts_cache_tileset_mismatch_rejected_total 9\n"), std::string::npos)
+      << metrics;  // 3 gets x (1 + 2 re-fetches)
+  EXPECT_EQ(daemon.provider->health_problem(), "");
+}
+
+// Revalidation against a real upstream (`vts serve` on loopback): the daemon sends back, as
+// If-None-Match, the tag the upstream gave with the tile, and the upstream answers 304 (its own
+// metrics count it); the tile stays served, with the tag derived from its header frame (what the
+// router puts in ETag), which for this upstream is the same tag.
+TEST(CacheProvider, AStaleTileIsRevalidatedWithTheUpstreamsTagAndTheUpstreamAnswers304) {
+  Dir d;
+  const fs::path archive = build(d.path / "earth.pmtiles");
+  vts::test::RunningServer server({archive});
+  const std::string location = server.base_url() + "/earth";
+  auto opened = open_source(location);
+  ASSERT_TRUE(opened.ok()) << opened.error().to_string();
+  const SourceInfo info = (*opened)->info();
+  auto upstream = std::make_shared<ReconnectingSource>(
+      info, std::move(*opened), location, SourceOptions{}, std::chrono::milliseconds(20));
+  TileCacheOptions co;
+  co.disk = DiskCacheOptions{};
+  co.disk->dir = d.path / "cache";
+  co.revalidate_after = std::chrono::seconds(0);  // every hit is stale
+  auto cache = TileCache::create(upstream, co);
+  ASSERT_TRUE(cache.ok()) << cache.error().to_string();
+  TileCache* c = cache->get();
+  auto tileset = std::make_shared<ProvidedTileset>();
+  tileset->name = "earth";
+  tileset->info = info.info;
+  CacheProvider provider(tileset, std::move(*cache), upstream);
+  auto get = [&] {
+    std::promise<ProvidedTile> p;
+    auto f = p.get_future();
+    provider.tile(tileset, TileId{2, 1, 1}, [&p](ProvidedTile t) { p.set_value(std::move(t)); });
+    EXPECT_EQ(f.wait_for(std::chrono::seconds(10)), std::future_status::ready);
+    return f.get();
+  };
+  const ProvidedTile first = get();
+  ASSERT_EQ(first.kind, ProvidedTile::Kind::ok) << first.message;
+  const std::string derived = tile_etag(first.payload).value();
+  auto held = c->ram()->get(TileKey{info.key, TileId{2, 1, 1}});
+  ASSERT_TRUE(held);
+  EXPECT_EQ(held->etag, derived) << "vts serve's ETag is the derived tag";
+
+  const ProvidedTile second = get();  // a RAM hit, stale: revalidated in the background
+  ASSERT_EQ(second.kind, ProvidedTile::Kind::ok);
+  EXPECT_EQ(tile_etag(second.payload).value(), derived);
+  ASSERT_TRUE(vts::test::wait_until([&] { return c->stats().not_modified == 1; }))
+      << "revalidations " << c->stats().revalidations;
+  const std::string m = server.server().metrics_text();
+  EXPECT_NE(m.find("vts_http_requests_total{route=\"tile\",status=\"304\"} 1\n"), std::string::npos)
+      << m;
+  EXPECT_TRUE(provider.shutdown().ok());
 }
 
 TEST(CacheProvider, ATileTheUpstreamLacksIsAbsent) {

@@ -4,6 +4,8 @@
 #include "vts/client/disk_cache.hpp"
 #include "vts/test/temp_dir.hpp"
 
+#include "fault_vfs.hpp"
+
 #include <gtest/gtest.h>
 #include <sqlite3.h>
 #include <stdlib.h>
@@ -585,113 +587,7 @@ TEST(DiskCache, RefusesAFolderThatIsAFile) {
 
 // ---- full disk ----------------------------------------------------------------------------------
 
-// An SQLite VFS over the default one whose writes start failing with SQLITE_FULL (as a full disk
-// does) after a set number of successful writes.
-namespace fault {
-
-std::atomic<long> writes_left{-1};  // < 0: never fail
-std::atomic<long> failures{0};
-sqlite3_vfs* base = nullptr;
-
-struct File {
-  sqlite3_file head;
-  sqlite3_file* real;
-};
-sqlite3_file* real(sqlite3_file* f) {
-  return reinterpret_cast<File*>(f)->real;
-}
-
-int x_close(sqlite3_file* f) {
-  return real(f)->pMethods->xClose(real(f));
-}
-int x_read(sqlite3_file* f, void* p, int n, sqlite3_int64 o) {
-  return real(f)->pMethods->xRead(real(f), p, n, o);
-}
-int x_write(sqlite3_file* f, const void* p, int n, sqlite3_int64 o) {
-  for (long left = writes_left.load(); left >= 0;) {
-    if (left == 0) {
-      ++failures;
-      return SQLITE_FULL;
-    }
-    if (writes_left.compare_exchange_weak(left, left - 1)) break;
-  }
-  return real(f)->pMethods->xWrite(real(f), p, n, o);
-}
-int x_truncate(sqlite3_file* f, sqlite3_int64 n) {
-  return real(f)->pMethods->xTruncate(real(f), n);
-}
-int x_sync(sqlite3_file* f, int flags) {
-  return real(f)->pMethods->xSync(real(f), flags);
-}
-int x_size(sqlite3_file* f, sqlite3_int64* n) {
-  return real(f)->pMethods->xFileSize(real(f), n);
-}
-int x_lock(sqlite3_file* f, int l) {
-  return real(f)->pMethods->xLock(real(f), l);
-}
-int x_unlock(sqlite3_file* f, int l) {
-  return real(f)->pMethods->xUnlock(real(f), l);
-}
-int x_check(sqlite3_file* f, int* r) {
-  return real(f)->pMethods->xCheckReservedLock(real(f), r);
-}
-int x_fcntl(sqlite3_file* f, int op, void* a) {
-  return real(f)->pMethods->xFileControl(real(f), op, a);
-}
-int x_sector(sqlite3_file* f) {
-  return real(f)->pMethods->xSectorSize(real(f));
-}
-int x_dev(sqlite3_file* f) {
-  return real(f)->pMethods->xDeviceCharacteristics(real(f));
-}
-int x_shm_map(sqlite3_file* f, int i, int sz, int ext, void volatile** pp) {
-  return real(f)->pMethods->xShmMap(real(f), i, sz, ext, pp);
-}
-int x_shm_lock(sqlite3_file* f, int o, int n, int fl) {
-  return real(f)->pMethods->xShmLock(real(f), o, n, fl);
-}
-void x_shm_barrier(sqlite3_file* f) {
-  real(f)->pMethods->xShmBarrier(real(f));
-}
-int x_shm_unmap(sqlite3_file* f, int d) {
-  return real(f)->pMethods->xShmUnmap(real(f), d);
-}
-int x_fetch(sqlite3_file* f, sqlite3_int64 o, int n, void** pp) {
-  return real(f)->pMethods->xFetch(real(f), o, n, pp);
-}
-int x_unfetch(sqlite3_file* f, sqlite3_int64 o, void* p) {
-  return real(f)->pMethods->xUnfetch(real(f), o, p);
-}
-
-const sqlite3_io_methods kMethods = {
-    3,          x_close,       x_read,      x_write, x_truncate, x_sync, x_size,
-    x_lock,     x_unlock,      x_check,     x_fcntl, x_sector,   x_dev,  x_shm_map,
-    x_shm_lock, x_shm_barrier, x_shm_unmap, x_fetch, x_unfetch};
-
-int x_open(sqlite3_vfs*, sqlite3_filename name, sqlite3_file* f, int flags, int* out) {
-  auto* file = reinterpret_cast<File*>(f);
-  file->real = reinterpret_cast<sqlite3_file*>(file + 1);
-  const int rc = base->xOpen(base, name, file->real, flags, out);
-  file->head.pMethods = file->real->pMethods ? &kMethods : nullptr;
-  return rc;
-}
-
-const char* register_vfs() {
-  static sqlite3_vfs vfs = [] {
-    base = sqlite3_vfs_find(nullptr);
-    sqlite3_vfs v = *base;
-    v.pNext = nullptr;
-    v.zName = "vts_fault";
-    v.szOsFile = static_cast<int>(sizeof(File)) + base->szOsFile;
-    v.xOpen = x_open;
-    return v;
-  }();
-  static const int rc = sqlite3_vfs_register(&vfs, 0);
-  EXPECT_EQ(rc, SQLITE_OK);
-  return vfs.zName;
-}
-
-}  // namespace fault
+// The fault VFS (fault_vfs.hpp): writes fail with SQLITE_FULL after fault::writes_left more.
 
 TEST(DiskCache, AFullDiskFailsThePutCleanlyAtEveryWriteAndReadsKeepWorking) {
   TempFolder dir;

@@ -18,7 +18,10 @@
 #include "vts/protocol/codec.hpp"
 #include "vts/protocol/pmtiles.hpp"
 #include "vts/test/clock.hpp"
+#include "vts/test/forge.hpp"
 #include "vts/test/temp_dir.hpp"
+
+#include "fault_vfs.hpp"
 
 namespace fs = std::filesystem;
 using namespace vts::client;
@@ -295,6 +298,159 @@ TEST(TileCache, ACorruptPayloadIsRefetchedAndNeverCachedOrDelivered) {
   auto row = cache->disk()->get(cache->info().key, TileId{1, 0, 0});
   ASSERT_TRUE(row.ok());
   EXPECT_FALSE(row->has_value());
+}
+
+// Tiles whose header contradicts the tileset (264 x 264 lossless): verified bytes of the wrong
+// size or codec, written into the archive with the real writer.
+struct ForgedArchive {
+  fs::path good, forged;
+  static constexpr TileId kSmall{2, 1, 1};  // 64 x 64
+  static constexpr TileId kHuge{2, 2, 1};   // 8192 x 8192 declared (256 MiB), 8 KiB stored
+  static constexpr TileId kBc1{2, 3, 2};    // 264 x 264, but bc1
+  explicit ForgedArchive(const fs::path& dir)
+      : good(dir / "good.pmtiles"), forged(dir / "f.pmtiles") {
+    build(good);
+    vts::TileImage img;
+    img.width = img.height = 264;
+    img.pixels.assign(264u * 264u * 4u, 0x80);
+    auto bc1 = vts::find_codec(vts::CodecId::bc1)->encode(img, {});
+    EXPECT_TRUE(bc1.ok());
+    vts::test::copy_archive_replacing(good, forged,
+                                      {{kSmall, vts::test::flat_tile(64, 64, 7)},
+                                       {kHuge, vts::test::flat_tile(8192, 8192, 7)},
+                                       {kBc1, *bc1}});
+  }
+};
+
+TEST(TileCache, ATileThatContradictsTheTilesetIsRefusedNeverCachedAndCounted) {
+  Dir d;
+  ForgedArchive a(d.path());
+  auto source = take(open_source(a.forged.string()));
+  ASSERT_EQ(source->info().info.geometry.stored_size(), 264u);
+  auto cache = take(TileCache::create(std::move(source), with_disk(d.path() / "cache")));
+  const std::pair<TileId, const char*> cases[] = {{ForgedArchive::kSmall, "64x64"},
+                                                  {ForgedArchive::kHuge, "8192x8192"},
+                                                  {ForgedArchive::kBc1, "codec bc1"}};
+  for (const auto& [id, says] : cases) {
+    for (int again = 0; again < 2; ++again) {  // the second get finds nothing cached either
+      Got got;
+      cache->get(id, {}, got.callback());
+      ASSERT_TRUE(vts::test::wait_until([&] { return got.size() == 1; }));
+      const PayloadResult& r = got.results[0];
+      ASSERT_EQ(r.kind, PayloadResult::Kind::error) << id.to_string();
+      EXPECT_EQ(r.error->code, vts::ErrorCode::corrupt) << r.error->to_string();
+      EXPECT_NE(r.error->message.find(says), std::string::npos) << r.error->message;
+      EXPECT_NE(r.error->message.find(id.to_string()), std::string::npos) << r.error->message;
+    }
+  }
+  Got fine;
+  cache->get(TileId{2, 0, 0}, {}, fine.callback());
+  ASSERT_TRUE(vts::test::wait_until([&] { return fine.size() == 1; }));
+  EXPECT_EQ(fine.results[0].kind, PayloadResult::Kind::ok);
+  ASSERT_TRUE(cache->flush().ok());
+  for (const auto& c : cases) {
+    EXPECT_EQ(cache->ram()->get(TileKey{cache->info().key, c.first}), nullptr);
+    auto row = cache->disk()->get(cache->info().key, c.first);
+    ASSERT_TRUE(row.ok());
+    EXPECT_FALSE(row->has_value()) << c.first.to_string() << " reached the disk";
+  }
+  EXPECT_TRUE(cache->disk()->get(cache->info().key, TileId{2, 0, 0})->has_value());
+  // 3 tiles x 2 gets x (1 + corrupt_retries) fetches, each refused.
+  EXPECT_EQ(cache->stats().mismatch_rejected, 3u * 2u * 3u);
+  EXPECT_EQ(cache->stats().corrupt_rejected, 3u * 2u * 3u);
+}
+
+TEST(TileCache, ADiskRowThatContradictsTheTilesetIsDroppedAndFetchedAgain) {
+  Dir d;
+  ForgedArchive a(d.path());
+  auto source = take(open_source(a.good.string()));
+  const std::string key = source->info().key;
+  {  // a cache folder that holds a forged row (another writer, an older version...)
+    DiskCacheOptions o;
+    o.dir = d.path() / "cache";
+    auto disk = take(DiskCache::open(o));
+    CachedTile forged;
+    forged.payload = vts::test::flat_tile(64, 64, 7);
+    forged.etag = "\"forged\"";
+    ASSERT_TRUE(disk->put(key, ForgedArchive::kSmall, forged).ok());
+  }
+  auto cache = take(TileCache::create(std::move(source), with_disk(d.path() / "cache")));
+  Got got;
+  cache->get(ForgedArchive::kSmall, {}, got.callback());
+  ASSERT_TRUE(vts::test::wait_until([&] { return got.size() == 1; }));
+  ASSERT_EQ(got.results[0].kind, PayloadResult::Kind::ok);
+  EXPECT_EQ(got.results[0].from, PayloadResult::From::network);
+  EXPECT_EQ(got.results[0].tile->payload, stored(a.good, ForgedArchive::kSmall));
+  EXPECT_EQ(cache->stats().mismatch_rejected, 1u);
+  EXPECT_EQ(cache->stats().disk_hits, 0u);
+  ASSERT_TRUE(cache->flush().ok());
+  auto row = cache->disk()->get(key, ForgedArchive::kSmall);
+  ASSERT_TRUE(row.ok() && row->has_value());
+  EXPECT_EQ((*row)->payload, stored(a.good, ForgedArchive::kSmall)) << "the row was replaced";
+}
+
+// Writes that fail (a full disk, here SQLite's own SQLITE_FULL from the fault VFS) are reported:
+// the first at once, then at most one line per interval counting the ones in between; the disk
+// is marked failing until a tile is stored again, which is reported too.
+TEST(TileCache, FailingDiskWritesAreReportedRateLimitedAndTheStateRecovers) {
+  Dir d;
+  const auto archive = build(d.path() / "a.pmtiles");
+  vts::test::FakeClock clock;
+  std::mutex m;
+  std::vector<std::string> lines;
+  TileCacheOptions o = with_disk(d.path() / "cache");
+  o.disk->vfs = fault::register_vfs();
+  ASSERT_NE(o.disk->vfs, "");
+  o.disk_report = [&](const std::string& line) {
+    std::lock_guard lock(m);
+    lines.push_back(line);
+  };
+  o.disk_report_interval = std::chrono::minutes(1);
+  o.clock = clock.fn();
+  auto cache = take(TileCache::create(take(open_source(archive.string())), o));
+  auto get = [&](TileId id) {
+    Got got;
+    cache->get(id, {}, got.callback());
+    EXPECT_TRUE(vts::test::wait_until([&] { return got.size() == 1; }));
+    EXPECT_EQ(got.results[0].kind, PayloadResult::Kind::ok) << "gets never fail for the disk";
+    (void)cache->flush();  // waits for the queued write (its own access-time write may fail)
+  };
+  auto reported = [&] {
+    std::lock_guard lock(m);
+    return lines;
+  };
+  get(TileId{2, 0, 0});
+  EXPECT_FALSE(cache->disk_health().failing);
+  EXPECT_TRUE(reported().empty());
+
+  fault::writes_left = 0;  // the disk is full
+  for (std::uint32_t x = 1; x < 4; ++x) get(TileId{2, x, 0});
+  DiskHealth h = cache->disk_health();
+  EXPECT_TRUE(h.failing);
+  EXPECT_GE(h.failed_writes, 3u);
+  ASSERT_TRUE(h.last_error);
+  EXPECT_NE(h.last_error->message.find("disk full"), std::string::npos) << h.last_error->message;
+  EXPECT_GE(cache->stats().disk_write_errors, 3u);
+  ASSERT_EQ(reported().size(), 1u) << "one line for the first failure, the rest held back";
+  EXPECT_NE(reported()[0].find("disk cache write failed"), std::string::npos) << reported()[0];
+  EXPECT_NE(reported()[0].find("disk full"), std::string::npos) << reported()[0];
+
+  clock.advance(std::chrono::seconds(61));
+  get(TileId{2, 0, 1});
+  ASSERT_EQ(reported().size(), 2u);
+  EXPECT_NE(reported()[1].find("disk cache writes failing: "), std::string::npos) << reported()[1];
+  EXPECT_NE(reported()[1].find(" failed writes since the last report"), std::string::npos);
+  get(TileId{2, 1, 1});
+  EXPECT_EQ(reported().size(), 2u) << "within the interval: counted, not printed";
+
+  fault::writes_left = -1;  // space again
+  get(TileId{2, 2, 1});
+  EXPECT_FALSE(cache->disk_health().failing);
+  ASSERT_EQ(reported().size(), 3u);
+  EXPECT_NE(reported()[2].find("disk cache writes succeed again"), std::string::npos)
+      << reported()[2];
+  auto row = cache->disk()->get(cache->info().key, TileId{2, 2, 1});
+  ASSERT_TRUE(row.ok() && row->has_value()) << "stored once the disk had room";
 }
 
 TEST(TileCache, AbsentTilesAreRememberedAndNotAskedForAgain) {

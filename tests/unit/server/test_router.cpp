@@ -747,6 +747,21 @@ TEST_F(AdminRouter, HealthListsTheSkippedArchivesOneLineEach) {
   EXPECT_EQ(get("/health").owned, "ok\n");
 }
 
+TEST_F(AdminRouter, HealthSaysDegradedWith503AndTheReasonWhileAProblemIsReported) {
+  state_.degraded = "disk cache writes failing";
+  auto degraded = get("/health");
+  EXPECT_EQ(degraded.status, 503);
+  EXPECT_EQ(degraded.owned, "degraded: disk cache writes failing\n");
+  EXPECT_EQ(header(degraded, "Cache-Control"), "no-store");
+  state_.ready = false;
+  EXPECT_EQ(get("/health").owned, "loading\n") << "not serving yet says so first";
+  state_.ready = true;
+  state_.degraded.clear();
+  auto ok = get("/health");
+  EXPECT_EQ(ok.status, 200);
+  EXPECT_EQ(ok.owned, "ok\n");
+}
+
 TEST_F(AdminRouter, HeadAnswersWithTheLengthButNoBodyToSend) {
   auto r = get("/metrics", vts::HttpMethod::head);
   EXPECT_EQ(r.status, 200);

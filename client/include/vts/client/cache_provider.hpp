@@ -84,7 +84,8 @@ class ReconnectingSource final : public TileSource {
 // Serves one tileset from a TileCache. tile() maps the cache's outcome to the HTTP front's:
 // ok -> ok (the cached bytes, no copy), absent -> absent, a payload that failed verification ->
 // bad_origin, any other error (unreachable, offline) or a cancelled get -> unavailable.
-// metrics_text() is the cache's counters and whether the upstream is online, in Prometheus text.
+// metrics_text() is the cache's counters, whether the upstream is online and whether disk writes
+// are failing, in Prometheus text.
 class CacheProvider final : public AsyncTileProvider {
  public:
   CacheProvider(std::shared_ptr<const ProvidedTileset> tileset, std::unique_ptr<TileCache> cache,
@@ -97,6 +98,9 @@ class CacheProvider final : public AsyncTileProvider {
   void tile(const std::shared_ptr<const ProvidedTileset>& tileset, TileId id,
             std::function<void(ProvidedTile)> done, std::stop_token abandon = {}) override;
   std::string metrics_text() const override;
+  // "disk cache writes failing since ...: N failed writes; the last: ..." while the cache's
+  // disk writes fail (TileCache::disk_health()), else empty.
+  std::string health_problem() const override;
 
   // Finishes pending gets (their `done`s run with unavailable), writes what the disk cache has
   // batched and releases the cache; the flush's error, if any. Call after the server stops

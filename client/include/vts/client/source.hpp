@@ -65,7 +65,9 @@ struct SourceTile {
   };
   Kind kind = Kind::error;
   std::vector<std::uint8_t> payload;  // the stored tile bytes, exactly as in the archive
-  std::string etag;                   // quoted, as HTTP sends it
+  // The validator to revalidate with, quoted as HTTP sends it: the archive sources' tile_etag();
+  // the TileJSON source's server's ETag header, empty when it sent none.
+  std::string etag;
   std::optional<Error> error;
   std::optional<SourceTransfer> transfer;  // set by sources that made one HTTP request for it
 };
@@ -127,8 +129,8 @@ Result<std::unique_ptr<TileSource>> open_remote_archive(std::string_view url,
                                                         SourceOptions options = {});
 
 // The ETag `vts serve` sends for a stored tile: '"' + 16 lowercase hex digits of the XXH3-64
-// checksum in the payload's tile header frame + '"'. Every source reports this same tag for the
-// same payload. corrupt when the payload has no valid header frame.
+// checksum in the payload's tile header frame + '"'; the tag the archive sources report, and the
+// one `vts serve` and the cache daemon serve. corrupt when the payload has no valid header frame.
 Result<std::string> tile_etag(std::span<const std::uint8_t> payload);
 // If-None-Match comparison as `vts serve` does it (RFC 9110 §13.1.2, weak): `header` is a list
 // of entity tags (W/ prefixes ignored) or "*"; false when empty.

@@ -9,9 +9,12 @@
 // dead server.
 //
 // What the caches hand out is always verified: a payload from the network is checked (tile
-// header + XXH3 checksum of its body) before it is cached or delivered, and re-fetched when it
-// fails (up to `corrupt_retries` times); rows read from disk are checked by the disk cache's own
-// checksum and again here. A tile older than `revalidate_after` is delivered at once and then
+// header + XXH3 checksum of its body, and the header against the tileset: size, codec and pixel
+// format, vts::check_tile_against) before it is cached or delivered, and re-fetched when it
+// fails (up to `corrupt_retries` times; then an error, ErrorCode::checksum or corrupt); rows read
+// from disk are checked by the disk cache's own checksum and again here (a row that fails is
+// dropped and fetched again). So a tile of another size or codec never reaches RAM, disk or a
+// caller. A tile older than `revalidate_after` is delivered at once and then
 // revalidated at the lowest priority (If-None-Match; 304 refreshes its age). Tiles the source
 // says are absent are remembered for the session and never asked for again.
 //
@@ -24,6 +27,7 @@
 #include <functional>
 #include <memory>
 #include <optional>
+#include <string>
 
 #include "vts/client/disk_cache.hpp"
 #include "vts/client/ram_cache.hpp"
@@ -37,6 +41,23 @@ struct TileCacheOptions {
   std::optional<DiskCacheOptions> disk;         // none = no disk cache
   std::chrono::seconds revalidate_after{3600};  // 0 = revalidate on every disk/RAM hit
   int corrupt_retries = 2;                      // re-fetches of a payload that failed its checksum
+  // Where failed disk writes (disk full, I/O error, a damaged or read-only cache.db) are
+  // reported, one line without a newline, called on the disk thread: the first failure at once,
+  // then at most one line per `disk_report_interval` counting the failures since the last line,
+  // and one line when a tile is stored again. Unset: not reported (disk_health() and the stats
+  // still tell). A tile too large for the cache or a row evicted meanwhile is not a failure.
+  std::function<void(const std::string& line)> disk_report;
+  std::chrono::milliseconds disk_report_interval{60000};
+  // The clock of that interval; unset: std::chrono::steady_clock (tests pass a fake one).
+  std::function<std::chrono::steady_clock::time_point()> clock;
+};
+
+// The disk cache's write state: failing from a failed write until a tile is stored again.
+struct DiskHealth {
+  bool failing = false;
+  std::uint64_t failed_writes = 0;  // since failing began
+  std::int64_t failing_since_unix = 0;
+  std::optional<Error> last_error;  // of the current failing spell
 };
 
 struct GetOptions {
@@ -81,13 +102,16 @@ class TileCache {
   struct Stats {
     std::uint64_t gets = 0, ram_hits = 0, disk_hits = 0, network_fetches = 0, absent = 0,
                   errors = 0, corrupt_rejected = 0, revalidations = 0, not_modified = 0,
-                  disk_write_errors = 0, cancelled = 0;
+                  disk_write_errors = 0, cancelled = 0,
+                  mismatch_rejected = 0;  // tiles refused for contradicting the tileset
   };
   Stats stats() const;
   RamCache* ram();    // nullptr when disabled
   DiskCache* disk();  // nullptr when disabled
   // The last disk write error (e.g. disk full), for reporting; empty when none.
   std::optional<Error> last_disk_error() const;
+  // Whether disk writes are failing now (see TileCacheOptions::disk_report). Thread-safe.
+  DiskHealth disk_health() const;
 
  private:
   class Impl;

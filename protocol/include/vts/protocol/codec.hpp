@@ -88,6 +88,21 @@ Result<TileHeader> parse_tile_header(std::span<const std::uint8_t> payload);
 // parse_tile_header() plus the checksum of the body. Cheap: hashing only, no decompression.
 Result<TileHeader> verify_tile(std::span<const std::uint8_t> payload);
 
+// What a tileset says every one of its tiles is: width x height texels (its geometry's
+// stored_size() on both sides, edge tiles included) encoded with `codec`, whose pixel format
+// follows (lossless: rgba8, bc1: bc1). TilesetInfo::tile_spec() gives a tileset's.
+struct TileSpec {
+  std::uint32_t width = 0;
+  std::uint32_t height = 0;
+  CodecId codec = CodecId::lossless;
+};
+// The one check of a tile against its tileset, made by every cache before it stores or hands
+// out a tile and by every decoder given a tileset: corrupt, naming the field, when the header's
+// size, codec or pixel format is not the tileset's. Reads the header only.
+Status check_tile_against(const TileHeader& header, const TileSpec& spec);
+// verify_tile() + check_tile_against().
+Result<TileHeader> verify_tile(std::span<const std::uint8_t> payload, const TileSpec& spec);
+
 class Codec {
  public:
   virtual ~Codec() = default;
@@ -111,7 +126,12 @@ Result<TileImage> bc1_to_rgba8(const TileImage& image);
 
 // The codec singleton for an id; nullptr when not implemented in this build.
 const Codec* find_codec(CodecId id) noexcept;
-// Decodes any payload with the codec its header names.
+// Decodes any payload with the codec its header names. Without a tileset the declared size is
+// bounded only by TileHeader::kMaxDimension per side (256 MiB of rgba8): give the tileset's
+// TileSpec whenever there is one.
 Result<TileImage> decode_tile(std::span<const std::uint8_t> payload);
+// Refuses (corrupt) a tile whose header contradicts `spec` before allocating anything for its
+// texels, then decodes it as above.
+Result<TileImage> decode_tile(std::span<const std::uint8_t> payload, const TileSpec& spec);
 
 }  // namespace vts

@@ -74,6 +74,10 @@ class AsyncTileProvider {
                     std::function<void(ProvidedTile)> done, std::stop_token abandon = {}) = 0;
   // Extra Prometheus text appended to the server's /metrics (e.g. cache counters); may be empty.
   virtual std::string metrics_text() const { return {}; }
+  // Empty while the provider works as it should; else one line (no newline) saying what is
+  // wrong although it still serves (e.g. its disk cache cannot write): /health then answers
+  // 503 "degraded: <line>". Called for every /health request, from any thread. Must not block.
+  virtual std::string health_problem() const { return {}; }
 };
 
 }  // namespace vts

@@ -30,6 +30,9 @@ struct TilesetInfo {
   // which hashes the metadata, always changes with the tiles. Optional; empty when unknown.
   std::string content_hash;
 
+  // What every tile of this tileset is: stored_size() x stored_size() texels of `codec`.
+  TileSpec tile_spec() const { return {geometry.stored_size(), geometry.stored_size(), codec}; }
+
   std::string to_json() const;
   // Validates every field (unknown codec, unsupported format_version, bad geometry → error).
   static Result<TilesetInfo> from_json(const std::string& metadata_json);

@@ -110,7 +110,8 @@ HttpResponse route(const HttpRequest& request, const TilesetRegistry& registry,
 
 // What the admin listener reports.
 struct AdminState {
-  bool ready = false;                         // /health: 200 "ok" when set, else 503 "loading"
+  bool ready = false;    // /health: 200 "ok" when set, else 503 "loading"
+  std::string degraded;  // when ready and non-empty, /health is 503 "degraded: <this>"
   std::function<std::string()> metrics_text;  // /metrics body; called for /metrics only
   // The archive files not served as they are (TilesetRegistry::skipped()); /health lists them
   // after its first line. Called for /health only; may be empty (none).
@@ -120,8 +121,9 @@ struct AdminState {
 
 // The admin listener: GET/HEAD /metrics and /health (no-store), 404 for any other path, 405 for
 // other methods; every answer has route `admin`. The target is checked as route() checks it.
-// /health is text/plain: "ok" or "loading" on the first line, then one line per skipped archive,
-// "skipped <file>: <reason>" (control characters in either written as \xHH, so a line is a line).
+// /health is text/plain: "ok", "loading" or "degraded: <why>" on the first line, then one line
+// per skipped archive, "skipped <file>: <reason>" (control characters in either written as \xHH, so
+// a line is a line).
 HttpResponse route_admin(const HttpRequest& request, const AdminState& state);
 
 // Finishes a deferred response (`marker`, as route() returned it) with the provider's answer:
