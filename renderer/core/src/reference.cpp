@@ -34,11 +34,13 @@ const std::array<double, 256>& decode_table() {
 // ---- PyramidSampler --------------------------------------------------------------------------
 
 PyramidSampler::PyramidSampler(std::filesystem::path path, std::shared_ptr<pmtiles::Reader> reader,
-                               Geometry geometry, PixelFormat format, std::size_t cache_tiles)
+                               Geometry geometry, PixelFormat format, TileSpec spec,
+                               std::size_t cache_tiles)
     : path_(std::move(path)),
       reader_(std::move(reader)),
       geometry_(geometry),
       format_(format),
+      spec_(spec),
       cache_tiles_(std::max<std::size_t>(cache_tiles, 1)) {}
 
 Result<std::unique_ptr<PyramidSampler>> PyramidSampler::open(const std::filesystem::path& archive,
@@ -70,8 +72,8 @@ Result<std::unique_ptr<PyramidSampler>> PyramidSampler::open(const std::filesyst
     return make_error(ErrorCode::unsupported, quoted(archive) + ": bc1 tiles of " +
                                                   std::to_string(info->geometry.stored_size()) +
                                                   " texels a side are not whole 4 x 4 blocks");
-  return std::unique_ptr<PyramidSampler>(
-      new PyramidSampler(archive, std::move(*reader), info->geometry, format, cache_tiles));
+  return std::unique_ptr<PyramidSampler>(new PyramidSampler(
+      archive, std::move(*reader), info->geometry, format, info->tile_spec(), cache_tiles));
 }
 
 Result<const std::vector<std::uint8_t>*> PyramidSampler::tile(TileId id) {
@@ -83,7 +85,7 @@ Result<const std::vector<std::uint8_t>*> PyramidSampler::tile(TileId id) {
   std::shared_ptr<const std::vector<std::uint8_t>> pixels;
   auto bytes = reader_->get(id);
   if (bytes) {
-    auto img = decode_tile(*bytes);
+    auto img = decode_tile(*bytes, spec_);  // a contradicting header is refused before allocating
     if (!img)
       return make_error(img.error().code,
                         quoted(path_) + ": tile " + id.to_string() + ": " + img.error().message);

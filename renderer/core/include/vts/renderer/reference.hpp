@@ -81,7 +81,7 @@ class PyramidSampler {
   };
 
   PyramidSampler(std::filesystem::path path, std::shared_ptr<pmtiles::Reader> reader,
-                 Geometry geometry, PixelFormat format, std::size_t cache_tiles);
+                 Geometry geometry, PixelFormat format, TileSpec spec, std::size_t cache_tiles);
   // The decoded stored tile, or null when the archive does not have it.
   Result<const std::vector<std::uint8_t>*> tile(TileId id);
 
@@ -89,6 +89,7 @@ class PyramidSampler {
   std::shared_ptr<pmtiles::Reader> reader_;
   Geometry geometry_;
   PixelFormat format_;  // what the archive's tiles decode to (bc1 is then widened to rgba8)
+  TileSpec spec_;       // what every tile's header must say (refused before decoding otherwise)
   std::size_t cache_tiles_;
   std::list<std::uint64_t> lru_;  // most recently used first
   std::unordered_map<std::uint64_t, Entry> cache_;
