@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include "router_internal.hpp"
+#include "tile_tag_memo.hpp"
 #include "vts/protocol/codec.hpp"
 #include "vts/protocol/file_io.hpp"
 #include "vts/protocol/tilejson.hpp"
@@ -249,32 +250,39 @@ HttpResponse archive_route(const HttpRequest& request, std::shared_ptr<const Til
   return r;
 }
 
-// 200 with the stored payload (a view: the caller keeps its bytes alive) or 304, with the ETag
-// read from the payload's tile header frame; `damaged_status` when that frame does not parse
-// (500 for our own archive, 502 for a provider's origin).
-HttpResponse payload_response(std::span<const std::uint8_t> payload, std::string_view if_none_match,
-                              const std::string& cc, int damaged_status, TileId id,
-                              std::string_view tileset) {
-  auto header = parse_tile_header(payload);
-  if (!header) {
-    return tile_error(damaged_status, "tile " + id.to_string() + " of " + std::string(tileset) +
-                                          " is damaged: " + header.error().to_string());
-  }
+// The tile's ETag and Cache-Control; 304 when `if_none_match` names the tag, else a 200 whose
+// body the caller sets.
+HttpResponse tag_response(std::uint64_t checksum, std::string_view if_none_match,
+                          const std::string& cc) {
   // "<16 lowercase hex>" without printf: this runs for every tile and every 304.
   char etag[19];
   etag[0] = '"';
-  for (int i = 0; i < 16; ++i)
-    etag[1 + i] = "0123456789abcdef"[(header->checksum >> (60 - 4 * i)) & 0xf];
+  for (int i = 0; i < 16; ++i) etag[1 + i] = "0123456789abcdef"[(checksum >> (60 - 4 * i)) & 0xf];
   etag[17] = '"';
   etag[18] = '\0';
   HttpResponse r;
   r.route = Route::tile;
   add(r, "ETag", etag);
   add(r, "Cache-Control", cc);
-  if (none_match(if_none_match, etag)) {
-    r.status = 304;
-    return r;
+  if (none_match(if_none_match, etag)) r.status = 304;
+  return r;
+}
+
+// 200 with the stored payload (a view: the caller keeps its bytes alive) or 304, with the ETag
+// read from the payload's tile header frame; `damaged_status` when that frame does not parse
+// (500 for our own archive, 502 for a provider's origin). The frame's checksum goes to `memo`.
+HttpResponse payload_response(std::span<const std::uint8_t> payload, std::string_view if_none_match,
+                              const std::string& cc, int damaged_status, TileId id,
+                              std::string_view tileset, http_detail::TileTagMemo* memo = nullptr,
+                              std::uint64_t tile_id = 0) {
+  auto header = parse_tile_header(payload);
+  if (!header) {
+    return tile_error(damaged_status, "tile " + id.to_string() + " of " + std::string(tileset) +
+                                          " is damaged: " + header.error().to_string());
   }
+  if (memo) memo->remember(tile_id, header->checksum);
+  HttpResponse r = tag_response(header->checksum, if_none_match, cc);
+  if (r.status == 304) return r;
   add(r, "Content-Type", kTileType);
   r.view = payload;
   r.content_length = r.view.size();
@@ -296,17 +304,30 @@ HttpResponse tile_route(const HttpRequest& request, std::shared_ptr<const Tilese
 
   const std::string cc = version.empty() ? cache_control(priv, config.max_age_seconds, false)
                                          : cache_control(priv, kImmutableMaxAge, true);
+  const std::uint64_t tile_id = pmtiles::zxy_to_tile_id(id.z, id.x, id.y);
+  http_detail::TileTagMemo* memo = t->tags.get();
+  if (!request.if_none_match.empty() && memo) {
+    // A tag read before from this file answers without touching it.
+    if (auto known = memo->find(tile_id)) {
+      HttpResponse r = tag_response(*known, request.if_none_match, cc);
+      if (r.status == 304) {
+        r.hold = std::move(t);
+        return r;
+      }
+    }
+  }
   if (!request.if_none_match.empty()) {
     // The ETag is in the tile's header frame: read that first, the whole payload only when the
     // client's copy is not current.
-    auto entry = t->reader->find_entry(pmtiles::zxy_to_tile_id(id.z, id.x, id.y));
+    auto entry = t->reader->find_entry(tile_id);
     if (!entry) return unreadable_tile(std::move(t), id, entry.error(), cc);
     std::array<std::uint8_t, TileHeader::kFrameBytes> frame;
     const std::span<std::uint8_t> head(frame.data(),
                                        std::min<std::size_t>(frame.size(), entry->length));
     Status read = t->reader->read(t->reader->header().tile_data_offset + entry->offset, head);
     if (!read) return unreadable_tile(std::move(t), id, read.error(), cc);
-    HttpResponse r = payload_response(head, request.if_none_match, cc, 500, id, t->name);
+    HttpResponse r =
+        payload_response(head, request.if_none_match, cc, 500, id, t->name, memo, tile_id);
     if (r.status != 200) {  // 304, or a damaged header frame
       r.hold = std::move(t);
       return r;
@@ -315,7 +336,8 @@ HttpResponse tile_route(const HttpRequest& request, std::shared_ptr<const Tilese
   auto payload = t->reader->get(id);
   if (!payload) return unreadable_tile(std::move(t), id, payload.error(), cc);
   auto bytes = std::make_shared<const std::vector<std::uint8_t>>(std::move(*payload));
-  HttpResponse r = payload_response(*bytes, request.if_none_match, cc, 500, id, t->name);
+  HttpResponse r =
+      payload_response(*bytes, request.if_none_match, cc, 500, id, t->name, memo, tile_id);
   if (!r.view.empty()) r.keep = std::move(bytes);
   r.hold = std::move(t);  // names the tileset in access logs
   return r;

@@ -1,6 +1,8 @@
 // Tileset registry: opens archives, computes their version, and swaps snapshots on reload.
 #include "vts/server/tileset_registry.hpp"
 
+#include "tile_tag_memo.hpp"
+
 #include <sys/stat.h>
 
 #include <algorithm>
@@ -86,6 +88,7 @@ Result<std::shared_ptr<const Tileset>> open_archive(const fs::path& path) {
   t->reader = std::move(*reader);
   t->info = std::move(*info);
   t->version = t->reader->version();
+  t->tags = std::make_shared<http_detail::TileTagMemo>();
   t->file_size = id->size;
   t->file_mtime_ns = id->mtime_ns;
   t->file_inode = id->inode;

@@ -10,6 +10,7 @@
 #include <optional>
 #include <string>
 
+#include "tile_tag_memo.hpp"
 #include "vts/builder/builder.hpp"
 #include "vts/protocol/codec.hpp"
 #include "vts/protocol/pmtiles.hpp"
@@ -168,6 +169,54 @@ TEST_F(Router, IfNoneMatchWithTheTileEtagAnswers304WithValidators) {
     req_.if_none_match = inm;
     EXPECT_EQ(get("/dense/2/1/1").status, 200) << inm;
   }
+}
+
+// A tag read once from an archive answers later conditional requests without reading the file
+// again: with the file truncated in place behind the server's back, a 304 for a tile whose tag is
+// known still comes (a whole old tile confirmed), while anything that must read fails as changed.
+TEST_F(Router, AKnownTagAnswers304WithoutReadingTheArchiveAgain) {
+  vts::test::TempDir dir("vts-router-memo");
+  vts::BuildOptions o;
+  o.synthetic = vts::SyntheticSpec{600, 300, std::nullopt, 2};
+  o.output = dir.path() / "memo.pmtiles";
+  o.threads = 1;
+  ASSERT_TRUE(vts::build_pyramid(o).ok());
+  vts::TilesetRegistry registry;
+  ASSERT_TRUE(registry.load({dir.path()}).ok());
+  auto route = [&](std::string_view target, std::string inm) {
+    req_.method = vts::HttpMethod::get;
+    req_.target = target;
+    req_.if_none_match = inm;
+    return vts::route(req_, registry, config_);
+  };
+  auto first = route("/memo/2/1/1", "\"0000000000000000\"");
+  ASSERT_EQ(first.status, 200);
+  const std::string etag = *header(first, "ETag");
+  const std::string other = *header(route("/memo/2/0/0", ""), "ETag");
+
+  std::filesystem::resize_file(o.output, std::filesystem::file_size(o.output) / 2);
+  auto known = route("/memo/2/1/1", etag);
+  EXPECT_EQ(known.status, 304) << known.owned;
+  EXPECT_EQ(header(known, "ETag"), etag);
+  EXPECT_EQ(header(known, "Cache-Control"), "public, max-age=3600");
+  EXPECT_EQ(route("/memo/2/0/0", other).status, 304) << "a 200 teaches the tag too";
+  EXPECT_EQ(route("/memo/2/1/1", "\"0000000000000000\"").status, 503)
+      << "a known tag that does not match still reads the tile, which is now refused";
+  EXPECT_EQ(route("/memo/2/1/0", "*").status, 503) << "an unknown tag reads the file";
+}
+
+TEST(TileTagMemo, KeepsWhatItLearntAndStaysBounded) {
+  vts::http_detail::TileTagMemo memo(/*shard_entries=*/64);
+  memo.remember(7, 0xabc);
+  EXPECT_EQ(memo.find(7), 0xabcu);
+  EXPECT_FALSE(memo.find(8).has_value());
+  memo.remember(7, 0xdef);
+  EXPECT_EQ(memo.find(7), 0xdefu) << "a later read replaces the tag";
+  const std::size_t cap =
+      vts::http_detail::TileTagMemo::kShards * vts::http_detail::TileTagMemo::kShardEntries;
+  for (std::uint64_t id = 100; id < 100 + 2 * cap; ++id) memo.remember(id, id);
+  EXPECT_LE(memo.size(), cap);
+  EXPECT_EQ(memo.find(100 + 2 * cap - 1), 100 + 2 * cap - 1) << "the newest tag is kept";
 }
 
 TEST_F(Router, VersionedUrlOfTheCurrentArchiveIsImmutable) {

@@ -21,6 +21,10 @@
 
 namespace vts {
 
+namespace http_detail {
+class TileTagMemo;
+}
+
 struct Tileset {
   std::string name;
   std::filesystem::path path;
@@ -33,6 +37,9 @@ struct Tileset {
   std::uint64_t file_size = 0;
   std::int64_t file_mtime_ns = 0;
   std::uint64_t file_inode = 0;
+  // Tags of tiles already read from this file, so that a conditional request for one of them is
+  // answered without reading the file (server/src/tile_tag_memo.hpp). Null: none kept.
+  std::shared_ptr<http_detail::TileTagMemo> tags;
 };
 
 // Opens one archive as a tileset named after its file stem; validates metadata. Errors name the
