@@ -5,7 +5,7 @@
 # decoders' complaints (libjpeg's "Premature end of JPEG file", libtiff's short strips) were
 # ignored and the build exited 0 with an archive of grey or black tiles that `vts verify` passed.
 # Inputs with harmless oddities (bytes after the end of the image, an unknown JFIF revision, a bad
-# CRC on a PNG text chunk) still build.
+# CRC on a PNG text chunk) still build; a file that is no image at all is exit 2.
 # shellcheck source=lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 require_tool "$OIIOTOOL"
@@ -113,6 +113,12 @@ cp "$D/out.pmtiles" "$WORK/out.orig"
 expect_damaged truncated "reading rows" "$I/cut50-earth.png" "$I/cut50-earth.png"
 cmp -s "$D/out.pmtiles" "$WORK/out.orig" || fail "a failed build changed the existing archive"
 rm "$D/out.pmtiles"
+
+note "a file that is no image at all: a bad argument (exit 2), not a damaged image"
+printf 'this is not an image\n' >"$I/text.png"
+run "$VTS" build "$I/text.png" -o "$D/x.pmtiles"
+((RC == 2)) || { show_output; fail "vts build on a text file exited $RC, expected 2"; }
+[[ ! -e $D/x.pmtiles ]] || fail "vts build on a text file wrote $D/x.pmtiles"
 
 note "harmless oddities still build"
 { cat "$I/earth.jpg"; printf 'trailing bytes after EOI\n'; } >"$I/trailing.jpg"
