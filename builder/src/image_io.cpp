@@ -4,6 +4,7 @@
 
 #include <string>
 
+#include "image_source.hpp"
 #include "vts/protocol/file_io.hpp"
 
 namespace vts {
@@ -64,8 +65,10 @@ Result<Rgba8Image> read_rgba8(const std::filesystem::path& path) {
                                                   std::to_string(spec.height) + " with " +
                                                   std::to_string(channels) + " channels");
   std::vector<std::uint8_t> raw(std::size_t(spec.width) * spec.height * channels);
-  if (!in->read_image(0, 0, 0, channels, OIIO::TypeDesc::UINT8, raw.data()))
-    return make_error(ErrorCode::corrupt, "reading " + quoted(path) + ": " + in->geterror());
+  // Decoders report damage in the middle of the pixels on a read that still succeeds.
+  const bool ok = in->read_image(0, 0, 0, channels, OIIO::TypeDesc::UINT8, raw.data());
+  if (Status st = detail::check_read(path, "reading its pixels", ok, in->geterror()); !st)
+    return st.error();
   in->close();
   Rgba8Image img{spec.width, spec.height,
                  std::vector<std::uint8_t>(std::size_t(spec.width) * spec.height * 4)};

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <string_view>
 
 #include "vts/builder/downsample.hpp"
 #include "vts/protocol/file_io.hpp"
@@ -27,11 +28,15 @@ struct ImageSource::Piece {
   std::vector<std::uint8_t> band;
   std::int64_t band_y0 = -1;
 
-  // Reads rows [y, y + n) of channels [0, nch) as `type` into out (tightly packed).
-  bool read(std::uint64_t y, std::uint32_t n, int nch, OIIO::TypeDesc type, void* out) {
-    if (tile_height <= 0)
-      return in->read_scanlines(0, 0, static_cast<int>(y), static_cast<int>(y + n), 0, 0, nch, type,
-                                out);
+  // Reads rows [y, y + n) of channels [0, nch) as `type` into out (tightly packed); an error
+  // when the reader fails or reports damage (check_read()).
+  Status read(std::uint64_t y, std::uint32_t n, int nch, OIIO::TypeDesc type, void* out) {
+    const std::string what = "reading rows " + std::to_string(y) + ".." + std::to_string(y + n);
+    if (tile_height <= 0) {
+      const bool ok = in->read_scanlines(0, 0, static_cast<int>(y), static_cast<int>(y + n), 0, 0,
+                                         nch, type, out);
+      return check_read(path, what, ok, in->geterror());
+    }
     const std::size_t row_bytes = width * nch * type.size();
     auto* dst = static_cast<std::uint8_t*>(out);
     for (std::uint64_t row = y; row < y + n;) {
@@ -45,11 +50,14 @@ struct ImageSource::Piece {
         for (std::uint64_t x0 = 0; x0 < width; x0 += chunk) {
           const std::uint64_t x1 = std::min(width, x0 + chunk);
           const std::size_t px = nch * type.size();
-          if (!in->read_tiles(0, 0, static_cast<int>(x0), static_cast<int>(x1),
-                              static_cast<int>(b0), static_cast<int>(b1), 0, 1, 0, nch, type,
-                              band.data() + x0 * px, static_cast<OIIO::stride_t>(px),
-                              static_cast<OIIO::stride_t>(row_bytes)))
-            return false;
+          const bool ok = in->read_tiles(
+              0, 0, static_cast<int>(x0), static_cast<int>(x1), static_cast<int>(b0),
+              static_cast<int>(b1), 0, 1, 0, nch, type, band.data() + x0 * px,
+              static_cast<OIIO::stride_t>(px), static_cast<OIIO::stride_t>(row_bytes));
+          if (Status st = check_read(path, what, ok, in->geterror()); !st) {
+            band_y0 = -1;  // the band is partly filled
+            return st;
+          }
         }
         band_y0 = b0;
       }
@@ -60,11 +68,48 @@ struct ImageSource::Piece {
       dst += take * row_bytes;
       row += take;
     }
-    return true;
+    return {};
   }
 };
 
 namespace {
+
+// The decoder's messages, one per line, without repeats: the first few joined with "; ".
+std::string condense(const std::string& messages) {
+  std::vector<std::string> lines;
+  std::size_t more = 0;
+  for (std::size_t b = 0; b < messages.size();) {
+    std::size_t e = messages.find('\n', b);
+    if (e == std::string::npos) e = messages.size();
+    std::string line = messages.substr(b, e - b);
+    b = e + 1;
+    if (line.empty() || std::find(lines.begin(), lines.end(), line) != lines.end()) continue;
+    if (lines.size() < 3)
+      lines.push_back(std::move(line));
+    else
+      ++more;
+  }
+  std::string out;
+  for (const auto& l : lines) out += (out.empty() ? "" : "; ") + l;
+  if (more > 0) out += " (and " + std::to_string(more) + " more)";
+  return out;
+}
+
+// libjpeg's warnings about metadata (jerror.h): the pixels decode in full all the same.
+bool harmless(std::string_view line) {
+  for (std::string_view w :
+       {"unknown JFIF revision number", "Invalid SOS parameters for sequential",
+        "Unknown Adobe color transform code"})
+    if (line.find(w) != std::string_view::npos) return true;
+  return false;
+}
+
+// The decoder ran out of bytes: libjpeg, libpng and libtiff's words for it.
+bool says_truncated(const std::string& messages) {
+  for (std::string_view w : {"Premature end of", "end of file", "bytes, expected"})
+    if (messages.find(w) != std::string::npos) return true;
+  return false;
+}
 
 Result<std::unique_ptr<OIIO::ImageInput>> open_input(const std::filesystem::path& path) {
   // Not a FIFO or a device: OpenImageIO would wait for a writer, or read /dev/zero forever.
@@ -73,21 +118,51 @@ Result<std::unique_ptr<OIIO::ImageInput>> open_input(const std::filesystem::path
       return make_error(ErrorCode::not_found, "input '" + path.string() + "' does not exist");
     return s.error();
   }
+  std::error_code ec;
+  if (std::filesystem::file_size(path, ec) == 0 && !ec)
+    return make_error(ErrorCode::truncated, "input '" + path.string() + "' is truncated: empty");
   // Texels are stored with straight alpha (docs/FORMAT.md): ask readers whose files hold straight
   // alpha (PNG, TIFF with unassociated extra samples) not to premultiply it on the way in.
   OIIO::ImageSpec config;
   config.attribute("oiio:UnassociatedAlpha", 1);
   auto in = OIIO::ImageInput::open(path.string(), &config);
   if (!in) {
-    std::string why = OIIO::geterror();
-    if (why.empty()) why = "not an image format OpenImageIO can read";
+    const std::string why = OIIO::geterror();
+    // A reader that recognises the file's signature (create() without opening checks it) but
+    // cannot read its header: the file is damaged rather than of a kind we cannot read.
+    auto reader = OIIO::ImageInput::create(path.string(), false);
+    OIIO::geterror();  // create()'s own complaint, if any
+    if (reader)
+      return check_read(path, std::string("opening it as ") + reader->format_name(), false, why)
+          .error();
     return make_error(ErrorCode::invalid_argument,
-                      "cannot read input '" + path.string() + "': " + why);
+                      "cannot read input '" + path.string() +
+                          "': " + (why.empty() ? "not an image format OpenImageIO can read" : why));
   }
+  // Opening may already have reported damage (or a harmless warning, dropped here so that it is
+  // not taken for a failure of the first read).
+  if (Status st = check_read(path, "opening it", true, in->geterror()); !st) return st.error();
   return in;
 }
 
 }  // namespace
+
+Status check_read(const std::filesystem::path& path, const std::string& what, bool ok,
+                  const std::string& messages) {
+  std::string damage;
+  for (std::size_t b = 0; b < messages.size();) {
+    std::size_t e = messages.find('\n', b);
+    if (e == std::string::npos) e = messages.size();
+    const std::string_view line(messages.data() + b, e - b);
+    if (!line.empty() && !harmless(line)) damage.append(line).push_back('\n');
+    b = e + 1;
+  }
+  if (ok && damage.empty()) return {};
+  const ErrorCode code = says_truncated(damage) ? ErrorCode::truncated : ErrorCode::corrupt;
+  return make_error(code, "input '" + path.string() + "' is " + error_code_name(code) + ": " +
+                              what + " failed" +
+                              (damage.empty() ? std::string() : ": " + condense(damage)));
+}
 
 ImageSource::~ImageSource() = default;
 
@@ -208,7 +283,7 @@ Status ImageSource::read_rows(std::uint64_t y, std::uint32_t count, std::uint8_t
           }
         }
       };
-      bool ok;
+      Status ok;
       if (piece->is_float) {
         scratch_float_.resize(texels * read_ch);
         ok = piece->read(local_y, n, read_ch, OIIO::TypeDesc::FLOAT, scratch_float_.data());
@@ -229,13 +304,7 @@ Status ImageSource::read_rows(std::uint64_t y, std::uint32_t count, std::uint8_t
         const std::uint8_t* b = scratch_.data();
         if (ok) expand([&](std::size_t i, int c) { return b[i * read_ch + c]; });
       }
-      if (!ok) {
-        std::string why = piece->in->geterror();
-        return make_error(ErrorCode::io, "reading rows " + std::to_string(local_y) + ".." +
-                                             std::to_string(local_y + n) + " of '" +
-                                             piece->path.string() + "' failed" +
-                                             (why.empty() ? "" : ": " + why));
-      }
+      if (!ok) return ok;
       x_offset += piece->width;
     }
     out += std::size_t{n} * width_ * 4;

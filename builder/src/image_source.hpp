@@ -12,10 +12,23 @@
 
 namespace vts::detail {
 
+// Decides whether an OpenImageIO read of `path` went wrong: `ok` is what the read call returned,
+// `messages` what the reader reported meanwhile (ImageInput::geterror()). Decoders report damage
+// in the middle of the pixels as a message on a call that still returns true (libjpeg's
+// "Premature end of JPEG file", libtiff's short strip reads), so a read is good only when it
+// returned true and every message is one of the few libjpeg warnings about metadata that leave
+// the pixels intact (an unknown JFIF revision, non-standard SOS parameters, an unknown Adobe
+// transform code). A bad read is truncated when the decoder ran out of bytes, corrupt otherwise,
+// with `what` ("reading rows 0..64") and the decoder's first messages in the text.
+Status check_read(const std::filesystem::path& path, const std::string& what, bool ok,
+                  const std::string& messages);
+
 class ImageSource {
  public:
   // Opens every input and checks the mosaic is consistent: inputs in one grid row share a height,
-  // inputs in one grid column share a width. Inputs are given row-major.
+  // inputs in one grid column share a width. Inputs are given row-major. A file no reader
+  // recognises is invalid_argument; a file in a recognised format whose header cannot be read,
+  // or an empty file, is corrupt or truncated.
   static Result<std::unique_ptr<ImageSource>> open(const std::vector<std::filesystem::path>& inputs,
                                                    std::uint32_t columns, std::uint32_t rows);
   ~ImageSource();
@@ -25,7 +38,8 @@ class ImageSource {
   std::string description() const { return description_; }
 
   // Reads mosaic rows [y, y + count) as RGBA8 into out (width() * 4 bytes per row). Rows must be
-  // read in increasing order.
+  // read in increasing order. Damaged pixel data is an error (see check_read()), never rows of
+  // whatever the decoder filled in.
   Status read_rows(std::uint64_t y, std::uint32_t count, std::uint8_t* out);
 
  private:

@@ -51,18 +51,7 @@ note "an empty file"
 expect_clean_failure "$VTS" build "$WORK/empty.png" -o "$D/x.pmtiles"
 expect_nothing_written
 
-note "a truncated JPEG"
-head -c 3000 "$EARTH" >"$WORK/truncated.jpg"
-run "$VTS" build "$WORK/truncated.jpg" -o "$D/x.pmtiles"
-# libjpeg may accept a truncated stream (grey fill with a warning); either way no crash and, on
-# failure, no file.
-((RC < 124)) || { show_output; fail "vts build on a truncated JPEG exited $RC (crash or hang)"; }
-if ((RC != 0)); then
-  grep -q '[^[:space:]]' "$ERR" || fail "failed on a truncated JPEG without a message"
-  expect_nothing_written
-else
-  rm -f "$D/x.pmtiles"
-fi
+# Truncated and corrupt images (exit 5, nothing written): damaged_input.sh.
 
 note "a directory as input"
 expect_clean_failure "$VTS" build "$WORK" -o "$D/x.pmtiles"

@@ -24,7 +24,9 @@ Status write_png(const std::filesystem::path& path, int width, int height,
 
 // Reads an image file (PNG, or any 8-bit format OpenImageIO reads) as RGBA8: grey is replicated,
 // a missing alpha channel becomes 255. not_found when the file does not exist; corrupt when it
-// cannot be decoded; unsupported beyond 32768 pixels a side or 4 channels.
+// cannot be decoded, truncated or corrupt when its pixels are cut short or damaged (even where
+// the decoder fills them in and carries on); unsupported beyond 32768 pixels a side or 4
+// channels.
 Result<Rgba8Image> read_rgba8(const std::filesystem::path& path);
 
 }  // namespace vts
