@@ -369,6 +369,34 @@ void build_synthetic(const BuildOptions& o, const SyntheticSpec& spec, const Geo
   ticker.tick(0, true);
 }
 
+// The georeference BuildOptions asks for (nullopt for a plain image), checked against the
+// geometry. A synthetic build without a region of its own gets the footprint as its region, at
+// every level.
+Result<std::optional<Georeference>> make_georeference(const BuildOptions& o, const Geometry& g,
+                                                      std::optional<SyntheticSpec>& synthetic) {
+  if (o.tiling == Tiling::none) {
+    if (o.bounds) return make_error(ErrorCode::invalid_argument, "bounds need a tiling scheme");
+    return std::optional<Georeference>();
+  }
+  if (!o.synthetic)
+    return make_error(ErrorCode::unsupported,
+                      "georeferenced inputs: not yet (a tiling scheme is only accepted with "
+                      "--synthetic for now)");
+  Georeference geo;
+  geo.tiling = o.tiling;
+  geo.bounds = o.bounds.value_or(scheme_extent(o.tiling));
+  if (Status s = check_tiling_geometry(o.tiling, g); !s) return s.error();
+  // The center is checked with the bounds; compute it only from bounds that can be valid.
+  geo.center = {geo.bounds.west, geo.bounds.south, 0};
+  if (Status s = check_georeference(geo, g); !s) return s.error();
+  geo.center = default_center(o.tiling, g, geo.bounds);
+  if (!synthetic->region) {
+    synthetic->region = footprint_texels(o.tiling, g, geo.bounds);
+    synthetic->region_level = 0;
+  }
+  return std::optional<Georeference>(geo);
+}
+
 }  // namespace
 
 Result<BuildReport> build_pyramid(const BuildOptions& o) {
@@ -424,7 +452,13 @@ Result<BuildReport> build_pyramid(const BuildOptions& o) {
       return make_error(ErrorCode::invalid_argument, "region level must be >= 0");
   }
 
+  std::optional<SyntheticSpec> synthetic = o.synthetic;
+  auto georeference = make_georeference(o, g, synthetic);
+  if (!georeference) return std::move(georeference).error();
+
   pmtiles::WriterOptions wo;
+  if (*georeference)
+    wo.bounds = pmtiles::georeferenced_bounds((*georeference)->bounds, (*georeference)->center);
   wo.path = o.output;
   wo.min_zoom = 0;
   wo.max_zoom = static_cast<std::uint8_t>(g.max_zoom());
@@ -437,8 +471,8 @@ Result<BuildReport> build_pyramid(const BuildOptions& o) {
   shared.writer = writer->get();
   shared.cancel = o.cancel;
   const unsigned threads = worker_count(o.threads);
-  if (o.synthetic)
-    build_synthetic(o, *o.synthetic, g, shared, threads);
+  if (synthetic)
+    build_synthetic(o, *synthetic, g, shared, threads);
   else
     build_from_source(o, *source, g, shared, threads);
   if (shared.failed) {
@@ -454,14 +488,14 @@ Result<BuildReport> build_pyramid(const BuildOptions& o) {
   info.name = o.name.empty() ? o.output.stem().string() : o.name;
   info.description = o.description.empty() ? input_desc : o.description;
   info.downsample = o.synthetic ? "synthetic-per-level" : downsample_method(o.downsample);
-  info.sparse = o.synthetic && o.synthetic->region.has_value();
+  info.sparse = synthetic && synthetic->region.has_value();
+  info.georeference = *georeference;
   char hash[17];
   std::snprintf(hash, sizeof hash, "%016llx",
                 static_cast<unsigned long long>(shared.content_sum.load()));
   info.content_hash = hash;
   for (int z = 0; z <= g.max_zoom(); ++z) {
-    const std::uint64_t n =
-        o.synthetic ? synthetic_range(g, *o.synthetic, z).count() : g.tile_count(z);
+    const std::uint64_t n = synthetic ? synthetic_range(g, *synthetic, z).count() : g.tile_count(z);
     report.levels.push_back({z, g.level_width(z), g.level_height(z), n});
   }
   if (o.cancel && o.cancel->load()) {

@@ -42,6 +42,15 @@ void print_info_json(const std::string& path, const ArchiveSummary& s) {
   j["downsample"] = s.info.downsample;
   j["sparse"] = s.info.sparse;
   j["content_hash"] = s.info.content_hash;
+  if (const auto& geo = s.info.georeference) {
+    const LonLatBounds& b = geo->bounds;
+    j["georeference"] = {{"tiling", std::string(tiling_name(geo->tiling))},
+                         {"crs", geo->crs()},
+                         {"bounds", {b.west, b.south, b.east, b.north}},
+                         {"center", {geo->center.lon, geo->center.lat, geo->center.level}},
+                         {"tiles_present", s.addressed_tiles},
+                         {"tiles_full_grid", g.total_tile_count()}};
+  }
   j["tiles"] = s.addressed_tiles;
   j["unique_tiles"] = s.unique_tiles;
   j["entries"] = s.entries;
@@ -72,6 +81,15 @@ void print_info_text(const std::string& path, const ArchiveSummary& s) {
   std::printf("  tiles        %u + 2x%u border = %u texels stored, levels 0..%d%s\n", g.tile_size(),
               g.border(), g.stored_size(), g.max_zoom(), s.info.sparse ? " (sparse)" : "");
   std::printf("  codec        %s (format v%d)\n", codec_name(s.info.codec), s.info.format_version);
+  if (const auto& geo = s.info.georeference) {
+    const LonLatBounds& b = geo->bounds;
+    std::printf("  georef       %s (%s), bounds %.9g,%.9g,%.9g,%.9g, center %.9g,%.9g level %d\n",
+                std::string(tiling_name(geo->tiling)).c_str(), geo->crs().c_str(), b.west, b.south,
+                b.east, b.north, geo->center.lon, geo->center.lat, geo->center.level);
+    std::printf("  coverage     %llu of the full grid's %llu tiles (%.4g%%)\n",
+                (unsigned long long)s.addressed_tiles, (unsigned long long)g.total_tile_count(),
+                100.0 * double(s.addressed_tiles) / double(g.total_tile_count()));
+  }
   std::printf("  archive      %s, %llu tiles, %llu unique, %llu entries, %llu leaf directories\n",
               human_bytes(s.file_bytes).c_str(), (unsigned long long)s.addressed_tiles,
               (unsigned long long)s.unique_tiles, (unsigned long long)s.entries,

@@ -1,5 +1,6 @@
 // vts build: image(s) or the synthetic source → PMTiles pyramid archive.
 #include <cstdio>
+#include <cstdlib>
 #include <nlohmann/json.hpp>
 #include <string_view>
 
@@ -21,7 +22,7 @@ struct BuildArgs {
   std::string bc1_quality = "fast";
   std::string downsample = downsample_filter_name(BuildOptions{}.downsample);
   unsigned threads = 0;
-  std::string grid, synthetic, region;
+  std::string grid, synthetic, region, tiling, bbox;
   int region_level = 6;
   std::string name;
   bool json = false, quiet = false;
@@ -40,6 +41,32 @@ Result<SyntheticSpec> synthetic_spec(const BuildArgs& a) {
   }
   s.region_level = a.region_level;
   return s;
+}
+
+// --tiling NAME and --bbox W,S,E,N (degrees).
+Status georeference_options(const BuildArgs& a, BuildOptions& o) {
+  if (!a.tiling.empty()) {
+    auto t = parse_tiling(a.tiling);
+    if (!t) return make_error(ErrorCode::invalid_argument, "--tiling: " + t.error().message);
+    o.tiling = *t;
+  }
+  if (a.bbox.empty()) return {};
+  if (o.tiling == Tiling::none)
+    return make_error(ErrorCode::invalid_argument, "--bbox needs --tiling");
+  double v[4];
+  std::size_t at = 0;
+  for (int i = 0; i < 4; ++i) {
+    const std::size_t end = i < 3 ? a.bbox.find(',', at) : a.bbox.size();
+    const std::string part = a.bbox.substr(at, end == std::string::npos ? end : end - at);
+    char* stop = nullptr;
+    v[i] = std::strtod(part.c_str(), &stop);
+    if (part.empty() || end == std::string::npos || *stop != '\0')
+      return make_error(ErrorCode::invalid_argument,
+                        "--bbox '" + a.bbox + "' is not of the form W,S,E,N (degrees)");
+    at = end + 1;
+  }
+  o.bounds = LonLatBounds{v[0], v[1], v[2], v[3]};
+  return {};
 }
 
 Result<BuildOptions> build_options(const BuildArgs& a) {
@@ -75,6 +102,7 @@ Result<BuildOptions> build_options(const BuildArgs& a) {
   } else if (!a.region.empty()) {
     return make_error(ErrorCode::invalid_argument, "--region applies to --synthetic builds only");
   }
+  if (Status s = georeference_options(a, o); !s) return s.error();
   return o;
 }
 
@@ -173,6 +201,11 @@ Runner add_build(CLI::App& app) {
   c->add_option("--region-level", a->region_level, "First level restricted to --region")
       ->check(CLI::Range(0, int(Geometry::kMaxZoom)))
       ->capture_default_str();
+  c->add_option("--tiling", a->tiling,
+                "Georeference on an OGC tile matrix set: WorldCRS84Quad or WebMercatorQuad "
+                "(--synthetic only for now; the image must be the scheme's grid)");
+  c->add_option("--bbox", a->bbox,
+                "With --tiling: the data footprint W,S,E,N in degrees; only its tiles are built");
   c->add_option("--name", a->name, "Tileset name (default: output file stem)")
       ->check(CLI::Validator(
           [](std::string& name) { return name.empty() ? std::string("is empty") : ""; }, "NAME"));

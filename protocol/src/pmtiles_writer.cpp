@@ -16,6 +16,7 @@
 #include <algorithm>
 #include <cassert>
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 #include <limits>
 #include <mutex>
@@ -548,6 +549,19 @@ class WriterImpl final : public Writer {
 };
 
 }  // namespace
+
+Header georeferenced_bounds(const LonLatBounds& b, const LonLatLevel& center) {
+  const auto e7 = [](double units) { return static_cast<std::int32_t>(units); };
+  Header h;
+  h.min_lon_e7 = e7(std::floor(b.west * 1e7));
+  h.min_lat_e7 = e7(std::floor(b.south * 1e7));
+  h.max_lon_e7 = e7(std::ceil(b.east * 1e7));
+  h.max_lat_e7 = e7(std::ceil(b.north * 1e7));
+  h.center_lon_e7 = e7(std::round(center.lon * 1e7));
+  h.center_lat_e7 = e7(std::round(center.lat * 1e7));
+  h.center_zoom = static_cast<std::uint8_t>(std::clamp(center.level, 0, 255));
+  return h;
+}
 
 Result<std::unique_ptr<Writer>> Writer::create(WriterOptions options) {
   if (options.path.empty() || !options.path.has_filename()) {

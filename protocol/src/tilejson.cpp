@@ -48,18 +48,24 @@ std::string write_tilejson(const TileJsonFields& f) {
   const TilesetInfo& info = *f.info;
   ordered_json v = vtstream_object(f.metadata_json, info);
   if (!f.archive_url.empty()) v["archive"] = std::string(f.archive_url);
-  const ordered_json j = {
+  ordered_json j = {
       {"tilejson", "3.0.0"},
       {"name", info.name.empty() ? std::string(f.tileset) : info.name},
       {"description", info.description},
       {"version", std::string(f.version)},
       {"scheme", "xyz"},
       {"tiles", {std::string(f.tiles_url)}},
+      // The zooms of the tiles URL: our levels (docs/PROTOCOL.md: for WorldCRS84Quad, TMS + 1).
       {"minzoom", 0},
       {"maxzoom", info.geometry.max_zoom()},
       {"bounds", {-180, -90, 180, 90}},
-      {"vtstream", std::move(v)},
   };
+  if (info.georeference) {
+    const Georeference& g = *info.georeference;
+    j["bounds"] = {g.bounds.west, g.bounds.south, g.bounds.east, g.bounds.north};
+    j["center"] = {g.center.lon, g.center.lat, g.center.level};
+  }
+  j["vtstream"] = std::move(v);
   return j.dump(2, ' ', false, ordered_json::error_handler_t::replace) + "\n";
 }
 

@@ -4,9 +4,12 @@
 // later minor additions stay readable by this version (a breaking change bumps format_version).
 #include <nlohmann/json.hpp>
 
+#include <cmath>
 #include <exception>
 #include <limits>
+#include <sstream>
 #include <string>
+#include <vector>
 
 #include "vts/protocol/tileset.hpp"
 
@@ -72,6 +75,67 @@ Result<std::string> get_optional_string(const json& obj, const char* key) {
   if (it == obj.end() || it->is_null()) return std::string();
   if (!it->is_string()) return bad_key(key, "must be a string");
   return it->get<std::string>();
+}
+
+std::string num(double v) {
+  std::ostringstream o;
+  o.precision(17);
+  o << v;
+  return o.str();
+}
+
+std::string bounds_text(const LonLatBounds& b) {
+  return num(b.west) + "," + num(b.south) + "," + num(b.east) + "," + num(b.north);
+}
+
+// An array of `n` numbers, or an error naming the key.
+Result<std::vector<double>> get_numbers(const json& obj, const std::string& path, const char* key,
+                                        std::size_t n, const char* what) {
+  auto v = member(obj, path, key);
+  if (!v) return std::move(v).error();
+  const json& j = **v;
+  if (!j.is_array() || j.size() != n) return bad_key(path + key, std::string("must be ") + what);
+  std::vector<double> out;
+  for (const json& e : j) {
+    if (!e.is_number()) return bad_key(path + key, std::string("must be ") + what);
+    out.push_back(e.get<double>());
+  }
+  return out;
+}
+
+// The optional "georeference" object of "vtstream": absent (older archives, plain images) ->
+// nullopt.
+Result<std::optional<Georeference>> parse_georeference(const json& v, const Geometry& g) {
+  auto it = v.find("georeference");
+  if (it == v.end() || it->is_null()) return std::optional<Georeference>();
+  if (!it->is_object()) return bad_key("vtstream.georeference", "must be an object");
+  const json& o = *it;
+  const std::string p = "vtstream.georeference.";
+  Georeference geo;
+  auto tiling_text = get_string(o, p, "tiling");
+  if (!tiling_text) return std::move(tiling_text).error();
+  auto tiling = parse_tiling(*tiling_text);
+  if (!tiling || *tiling == Tiling::none)
+    return bad_key(p + "tiling",
+                   "is \"" + *tiling_text + "\" (known: WorldCRS84Quad, WebMercatorQuad)");
+  geo.tiling = *tiling;
+  auto crs = get_string(o, p, "crs");
+  if (!crs) return std::move(crs).error();
+  if (*crs != geo.crs())
+    return bad_key(p + "crs", "is \"" + *crs + "\" but " + std::string(tiling_name(geo.tiling)) +
+                                  " is in " + geo.crs());
+  auto b = get_numbers(o, p, "bounds", 4, "[west, south, east, north] in degrees");
+  if (!b) return std::move(b).error();
+  geo.bounds = {(*b)[0], (*b)[1], (*b)[2], (*b)[3]};
+  auto c = get_numbers(o, p, "center", 3, "[lon, lat, level]");
+  if (!c) return std::move(c).error();
+  const double level = (*c)[2];
+  if (!(level >= 0 && level <= 255 && level == std::floor(level)))
+    return bad_key(p + "center", "level must be an integer 0..255");
+  geo.center = {(*c)[0], (*c)[1], static_cast<int>(level)};
+  if (Status s = check_georeference(geo, g); !s)
+    return make_error(ErrorCode::corrupt, "tileset metadata: " + s.error().message);
+  return std::optional<Georeference>(geo);
 }
 
 Result<TilesetInfo> parse(const json& root) {
@@ -170,6 +234,9 @@ Result<TilesetInfo> parse(const json& root) {
   auto content_hash = get_optional_string(v, "content_hash");
   if (!content_hash) return std::move(content_hash).error();
   info.content_hash = *content_hash;
+  auto georeference = parse_georeference(v, info.geometry);
+  if (!georeference) return std::move(georeference).error();
+  info.georeference = *georeference;
 
   // Generic keys: optional (other tools may rewrite them), but typed when present.
   auto name = get_optional_string(root, "name");
@@ -208,6 +275,15 @@ std::string TilesetInfo::to_json() const {
       {"generator", generator},
   };
   if (!content_hash.empty()) ours["content_hash"] = content_hash;
+  if (georeference) {
+    const Georeference& g = *georeference;
+    ours["georeference"] = {
+        {"tiling", tiling_name(g.tiling)},
+        {"crs", g.crs()},
+        {"bounds", {g.bounds.west, g.bounds.south, g.bounds.east, g.bounds.north}},
+        {"center", {g.center.lon, g.center.lat, g.center.level}},
+    };
+  }
   ordered_json root = {
       {"name", name},        {"description", description},
       {"type", "baselayer"}, {"format", std::string("vts-") + codec_name(codec)},
@@ -228,6 +304,44 @@ Result<TilesetInfo> TilesetInfo::from_json(const std::string& metadata_json) {
     // Nothing above should throw after parsing; never let it escape as an exception anyway.
     return make_error(ErrorCode::corrupt, std::string("tileset metadata: ") + e.what());
   }
+}
+
+Status check_georeference(const Georeference& geo, const Geometry& g) {
+  if (geo.tiling == Tiling::none)
+    return make_error(ErrorCode::invalid_argument, "georeference tiling must not be none");
+  if (Status s = check_tiling_geometry(geo.tiling, g); !s)
+    return make_error(ErrorCode::invalid_argument, "georeference: " + s.error().message);
+  const LonLatBounds& b = geo.bounds;
+  const LonLatBounds ext = scheme_extent(geo.tiling);
+  const std::string scheme(tiling_name(geo.tiling));
+  for (double v : {b.west, b.south, b.east, b.north}) {
+    if (!std::isfinite(v))
+      return make_error(ErrorCode::invalid_argument,
+                        "georeference bounds " + bounds_text(b) + " are not all finite");
+  }
+  if (b.west > b.east)
+    return make_error(ErrorCode::invalid_argument,
+                      "georeference bounds " + bounds_text(b) +
+                          ": west > east (a footprint crossing the antimeridian is not supported; "
+                          "split it at 180 degrees)");
+  if (!(b.west < b.east && b.south < b.north))
+    return make_error(ErrorCode::invalid_argument, "georeference bounds " + bounds_text(b) +
+                                                       " are empty (need west < east and south "
+                                                       "< north)");
+  if (b.west < ext.west || b.east > ext.east || b.south < ext.south || b.north > ext.north)
+    return make_error(ErrorCode::invalid_argument, "georeference bounds " + bounds_text(b) +
+                                                       " leave " + scheme + "'s extent " +
+                                                       bounds_text(ext));
+  const LonLatLevel& c = geo.center;
+  if (!(c.lon >= b.west && c.lon <= b.east && c.lat >= b.south && c.lat <= b.north))
+    return make_error(ErrorCode::invalid_argument, "georeference center " + num(c.lon) + "," +
+                                                       num(c.lat) + " is outside the bounds " +
+                                                       bounds_text(b));
+  if (c.level < 0 || c.level > g.max_zoom())
+    return make_error(ErrorCode::invalid_argument,
+                      "georeference center level " + std::to_string(c.level) +
+                          " is not within 0.." + std::to_string(g.max_zoom()));
+  return {};
 }
 
 std::string tileset_name_problem(std::string_view name) {

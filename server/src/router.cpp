@@ -17,6 +17,7 @@
 #include "vts/protocol/codec.hpp"
 #include "vts/protocol/file_io.hpp"
 #include "vts/protocol/tilejson.hpp"
+#include "vts/protocol/tiling.hpp"
 
 namespace vts {
 
@@ -199,6 +200,24 @@ HttpResponse tilejson_route(const Tileset& t, const std::string& base, bool priv
                             .metadata_json = t.reader->metadata_json(),
                             .archive_url = archive},
                            priv);
+}
+
+// The OGC 2D Tile Matrix Set of a georeferenced tileset (tiling.hpp), with the caching of
+// TileJSON; 404 for a plain image. Counted as route "tilejson" (a metadata document).
+HttpResponse tile_matrix_set_route(const std::string& name, const TilesetInfo& info, bool priv) {
+  if (!info.georeference) {
+    HttpResponse r =
+        error(404, "tileset \"" + name + "\" is not georeferenced: it has no tile matrix set");
+    r.route = Route::tilejson;
+    return r;
+  }
+  HttpResponse r;
+  r.route = Route::tilejson;
+  set_owned(
+      r, tile_matrix_set_json(info.georeference->tiling, info.geometry, info.georeference->bounds),
+      kJsonType);
+  add(r, "Cache-Control", cache_control(priv, kMetadataMaxAge, false));
+  return r;
 }
 
 HttpResponse archive_route(const HttpRequest& request, std::shared_ptr<const Tileset> t,
@@ -392,9 +411,10 @@ HttpResponse preflight(const HttpRequest& request) {
   return r;
 }
 
-// The address a path names: /{ts}.json, /{ts}.pmtiles or /{ts}[@{version}]/{z}/{x}/{y}.
+// The address a path names: /{ts}.json, /{ts}.pmtiles, /{ts}/tilematrixset.json or
+// /{ts}[@{version}]/{z}/{x}/{y}.
 struct Address {
-  enum class Kind { tile, tilejson, archive } kind = Kind::tile;
+  enum class Kind { tile, tilejson, archive, tile_matrix_set } kind = Kind::tile;
   std::string_view name;
   std::string_view version;
   std::vector<std::string_view> segments;
@@ -417,9 +437,14 @@ std::optional<HttpResponse> parse_address(std::string_view path, Address& a) {
       a.name = s.substr(0, s.size() - 8);
     } else {
       return error(404,
-                   "no such resource; try /, /{tileset}.json, /{tileset}.pmtiles or "
-                   "/{tileset}/{z}/{x}/{y}");
+                   "no such resource; try /, /{tileset}.json, /{tileset}.pmtiles, "
+                   "/{tileset}/tilematrixset.json or /{tileset}/{z}/{x}/{y}");
     }
+    return std::nullopt;
+  }
+  if (a.segments.size() == 2 && a.segments[1] == "tilematrixset.json") {
+    a.kind = Address::Kind::tile_matrix_set;
+    a.name = a.segments[0];
     return std::nullopt;
   }
   if (a.segments.size() != 4) return error(400, "tile address must be /{tileset}/{z}/{x}/{y}");
@@ -445,6 +470,8 @@ HttpResponse serve_provided(const HttpRequest& request, std::shared_ptr<const Pr
   switch (a.kind) {
     case Address::Kind::tilejson:
       return provided_tilejson_route(*t, base, priv);
+    case Address::Kind::tile_matrix_set:
+      return tile_matrix_set_route(t->name, t->info, priv);
     case Address::Kind::archive: {
       HttpResponse r = error(404, "tileset \"" + t->name +
                                       "\" is served from a cache and has no archive here; use /" +
@@ -464,6 +491,8 @@ HttpResponse serve_archive(const HttpRequest& request, std::shared_ptr<const Til
   switch (a.kind) {
     case Address::Kind::tilejson:
       return tilejson_route(*t, base, priv);
+    case Address::Kind::tile_matrix_set:
+      return tile_matrix_set_route(t->name, t->info, priv);
     case Address::Kind::archive:
       return archive_route(request, std::move(t), config, priv);
     case Address::Kind::tile:

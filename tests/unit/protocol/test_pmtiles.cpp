@@ -306,6 +306,19 @@ TEST(Header, FollowsTheSpecByteLayout) {
   EXPECT_EQ(b[123], 7);  // center lat
 }
 
+TEST(Header, GeoreferencedBoundsContainTheFootprintWithin1e7Degrees) {
+  const LonLatBounds b{-10.12345678, 35.00000001, 30.99999999, 60.5};
+  const Header h = georeferenced_bounds(b, {10.00000006, 47.5, 3});
+  EXPECT_EQ(h.min_lon_e7, -101234568);  // outwards
+  EXPECT_EQ(h.min_lat_e7, 350000000);
+  EXPECT_EQ(h.max_lon_e7, 310000000);
+  EXPECT_EQ(h.max_lat_e7, 605000000);
+  EXPECT_EQ(h.center_lon_e7, 100000001);  // nearest
+  EXPECT_EQ(h.center_lat_e7, 475000000);
+  EXPECT_EQ(h.center_zoom, 3);
+  EXPECT_EQ(h.min_zoom, 0);  // the rest is the writer's
+}
+
 TEST(Header, RejectsShortInputBadMagicAndOtherVersions) {
   auto b = serialize_header(full_header());
   EXPECT_EQ(parse_header(std::span(b).first(126)).error().code, ErrorCode::truncated);

@@ -76,6 +76,31 @@ TEST(TileJson, TheWriterEmitsTileJson3WithTheVtstreamObject) {
   EXPECT_EQ(j["vtstream"]["width"], 86400);
 }
 
+TEST(TileJson, AGeoreferencedTilesetHasItsBoundsAndCenterAndReadsBackTheGeoreference) {
+  TilesetInfo info;
+  info.geometry = tiling_geometry(Tiling::web_mercator_quad, 5, 256, 4).value();
+  info.georeference =
+      Georeference{Tiling::web_mercator_quad, {2.25, 48.75, 2.5, 49}, {2.3, 48.9, 4}};
+  const std::string doc =
+      write_tilejson({.tileset = "paris", .info = &info, .tiles_url = "/paris/{z}/{x}/{y}"});
+  const json j = json::parse(doc);
+  EXPECT_EQ(j["bounds"], json::array({2.25, 48.75, 2.5, 49.0}));
+  EXPECT_EQ(j["center"], json::array({2.3, 48.9, 4}));
+  EXPECT_EQ(j["minzoom"], 0);
+  EXPECT_EQ(j["maxzoom"], 5);
+  EXPECT_EQ(j["vtstream"]["georeference"]["tiling"], "WebMercatorQuad");
+  auto back = read(doc);
+  ASSERT_TRUE(back.ok()) << back.error().to_string();
+  ASSERT_TRUE(back->info.georeference.has_value());
+  EXPECT_EQ(*back->info.georeference, *info.georeference);
+  // A plain image keeps the whole-globe placeholder and has no center.
+  const TilesetInfo plain = sample();
+  const json p =
+      json::parse(write_tilejson({.tileset = "e", .info = &plain, .tiles_url = "/{z}/{x}/{y}"}));
+  EXPECT_EQ(p["bounds"], json::array({-180, -90, 180, 90}));
+  EXPECT_FALSE(p.contains("center"));
+}
+
 TEST(TileJson, AnUnnamedTilesetIsNamedAfterItsTilesetNameAndCarriesNoArchiveKeyWithoutAnArchive) {
   TilesetInfo info = sample();
   info.name.clear();

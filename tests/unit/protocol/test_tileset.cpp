@@ -94,6 +94,93 @@ TEST(TilesetInfo, RoundTripsThroughJson) {
   EXPECT_FALSE(back->sparse);
 }
 
+// A WorldCRS84Quad tileset of TMS levels 0..3 (our 0..4, 4096 x 2048 texels) over Europe.
+TilesetInfo georeferenced() {
+  TilesetInfo info;
+  info.geometry = tiling_geometry(Tiling::world_crs84_quad, 3, 256, 4).value();
+  info.sparse = true;
+  info.georeference = Georeference{Tiling::world_crs84_quad, {-10.5, 35.25, 30, 60}, {10, 47, 2}};
+  return info;
+}
+
+TEST(TilesetInfo, GeoreferenceRoundTripsUnderItsDocumentedKeys) {
+  const TilesetInfo in = georeferenced();
+  const json j = json::parse(in.to_json());
+  const json& g = j["vtstream"]["georeference"];
+  EXPECT_EQ(g["tiling"], "WorldCRS84Quad");
+  EXPECT_EQ(g["crs"], "OGC:CRS84");
+  EXPECT_EQ(g["bounds"], json::array({-10.5, 35.25, 30.0, 60.0}));
+  EXPECT_EQ(g["center"], json::array({10.0, 47.0, 2}));
+  EXPECT_EQ(g.size(), 4u);
+  auto out = TilesetInfo::from_json(in.to_json());
+  ASSERT_TRUE(out.ok()) << out.error().to_string();
+  ASSERT_TRUE(out->georeference.has_value());
+  EXPECT_EQ(*out->georeference, *in.georeference);
+  // Metadata without the key (every archive written before it existed) is a plain image.
+  EXPECT_FALSE(metadata()["vtstream"].contains("georeference"));
+  auto plain = TilesetInfo::from_json(sample().to_json());
+  ASSERT_TRUE(plain.ok());
+  EXPECT_FALSE(plain->georeference.has_value());
+}
+
+TEST(TilesetInfo, RejectsAGeoreferenceThatContradictsItselfOrTheGeometry) {
+  auto with = [](auto edit) {
+    json j = json::parse(georeferenced().to_json());
+    edit(j["vtstream"]["georeference"]);
+    return read(j);
+  };
+  expect_error(with([](json& g) { g["tiling"] = "GoogleCRS84Quad"; }), ErrorCode::corrupt,
+               "vtstream.georeference.tiling");
+  expect_error(with([](json& g) { g["tiling"] = "none"; }), ErrorCode::corrupt,
+               "vtstream.georeference.tiling");
+  expect_error(with([](json& g) { g["crs"] = "EPSG:3857"; }), ErrorCode::corrupt,
+               "vtstream.georeference.crs");
+  expect_error(with([](json& g) {
+                 g["bounds"] = json::array({1, 2, 3});
+               }),
+               ErrorCode::corrupt, "vtstream.georeference.bounds");
+  expect_error(with([](json& g) {
+                 g["bounds"] = json::array({170, 0, -170, 10});
+               }),
+               ErrorCode::corrupt, "antimeridian");
+  expect_error(with([](json& g) {
+                 g["bounds"] = json::array({0, 10, 20, 10});
+               }),
+               ErrorCode::corrupt, "empty");
+  expect_error(with([](json& g) {
+                 g["bounds"] = json::array({-190, 0, 20, 10});
+               }),
+               ErrorCode::corrupt, "extent");
+  expect_error(with([](json& g) {
+                 g["center"] = json::array({100, 47, 2});
+               }),
+               ErrorCode::corrupt, "outside the bounds");
+  expect_error(with([](json& g) {
+                 g["center"] = json::array({10, 47, 5});
+               }),
+               ErrorCode::corrupt, "level 5 is not within 0..4");
+  expect_error(with([](json& g) {
+                 g["center"] = json::array({10, 47, 1.5});
+               }),
+               ErrorCode::corrupt, "integer");
+  expect_error(with([](json& g) { g = "WorldCRS84Quad"; }), ErrorCode::corrupt,
+               "vtstream.georeference");
+  // A WebMercatorQuad tileset must be square, and stop at 85.05 degrees.
+  expect_error(with([](json& g) {
+                 g["tiling"] = "WebMercatorQuad";
+                 g["crs"] = "EPSG:3857";
+               }),
+               ErrorCode::corrupt, "square");
+  TilesetInfo merc;
+  merc.geometry = tiling_geometry(Tiling::web_mercator_quad, 2, 256, 4).value();
+  merc.georeference = Georeference{Tiling::web_mercator_quad, {-10, 80, 10, 89}, {0, 82, 0}};
+  expect_error(TilesetInfo::from_json(merc.to_json()), ErrorCode::corrupt, "extent");
+  // And a plain image cannot claim a scheme.
+  TilesetInfo odd = sample();
+  odd.georeference = georeferenced().georeference;
+  expect_error(TilesetInfo::from_json(odd.to_json()), ErrorCode::corrupt, "WorldCRS84Quad");
+}
+
 TEST(TilesetInfo, ToJsonNeverThrowsOnInvalidUtf8) {
   TilesetInfo info;
   info.name = std::string("bad \xff\xfe name");

@@ -859,3 +859,72 @@ TEST(RouteNames, EveryRouteHasAStableMetricsLabel) {
   EXPECT_STREQ(vts::route_name(vts::Route::error), "error");
   EXPECT_EQ(vts::kRouteCount, int(vts::Route::admin) + 1);
 }
+
+// ---------------------------------------------------------------------------------------------
+// Georeferenced tilesets: the tile matrix set route and TileJSON's bounds and center
+
+TEST(RouterGeoreference, ServesTheTileMatrixSetOfAGeoreferencedTilesetAnd404ForAPlainOne) {
+  const vts::test::TempDir dir("vts-router-geo");
+  vts::BuildOptions o;
+  o.synthetic = vts::SyntheticSpec{1024, 512};  // WorldCRS84Quad TMS levels 0..1
+  o.tiling = vts::Tiling::world_crs84_quad;
+  o.bounds = vts::LonLatBounds{-10, 35, 30, 60};
+  o.output = dir / "geo.pmtiles";
+  o.threads = 1;
+  auto built = vts::build_pyramid(o);
+  ASSERT_TRUE(built.ok()) << built.error().to_string();
+  vts::BuildOptions p;
+  p.synthetic = vts::SyntheticSpec{600, 300};
+  p.output = dir / "plain.pmtiles";
+  p.threads = 1;
+  ASSERT_TRUE(vts::build_pyramid(p).ok());
+  vts::TilesetRegistry registry;
+  ASSERT_TRUE(registry.load({dir.path()}).ok());
+  vts::RouterConfig config;
+  vts::HttpRequest req;
+  req.method = vts::HttpMethod::get;
+  req.target = "/geo/tilematrixset.json";
+  const vts::HttpResponse r = vts::route(req, registry, config);
+  ASSERT_EQ(r.status, 200) << r.owned;
+  EXPECT_EQ(r.route, vts::Route::tilejson);
+  EXPECT_EQ(header(r, "Content-Type"), "application/json");
+  EXPECT_EQ(header(r, "Cache-Control"), "public, max-age=60");
+  EXPECT_EQ(header(r, "Access-Control-Allow-Origin"), "*");
+  EXPECT_FALSE(header(r, "ETag").has_value());  // as TileJSON
+  const json tms = json::parse(r.owned);
+  EXPECT_EQ(tms["id"], "WorldCRS84Quad");
+  ASSERT_EQ(tms["tileMatrices"].size(), 2u);
+  EXPECT_EQ(tms["tileMatrices"][1]["matrixWidth"], 4);
+  EXPECT_EQ(tms["tileMatrixSetLimits"][1]["minTileCol"], 1);
+  EXPECT_EQ(tms["tileMatrixSetLimits"][1]["maxTileCol"], 2);
+
+  req.target = "/geo.json";
+  const json tj = json::parse(vts::route(req, registry, config).owned);
+  EXPECT_EQ(tj["bounds"], json::parse("[-10, 35, 30, 60]"));
+  EXPECT_EQ(tj["center"], json::parse("[10, 47.5, 2]"));
+  EXPECT_EQ(tj["maxzoom"], 2);
+
+  req.target = "/plain/tilematrixset.json";
+  const vts::HttpResponse none = vts::route(req, registry, config);
+  expect_plain_error(none, 404);
+  EXPECT_NE(none.owned.find("not georeferenced"), std::string::npos) << none.owned;
+  req.target = "/nosuch/tilematrixset.json";
+  expect_plain_error(vts::route(req, registry, config), 404);
+  req.method = vts::HttpMethod::head;
+  req.target = "/geo/tilematrixset.json";
+  const vts::HttpResponse head = vts::route(req, registry, config);
+  EXPECT_EQ(head.status, 200);
+  EXPECT_TRUE(head.head_only);
+  EXPECT_EQ(head.content_length, r.content_length);
+
+  // A protected tileset's tile matrix set needs credentials and is private, as its TileJSON.
+  vts::TilesetAccess access;
+  access.bearer_tokens = {"tok"};
+  config.access["geo"] = access;
+  req.method = vts::HttpMethod::get;
+  EXPECT_EQ(vts::route(req, registry, config).status, 401);
+  req.authorization = "Bearer tok";
+  const vts::HttpResponse priv = vts::route(req, registry, config);
+  EXPECT_EQ(priv.status, 200);
+  EXPECT_EQ(header(priv, "Cache-Control"), "private, max-age=60");
+}

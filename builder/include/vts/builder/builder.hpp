@@ -58,6 +58,13 @@ struct BuildOptions {
   std::vector<std::filesystem::path> inputs;  // row-major order for a grid
   std::uint32_t grid_columns = 1, grid_rows = 1;
   std::optional<SyntheticSpec> synthetic;  // instead of inputs
+  // A georeferenced tileset on an OGC tile matrix set (synthetic builds only for now): the image
+  // must be the scheme's grid (check_tiling_geometry), `bounds` is the data's footprint in degrees
+  // (default: the scheme's extent). The metadata, PMTiles header and TileJSON carry it, the center
+  // is default_center(), and a synthetic build without a region writes only the footprint's tiles,
+  // at every level (footprint_tiles()).
+  Tiling tiling = Tiling::none;
+  std::optional<LonLatBounds> bounds;
   std::filesystem::path output;
   std::uint32_t tile_size = 256;
   std::uint32_t border = 4;

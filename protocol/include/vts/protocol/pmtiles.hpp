@@ -18,6 +18,7 @@
 
 #include "vts/protocol/geometry.hpp"
 #include "vts/protocol/result.hpp"
+#include "vts/protocol/tiling.hpp"
 
 namespace vts::pmtiles {
 
@@ -84,8 +85,14 @@ struct WriterOptions {
   Compression tile_compression = Compression::zstd;
   TileType tile_type = TileType::unknown;
   std::uint8_t min_zoom = 0, max_zoom = 0;
-  Header bounds;  // only the lon/lat/center fields are used
+  Header bounds;  // only the lon/lat/center fields are used (georeferenced_bounds())
 };
+
+// The header's lon/lat fields for a georeferenced tileset: min/max lon/lat rounded outwards to the
+// header's 1e-7 degree units (so the box always contains the footprint and differs from it by
+// less than 1e-7 degrees), the center rounded to the nearest unit, center_zoom = center.level.
+// The other fields keep their defaults.
+Header georeferenced_bounds(const LonLatBounds& b, const LonLatLevel& center);
 
 struct WriterStats {
   std::uint64_t addressed_tiles = 0;  // add_tile() calls
