@@ -30,6 +30,9 @@ PACKAGES=(
   libspdlog-dev libfmt-dev libboost1.81-dev libssl-dev libcurl4-openssl-dev libsqlite3-dev
   # the bc1 tile codec's encoders: libsquish, and stb_dxt from libstb-dev (below)
   libsquish-dev
+  # GeoTIFF and other georeferenced inputs of vts build (builder/src/gdal_source.cpp); gdal-bin's
+  # gdal_translate/gdalwarp make the test inputs and references
+  libgdal-dev gdal-bin
   # the OpenGL viewer (renderer/): GLFW 3.3, libepoxy (GL loader), GLM; its tests render under
   # Xvfb with Mesa's llvmpipe (GL 4.5 core, no GPU needed)
   libglfw3-dev libepoxy-dev libglm-dev xvfb xauth libgl1-mesa-dri
@@ -65,14 +68,38 @@ if ((${#missing[@]} > 0)) || [[ $FORCE == 1 ]]; then
     log "VTS_SETUP_FORCE=1: reinstalling Debian packages"
   fi
   apt_opts=(-o DPkg::Lock::Timeout=600 -o Dpkg::Use-Pty=0)
+  # libgdal-dev needs libkml-dev, which depends on libboost-dev: Boost 1.74 on bookworm, which
+  # conflicts with the libboost1.81-dev we build with. A tiny local package that provides
+  # libboost-dev by depending on libboost1.81-dev resolves it (built here with dpkg-deb).
+  shim_deb=""
+  if [[ $(dpkg-query -W -f='${db:Status-Status}' vts-libboost-dev-shim 2>/dev/null || true) != installed ]]; then
+    shim_dir=$(mktemp -d)
+    mkdir -p "$shim_dir/pkg/DEBIAN"
+    cat >"$shim_dir/pkg/DEBIAN/control" <<'CONTROL'
+Package: vts-libboost-dev-shim
+Version: 1.81.0
+Architecture: all
+Maintainer: vtstream <noreply@localhost>
+Depends: libboost1.81-dev
+Provides: libboost-dev (= 1.81.0)
+Section: libdevel
+Priority: optional
+Description: lets packages that need libboost-dev use Boost 1.81
+ libkml-dev (needed by libgdal-dev) depends on libboost-dev, Boost 1.74 on bookworm, which
+ conflicts with libboost1.81-dev.
+CONTROL
+    dpkg-deb --build "$shim_dir/pkg" "$shim_dir/vts-libboost-dev-shim.deb" >/dev/null
+    chmod -R a+rX "$shim_dir"
+    shim_deb="$shim_dir/vts-libboost-dev-shim.deb"
+  fi
   "${SUDO[@]}" env DEBIAN_FRONTEND=noninteractive apt-get "${apt_opts[@]}" update -q
   "${SUDO[@]}" env DEBIAN_FRONTEND=noninteractive apt-get "${apt_opts[@]}" install -y -q \
-    --no-install-recommends "${PACKAGES[@]}"
+    --no-install-recommends ${shim_deb:+"$shim_deb"} "${PACKAGES[@]}"
 else
   log "all ${#PACKAGES[@]} Debian packages already installed"
 fi
 
-for tool in node npm cmake ninja oiiotool idiff vips; do
+for tool in node npm cmake ninja oiiotool idiff vips gdal_translate gdalwarp; do
   command -v "$tool" >/dev/null 2>&1 || {
     echo "setup.sh: '$tool' is still missing after installing packages" >&2
     exit 1
