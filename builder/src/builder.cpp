@@ -12,6 +12,7 @@
 
 #include <xxhash.h>
 
+#include "gdal_source.hpp"
 #include "image_source.hpp"
 #include "vts/builder/downsample.hpp"
 #include "vts/builder/synthetic.hpp"
@@ -23,6 +24,7 @@ namespace vts {
 namespace {
 
 using Clock = std::chrono::steady_clock;
+using detail::GdalSource;
 using detail::ImageSource;
 using detail::WorkQueue;
 
@@ -79,8 +81,15 @@ class Cascade {
   // 2r + 6 for parent row r; rather than keeping 12 extra 8-bit rows per level it filters every
   // row horizontally as it arrives, into the LanczosReducer's ring of 12 half-width float rows, so
   // the 8-bit ring stays at T + 2B + 2 rows for both filters.
-  Cascade(const Geometry& g, DownsampleFilter filter, WorkQueue& queue, Shared& shared)
-      : g_(g), queue_(queue), shared_(shared), levels_(static_cast<std::size_t>(g.level_count())) {
+  // `only`: when not empty, the tiles of each level to write (a sparse footprint); the others are
+  // still made (their texels feed the coarser levels) but not encoded.
+  Cascade(const Geometry& g, DownsampleFilter filter, WorkQueue& queue, Shared& shared,
+          std::vector<TileRect> only)
+      : g_(g),
+        queue_(queue),
+        shared_(shared),
+        levels_(static_cast<std::size_t>(g.level_count())),
+        only_(std::move(only)) {
     const std::uint32_t cap = g.stored_size() + 2;
     for (int z = 0; z <= g.max_zoom(); ++z) {
       Level& l = levels_[static_cast<std::size_t>(z)];
@@ -156,7 +165,10 @@ class Cascade {
   void emit_tile_row(int z, std::uint32_t ty) {
     Level& l = levels_[static_cast<std::size_t>(z)];
     const std::uint32_t S = g_.stored_size();
-    for (std::uint32_t tx = 0; tx < g_.tiles_x(z); ++tx) {
+    TileRect keep{0, 0, g_.tiles_x(z), g_.tiles_y(z)};
+    if (!only_.empty()) keep = only_[static_cast<std::size_t>(z)];
+    if (ty < keep.y0 || ty >= keep.y1) return;
+    for (std::uint32_t tx = keep.x0; tx < keep.x1; ++tx) {
       const TileId id{static_cast<std::uint8_t>(z), tx, ty};
       TileImage img;
       img.width = img.height = S;
@@ -184,6 +196,7 @@ class Cascade {
   WorkQueue& queue_;
   Shared& shared_;
   std::vector<Level> levels_;
+  std::vector<TileRect> only_;
 };
 
 // Strips of scanlines handed from the reader thread to the cascade, with a fixed number of
@@ -301,10 +314,27 @@ TileRange synthetic_range(const Geometry& g, const SyntheticSpec& spec, int z) {
   return r;
 }
 
-void build_from_source(const BuildOptions& o, ImageSource& src, const Geometry& g, Shared& shared,
-                       unsigned threads) {
+// Reads rows [y, y + count) of the finest level as RGBA8, in increasing order.
+using RowReader = std::function<Status(std::uint64_t y, std::uint32_t count, std::uint8_t* out)>;
+
+// The tiles of every level a sparse georeferenced build writes (empty: all of them).
+std::vector<TileRect> footprint_rects(const std::optional<Georeference>& geo, const Geometry& g) {
+  std::vector<TileRect> rects;
+  if (!geo) return rects;
+  for (int z = 0; z <= g.max_zoom(); ++z)
+    rects.push_back(footprint_tiles(geo->tiling, g, z, geo->bounds));
+  return rects;
+}
+
+void build_from_source(const BuildOptions& o, const RowReader& read_rows, const Geometry& g,
+                       std::vector<TileRect> only, Shared& shared, unsigned threads) {
+  std::uint64_t total = g.total_tile_count();
+  if (!only.empty()) {
+    total = 0;
+    for (const TileRect& r : only) total += r.count();
+  }
   WorkQueue queue(threads, std::size_t{threads} * 4);
-  Cascade cascade(g, o.downsample, queue, shared);
+  Cascade cascade(g, o.downsample, queue, shared, std::move(only));
   const std::uint64_t row_bytes = g.width() * 4;
   // About 4 MiB per strip, at least one row, at most 64.
   const auto strip_rows =
@@ -317,7 +347,7 @@ void build_from_source(const BuildOptions& o, ImageSource& src, const Geometry& 
       if (!strip || shared.failed) break;
       strip->y = y;
       strip->rows = static_cast<std::uint32_t>(std::min<std::uint64_t>(strip_rows, g.height() - y));
-      if (auto st = src.read_rows(y, strip->rows, strip->pixels.data()); !st) {
+      if (auto st = read_rows(y, strip->rows, strip->pixels.data()); !st) {
         error = st.error();
         break;
       }
@@ -326,7 +356,7 @@ void build_from_source(const BuildOptions& o, ImageSource& src, const Geometry& 
     }
     channel.finish_reading(std::move(error));
   });
-  ProgressTicker ticker(o, shared, g.total_tile_count(), g.height());
+  ProgressTicker ticker(o, shared, total, g.height());
   std::uint64_t rows = 0;
   while (auto strip = channel.take_full()) {
     for (std::uint32_t r = 0; r < strip->rows && !shared.stopping(); ++r)
@@ -372,29 +402,43 @@ void build_synthetic(const BuildOptions& o, const SyntheticSpec& spec, const Geo
 // The georeference BuildOptions asks for (nullopt for a plain image), checked against the
 // geometry. A synthetic build without a region of its own gets the footprint as its region, at
 // every level.
-Result<std::optional<Georeference>> make_georeference(const BuildOptions& o, const Geometry& g,
-                                                      std::optional<SyntheticSpec>& synthetic) {
-  if (o.tiling == Tiling::none) {
+// `tiling` and `data_bounds` are the scheme and footprint of georeferenced inputs, if any.
+Result<std::optional<Georeference>> make_georeference(
+    const BuildOptions& o, Tiling tiling, const std::optional<LonLatBounds>& data_bounds,
+    const Geometry& g, std::optional<SyntheticSpec>& synthetic) {
+  if (tiling == Tiling::none) {
     if (o.bounds) return make_error(ErrorCode::invalid_argument, "bounds need a tiling scheme");
     return std::optional<Georeference>();
   }
-  if (!o.synthetic)
-    return make_error(ErrorCode::unsupported,
-                      "georeferenced inputs: not yet (a tiling scheme is only accepted with "
-                      "--synthetic for now)");
   Georeference geo;
-  geo.tiling = o.tiling;
-  geo.bounds = o.bounds.value_or(scheme_extent(o.tiling));
-  if (Status s = check_tiling_geometry(o.tiling, g); !s) return s.error();
+  geo.tiling = tiling;
+  geo.bounds = o.bounds.value_or(data_bounds.value_or(scheme_extent(tiling)));
+  if (Status s = check_tiling_geometry(tiling, g); !s) return s.error();
   // The center is checked with the bounds; compute it only from bounds that can be valid.
   geo.center = {geo.bounds.west, geo.bounds.south, 0};
   if (Status s = check_georeference(geo, g); !s) return s.error();
-  geo.center = default_center(o.tiling, g, geo.bounds);
-  if (!synthetic->region) {
-    synthetic->region = footprint_texels(o.tiling, g, geo.bounds);
+  geo.center = default_center(tiling, g, geo.bounds);
+  if (synthetic && !synthetic->region) {
+    synthetic->region = footprint_texels(tiling, g, geo.bounds);
     synthetic->region_level = 0;
   }
   return std::optional<Georeference>(geo);
+}
+
+// Georeferenced inputs through GDAL; a C x R grid does not apply (they place themselves).
+Result<std::unique_ptr<GdalSource>> open_gdal(const BuildOptions& o) {
+  if (o.grid_columns != 1 || o.grid_rows != 1)
+    return make_error(ErrorCode::invalid_argument,
+                      "a mosaic grid does not apply to georeferenced inputs (each is placed by its "
+                      "georeference)");
+  detail::GdalSourceOptions go;
+  go.tiling = o.tiling == Tiling::none ? Tiling::world_crs84_quad : o.tiling;
+  go.tile_size = o.tile_size;
+  go.border = o.border;
+  go.max_level = o.max_level;
+  go.resampling = o.resampling;
+  go.value_range = o.value_range;
+  return GdalSource::open(o.inputs, go);
 }
 
 }  // namespace
@@ -413,13 +457,30 @@ Result<BuildReport> build_pyramid(const BuildOptions& o) {
   if (Status s = check_output_is_not_an_input(o.output, o.inputs); !s) return s.error();
 
   std::unique_ptr<ImageSource> source;
+  std::unique_ptr<GdalSource> gdal;
+  Tiling tiling = o.tiling;
+  std::optional<LonLatBounds> data_bounds;
   std::uint64_t width = 0, height = 0;
   std::string input_desc;
   if (o.synthetic) {
     width = o.synthetic->width;
     height = o.synthetic->height;
     input_desc = "synthetic " + std::to_string(width) + "x" + std::to_string(height);
+  } else if (o.tiling != Tiling::none || detail::gdal_is_georeferenced(o.inputs.front())) {
+    auto src = open_gdal(o);
+    if (!src) return std::move(src).error();
+    gdal = std::move(src).value();
+    width = gdal->width();
+    height = gdal->height();
+    input_desc = gdal->description();
+    if (tiling == Tiling::none) tiling = Tiling::world_crs84_quad;
+    data_bounds = gdal->bounds();
   } else {
+    if (o.max_level || o.value_range)
+      return make_error(ErrorCode::invalid_argument,
+                        "a maximum level and a value range apply to georeferenced inputs only "
+                        "(" +
+                            o.inputs.front().string() + " has no georeference)");
     auto src = ImageSource::open(o.inputs, o.grid_columns, o.grid_rows);
     if (!src) return std::move(src).error();
     source = std::move(src).value();
@@ -453,7 +514,7 @@ Result<BuildReport> build_pyramid(const BuildOptions& o) {
   }
 
   std::optional<SyntheticSpec> synthetic = o.synthetic;
-  auto georeference = make_georeference(o, g, synthetic);
+  auto georeference = make_georeference(o, tiling, data_bounds, g, synthetic);
   if (!georeference) return std::move(georeference).error();
 
   pmtiles::WriterOptions wo;
@@ -473,8 +534,20 @@ Result<BuildReport> build_pyramid(const BuildOptions& o) {
   const unsigned threads = worker_count(o.threads);
   if (synthetic)
     build_synthetic(o, *synthetic, g, shared, threads);
+  else if (gdal)
+    build_from_source(
+        o,
+        [&](std::uint64_t y, std::uint32_t n, std::uint8_t* out) {
+          return gdal->read_rows(y, n, out);
+        },
+        g, footprint_rects(*georeference, g), shared, threads);
   else
-    build_from_source(o, *source, g, shared, threads);
+    build_from_source(
+        o,
+        [&](std::uint64_t y, std::uint32_t n, std::uint8_t* out) {
+          return source->read_rows(y, n, out);
+        },
+        g, {}, shared, threads);
   if (shared.failed) {
     (*writer)->abort();
     return *shared.error;
@@ -488,14 +561,18 @@ Result<BuildReport> build_pyramid(const BuildOptions& o) {
   info.name = o.name.empty() ? o.output.stem().string() : o.name;
   info.description = o.description.empty() ? input_desc : o.description;
   info.downsample = o.synthetic ? "synthetic-per-level" : downsample_method(o.downsample);
-  info.sparse = synthetic && synthetic->region.has_value();
+  info.sparse = (synthetic && synthetic->region.has_value()) || gdal != nullptr;
   info.georeference = *georeference;
   char hash[17];
   std::snprintf(hash, sizeof hash, "%016llx",
                 static_cast<unsigned long long>(shared.content_sum.load()));
   info.content_hash = hash;
   for (int z = 0; z <= g.max_zoom(); ++z) {
-    const std::uint64_t n = synthetic ? synthetic_range(g, *synthetic, z).count() : g.tile_count(z);
+    std::uint64_t n = g.tile_count(z);
+    if (synthetic)
+      n = synthetic_range(g, *synthetic, z).count();
+    else if (gdal)
+      n = footprint_tiles(tiling, g, z, (*georeference)->bounds).count();
     report.levels.push_back({z, g.level_width(z), g.level_height(z), n});
   }
   if (o.cancel && o.cancel->load()) {

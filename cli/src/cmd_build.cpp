@@ -4,6 +4,7 @@
 #include <nlohmann/json.hpp>
 #include <string_view>
 
+#include "build_geo.hpp"
 #include "commands.hpp"
 #include "progress.hpp"
 #include "vts/builder/builder.hpp"
@@ -22,7 +23,8 @@ struct BuildArgs {
   std::string bc1_quality = "fast";
   std::string downsample = downsample_filter_name(BuildOptions{}.downsample);
   unsigned threads = 0;
-  std::string grid, synthetic, region, tiling, bbox;
+  std::string grid, synthetic, region;
+  GeoArgs geo;
   int region_level = 6;
   std::string name;
   bool json = false, quiet = false;
@@ -41,32 +43,6 @@ Result<SyntheticSpec> synthetic_spec(const BuildArgs& a) {
   }
   s.region_level = a.region_level;
   return s;
-}
-
-// --tiling NAME and --bbox W,S,E,N (degrees).
-Status georeference_options(const BuildArgs& a, BuildOptions& o) {
-  if (!a.tiling.empty()) {
-    auto t = parse_tiling(a.tiling);
-    if (!t) return make_error(ErrorCode::invalid_argument, "--tiling: " + t.error().message);
-    o.tiling = *t;
-  }
-  if (a.bbox.empty()) return {};
-  if (o.tiling == Tiling::none)
-    return make_error(ErrorCode::invalid_argument, "--bbox needs --tiling");
-  double v[4];
-  std::size_t at = 0;
-  for (int i = 0; i < 4; ++i) {
-    const std::size_t end = i < 3 ? a.bbox.find(',', at) : a.bbox.size();
-    const std::string part = a.bbox.substr(at, end == std::string::npos ? end : end - at);
-    char* stop = nullptr;
-    v[i] = std::strtod(part.c_str(), &stop);
-    if (part.empty() || end == std::string::npos || *stop != '\0')
-      return make_error(ErrorCode::invalid_argument,
-                        "--bbox '" + a.bbox + "' is not of the form W,S,E,N (degrees)");
-    at = end + 1;
-  }
-  o.bounds = LonLatBounds{v[0], v[1], v[2], v[3]};
-  return {};
 }
 
 Result<BuildOptions> build_options(const BuildArgs& a) {
@@ -102,7 +78,7 @@ Result<BuildOptions> build_options(const BuildArgs& a) {
   } else if (!a.region.empty()) {
     return make_error(ErrorCode::invalid_argument, "--region applies to --synthetic builds only");
   }
-  if (Status s = georeference_options(a, o); !s) return s.error();
+  if (Status s = apply_geo_options(a.geo, o); !s) return s.error();
   return o;
 }
 
@@ -165,7 +141,8 @@ Runner add_build(CLI::App& app) {
   auto a = std::make_shared<BuildArgs>();
   CLI::App* c = app.add_subcommand("build", "Cut images into a tile pyramid archive (PMTiles)");
   c->add_option("inputs", a->inputs,
-                "Input image(s): anything OpenImageIO reads; C*R images row-major with --grid");
+                "Input image(s): anything OpenImageIO reads (C*R images row-major with --grid), "
+                "or georeferenced rasters GDAL reads (placed by their georeference)");
   c->add_option("-o,--output", a->output, "Output archive (.pmtiles)")->required();
   c->add_option("--tile", a->tile, "Tile content size T, a power of two")->capture_default_str();
   c->add_option("--border", a->border, "Border B copied from neighbours")->capture_default_str();
@@ -201,11 +178,7 @@ Runner add_build(CLI::App& app) {
   c->add_option("--region-level", a->region_level, "First level restricted to --region")
       ->check(CLI::Range(0, int(Geometry::kMaxZoom)))
       ->capture_default_str();
-  c->add_option("--tiling", a->tiling,
-                "Georeference on an OGC tile matrix set: WorldCRS84Quad or WebMercatorQuad "
-                "(--synthetic only for now; the image must be the scheme's grid)");
-  c->add_option("--bbox", a->bbox,
-                "With --tiling: the data footprint W,S,E,N in degrees; only its tiles are built");
+  add_geo_options(c, a->geo);
   c->add_option("--name", a->name, "Tileset name (default: output file stem)")
       ->check(CLI::Validator(
           [](std::string& name) { return name.empty() ? std::string("is empty") : ""; }, "NAME"));

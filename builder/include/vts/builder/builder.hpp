@@ -25,6 +25,8 @@
 #include <functional>
 #include <optional>
 #include <string>
+#include <string_view>
+#include <utility>
 #include <vector>
 
 #include "vts/builder/downsample.hpp"
@@ -54,17 +56,39 @@ struct BuildProgress {
   bool finishing = false;  // every tile is encoded; the archive file is being assembled
 };
 
+// How georeferenced inputs are resampled onto the tiling scheme's grid (GDAL's warper).
+enum class Resampling { nearest, bilinear, cubic, lanczos };
+// "near", "bilinear", "cubic", "lanczos" (gdalwarp's -r spelling) and back; parse_resampling's
+// error (invalid_argument) names the known ones.
+const char* resampling_name(Resampling r) noexcept;
+Result<Resampling> parse_resampling(std::string_view text);
+
+// The widest finest level a georeferenced build accepts, in texels (2^18 = 262144: level 10 of
+// WorldCRS84Quad or WebMercatorQuad at T = 256). The strip builder keeps rows of the whole grid
+// width at every level (~8 * (T + 2B + 2) * W bytes, ~560 MiB at this limit); finer levels need
+// the bounded-window builder, which is not written yet.
+inline constexpr std::uint64_t kMaxGeoreferencedWidth = std::uint64_t{1} << 18;
+
 struct BuildOptions {
   std::vector<std::filesystem::path> inputs;  // row-major order for a grid
   std::uint32_t grid_columns = 1, grid_rows = 1;
   std::optional<SyntheticSpec> synthetic;  // instead of inputs
-  // A georeferenced tileset on an OGC tile matrix set (synthetic builds only for now): the image
-  // must be the scheme's grid (check_tiling_geometry), `bounds` is the data's footprint in degrees
-  // (default: the scheme's extent). The metadata, PMTiles header and TileJSON carry it, the center
-  // is default_center(), and a synthetic build without a region writes only the footprint's tiles,
-  // at every level (footprint_tiles()).
+  // A georeferenced tileset on an OGC tile matrix set: the image must be the scheme's grid
+  // (check_tiling_geometry), `bounds` is the data's footprint in degrees. The metadata, PMTiles
+  // header and TileJSON carry it, the center is default_center(), and only the footprint's tiles
+  // are written, at every level (footprint_tiles()).
+  // Synthetic builds: bounds default to the scheme's extent. Inputs that GDAL finds georeferenced
+  // (a CRS and a geotransform) are read through GDAL and warped onto the scheme's grid
+  // (tiling defaults to WorldCRS84Quad); bounds default to the union of their extents in degrees.
+  // Inputs without a georeference keep the OpenImageIO path and refuse a tiling.
   Tiling tiling = Tiling::none;
   std::optional<LonLatBounds> bounds;
+  // Georeferenced inputs only. max_level: our finest level (default: the first level whose texel
+  // is no larger than the finest input's pixel in the scheme's CRS). value_range: maps values
+  // linearly to 0..255 (clamped); required for inputs that are not 8-bit.
+  Resampling resampling = Resampling::cubic;
+  std::optional<int> max_level;
+  std::optional<std::pair<double, double>> value_range;
   std::filesystem::path output;
   std::uint32_t tile_size = 256;
   std::uint32_t border = 4;
