@@ -11,6 +11,8 @@
 #include <gdal_utils.h>
 #include <ogr_srs_api.h>
 
+#include "vts/protocol/file_io.hpp"
+
 namespace vts {
 
 const char* resampling_name(Resampling r) noexcept {
@@ -109,6 +111,9 @@ struct GdalSource::Input {
 };
 
 bool gdal_is_georeferenced(const std::filesystem::path& path) {
+  // Only regular files: opening a FIFO or a device would block or read forever.
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) return false;
   register_gdal();
   ErrorCapture quiet;
   GDALDatasetH ds =
@@ -125,8 +130,17 @@ namespace {
 // Opens one input and checks what the build needs of it: a georeference, 1..4 bands, 8-bit data
 // or a value range; its extent in degrees and its pixel size in the scheme's CRS.
 Status open_input(GdalSource::Input& in, const GdalSourceOptions& o, const SrsPtr& lonlat) {
-  ErrorCapture errors;
   const std::string name = in.path.string();
+  // Not a FIFO or a device (GDAL would block on it or read forever), not missing, not empty.
+  if (Status st = check_input_file(in.path); !st) {
+    if (st.error().code == ErrorCode::not_found)
+      return make_error(ErrorCode::not_found, "input '" + name + "' does not exist");
+    return st.error();
+  }
+  std::error_code ec;
+  if (std::filesystem::file_size(in.path, ec) == 0 && !ec)
+    return make_error(ErrorCode::truncated, "input '" + name + "' is truncated: empty");
+  ErrorCapture errors;
   if (!GDALIdentifyDriverEx(name.c_str(), GDAL_OF_RASTER, nullptr, nullptr))
     return make_error(ErrorCode::invalid_argument, name + ": not a raster GDAL reads");
   in.src = GDALOpenEx(name.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY, nullptr, nullptr, nullptr);
@@ -220,6 +234,8 @@ Status warp_input(GdalSource::Input& in, const GdalSourceOptions& o, const Geome
   const double cell = level_cell_size(o.tiling, o.tile_size, z);
   const double west = top_left.min_x, north = top_left.max_y;
   const double east = west + cell * double(g.width()), south = north - cell * double(g.height());
+  // -et 0: the exact transformer at every texel, not a linear approximation within 1/8 texel
+  // (which depends on how the warper chunks the grid, so reading windows would shift it).
   std::vector<std::string> args = {"-of",
                                    "VRT",
                                    "-t_srs",
@@ -234,6 +250,8 @@ Status warp_input(GdalSource::Input& in, const GdalSourceOptions& o, const Geome
                                    std::to_string(g.height()),
                                    "-r",
                                    resampling_name(o.resampling),
+                                   "-et",
+                                   "0",
                                    "-ot",
                                    "Float32",
                                    "-dstalpha",

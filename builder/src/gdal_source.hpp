@@ -19,7 +19,8 @@
 namespace vts::detail {
 
 // Whether GDAL opens `path` as a raster with a CRS and a geotransform. False for anything else
-// (a plain JPEG, a missing file): those go to ImageSource, which reports its own errors.
+// (a plain JPEG, a missing file, anything but a regular file, which is not even opened): those go
+// to ImageSource, which reports its own errors.
 bool gdal_is_georeferenced(const std::filesystem::path& path);
 
 struct GdalSourceOptions {

@@ -32,7 +32,7 @@ expect_ok "$VTS" build --synthetic 600x300 -o "$D/plain.pmtiles" --threads 2
 
 note "refusals name what is wrong"
 expect_clean_failure "$VTS" build "$EARTH" --tiling WorldCRS84Quad -o "$WORK/x.pmtiles"
-grep -q "georeferenced inputs: not yet" "$ERR" || fail "no 'not yet' message: $(cat "$ERR")"
+grep -q "no georeference" "$ERR" || fail "a plain image with --tiling: $(cat "$ERR")"
 expect_clean_failure "$VTS" build --synthetic 16000x8000 --tiling WorldCRS84Quad -o "$WORK/x.pmtiles"
 grep -q "16384x8192" "$ERR" || fail "a wrong image size does not name the right one: $(cat "$ERR")"
 expect_clean_failure "$VTS" build --synthetic 4096x2048 --tiling WorldCRS84Quad --bbox=170,0,-170,10 \
