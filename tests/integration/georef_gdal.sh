@@ -27,6 +27,8 @@ T -ot UInt16 -scale 0 255 0 65535 world.tif u16.tif
 gdalwarp -q -t_srs EPSG:3857 -te_srs EPSG:4326 -te 0 20 40 60 -r bilinear world.tif merc.tif ||
   fail "gdalwarp merc"
 gdalwarp -q -te -180 -90 90 90 -dstnodata 0 west.tif padded.tif || fail "gdalwarp padded"
+T -b 1 world.tif grey.tif
+T -b 1 -b 2 -b 3 -b mask -a_nodata none -co ALPHA=YES padded.tif rgba.tif # nodata as alpha
 
 # raw FILE OUT: pixel-interleaved bytes of a raster (gdal_translate to ENVI, BIP).
 raw() { T -of ENVI -co INTERLEAVE=BIP "$1" "$2"; }
@@ -150,6 +152,8 @@ bad = [(x, y) for y in range(0, 1024, 3) for x in range(1026, 1534, 3) if a[4 * 
 assert not bad, bad[:5]
 assert all(a[4 * (y * 2048 + 500) + 3] == 255 for y in range(1024)), "the data part is not opaque"
 PY
+check grey grey.tif 2 near
+check rgba rgba.tif 3 cubic
 # u16.tif is world.tif * 257: with --range 0,65535 it maps back to the 8-bit values.
 REF_INPUT=world.tif check u16 u16.tif 2 lanczos --range 0,65535
 
@@ -167,6 +171,17 @@ assert all(a[4 * i + 3] == 255 for i in range(0, 2048 * 1024, 997)), "not opaque
 bad = sum(1 for i in range(2048 * 1024) if a[4 * i:4 * i + 3] != b[3 * i:3 * i + 3])
 assert bad == 0, f"{bad} texels differ"
 PY
+
+expect_ok "$VTS" info same.pmtiles --json
+json_check "$OUT" 'j.georeference.tiling === "WorldCRS84Quad"' "WorldCRS84Quad by default"
+
+note "inputs in different CRSs (EPSG:4326, EPSG:3857) together, as gdalwarp composites them"
+expect_ok "$VTS" build world.tif merc.tif --max-level 3 --resampling bilinear -o mixed.pmtiles
+expect_ok "$VTS" extract mixed.pmtiles --level 3 -o mixed.tif
+raw mixed.tif mixed.bil
+gdalwarp -q -t_srs EPSG:4326 -te -180 -90 180 90 -ts 2048 1024 -r bilinear -et 0 -dstalpha \
+  -of ENVI -co INTERLEAVE=BIP world.tif merc.tif mixed.ref.bil || fail "gdalwarp mixed"
+python3 compare.py mixed.bil mixed.ref.bil 2048 1024 || fail "mixed CRSs: pixels"
 
 note "the level rule: the first level whose texel is no larger than the input's pixel"
 expect_ok "$VTS" build fine.tif -o fine.pmtiles --threads 2 --json
