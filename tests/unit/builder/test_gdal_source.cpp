@@ -1,0 +1,158 @@
+// GdalSource on small real GeoTIFFs written here through GDAL: texels land where their
+// georeference says, the level follows the finest input, footprints are the inputs' extents, and
+// what the build cannot take is refused by name.
+#include "gdal_source.hpp"
+
+#include <gdal.h>
+#include <gtest/gtest.h>
+#include <ogr_srs_api.h>
+
+#include <cstdint>
+#include <cstdio>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "vts/test/temp_dir.hpp"
+
+namespace vts {
+namespace {
+
+namespace fs = std::filesystem;
+using detail::GdalSource;
+using detail::GdalSourceOptions;
+
+// Writes a w x h GeoTIFF in EPSG:4326 with its top-left corner at (west, north), `deg` degrees per
+// pixel; band b of pixel (x, y) is value(x, y, b).
+template <class F>
+void write_geotiff(const fs::path& path, int w, int h, int bands, GDALDataType type, double west,
+                   double north, double deg, F value) {
+  GDALAllRegister();
+  GDALDriverH drv = GDALGetDriverByName("GTiff");
+  GDALDatasetH ds = GDALCreate(drv, path.c_str(), w, h, bands, type, nullptr);
+  ASSERT_NE(ds, nullptr);
+  double gt[6] = {west, deg, 0, north, 0, -deg};
+  GDALSetGeoTransform(ds, gt);
+  GDALSetProjection(ds, "EPSG:4326");
+  OGRSpatialReferenceH srs = OSRNewSpatialReference(nullptr);
+  OSRImportFromEPSG(srs, 4326);
+  GDALSetSpatialRef(ds, srs);
+  OSRDestroySpatialReference(srs);
+  std::vector<double> row(static_cast<std::size_t>(w));
+  for (int b = 1; b <= bands; ++b)
+    for (int y = 0; y < h; ++y) {
+      for (int x = 0; x < w; ++x) row[static_cast<std::size_t>(x)] = value(x, y, b);
+      ASSERT_EQ(GDALRasterIO(GDALGetRasterBand(ds, b), GF_Write, 0, y, w, 1, row.data(), w, 1,
+                             GDT_Float64, 0, 0),
+                CE_None);
+    }
+  GDALClose(ds);
+}
+
+GdalSourceOptions options(int tile_size, std::optional<int> level = std::nullopt) {
+  GdalSourceOptions o;
+  o.tiling = Tiling::world_crs84_quad;
+  o.tile_size = static_cast<std::uint32_t>(tile_size);
+  o.border = 0;
+  o.max_level = level;
+  o.resampling = Resampling::nearest;
+  return o;
+}
+
+int code(int x, int y, int b) {
+  return (x * 7 + y * 13 + b * 50) % 256;
+}
+
+TEST(GdalSource, WholeWorldAtItsOwnResolutionIsTheInputExactly) {
+  vts::test::TempDir dir;
+  const fs::path p = dir.path() / "world.tif";
+  // 16 x 8 pixels of 22.5 degrees: WorldCRS84Quad level 2 with T = 4 (16 x 8 texels).
+  write_geotiff(p, 16, 8, 3, GDT_Byte, -180, 90, 22.5, code);
+  ASSERT_TRUE(detail::gdal_is_georeferenced(p));
+  auto s = GdalSource::open({p}, options(4));
+  ASSERT_TRUE(s) << s.error().message;
+  EXPECT_EQ((*s)->max_level(), 2);
+  ASSERT_EQ((*s)->width(), 16u);
+  ASSERT_EQ((*s)->height(), 8u);
+  EXPECT_EQ((*s)->bounds(), (LonLatBounds{-180, -90, 180, 90}));
+  std::vector<std::uint8_t> rows(16 * 8 * 4);
+  ASSERT_TRUE((*s)->read_rows(0, 8, rows.data()));
+  for (int y = 0; y < 8; ++y)
+    for (int x = 0; x < 16; ++x)
+      for (int b = 0; b < 4; ++b)
+        ASSERT_EQ(rows[std::size_t((y * 16 + x) * 4 + b)], b == 3 ? 255 : code(x, y, b + 1))
+            << x << "," << y << " band " << b;
+}
+
+TEST(GdalSource, AnInputCoversOnlyItsExtentAndTheLevelFollowsItsPixels) {
+  vts::test::TempDir dir;
+  const fs::path p = dir.path() / "piece.tif";
+  // 20 x 10 pixels of 4.5 degrees from (0, 45): level rule picks 22.5 / 2^k <= 4.5 -> 5.625 is
+  // too coarse, 2.8125 (level 5 with T = 4: 128 texels around) is the first.
+  write_geotiff(p, 20, 10, 1, GDT_Byte, 0, 45, 4.5, [](int, int, int) { return 200; });
+  auto s = GdalSource::open({p}, options(4));
+  ASSERT_TRUE(s) << s.error().message;
+  EXPECT_EQ((*s)->max_level(), 5);
+  EXPECT_EQ((*s)->bounds(), (LonLatBounds{0, 0, 90, 45}));
+  const std::uint64_t w = (*s)->width();
+  ASSERT_EQ(w, 128u);
+  std::vector<std::uint8_t> rows(w * 64 * 4);
+  ASSERT_TRUE((*s)->read_rows(0, 64, rows.data()));
+  // Texels of 2.8125 degrees: the piece spans columns 64..96 and rows 16..32.
+  for (std::uint64_t y = 0; y < 64; ++y)
+    for (std::uint64_t x = 0; x < w; ++x) {
+      const bool inside = x >= 64 && x < 96 && y >= 16 && y < 32;
+      const std::uint8_t* t = &rows[(y * w + x) * 4];
+      ASSERT_EQ(t[3], inside ? 255 : 0) << x << "," << y;
+      if (inside) {
+        ASSERT_EQ(t[0], 200);
+      }
+    }
+}
+
+TEST(GdalSource, RefusesWhatTheBuildCannotTake) {
+  vts::test::TempDir dir;
+  const fs::path u16 = dir.path() / "deep.tif";
+  write_geotiff(u16, 16, 8, 1, GDT_UInt16, -180, 90, 22.5,
+                [](int x, int, int) { return 1000 + x * 10; });
+  auto s = GdalSource::open({u16}, options(4));
+  ASSERT_FALSE(s);
+  EXPECT_EQ(s.error().code, ErrorCode::invalid_argument);
+  EXPECT_NE(s.error().message.find("deep.tif"), std::string::npos) << s.error().message;
+  EXPECT_NE(s.error().message.find("1000"), std::string::npos) << s.error().message;
+  EXPECT_NE(s.error().message.find("1150"), std::string::npos) << s.error().message;
+  EXPECT_NE(s.error().message.find("--range"), std::string::npos) << s.error().message;
+
+  GdalSourceOptions ranged = options(4);
+  ranged.value_range = std::pair{1000.0, 1150.0};
+  auto r = GdalSource::open({u16}, ranged);
+  ASSERT_TRUE(r) << r.error().message;
+  std::vector<std::uint8_t> rows(16 * 8 * 4);
+  ASSERT_TRUE((*r)->read_rows(0, 8, rows.data()));
+  EXPECT_EQ(rows[0], 0);         // 1000 -> 0
+  EXPECT_EQ(rows[15 * 4], 255);  // 1150 -> 255
+  EXPECT_EQ(rows[5 * 4], 85);    // 1050 -> 85
+
+  auto wide = GdalSource::open({u16}, [] {
+    GdalSourceOptions o = options(256, 11);
+    o.value_range = std::pair{0.0, 1.0};
+    return o;
+  }());
+  ASSERT_FALSE(wide);
+  EXPECT_EQ(wide.error().code, ErrorCode::too_large);
+  EXPECT_NE(wide.error().message.find("262144"), std::string::npos) << wide.error().message;
+
+  const fs::path plain = dir.path() / "plain.txt";
+  {
+    std::FILE* f = std::fopen(plain.c_str(), "w");
+    std::fputs("not a raster\n", f);
+    std::fclose(f);
+  }
+  EXPECT_FALSE(detail::gdal_is_georeferenced(plain));
+  auto t = GdalSource::open({plain}, options(4));
+  ASSERT_FALSE(t);
+  EXPECT_NE(t.error().message.find("plain.txt"), std::string::npos) << t.error().message;
+}
+
+}  // namespace
+}  // namespace vts
