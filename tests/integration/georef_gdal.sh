@@ -183,6 +183,19 @@ gdalwarp -q -t_srs EPSG:4326 -te -180 -90 180 90 -ts 2048 1024 -r bilinear -et 0
   -of ENVI -co INTERLEAVE=BIP world.tif merc.tif mixed.ref.bil || fail "gdalwarp mixed"
 python3 compare.py mixed.bil mixed.ref.bil 2048 1024 || fail "mixed CRSs: pixels"
 
+note "several inputs: the footprint is the union of their extents"
+expect_ok "$VTS" build west.tif merc.tif --max-level 2 -o union.pmtiles
+expect_ok "$VTS" info union.pmtiles --json
+cp "$OUT" union.info.json
+gdalinfo -json merc.tif >merc.gdalinfo.json || fail "gdalinfo merc.tif"
+python3 - union.info.json "$(python3 extent.py merc.gdalinfo.json)" <<'PY' || fail "union bounds"
+import json, sys
+b = json.load(open(sys.argv[1]))["georeference"]["bounds"]
+m = [float(v) for v in sys.argv[2].split(",")]
+want = [-180, -90, max(0, m[2]), 90]
+assert all(abs(x - y) <= 1e-7 for x, y in zip(b, want)), (b, want)
+PY
+
 note "the level rule: the first level whose texel is no larger than the input's pixel"
 expect_ok "$VTS" build fine.tif -o fine.pmtiles --threads 2 --json
 json_check "$OUT" 'j.max_zoom === 4' "2100 px around the globe -> level 4 (4096 texels)"

@@ -1,6 +1,6 @@
-// The pyramid builder behind `vts build`: cuts one image (or a C x R mosaic of images, or the
-// built-in synthetic source) into the tile pyramid of docs/ARCHITECTURE.md and writes a PMTiles
-// archive.
+// The pyramid builder behind `vts build`: cuts one image (or a C x R mosaic of images, or
+// georeferenced rasters warped by GDAL onto a tiling scheme's grid, or the built-in synthetic
+// source) into the tile pyramid of docs/ARCHITECTURE.md and writes a PMTiles archive.
 //
 // Streaming: the input is read in strips of scanlines by a reader thread; every level keeps only a
 // ring of T + 2B + 2 rows of its own width, from which it cuts one row of tiles at a time and makes
@@ -65,8 +65,8 @@ Result<Resampling> parse_resampling(std::string_view text);
 
 // The widest finest level a georeferenced build accepts, in texels (2^18 = 262144: level 10 of
 // WorldCRS84Quad or WebMercatorQuad at T = 256). The strip builder keeps rows of the whole grid
-// width at every level (~8 * (T + 2B + 2) * W bytes, ~560 MiB at this limit); finer levels need
-// the bounded-window builder, which is not written yet.
+// width at every level (~8 * (T + 2B + 2) * W bytes, 532 MiB at this limit with T = 256, B = 4);
+// finer levels need the bounded-window builder, which is not written yet.
 inline constexpr std::uint64_t kMaxGeoreferencedWidth = std::uint64_t{1} << 18;
 
 struct BuildOptions {
