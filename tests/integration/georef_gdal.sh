@@ -47,18 +47,24 @@ if "3857" in json.dumps(j["coordinateSystem"]["wkt"])[-40:] or "Pseudo-Mercator"
     x0, x1, y0, y1 = lon(x0), lon(x1), lat(y0), lat(y1)
 print(",".join(repr(v) for v in (x0, y0, x1, y1)))
 PY
-# count.py MAXZ T W,S,E,N: the footprint's tile count on WorldCRS84Quad (FORMAT.md §6).
+# count.py MAXZ T W,S,E,N [SCHEME]: the footprint's tile count on WorldCRS84Quad (default) or
+# WebMercatorQuad (FORMAT.md §6).
 cat >count.py <<'PY'
 import math, sys
 maxz, T = int(sys.argv[1]), int(sys.argv[2])
 w, s, e, n = map(float, sys.argv[3].split(","))
+mercator = len(sys.argv) > 4 and sys.argv[4] == "WebMercatorQuad"
 N = T * 2 ** maxz
-W, H = N, N // 2
+W, H = N, (N if mercator else N // 2)
 def snap(v, f):
     r = round(v)
     return r if abs(v - r) <= 1e-6 else f(v)
-x0, y0 = snap((w + 180) / 360 * N, math.floor), snap((90 - n) / 360 * N, math.floor)
-x1, y1 = min(snap((e + 180) / 360 * N, math.ceil), W), min(snap((90 - s) / 360 * N, math.ceil), H)
+def ty(lat):
+    if not mercator:
+        return (90 - lat) / 360 * N
+    return (1 - math.log(math.tan(math.pi / 4 + math.radians(lat) / 2)) / math.pi) / 2 * N
+x0, y0 = snap((w + 180) / 360 * N, math.floor), snap(ty(n), math.floor)
+x1, y1 = min(snap((e + 180) / 360 * N, math.ceil), W), min(snap(ty(s), math.ceil), H)
 count = 0
 for z in range(maxz + 1):
     d = maxz - z
@@ -156,6 +162,29 @@ check grey grey.tif 2 near
 check rgba rgba.tif 3 cubic
 # u16.tif is world.tif * 257: with --range 0,65535 it maps back to the 8-bit values.
 REF_INPUT=world.tif check u16 u16.tif 2 lanczos --range 0,65535
+
+note "WebMercatorQuad: the west half, clipped to +-85.0511 degrees, against gdalwarp in EPSG:3857"
+expect_ok "$VTS" build west.tif --tiling WebMercatorQuad --max-level 3 --resampling bilinear \
+  -o wm.pmtiles --threads 2
+expect_ok "$VTS" info wm.pmtiles --json
+cp "$OUT" wm.info.json
+WM_BBOX="-180,-85.05112877980659,0,85.05112877980659"
+python3 - wm.info.json "$WM_BBOX" "$(python3 count.py 3 256 "$WM_BBOX" WebMercatorQuad)" <<'PY' ||
+import json, sys
+i = json.load(open(sys.argv[1]))
+g = i["georeference"]
+want = [float(v) for v in sys.argv[2].split(",")]
+assert g["tiling"] == "WebMercatorQuad" and g["crs"] == "EPSG:3857", g
+assert all(abs(a - b) <= 1e-7 for a, b in zip(g["bounds"], want)), (g["bounds"], want)
+assert i["tiles"] == int(sys.argv[3]) and i["width"] == i["height"] == 2048, (i["tiles"], sys.argv[3])
+PY
+  fail "WebMercatorQuad: bounds, tile count or size"
+expect_ok "$VTS" extract wm.pmtiles --level 3 -o wm.tif
+raw wm.tif wm.bil
+M=20037508.342789244
+gdalwarp -q -t_srs EPSG:3857 -te -$M -$M $M $M -ts 2048 2048 -r bilinear -et 0 -dstalpha \
+  -of ENVI -co INTERLEAVE=BIP west.tif wm.ref.bil || fail "gdalwarp WebMercatorQuad reference"
+python3 compare.py wm.bil wm.ref.bil 2048 2048 || fail "WebMercatorQuad: pixels"
 
 note "the identity: the world at its own resolution (level chosen from it), nearest, is the input"
 expect_ok "$VTS" build world.tif --resampling near -o same.pmtiles --threads 2 --json
