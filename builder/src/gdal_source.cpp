@@ -297,6 +297,10 @@ Result<std::unique_ptr<GdalSource>> GdalSource::open(
     in->path = path;
     if (Status st = open_input(*in, options, lonlat); !st) return st.error();
     LonLatBounds& b = in->bounds;
+    if (b.west > b.east)
+      return make_error(ErrorCode::unsupported, path.string() + ": crosses the antimeridian (" +
+                                                    fmt(b.west) + " .. " + fmt(b.east) +
+                                                    " degrees); not supported: split it in two");
     b = {std::max(b.west, extent.west), std::max(b.south, extent.south),
          std::min(b.east, extent.east), std::min(b.north, extent.north)};
     if (!(b.west < b.east && b.south < b.north))
