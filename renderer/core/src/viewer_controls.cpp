@@ -69,8 +69,8 @@ std::vector<std::string> hud_lines(const HudNumbers& n, bool globe, const PlaneV
     std::snprintf(buf[2], sizeof buf[2], "lon %.4f  lat %.4f  altitude %.0f m", g.lon_deg,
                   g.lat_deg, g.altitude_m);
   } else {
-    std::snprintf(buf[2], sizeof buf[2], "center %.1f, %.1f  %.3g texels/pixel", p.center_u,
-                  p.center_v, p.texels_per_pixel);
+    std::snprintf(buf[2], sizeof buf[2], "center %.1f, %.1f  %.3g texels/pixel%s%s", p.center_u,
+                  p.center_v, p.texels_per_pixel, n.place.empty() ? "" : "  ", n.place.c_str());
   }
   std::snprintf(buf[3], sizeof buf[3], "%s slots  physical %.1f MiB  page table %.2f MiB",
                 n.bc1 ? "bc1 (S3TC)" : "rgba8", double(n.physical_bytes) / (1 << 20),

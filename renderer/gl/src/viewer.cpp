@@ -4,9 +4,11 @@
 #include <GLFW/glfw3.h>
 
 #include <algorithm>
+#include <cstdio>
 #include <nlohmann/json.hpp>
 #include <thread>
 
+#include "vts/renderer/geo_view.hpp"
 #include "vts/renderer/gl_check.hpp"
 #include "vts/renderer/globe.hpp"
 
@@ -173,6 +175,8 @@ Viewer::~Viewer() {
 Result<std::unique_ptr<Viewer>> Viewer::create(std::shared_ptr<client::TileClient> tiles,
                                                const Geometry& geometry, ViewerOptions options,
                                                Log log) {
+  if (options.globe)
+    if (auto s = check_globe_tiling(options.tiling); !s) return s.error();
   std::unique_ptr<Viewer> v(new Viewer(std::move(options), geometry, std::move(log)));
   auto gl = GlContext::create(v->options_.window);
   if (!gl) return gl.error();
@@ -223,6 +227,9 @@ std::vector<std::string> Viewer::hud_lines_now(const FrameStats& st, double uplo
   n.bc1 = vt_->tile_format() == PixelFormat::bc1;
   n.physical_bytes = vt_->physical_gpu_bytes();
   n.page_table_bytes = vt_->page_table_gpu_bytes();
+  if (options_.tiling != Tiling::none && !controls_.globe())
+    n.place =
+        lonlat_text(options_.tiling, geometry_, controls_.plane.center_u, controls_.plane.center_v);
   return hud_lines(n, controls_.globe(), controls_.plane, controls_.globe_view);
 }
 
@@ -351,6 +358,19 @@ std::string Viewer::report_json(const HeadlessRun& run, const std::string& sourc
   j["camera"] =
       camera_key_json(controls_.globe(), controls_.plane, controls_.globe_view, vt_->debug_view());
   return j.dump(2);
+}
+
+std::string Viewer::report_text(const HeadlessRun& run, const std::string& source,
+                                const std::string& screenshot) const {
+  const FrameStats& last = run.frames.back();
+  const std::string complete =
+      run.complete_at ? "complete at frame " + std::to_string(*run.complete_at) : "never complete";
+  char buf[160];
+  std::snprintf(buf, sizeof buf, " %dx%d: %zu frames, %s; %u resident, %u pending, hit %.1f%%",
+                options_.window.width, options_.window.height, run.frames.size(), complete.c_str(),
+                last.resident, last.pending, last.hit_ratio * 100);
+  return std::string(controls_.globe() ? "globe " : "plane ") + source + buf +
+         (screenshot.empty() ? "" : "; screenshot " + screenshot);
 }
 
 std::optional<CameraPath> Viewer::recorded() const {

@@ -34,6 +34,9 @@ struct HudNumbers {
   std::string debug;
   bool bc1 = false;
   std::uint64_t physical_bytes = 0, page_table_bytes = 0;
+  // Georeferenced tilesets: the place at the plane's screen centre (lonlat_text(), geo_view.hpp);
+  // empty otherwise. The plane's camera line ends with it.
+  std::string place;
 };
 
 // Four lines: streaming numbers, hit ratio / bias / frame time, the physical texture, then the
