@@ -99,4 +99,13 @@ std::string lonlat_text(Tiling t, const Geometry& g, double u, double v) {
   return buf;
 }
 
+std::string plane_place_text(Tiling t, const Geometry& g, const PlaneView& view, int width,
+                             int height, std::optional<std::pair<double, double>> cursor) {
+  if (cursor) {
+    if (auto uv = PlaneCamera::from_view(view, width, height).hit(cursor->first, cursor->second))
+      return lonlat_text(t, g, uv->first, uv->second) + " (cursor)";
+  }
+  return lonlat_text(t, g, view.center_u, view.center_v) + " (centre)";
+}
+
 }  // namespace vts::renderer

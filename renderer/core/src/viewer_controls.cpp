@@ -103,11 +103,17 @@ void CameraControls::button(Button b, bool down, double x, double y) {
   }
 }
 
+std::optional<std::pair<double, double>> CameraControls::cursor_pixel() const {
+  if (!cursor_seen_) return std::nullopt;
+  return std::pair<double, double>{last_x_ * scale_, last_y_ * scale_};
+}
+
 void CameraControls::cursor(double x, double y, double scale, int fb_width, int fb_height) {
   const double dx = (x - last_x_) * scale, dy = (y - last_y_) * scale;
   const double px = last_x_ * scale, py = last_y_ * scale;
   last_x_ = x;
   last_y_ = y;
+  scale_ = scale;
   const bool first = !cursor_seen_;
   cursor_seen_ = true;
   if (first || (!left_ && !right_)) return;

@@ -214,8 +214,8 @@ FrameStats Viewer::render(double frame, int width, int height, bool follow_path)
   return vt_->render(PlaneScene(c.plane), width, height);
 }
 
-std::vector<std::string> Viewer::hud_lines_now(const FrameStats& st, double uploads,
-                                               double ms) const {
+std::vector<std::string> Viewer::hud_lines_now(const FrameStats& st, double uploads, double ms,
+                                               int width, int height) const {
   HudNumbers n;
   n.resident = st.resident;
   n.pending = st.pending;
@@ -228,8 +228,8 @@ std::vector<std::string> Viewer::hud_lines_now(const FrameStats& st, double uplo
   n.physical_bytes = vt_->physical_gpu_bytes();
   n.page_table_bytes = vt_->page_table_gpu_bytes();
   if (options_.tiling != Tiling::none && !controls_.globe())
-    n.place =
-        lonlat_text(options_.tiling, geometry_, controls_.plane.center_u, controls_.plane.center_v);
+    n.place = plane_place_text(options_.tiling, geometry_, controls_.plane, width, height,
+                               controls_.cursor_pixel());
   return hud_lines(n, controls_.globe(), controls_.plane, controls_.globe_view);
 }
 
@@ -253,7 +253,7 @@ Result<HeadlessRun> Viewer::run_headless(int frames, bool until_complete) {
     ms += f.frame_ms;
   }
   const double n = double(run.frames.size());
-  if (!run.frames.empty()) lines_ = hud_lines_now(run.frames.back(), uploads / n, ms / n);
+  if (!run.frames.empty()) lines_ = hud_lines_now(run.frames.back(), uploads / n, ms / n, w, h);
   return run;
 }
 
@@ -266,7 +266,8 @@ void Viewer::interactive_frame(double frame, int w, int h) {
   uploads_ += st.uploads;
   ++counted_;
   if (lines_.empty() || now - last_title_ >= std::chrono::milliseconds(250)) {
-    lines_ = hud_lines_now(st, double(uploads_) / double(counted_), wall_ms_ / double(counted_));
+    lines_ =
+        hud_lines_now(st, double(uploads_) / double(counted_), wall_ms_ / double(counted_), w, h);
     const std::string text = lines_[0] + "  " + lines_[1];
     glfwSetWindowTitle(gl_->window(), ("vts view — " + text).c_str());
     if (now - last_line_ >= std::chrono::seconds(1)) {

@@ -106,3 +106,20 @@ TEST(GeoView, ThePlaneHudShowsTheLongitudeAndLatitudeAtTheScreenCentre) {
   const auto plain = hud_lines(HudNumbers{}, false, p, GlobeView{});
   EXPECT_EQ(plain.back().find("lon"), std::string::npos) << plain.back();
 }
+
+TEST(GeoView, ThePlacesTextIsAtTheCursorWhenThereIsOneElseAtTheCentre) {
+  PlaneView p;
+  p.center_u = 185.0 / 360 * 16384;
+  p.center_v = 2048;
+  p.texels_per_pixel = 2;
+  const auto t = vts::Tiling::world_crs84_quad;
+  EXPECT_EQ(plane_place_text(t, kGeo, p, 200, 100, std::nullopt),
+            "lon 5.00000  lat 45.00000 (centre)");
+  // 45.5111 texels per degree: 91.0222 pixels at 2 texels per pixel is 4 degrees.
+  const double px = 16384.0 / 360 * 4 / 2;
+  EXPECT_EQ(plane_place_text(t, kGeo, p, 200, 100, std::pair{100 + px, 50 - px}),
+            "lon 9.00000  lat 49.00000 (cursor)");
+  p.tilt = 1.4;  // the cursor at the top row looks above the horizon: the centre instead
+  EXPECT_EQ(plane_place_text(t, kGeo, p, 200, 100, std::pair{100.0, 0.0}),
+            "lon 5.00000  lat 45.00000 (centre)");
+}

@@ -10,11 +10,13 @@
 
 #include <optional>
 #include <string>
+#include <utility>
 
 #include "vts/protocol/geometry.hpp"
 #include "vts/protocol/result.hpp"
 #include "vts/protocol/tileset.hpp"
 #include "vts/protocol/tiling.hpp"
+#include "vts/renderer/camera.hpp"
 #include "vts/renderer/camera_path.hpp"
 
 namespace vts::renderer {
@@ -38,6 +40,12 @@ Result<CameraKey> camera_at(const CameraKey& base, Tiling t, const Geometry& g, 
 // georeference, or camera_at()'s.
 Status start_at_place(const std::optional<Georeference>& geo, const Geometry& g,
                       const std::string& center, int level, CameraKey& camera);
+
+// The HUD's place on a georeferenced plane: lonlat_text() of the texel under `cursor` (framebuffer
+// pixels of a width x height frame) with " (cursor)", or when there is no cursor or it is above
+// the horizon, of the screen centre with " (centre)".
+std::string plane_place_text(Tiling t, const Geometry& g, const PlaneView& view, int width,
+                             int height, std::optional<std::pair<double, double>> cursor);
 
 // "lon 12.34567  lat -45.67890": the place under finest texel (u, v) of the scheme.
 std::string lonlat_text(Tiling t, const Geometry& g, double u, double v);

@@ -39,7 +39,8 @@ struct ViewerOptions {
   bool record = false;             // keep every frame's camera (recorded())
   bool hud = false;                // a HUD even without a visible window (screenshots with it)
   // The tileset's scheme (TilesetInfo::georeference): the plane's HUD shows the longitude and
-  // latitude at the screen centre; the globe refuses WebMercatorQuad (check_globe_tiling).
+  // latitude at the cursor (at the screen centre before the cursor is seen, and headless); the
+  // globe refuses WebMercatorQuad (check_globe_tiling).
   Tiling tiling = Tiling::none;
 };
 
@@ -97,7 +98,9 @@ class Viewer {
  private:
   Viewer(ViewerOptions options, const Geometry& geometry, Log log);
   FrameStats render(double frame, int width, int height, bool follow_path);
-  std::vector<std::string> hud_lines_now(const FrameStats& st, double uploads, double ms) const;
+  // For a width x height frame (the cursor's place on a georeferenced plane).
+  std::vector<std::string> hud_lines_now(const FrameStats& st, double uploads, double ms, int width,
+                                         int height) const;
   void interactive_frame(double frame, int width, int height);
 
   ViewerOptions options_;
