@@ -219,11 +219,11 @@ else:
 EOF
 done
 expect_clean_failure "${XVFB[@]}" "$VTS" view "$ARCHIVE" --headless --frames 1 --center 5,45
-((RC == 2)) && grep -q 'not georeferenced' "$ERR" || { show_output; fail "--center, plain image"; }
+if ((RC != 2)) || ! grep -q 'not georeferenced' "$ERR"; then show_output; fail "--center, plain image"; fi
 expect_clean_failure "${XVFB[@]}" "$VTS" view "$WORK/geo.pmtiles" --headless --frames 1 --center 5
-((RC == 2)) && grep -q 'LON,LAT' "$ERR" || { show_output; fail "--center 5"; }
+if ((RC != 2)) || ! grep -q 'LON,LAT' "$ERR"; then show_output; fail "--center 5"; fi
 expect_clean_failure "${XVFB[@]}" "$VTS" view "$WORK/web.pmtiles" --headless --frames 1 \
   --scene globe
-((RC == 6)) && grep -q 'WebMercatorQuad' "$ERR" || { show_output; fail "Web Mercator globe"; }
+if ((RC != 6)) || ! grep -q 'WebMercatorQuad' "$ERR"; then show_output; fail "Web Mercator globe"; fi
 
 note "ok"
