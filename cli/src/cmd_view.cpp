@@ -14,6 +14,7 @@
 #include "vts/client/source.hpp"
 #include "vts/client/tile_client.hpp"
 #include "vts/protocol/file_io.hpp"
+#include "vts/renderer/geo_view.hpp"
 #include "vts/renderer/viewer.hpp"
 
 namespace vts::cli {
@@ -24,10 +25,11 @@ using namespace vts::renderer;
 
 struct ViewArgs {
   std::string source, cache_dir, scene = "plane", camera_path, debug = "none", screenshot, record;
+  std::string center;  // --center LON,LAT; --level is level (-1: not given)
   std::uint64_t ram_mb = 256;
   int width = 1280, height = 720;
   std::uint32_t slots = 256, window = 64, upload_tiles = 32;
-  int feedback = 8, anisotropy = 8;
+  int feedback = 8, anisotropy = 8, level = -1;
   bool headless = false, json = false, until_complete = false, hud = false, print_camera = false;
   int frames = 0;
 };
@@ -85,9 +87,12 @@ Result<std::shared_ptr<client::TileClient>> open_client(
 
 // The scene, the start camera and the camera path.
 Status scene_options(const ViewArgs& a, const std::optional<std::string>& path_text,
-                     const Geometry& geometry, ViewerOptions& o) {
-  o.camera = default_camera(geometry, a.width, a.height);
+                     const TilesetInfo& info, ViewerOptions& o) {
+  o.camera = default_camera(info.geometry, a.width, a.height);
   if (auto s = parse_scene(a.scene, o.globe, o.camera); !s) return s;
+  o.tiling = info.georeference ? info.georeference->tiling : Tiling::none;
+  if (auto s = start_at_place(info.georeference, info.geometry, a.center, a.level, o.camera); !s)
+    return make_error(s.error().code, a.source + ": " + s.error().message);
   if (!path_text) return {};
   auto p = CameraPath::parse(*path_text, o.camera);
   if (!p) return make_error(p.error().code, a.camera_path + ": " + p.error().message);
@@ -129,19 +134,9 @@ int write_screenshot(const Viewer& viewer, const std::string& path) {
 // --headless's screenshot and report. Returns the exit code.
 int finish_headless(const Viewer& viewer, const HeadlessRun& run, const ViewArgs& a) {
   const int rc = a.screenshot.empty() ? 0 : write_screenshot(viewer, a.screenshot);
-  if (a.json) {
-    std::printf("%s\n", viewer.report_json(run, a.source, a.screenshot).c_str());
-  } else {
-    const FrameStats& last = run.frames.back();
-    const std::string complete = run.complete_at
-                                     ? "complete at frame " + std::to_string(*run.complete_at)
-                                     : "never complete";
-    std::printf("%s %s %dx%d: %zu frames, %s; %u resident, %u pending, hit %.1f%%%s%s\n",
-                viewer.globe() ? "globe" : "plane", a.source.c_str(), a.width, a.height,
-                run.frames.size(), complete.c_str(), last.resident, last.pending,
-                last.hit_ratio * 100, a.screenshot.empty() ? "" : "; screenshot ",
-                a.screenshot.c_str());
-  }
+  const std::string report = a.json ? viewer.report_json(run, a.source, a.screenshot)
+                                    : viewer.report_text(run, a.source, a.screenshot);
+  std::printf("%s\n", report.c_str());
   std::fflush(stdout);
   return rc;
 }
@@ -160,7 +155,8 @@ int run_view(const ViewArgs& a) {
   if (!source) return report_error(source.error());
   const Geometry geometry = (*source)->info().info.geometry;
   ViewerOptions o = viewer_options(a);
-  if (auto s = scene_options(a, path_text, geometry, o); !s) return report_error(s.error());
+  if (auto s = scene_options(a, path_text, (*source)->info().info, o); !s)
+    return report_error(s.error());
   auto tiles = open_client(a, *source);
   if (!tiles) return report_error(tiles.error());
   auto made = Viewer::create(std::move(*tiles), geometry, std::move(o), log_line);
@@ -205,6 +201,10 @@ Runner add_view(CLI::App& app) {
   c->add_option("--scene", a->scene, "plane, globe, or FILE.json {\"scene\":..., \"camera\":{...}}")
       ->capture_default_str();
   c->add_option("--camera-path", a->camera_path, "Keyframes FILE.json {\"keys\":[...]}");
+  c->add_option("--center", a->center, "Georeferenced tilesets: start over LON,LAT (degrees)");
+  c->add_option("--level", a->level,
+                "Georeferenced tilesets: start at about one texel of this level per pixel")
+      ->check(CLI::Range(0, Geometry::kMaxZoom));
   c->add_option("--record", a->record,
                 "On exit, write every frame's camera to FILE.json as a camera path (a key where "
                 "it changed) that --camera-path replays");

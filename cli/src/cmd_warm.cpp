@@ -19,7 +19,7 @@ namespace {
 using Clock = std::chrono::steady_clock;
 
 struct WarmArgs {
-  std::string url, cache_dir, levels, region, cache_size = "10G";
+  std::string url, cache_dir, levels, region, bbox, cache_size = "10G";
   unsigned concurrency = 32;
   unsigned max_errors = 100;
   bool json = false, quiet = false;
@@ -54,7 +54,7 @@ Status check_request(const WarmArgs& a, const client::SourceInfo& info,
     return make_error(
         ErrorCode::invalid_argument,
         "--levels " + a.levels + ": " + info.key + " has levels 0-" + std::to_string(g.max_zoom()));
-  if (o.region && (o.region->x1 > g.width() || o.region->y1 > g.height()))
+  if (o.region && !a.region.empty() && (o.region->x1 > g.width() || o.region->y1 > g.height()))
     return make_error(ErrorCode::invalid_argument,
                       "--region " + a.region + " reaches beyond the image (" +
                           std::to_string(g.width()) + "x" + std::to_string(g.height()) +
@@ -160,6 +160,11 @@ Result<client::WarmOptions> warm_options(const WarmArgs& a) {
     if (!r) return r.error();
     o.region = *r;
   }
+  if (!a.bbox.empty()) {
+    auto b = parse_numbers(a.bbox, 4, "--bbox", "W,S,E,N");
+    if (!b) return b.error();
+    o.bbox = LonLatBounds{(*b)[0], (*b)[1], (*b)[2], (*b)[3]};
+  }
   auto cache_size = parse_byte_size(a.cache_size, "--cache-size");
   if (!cache_size) return cache_size.error();
   if (a.cache_dir.empty()) return make_error(ErrorCode::invalid_argument, "--cache-dir is empty");
@@ -181,6 +186,16 @@ int run_warm(const WarmArgs& a) {
   o.source = *source;
   const client::SourceInfo& info = o.source->info();
   if (a.levels.empty()) o.last_level = info.info.geometry.max_zoom();
+  if (o.bbox) {
+    auto region = client::bbox_region(info.info, *o.bbox);
+    if (!region)
+      return report_error(
+          make_error(region.error().code, info.key + ": " + region.error().message));
+    if (region->empty())
+      std::fprintf(stderr, "vts warm: --bbox %s does not overlap %s's footprint: nothing to warm\n",
+                   a.bbox.c_str(), info.key.c_str());
+    o.region = *region;
+  }
   if (auto st = check_request(a, info, o); !st) return report_error(st.error());
   // Remember the tileset in the cache folder, so viewers and `vts cache serve` can open it with
   // the network gone.
@@ -211,7 +226,10 @@ Runner add_warm(CLI::App& app) {
   c->add_option("--cache-dir", a->cache_dir, "Cache folder (created if missing)")->required();
   c->add_option("--levels", a->levels, "Levels A-B (or one level A); default all");
   c->add_option("--region", a->region,
-                "Only tiles over x0,y0,x1,y1 (finest-level texels, half-open) at every level");
+                "Only tiles over x0,y0,x1,y1 (finest-level texels, half-open) at every level")
+      ->excludes(c->add_option("--bbox", a->bbox,
+                               "Georeferenced tilesets: only tiles over W,S,E,N (degrees), clipped "
+                               "to the tileset's footprint, at every level"));
   c->add_option("--concurrency", a->concurrency, "Tile requests in flight")
       ->check(CLI::Range(1u, 1024u))
       ->capture_default_str();

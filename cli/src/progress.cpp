@@ -3,7 +3,9 @@
 #include <unistd.h>
 
 #include <cctype>
+#include <cmath>
 #include <cstdio>
+#include <cstdlib>
 
 namespace vts::cli {
 
@@ -142,6 +144,26 @@ Result<TexelRect> parse_texel_rect(const std::string& text, std::string_view fla
         ErrorCode::invalid_argument,
         std::string(flag) + " '" + text + "' is empty (x1 must exceed x0 and y1 exceed y0)");
   return r;
+}
+
+Result<std::vector<double>> parse_numbers(const std::string& text, std::size_t count,
+                                          std::string_view flag, std::string_view form) {
+  std::vector<double> v;
+  std::size_t start = 0;
+  for (std::size_t i = 0; i < count; ++i) {
+    const std::size_t comma = i + 1 < count ? text.find(',', start) : text.size();
+    const std::string part =
+        comma == std::string::npos ? std::string() : text.substr(start, comma - start);
+    char* stop = nullptr;
+    const double d = part.empty() ? 0.0 : std::strtod(part.c_str(), &stop);
+    if (part.empty() || *stop != '\0' || !std::isfinite(d))
+      return make_error(ErrorCode::invalid_argument, std::string(flag) + " '" + text +
+                                                         "' is not of the form " +
+                                                         std::string(form) + " (degrees)");
+    v.push_back(d);
+    start = comma + 1;
+  }
+  return v;
 }
 
 }  // namespace vts::cli

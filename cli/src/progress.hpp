@@ -9,6 +9,7 @@
 #include <string>
 #include <string_view>
 #include <utility>
+#include <vector>
 
 #include "vts/protocol/geometry.hpp"
 #include "vts/protocol/result.hpp"
@@ -57,5 +58,9 @@ Result<std::uint64_t> parse_byte_size(const std::string& text, std::string_view 
 Result<std::pair<int, int>> parse_level_range(const std::string& text, std::string_view flag);
 // x0,y0,x1,y1 in finest-level texels, half-open, non-empty.
 Result<TexelRect> parse_texel_rect(const std::string& text, std::string_view flag);
+// `count` comma-separated finite numbers (degrees: W,S,E,N or LON,LAT); invalid_argument naming
+// `flag` and `form` otherwise.
+Result<std::vector<double>> parse_numbers(const std::string& text, std::size_t count,
+                                          std::string_view flag, std::string_view form);
 
 }  // namespace vts::cli

@@ -1,7 +1,10 @@
 #include "vts/client/warm.hpp"
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <condition_variable>
+#include <cstdio>
 #include <mutex>
 #include <unordered_map>
 
@@ -27,7 +30,7 @@ constexpr auto kPoll = std::chrono::milliseconds(100);
 class TileWalk {
  public:
   TileWalk(const Geometry& g, int first, int last, const TexelRect& region) {
-    for (int z = first; z <= last; ++z) {
+    for (int z = first; z <= last && !region.empty(); ++z) {
       const TexelRect r = g.map_rect(g.max_zoom(), region, z);
       if (r.empty()) continue;
       const std::uint64_t t = g.tile_size();
@@ -246,7 +249,33 @@ class WarmRun {
   std::optional<Error> disk_error_;  // a disk error that makes going on pointless
 };
 
+std::string degrees_text(const LonLatBounds& b) {
+  char text[128];
+  std::snprintf(text, sizeof text, "%.9g,%.9g,%.9g,%.9g", b.west, b.south, b.east, b.north);
+  return text;
+}
+
 }  // namespace
+
+Result<TexelRect> bbox_region(const TilesetInfo& info, const LonLatBounds& bbox) {
+  if (!info.georeference)
+    return make_error(ErrorCode::invalid_argument,
+                      "--bbox needs a georeferenced tileset; this one has no georeference "
+                      "(use --region, in texels)");
+  const LonLatBounds& b = bbox;
+  if (!std::isfinite(b.west) || !std::isfinite(b.south) || !std::isfinite(b.east) ||
+      !std::isfinite(b.north) || b.west >= b.east || b.south >= b.north)
+    return make_error(ErrorCode::invalid_argument,
+                      "--bbox " + degrees_text(b) +
+                          ": needs finite west < east and south < north (degrees; a box across "
+                          "the antimeridian is not supported)");
+  const Georeference& geo = *info.georeference;
+  const LonLatBounds clipped{std::max(b.west, geo.bounds.west), std::max(b.south, geo.bounds.south),
+                             std::min(b.east, geo.bounds.east),
+                             std::min(b.north, geo.bounds.north)};
+  if (clipped.west >= clipped.east || clipped.south >= clipped.north) return TexelRect{};
+  return footprint_texels(geo.tiling, info.geometry, clipped);
+}
 
 std::uint64_t warm_tile_count(const Geometry& geometry, int first_level, int last_level,
                               const TexelRect& region) {
@@ -285,6 +314,8 @@ nlohmann::json warm_report_json(const WarmOptions& o, const WarmReport& r) {
   j["levels"] = {o.first_level, o.last_level};
   j["region"] = region ? nlohmann::json{region->x0, region->y0, region->x1, region->y1}
                        : nlohmann::json(nullptr);
+  j["bbox"] = o.bbox ? nlohmann::json{o.bbox->west, o.bbox->south, o.bbox->east, o.bbox->north}
+                     : nlohmann::json(nullptr);
   j["tiles_total"] = r.tiles_total;
   j["from_network"] = r.network;
   j["already_cached"] = r.cached;

@@ -17,6 +17,7 @@
 #include "vts/builder/image_io.hpp"
 #include "vts/client/source.hpp"
 #include "vts/client/tile_client.hpp"
+#include "vts/renderer/geo_view.hpp"
 #include "vts/renderer/gl_context.hpp"
 #include "vts/renderer/globe.hpp"
 #include "vts/renderer/reference.hpp"
@@ -246,3 +247,40 @@ TEST_F(GlobeTest, TiltedTwoHundredMetresUpSeesAKilometreAccurately) {
 }
 
 }  // namespace
+
+// A sparse WorldCRS84Quad synthetic planet (our levels 0-6, 16384 x 8192: the scheme's grid)
+// holding only a European footprint, viewed on the globe with vts view --center's camera
+// (camera_at): the GPU matches the reference, every pixel sees the footprint's data, and the
+// texel under the screen centre is the one tiling.hpp puts at the place.
+TEST_F(GlobeTest, ASparseWorldCrs84QuadArchiveSitsWhereItsGeoreferenceSays) {
+  const fs::path path = *dir_ / "crs84.pmtiles";
+  if (!fs::exists(path)) {
+    vts::BuildOptions o;
+    o.synthetic = vts::SyntheticSpec{16384, 8192, std::nullopt, 6};
+    o.tiling = vts::Tiling::world_crs84_quad;
+    o.bounds = vts::LonLatBounds{-10.5, 35.25, 30.125, 60.1};
+    o.output = path;
+    o.threads = 2;
+    auto r = vts::build_pyramid(o);
+    ASSERT_TRUE(r.ok()) << r.error().to_string();
+  }
+  auto vt = open(path);
+  ASSERT_TRUE(vt);
+  const vts::Geometry& g = vt->geometry();
+  for (const vts::LonLat at : {vts::LonLat{5, 45}, vts::LonLat{25.3, 58.9}}) {
+    auto k = camera_at(CameraKey{}, vts::Tiling::world_crs84_quad, g, at, 6);
+    ASSERT_TRUE(k) << k.error().message;
+    const GlobeScene scene = scene_for(*vt, k->globe);
+    const auto centre = scene.hit(128, 96, 256, 192);
+    const auto want = vts::lonlat_to_texel(vts::Tiling::world_crs84_quad, 256, 6, at);
+    ASSERT_TRUE(centre);
+    EXPECT_NEAR(centre->first, want.x, 0.01);
+    EXPECT_NEAR(centre->second, want.y, 0.01);
+    const Image got = converge(*vt, scene, 256, 192);
+    const ImageDiff d = compare(got, reference(path, scene, 256, 192),
+                                "globe-crs84-" + std::to_string(int(at.lon)));
+    EXPECT_GE(d.psnr_db, 35.0) << at.lon;
+    EXPECT_EQ(magenta(got), 0) << at.lon;
+    EXPECT_EQ(lit(got), 256 * 192) << at.lon;
+  }
+}

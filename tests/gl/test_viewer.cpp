@@ -135,3 +135,40 @@ TEST_F(ViewerTest, DebugViewNamesRoundTrip) {
 }
 
 }  // namespace
+
+// A georeferenced plane (the scheme set as vts view sets it from the georeference): the HUD's
+// camera line ends with the place at the screen centre, then, once the cursor is seen, at the
+// cursor. 600 x 400 in 64-texel tiles: levels 0-4, 1024 finest texels per 360 degrees.
+TEST_F(ViewerTest, AGeoreferencedPlaneHudShowsThePlaceAtTheCentreThenAtTheCursor) {
+  ViewerOptions o;
+  o.tiling = vts::Tiling::world_crs84_quad;
+  auto v = make(o);
+  ASSERT_TRUE(v);
+  ASSERT_TRUE(v->run_headless(400, true).ok());
+  // The centre, texel (300, 200): lon 300 / 1024 * 360 - 180, lat 90 - 200 / 1024 * 360.
+  EXPECT_NE(v->hud_text()[3].find("lon -74.53125  lat 19.68750 (centre)"), std::string::npos)
+      << v->hud_text()[3];
+  // 32 pixels right of the centre at 4.2 texels per pixel: u = 300 + 134.4.
+  v->controls().cursor(112, 50, 1, 160, 100);
+  ASSERT_TRUE(v->run_headless(1, false).ok());
+  EXPECT_NE(v->hud_text()[3].find("lon -27.28125  lat 19.68750 (cursor)"), std::string::npos)
+      << v->hud_text()[3];
+}
+
+TEST_F(ViewerTest, TheGlobeRefusesAWebMercatorTilesetBeforeOpeningAWindow) {
+  const fs::path path = archive("viewer", 64, 4, vts::SyntheticSpec{600, 400, std::nullopt, 6});
+  auto src = vts::client::open_local_archive(path);
+  ASSERT_TRUE(src.ok());
+  auto tiles = vts::client::TileClient::create(std::shared_ptr(std::move(*src)));
+  ASSERT_TRUE(tiles.ok());
+  const vts::Geometry geometry = (*tiles)->info().info.geometry;
+  ViewerOptions o;
+  o.globe = true;
+  o.tiling = vts::Tiling::web_mercator_quad;
+  o.window.visible = false;
+  auto v = Viewer::create(std::shared_ptr(std::move(*tiles)), geometry, std::move(o),
+                          [](const std::string&) {});
+  ASSERT_FALSE(v.ok());
+  EXPECT_EQ(v.error().code, vts::ErrorCode::unsupported);
+  EXPECT_NE(v.error().message.find("WebMercatorQuad"), std::string::npos);
+}

@@ -198,4 +198,32 @@ expect_clean_failure env -u DISPLAY -u WAYLAND_DISPLAY "$VTS" view "$ARCHIVE" --
 grep -q 'xvfb-run' "$ERR" || { show_output; fail "the no-display error does not mention xvfb-run"; }
 [[ ! -s $OUT ]] || { show_output; fail "vts view printed a report without a display"; }
 
+note "georeferenced: --center/--level start plane and globe over the place; refusals"
+expect_ok "$VTS" build --synthetic 4096x2048 --tiling WorldCRS84Quad \
+  --bbox=-10.5,35.25,30.125,60.1 -o "$WORK/geo.pmtiles" --threads 2
+expect_ok "$VTS" build --synthetic 4096x4096 --tiling WebMercatorQuad --bbox=2,48,3,49 \
+  -o "$WORK/web.pmtiles" --threads 2
+for scene in plane globe; do
+  expect_ok "${XVFB[@]}" "$VTS" view "$WORK/geo.pmtiles" --headless --frames 2 --width "$W" \
+    --height "$H" --scene "$scene" --center 5,45 --level 3 --json
+  # 4096 texels over 360 degrees from (-180, 90); level 3 of 4: 2 finest texels per pixel.
+  python3 - "$OUT" "$scene" <<'EOF' || fail "--center 5,45 --level 3 ($scene): wrong camera"
+import json, sys
+k = json.load(open(sys.argv[1]))["camera"]["keys"][0]
+if sys.argv[2] == "plane":
+    u, v = k["center"]
+    assert abs(u - 185 / 360 * 4096) < 1e-6 and abs(v - 512) < 1e-6, k
+    assert k["texels_per_pixel"] == 2, k
+else:
+    assert k["lon"] == 5 and k["lat"] == 45 and k["tilt"] == 0, k
+EOF
+done
+expect_clean_failure "${XVFB[@]}" "$VTS" view "$ARCHIVE" --headless --frames 1 --center 5,45
+if ((RC != 2)) || ! grep -q 'not georeferenced' "$ERR"; then show_output; fail "--center, plain image"; fi
+expect_clean_failure "${XVFB[@]}" "$VTS" view "$WORK/geo.pmtiles" --headless --frames 1 --center 5
+if ((RC != 2)) || ! grep -q 'LON,LAT' "$ERR"; then show_output; fail "--center 5"; fi
+expect_clean_failure "${XVFB[@]}" "$VTS" view "$WORK/web.pmtiles" --headless --frames 1 \
+  --scene globe
+if ((RC != 6)) || ! grep -q 'WebMercatorQuad' "$ERR"; then show_output; fail "Web Mercator globe"; fi
+
 note "ok"

@@ -7,6 +7,9 @@
 #   subset    --levels and --region select exactly the tiles the geometry says
 #   crash     kill -9 at random moments and SIGINT leave a valid cache; warm then resumes to the end
 #   bad_input unreachable URL, bad --levels/--region/--cache-size: clean errors, no cache folder
+#   bbox      --bbox (degrees) on sparse georeferenced archives warms exactly the tiles of the box
+#             clipped to the footprint, as docs/FORMAT.md §6 defines them (computed here in
+#             Python); a box outside the footprint warms nothing (exit 0); no georeference: exit 2
 # Environment (besides lib.sh's): SQLITE3, the sqlite3 CLI.
 # shellcheck source=lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
@@ -15,7 +18,7 @@ source "$(dirname "${BASH_SOURCE[0]}")/serve_lib.sh"
 
 SQLITE3=${SQLITE3:-sqlite3}
 require_tool "$SQLITE3"
-PART=${1:?usage: warm.sh fill|subset|crash|bad_input}
+PART=${1:?usage: warm.sh fill|subset|crash|bad_input|bbox}
 
 # sql DIR QUERY: the sqlite3 CLI's answer for the cache in DIR.
 sql() { "$SQLITE3" "$1/cache.db" "$2"; }
@@ -298,11 +301,96 @@ part_bad_input() {
   stop_server
 }
 
+# bbox_tiles SCHEME MAXZ T BOUNDS BBOX: "z x y" of every tile over BBOX clipped to BOUNDS (both
+# W,S,E,N degrees), by docs/FORMAT.md §6's footprint rule restated in Python; nothing if disjoint.
+bbox_tiles() {
+  python3 - "$@" <<'PY'
+import math, sys
+scheme, maxz, T = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
+bw, bs, be, bn = map(float, sys.argv[4].split(","))
+w, s, e, n = map(float, sys.argv[5].split(","))
+w, s, e, n = max(w, bw), max(s, bs), min(e, be), min(n, bn)
+if w >= e or s >= n:
+    sys.exit(0)
+N = T * 2 ** maxz
+def tx(lon): return (lon + 180) / 360 * N
+def ty(lat):
+    if scheme == "WorldCRS84Quad": return (90 - lat) / 360 * N
+    return (1 - math.log(math.tan(math.pi / 4 + math.radians(lat) / 2)) / math.pi) / 2 * N
+def snap(v): return round(v) if abs(v - round(v)) < 1e-6 else v
+W, H = N, (N // 2 if scheme == "WorldCRS84Quad" else N)
+x0, y0 = max(math.floor(snap(tx(w))), 0), max(math.floor(snap(ty(n))), 0)
+x1, y1 = min(math.ceil(snap(tx(e))), W), min(math.ceil(snap(ty(s))), H)
+for z in range(maxz + 1):
+    d = maxz - z
+    lx0, ly0, lx1, ly1 = x0 >> d, y0 >> d, -(-x1 // 2 ** d), -(-y1 // 2 ** d)
+    for y in range(ly0 // T, -(-ly1 // T)):
+        for x in range(lx0 // T, -(-lx1 // T)):
+            print(z, x, y)
+PY
+}
+
+part_bbox() {
+  # WorldCRS84Quad TMS levels 0-5 = our levels 0-6 (16384 x 8192); WebMercatorQuad levels 0-6.
+  local geo_bounds="-10.5,35.25,30.125,60.1" web_bounds="2.2,48.8,2.5,48.95"
+  expect_ok "$VTS" build --synthetic 16384x8192 --tiling WorldCRS84Quad --bbox="$geo_bounds" \
+    -o "$WORK/geo.pmtiles" --threads 2
+  expect_ok "$VTS" build --synthetic 16384x16384 --tiling WebMercatorQuad --bbox="$web_bounds" \
+    -o "$WORK/web.pmtiles" --threads 2
+  expect_ok "$VTS" build --synthetic 2048x1024 -o "$WORK/syn.pmtiles"
+  start_server "$WORK/geo.pmtiles" "$WORK/web.pmtiles" "$WORK/syn.pmtiles"
+  local name scheme bounds bbox count i=0 dir
+  # archive bbox: inside the footprint, straddling its edges, the whole world, a sliver thinner
+  # than a texel; around Paris on Web Mercator (inside, and a box holding the whole footprint).
+  while read -r name bbox; do
+    i=$((i + 1))
+    dir="$WORK/b$i"
+    if [[ $name == geo ]]; then scheme=WorldCRS84Quad bounds=$geo_bounds; else
+      scheme=WebMercatorQuad bounds=$web_bounds
+    fi
+    bbox_tiles "$scheme" 6 256 "$bounds" "$bbox" >"$LOGS/want.txt"
+    count=$(wc -l <"$LOGS/want.txt")
+    note "$name --bbox $bbox: $count tiles (Python, FORMAT.md §6)"
+    ((count > 0)) || fail "the table's box $bbox misses the footprint"
+    warm_json "$BASE/$name" --cache-dir "$dir" --bbox="$bbox"
+    json_check "$LOGS/warm.json" "j.tiles_total == $count && j.from_network == $count &&
+      j.absent == 0 && j.failed == 0 && j.complete && j.bbox.join() == [$bbox].join()" \
+      "$count tiles, none absent"
+    expect_tiles "$dir" "$LOGS/want.txt"
+    expect_cached "$dir" "$count"
+  done <<'EOF'
+geo 0,40,10,50
+geo -20,30,0,45
+geo -180,-90,180,90
+geo 12.0001,44.5,12.0002,44.50001
+web 2.3,48.85,2.35,48.9
+web 2,48,3,49
+EOF
+  note "a box outside the footprint warms nothing and says so (exit 0)"
+  warm_json "$BASE/geo" --cache-dir "$WORK/outside" --bbox=100,0,110,10
+  json_check "$LOGS/warm.json" "j.tiles_total == 0 && j.from_network == 0 && j.absent == 0 &&
+    j.complete" "nothing to warm"
+  grep -q "does not overlap" "$ERR" || { show_output; fail "no note that the box misses"; }
+  note "refusals (exit 2): no georeference, malformed or inverted boxes, --bbox with --region"
+  local bad args
+  for bad in "syn --bbox=0,0,1,1:georeference" "geo --bbox=0,0,1:W,S,E,N" \
+    "geo --bbox=10,0,5,1:west < east" "geo --bbox=0,0,nan,1:W,S,E,N" \
+    "geo --bbox=0,0,1,1 --region 0,0,1,1:excludes"; do
+    read -r -a args <<<"${bad%%:*}"
+    expect_clean_failure "$VTS" warm "$BASE/${args[0]}" "${args[@]:1}" --cache-dir "$WORK/never"
+    ((RC == 2)) || { show_output; fail "warm ${bad%%:*} exited $RC, expected 2"; }
+    grep -q -- "${bad#*:}" "$ERR" || { show_output; fail "warm ${bad%%:*}: no '${bad#*:}'"; }
+    [[ ! -e $WORK/never ]] || fail "warm ${bad%%:*} created a cache folder"
+  done
+  stop_server
+}
+
 case $PART in
   fill) part_fill ;;
   subset) part_subset ;;
   crash) part_crash ;;
   bad_input) part_bad_input ;;
+  bbox) part_bbox ;;
   *) fail "unknown part '$PART'" ;;
 esac
 note "PASS"

@@ -69,8 +69,8 @@ std::vector<std::string> hud_lines(const HudNumbers& n, bool globe, const PlaneV
     std::snprintf(buf[2], sizeof buf[2], "lon %.4f  lat %.4f  altitude %.0f m", g.lon_deg,
                   g.lat_deg, g.altitude_m);
   } else {
-    std::snprintf(buf[2], sizeof buf[2], "center %.1f, %.1f  %.3g texels/pixel", p.center_u,
-                  p.center_v, p.texels_per_pixel);
+    std::snprintf(buf[2], sizeof buf[2], "center %.1f, %.1f  %.3g texels/pixel%s%s", p.center_u,
+                  p.center_v, p.texels_per_pixel, n.place.empty() ? "" : "  ", n.place.c_str());
   }
   std::snprintf(buf[3], sizeof buf[3], "%s slots  physical %.1f MiB  page table %.2f MiB",
                 n.bc1 ? "bc1 (S3TC)" : "rgba8", double(n.physical_bytes) / (1 << 20),
@@ -103,11 +103,17 @@ void CameraControls::button(Button b, bool down, double x, double y) {
   }
 }
 
+std::optional<std::pair<double, double>> CameraControls::cursor_pixel() const {
+  if (!cursor_seen_) return std::nullopt;
+  return std::pair<double, double>{last_x_ * scale_, last_y_ * scale_};
+}
+
 void CameraControls::cursor(double x, double y, double scale, int fb_width, int fb_height) {
   const double dx = (x - last_x_) * scale, dy = (y - last_y_) * scale;
   const double px = last_x_ * scale, py = last_y_ * scale;
   last_x_ = x;
   last_y_ = y;
+  scale_ = scale;
   const bool first = !cursor_seen_;
   cursor_seen_ = true;
   if (first || (!left_ && !right_)) return;

@@ -4,9 +4,11 @@
 #include <GLFW/glfw3.h>
 
 #include <algorithm>
+#include <cstdio>
 #include <nlohmann/json.hpp>
 #include <thread>
 
+#include "vts/renderer/geo_view.hpp"
 #include "vts/renderer/gl_check.hpp"
 #include "vts/renderer/globe.hpp"
 
@@ -173,6 +175,8 @@ Viewer::~Viewer() {
 Result<std::unique_ptr<Viewer>> Viewer::create(std::shared_ptr<client::TileClient> tiles,
                                                const Geometry& geometry, ViewerOptions options,
                                                Log log) {
+  if (options.globe)
+    if (auto s = check_globe_tiling(options.tiling); !s) return s.error();
   std::unique_ptr<Viewer> v(new Viewer(std::move(options), geometry, std::move(log)));
   auto gl = GlContext::create(v->options_.window);
   if (!gl) return gl.error();
@@ -210,8 +214,8 @@ FrameStats Viewer::render(double frame, int width, int height, bool follow_path)
   return vt_->render(PlaneScene(c.plane), width, height);
 }
 
-std::vector<std::string> Viewer::hud_lines_now(const FrameStats& st, double uploads,
-                                               double ms) const {
+std::vector<std::string> Viewer::hud_lines_now(const FrameStats& st, double uploads, double ms,
+                                               int width, int height) const {
   HudNumbers n;
   n.resident = st.resident;
   n.pending = st.pending;
@@ -223,6 +227,9 @@ std::vector<std::string> Viewer::hud_lines_now(const FrameStats& st, double uplo
   n.bc1 = vt_->tile_format() == PixelFormat::bc1;
   n.physical_bytes = vt_->physical_gpu_bytes();
   n.page_table_bytes = vt_->page_table_gpu_bytes();
+  if (options_.tiling != Tiling::none && !controls_.globe())
+    n.place = plane_place_text(options_.tiling, geometry_, controls_.plane, width, height,
+                               controls_.cursor_pixel());
   return hud_lines(n, controls_.globe(), controls_.plane, controls_.globe_view);
 }
 
@@ -246,7 +253,7 @@ Result<HeadlessRun> Viewer::run_headless(int frames, bool until_complete) {
     ms += f.frame_ms;
   }
   const double n = double(run.frames.size());
-  if (!run.frames.empty()) lines_ = hud_lines_now(run.frames.back(), uploads / n, ms / n);
+  if (!run.frames.empty()) lines_ = hud_lines_now(run.frames.back(), uploads / n, ms / n, w, h);
   return run;
 }
 
@@ -259,7 +266,8 @@ void Viewer::interactive_frame(double frame, int w, int h) {
   uploads_ += st.uploads;
   ++counted_;
   if (lines_.empty() || now - last_title_ >= std::chrono::milliseconds(250)) {
-    lines_ = hud_lines_now(st, double(uploads_) / double(counted_), wall_ms_ / double(counted_));
+    lines_ =
+        hud_lines_now(st, double(uploads_) / double(counted_), wall_ms_ / double(counted_), w, h);
     const std::string text = lines_[0] + "  " + lines_[1];
     glfwSetWindowTitle(gl_->window(), ("vts view — " + text).c_str());
     if (now - last_line_ >= std::chrono::seconds(1)) {
@@ -351,6 +359,19 @@ std::string Viewer::report_json(const HeadlessRun& run, const std::string& sourc
   j["camera"] =
       camera_key_json(controls_.globe(), controls_.plane, controls_.globe_view, vt_->debug_view());
   return j.dump(2);
+}
+
+std::string Viewer::report_text(const HeadlessRun& run, const std::string& source,
+                                const std::string& screenshot) const {
+  const FrameStats& last = run.frames.back();
+  const std::string complete =
+      run.complete_at ? "complete at frame " + std::to_string(*run.complete_at) : "never complete";
+  char buf[160];
+  std::snprintf(buf, sizeof buf, " %dx%d: %zu frames, %s; %u resident, %u pending, hit %.1f%%",
+                options_.window.width, options_.window.height, run.frames.size(), complete.c_str(),
+                last.resident, last.pending, last.hit_ratio * 100);
+  return std::string(controls_.globe() ? "globe " : "plane ") + source + buf +
+         (screenshot.empty() ? "" : "; screenshot " + screenshot);
 }
 
 std::optional<CameraPath> Viewer::recorded() const {

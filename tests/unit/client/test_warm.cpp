@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <cmath>
 #include <filesystem>
 #include <optional>
 #include <thread>
@@ -273,3 +274,54 @@ TEST(Warm, TheJsonReportCarriesTheCountsAndTheRequest) {
 }
 
 }  // namespace
+
+namespace {
+
+vts::TilesetInfo georeferenced(vts::Tiling t, std::uint64_t w, std::uint64_t h,
+                               vts::LonLatBounds bounds) {
+  vts::TilesetInfo info;
+  info.geometry = *vts::Geometry::create(w, h, 256, 4);
+  info.georeference = vts::Georeference{t, bounds, {}};
+  return info;
+}
+
+}  // namespace
+
+TEST(WarmBbox, TheRegionOfABoxIsTheFootprintOfTheBoxClippedToTheTilesetsBounds) {
+  using vts::LonLatBounds;
+  const auto t = vts::Tiling::world_crs84_quad;
+  const LonLatBounds bounds{-10.5, 35.25, 30.125, 60.1};
+  const auto info = georeferenced(t, 16384, 8192, bounds);
+  // 16384 texels over 360 degrees: 45.5111 texels per degree, (0, 90) at the top-left.
+  auto inside = vts::client::bbox_region(info, {0, 40, 10, 50});
+  ASSERT_TRUE(inside) << inside.error().message;
+  EXPECT_EQ(*inside, vts::footprint_texels(t, info.geometry, {0, 40, 10, 50}));
+  EXPECT_EQ(inside->x0, 8192u);
+  EXPECT_EQ(inside->y0, 1820u);  // floor((90 - 50) * 16384 / 360) = floor(1820.44)
+  auto straddling = vts::client::bbox_region(info, {-20, 30, 0, 45});
+  ASSERT_TRUE(straddling);
+  EXPECT_EQ(*straddling, vts::footprint_texels(t, info.geometry, {-10.5, 35.25, 0, 45}));
+  auto world = vts::client::bbox_region(info, {-180, -90, 180, 90});
+  ASSERT_TRUE(world);
+  EXPECT_EQ(*world, vts::footprint_texels(t, info.geometry, bounds));
+  auto outside = vts::client::bbox_region(info, {100, 0, 110, 10});
+  ASSERT_TRUE(outside);
+  EXPECT_TRUE(outside->empty());
+  EXPECT_EQ(vts::client::warm_tile_count(info.geometry, 0, info.geometry.max_zoom(), *outside), 0u);
+}
+
+TEST(WarmBbox, ABoxNeedsAGeoreferenceAndWestBeforeEastAndSouthBeforeNorth) {
+  vts::TilesetInfo plain;
+  plain.geometry = *vts::Geometry::create(600, 300, 256, 4);
+  auto r = vts::client::bbox_region(plain, {0, 0, 1, 1});
+  ASSERT_FALSE(r);
+  EXPECT_EQ(r.error().code, vts::ErrorCode::invalid_argument);
+  EXPECT_NE(r.error().message.find("georeference"), std::string::npos);
+  const auto info =
+      georeferenced(vts::Tiling::web_mercator_quad, 4096, 4096, {2.2, 48.8, 2.5, 48.95});
+  EXPECT_FALSE(vts::client::bbox_region(info, {3, 48, 2, 49}));    // antimeridian / inverted
+  EXPECT_FALSE(vts::client::bbox_region(info, {2, 49, 3, 48}));    // south above north
+  EXPECT_FALSE(vts::client::bbox_region(info, {2, 48, 2, 49}));    // zero width
+  EXPECT_FALSE(vts::client::bbox_region(info, {2, 48, NAN, 49}));  // not finite
+  EXPECT_TRUE(vts::client::bbox_region(info, {2, 48, 3, 49}));
+}

@@ -21,6 +21,8 @@
 #include "vts/client/source.hpp"
 #include "vts/protocol/geometry.hpp"
 #include "vts/protocol/result.hpp"
+#include "vts/protocol/tileset.hpp"
+#include "vts/protocol/tiling.hpp"
 
 namespace vts::client {
 
@@ -37,8 +39,10 @@ struct WarmOptions {
   std::uint64_t cache_bytes = 10ull << 30;
   int first_level = 0, last_level = 0;  // inclusive; last_level <= the geometry's max zoom
   std::optional<TexelRect> region;      // finest-level texels inside the image; none = all
-  unsigned concurrency = 32;            // gets in flight, >= 1
-  unsigned max_errors = 100;            // stop after this many failed tiles; 0 = never
+  // The --bbox the region came from (bbox_region), for the report only.
+  std::optional<LonLatBounds> bbox;
+  unsigned concurrency = 32;  // gets in flight, >= 1
+  unsigned max_errors = 100;  // stop after this many failed tiles; 0 = never
   // When set, the source's description is saved in the cache folder under this location
   // (save_source_info) once the cache is open, before the first get.
   std::optional<std::string> remember_as;
@@ -64,7 +68,15 @@ struct WarmReport {
   }
 };
 
-// Tiles of levels first..last over `region` (finest-level texels).
+// The region (finest-level texels) of a box in degrees on a georeferenced tileset: the box clipped
+// to the tileset's footprint (georeference bounds), then footprint_texels() (tiling.hpp), so at
+// every level the tiles warmed are exactly footprint_tiles() of the clipped box: all of them exist
+// in a sparse archive. A box that does not overlap the footprint gives an empty rectangle (no
+// tiles). Errors (invalid_argument): a tileset without georeference; a box that is not finite or
+// has west >= east or south >= north (a box across the antimeridian is not supported).
+Result<TexelRect> bbox_region(const TilesetInfo& info, const LonLatBounds& bbox);
+
+// Tiles of levels first..last over `region` (finest-level texels); an empty region has none.
 std::uint64_t warm_tile_count(const Geometry& geometry, int first_level, int last_level,
                               const TexelRect& region);
 
@@ -74,10 +86,10 @@ std::uint64_t warm_tile_count(const Geometry& geometry, int first_level, int las
 Result<WarmReport> warm_cache(const WarmOptions& options);
 
 // The `vts warm --json` document of a run: source (key), cache_dir, levels [first, last], region
-// ([x0, y0, x1, y1] or null), tiles_total, from_network, already_cached, absent, failed,
-// not_done, bytes_fetched, bytes_cached, seconds, tiles_per_second, bytes_per_second, complete,
-// interrupted, errors, disk_error (or null), cache {tiles, bytes, pinned_tiles, pinned_bytes,
-// max_bytes}.
+// ([x0, y0, x1, y1] or null), bbox ([west, south, east, north] as asked, or null), tiles_total,
+// from_network, already_cached, absent, failed, not_done, bytes_fetched, bytes_cached, seconds,
+// tiles_per_second, bytes_per_second, complete, interrupted, errors, disk_error (or null), cache
+// {tiles, bytes, pinned_tiles, pinned_bytes, max_bytes}.
 nlohmann::json warm_report_json(const WarmOptions& options, const WarmReport& report);
 
 }  // namespace vts::client

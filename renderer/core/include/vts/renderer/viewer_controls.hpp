@@ -7,6 +7,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "vts/protocol/geometry.hpp"
@@ -34,6 +35,9 @@ struct HudNumbers {
   std::string debug;
   bool bc1 = false;
   std::uint64_t physical_bytes = 0, page_table_bytes = 0;
+  // Georeferenced tilesets: the place at the plane's screen centre (lonlat_text(), geo_view.hpp);
+  // empty otherwise. The plane's camera line ends with it.
+  std::string place;
 };
 
 // Four lines: streaming numbers, hit ratio / bias / frame time, the physical texture, then the
@@ -60,6 +64,9 @@ class CameraControls {
                  std::uint64_t image_height);
 
   bool cursor_seen() const { return cursor_seen_; }
+  // Where the cursor is in framebuffer pixels (the last cursor event's place times its scale);
+  // nullopt before the first cursor event.
+  std::optional<std::pair<double, double>> cursor_pixel() const;
   // (x, y): where the cursor is, used only when no cursor event was seen yet.
   void button(Button b, bool down, double x, double y);
   void cursor(double x, double y, double scale, int fb_width, int fb_height);
@@ -84,7 +91,7 @@ class CameraControls {
   bool left_ = false, right_ = false;
   // The cursor as the latest event placed it. Events are handled in order, so a press and the
   // moves after it, read in one batch, still see the press's place.
-  double last_x_ = 0, last_y_ = 0;
+  double last_x_ = 0, last_y_ = 0, scale_ = 1;
   bool cursor_seen_ = false;
 };
 

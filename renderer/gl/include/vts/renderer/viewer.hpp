@@ -17,6 +17,7 @@
 #include "vts/client/tile_client.hpp"
 #include "vts/protocol/geometry.hpp"
 #include "vts/protocol/result.hpp"
+#include "vts/protocol/tiling.hpp"
 #include "vts/renderer/camera_path.hpp"
 #include "vts/renderer/gl_context.hpp"
 #include "vts/renderer/hud.hpp"
@@ -37,6 +38,10 @@ struct ViewerOptions {
   std::optional<CameraPath> path;  // followed until the user moves the camera
   bool record = false;             // keep every frame's camera (recorded())
   bool hud = false;                // a HUD even without a visible window (screenshots with it)
+  // The tileset's scheme (TilesetInfo::georeference): the plane's HUD shows the longitude and
+  // latitude at the cursor (at the screen centre before the cursor is seen, and headless); the
+  // globe refuses WebMercatorQuad (check_globe_tiling).
+  Tiling tiling = Tiling::none;
 };
 
 // What a headless run rendered.
@@ -51,7 +56,8 @@ class Viewer {
   using Log = std::function<void(const std::string&)>;
 
   // Errors: the window or context (GlContext::create), the virtual texture
-  // (VirtualTexture::create), the HUD when options.hud asks for one. A visible window whose HUD
+  // (VirtualTexture::create), the HUD when options.hud asks for one; a globe of a scheme
+  // check_globe_tiling() refuses (before any window opens). A visible window whose HUD
   // fails to build only logs a warning.
   static Result<std::unique_ptr<Viewer>> create(std::shared_ptr<client::TileClient> tiles,
                                                 const Geometry& geometry, ViewerOptions options,
@@ -75,6 +81,10 @@ class Viewer {
   // `vts view --headless --json`'s report of `run` (JSON, indented by 2).
   std::string report_json(const HeadlessRun& run, const std::string& source,
                           const std::string& screenshot) const;
+  // `vts view --headless`'s one-line summary of `run` (no newline): scene, source, size, frames,
+  // the first complete frame, the last frame's residency and hit ratio, the screenshot if any.
+  std::string report_text(const HeadlessRun& run, const std::string& source,
+                          const std::string& screenshot) const;
   // Every rendered frame's camera; nullopt without options.record or before the first frame.
   std::optional<CameraPath> recorded() const;
 
@@ -88,7 +98,9 @@ class Viewer {
  private:
   Viewer(ViewerOptions options, const Geometry& geometry, Log log);
   FrameStats render(double frame, int width, int height, bool follow_path);
-  std::vector<std::string> hud_lines_now(const FrameStats& st, double uploads, double ms) const;
+  // For a width x height frame (the cursor's place on a georeferenced plane).
+  std::vector<std::string> hud_lines_now(const FrameStats& st, double uploads, double ms, int width,
+                                         int height) const;
   void interactive_frame(double frame, int width, int height);
 
   ViewerOptions options_;
