@@ -131,16 +131,16 @@ stop_unit_line serve
 # The image's binary is the server-only build (-DVTS_BUILD_BUILDER=OFF): scripts/test.sh builds it
 # and names it in VTS_SERVER_ONLY. It must not need OpenImageIO; its DT_NEEDED entries are the
 # runtime packages. Without it, the test build's vts stands in (it has `vts build`, so
-# OpenImageIO is allowed there).
+# OpenImageIO and GDAL are allowed there).
 if [[ -n ${VTS_SERVER_ONLY:-} ]]; then
   [[ -x $VTS_SERVER_ONLY ]] || fail "VTS_SERVER_ONLY=$VTS_SERVER_ONLY is not an executable"
   IMAGE_VTS=$VTS_SERVER_ONLY
   note "server-only binary: $IMAGE_VTS"
-  if readelf -d "$IMAGE_VTS" | grep -i 'NEEDED.*openimageio'; then
-    fail "the server-only vts needs OpenImageIO (readelf -d above)"
+  if readelf -d "$IMAGE_VTS" | grep -iE 'NEEDED.*(openimageio|gdal)'; then
+    fail "the server-only vts needs OpenImageIO or GDAL (readelf -d above)"
   fi
-  if ldd "$IMAGE_VTS" | grep -i openimageio; then
-    fail "the server-only vts loads OpenImageIO (ldd above)"
+  if ldd "$IMAGE_VTS" | grep -iE 'openimageio|gdal'; then
+    fail "the server-only vts loads OpenImageIO or GDAL (ldd above)"
   fi
   "$IMAGE_VTS" --help >"$LOGS/server-only-help.txt" || fail "the server-only vts --help failed"
   grep -qE '^ +serve' "$LOGS/server-only-help.txt" || fail "the server-only vts has no serve"
@@ -201,14 +201,16 @@ for entry in os.environ["VTS_NEEDED"].split():
     # links GLFW and libepoxy for `vts view`, which the image's binary does not have.
     if pkg in ("libglfw3", "libepoxy0"):
         continue
-    # Likewise the test build's `vts build` links OpenImageIO, which the server-only image lacks.
-    if os.environ["SERVER_ONLY"] != "1" and pkg.startswith("libopenimageio"):
+    # Likewise the test build's `vts build` links OpenImageIO and GDAL, which the server-only
+    # image lacks.
+    if os.environ["SERVER_ONLY"] != "1" and pkg.startswith(("libopenimageio", "libgdal")):
         continue
     check(pkg in runtime_pkgs, f"Dockerfile: runtime stage lacks {pkg} (for {lib})")
 for gl in ("libgl1", "libglfw3", "libepoxy0", "libglx0", "libegl1"):
     check(gl not in runtime_pkgs, f"Dockerfile: GL package {gl} in the runtime image")
 for pkg in runtime_pkgs:
-    check(not pkg.startswith("libopenimageio"), f"Dockerfile: {pkg} in the server-only image")
+    check(not pkg.startswith(("libopenimageio", "libgdal")),
+          f"Dockerfile: {pkg} in the server-only image")
 check(re.search(r"^COPY --from=build \S+/cli/vts /usr/local/bin/vts$", runtime, re.M),
       "Dockerfile: runtime copies only the vts binary from the build stage")
 user = re.findall(r"^USER\s+(\S+)", runtime, re.M)
