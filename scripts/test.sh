@@ -198,6 +198,8 @@ if [[ ${VTS_TEST_SKIP_ASAN:-0} == 1 ]]; then
   skip "ASan+UBSan" "VTS_TEST_SKIP_ASAN=1"
 else
   export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:check_initialization_order=1:strict_init_order=1:detect_stack_use_after_return=1}
+  # Leaks inside third-party libraries only (each one named and explained in the file).
+  export LSAN_OPTIONS=${LSAN_OPTIONS:-suppressions=$ROOT/tests/lsan.supp:print_suppressions=0}
   export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
   sanitizer_build "ASan+UBSan" build-asan "" -DVTS_SANITIZE=address
 fi

@@ -94,7 +94,16 @@ TEST(ImageSource, TruncatedPixelDataIsAnErrorNotFilledRows) {
       spit(cut_path, bytes.substr(0, cut));
       // libjpeg fills the missing rows with grey and only warns ("Premature end of JPEG file");
       // libtiff's short strip read leaves read_scanlines() returning true.
-      expect_damaged(read_all({cut_path}), ErrorCode::truncated, cut_path, "reading rows");
+      const Status st = read_all({cut_path});
+      if (cut_path.extension() == ".tif" && !st.ok() && st.error().code == ErrorCode::corrupt) {
+        // libtiff's error handler is process-wide: once GDAL is loaded in the same process (the
+        // GdalSource tests, or `vts build` probing its first input), libtiff's "Read error at
+        // scanline" goes to GDAL instead of OpenImageIO, whose read then just fails: still exit
+        // 5, named "corrupt" rather than "truncated".
+        expect_damaged(st, ErrorCode::corrupt, cut_path, "reading rows");
+        continue;
+      }
+      expect_damaged(st, ErrorCode::truncated, cut_path, "reading rows");
     }
   }
 }
