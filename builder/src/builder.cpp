@@ -538,7 +538,7 @@ Result<BuildReport> build_pyramid(const BuildOptions& o) {
     build_from_source(
         o,
         [&](std::uint64_t y, std::uint32_t n, std::uint8_t* out) {
-          return gdal->read_rows(y, n, out);
+          return gdal->read_window(0, gdal->width(), y, n, out);
         },
         g, footprint_rects(*georeference, g), shared, threads);
   else

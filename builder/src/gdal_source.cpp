@@ -345,20 +345,23 @@ Result<std::unique_ptr<GdalSource>> GdalSource::open(
 
 GdalSource::~GdalSource() = default;
 
-Status GdalSource::read_rows(std::uint64_t y, std::uint32_t count, std::uint8_t* out) {
-  std::memset(out, 0, std::size_t(width_) * count * 4);
+Status GdalSource::read_window(std::uint64_t x0, std::uint64_t x1, std::uint64_t y,
+                               std::uint32_t count, std::uint8_t* out) {
+  const std::uint64_t out_w = x1 - x0;
+  std::memset(out, 0, std::size_t(out_w) * count * 4);
   ErrorCapture errors;
   const double lo = options_.value_range ? options_.value_range->first : 0.0;
   const double scale = options_.value_range ? 255.0 / (options_.value_range->second - lo) : 1.0;
   for (auto& in : inputs_) {
     const TexelRect& r = in->texels;
     const std::uint64_t y0 = std::max(y, r.y0), y1 = std::min(y + count, r.y1);
-    if (y0 >= y1 || r.x0 >= r.x1) continue;
-    const std::uint64_t w = r.x1 - r.x0, h = y1 - y0;
+    const std::uint64_t c0 = std::max(x0, r.x0), c1 = std::min(x1, r.x1);
+    if (y0 >= y1 || c0 >= c1) continue;
+    const std::uint64_t w = c1 - c0, h = y1 - y0;
     const int nb = in->bands;
     scratch_.resize(std::size_t(w) * h * nb);
     CPLErrorReset();
-    const CPLErr err = GDALDatasetRasterIO(in->warped, GF_Read, int(r.x0), int(y0), int(w), int(h),
+    const CPLErr err = GDALDatasetRasterIO(in->warped, GF_Read, int(c0), int(y0), int(w), int(h),
                                            scratch_.data(), int(w), int(h), GDT_Float32, nb,
                                            nullptr, nb * 4, GSpacing(w) * nb * 4, 4);
     if (err != CE_None || errors.failed())
@@ -367,7 +370,7 @@ Status GdalSource::read_rows(std::uint64_t y, std::uint32_t count, std::uint8_t*
                                                 ": " + errors.text());
     for (std::uint64_t row = 0; row < h; ++row) {
       const float* src = scratch_.data() + row * w * nb;
-      std::uint8_t* dst = out + ((y0 - y + row) * width_ + r.x0) * 4;
+      std::uint8_t* dst = out + ((y0 - y + row) * out_w + (c0 - x0)) * 4;
       for (std::uint64_t x = 0; x < w; ++x, src += nb, dst += 4) {
         const double a = std::clamp(double(src[nb - 1]), 0.0, 255.0) / 255.0;
         if (a <= 0) continue;

@@ -48,10 +48,11 @@ class GdalSource {
   const LonLatBounds& bounds() const { return bounds_; }
   std::string description() const { return description_; }
 
-  // Grid rows [y, y + count) as RGBA8 (width() * 4 bytes per row), in increasing order. Texels no
+  // Grid columns [x0, x1) of rows [y, y + count) as RGBA8 ((x1 - x0) * 4 bytes per row). Texels no
   // input covers (or covers with nodata, a mask or alpha 0) are transparent black; later inputs
   // are composited over earlier ones. A GDAL read error is corrupt, naming the file.
-  Status read_rows(std::uint64_t y, std::uint32_t count, std::uint8_t* out);
+  Status read_window(std::uint64_t x0, std::uint64_t x1, std::uint64_t y, std::uint32_t count,
+                     std::uint8_t* out);
 
   struct Input;  // one opened input and its warped VRT (gdal_source.cpp)
 

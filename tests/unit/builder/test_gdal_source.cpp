@@ -76,11 +76,28 @@ TEST(GdalSource, WholeWorldAtItsOwnResolutionIsTheInputExactly) {
   ASSERT_EQ((*s)->height(), 8u);
   EXPECT_EQ((*s)->bounds(), (LonLatBounds{-180, -90, 180, 90}));
   std::vector<std::uint8_t> rows(16 * 8 * 4);
-  ASSERT_TRUE((*s)->read_rows(0, 8, rows.data()));
+  ASSERT_TRUE((*s)->read_window(0, 16, 0, 8, rows.data()));
   for (int y = 0; y < 8; ++y)
     for (int x = 0; x < 16; ++x)
       for (int b = 0; b < 4; ++b)
         ASSERT_EQ(rows[std::size_t((y * 16 + x) * 4 + b)], b == 3 ? 255 : code(x, y, b + 1))
+            << x << "," << y << " band " << b;
+}
+
+TEST(GdalSource, AWindowOfColumnsIsThoseColumnsOfTheWholeRows) {
+  vts::test::TempDir dir;
+  const fs::path p = dir.path() / "world.tif";
+  write_geotiff(p, 16, 8, 3, GDT_Byte, -180, 90, 22.5, code);
+  auto s = GdalSource::open({p}, options(4));
+  ASSERT_TRUE(s) << s.error().message;
+  std::vector<std::uint8_t> whole(16 * 8 * 4), part(5 * 6 * 4);
+  ASSERT_TRUE((*s)->read_window(0, 16, 0, 8, whole.data()));
+  ASSERT_TRUE((*s)->read_window(7, 12, 1, 6, part.data()));
+  for (int y = 0; y < 6; ++y)
+    for (int x = 0; x < 5; ++x)
+      for (int b = 0; b < 4; ++b)
+        ASSERT_EQ(part[std::size_t((y * 5 + x) * 4 + b)],
+                  whole[std::size_t(((y + 1) * 16 + x + 7) * 4 + b)])
             << x << "," << y << " band " << b;
 }
 
@@ -97,7 +114,7 @@ TEST(GdalSource, AnInputCoversOnlyItsExtentAndTheLevelFollowsItsPixels) {
   const std::uint64_t w = (*s)->width();
   ASSERT_EQ(w, 128u);
   std::vector<std::uint8_t> rows(w * 64 * 4);
-  ASSERT_TRUE((*s)->read_rows(0, 64, rows.data()));
+  ASSERT_TRUE((*s)->read_window(0, w, 0, 64, rows.data()));
   // Texels of 2.8125 degrees: the piece spans columns 64..96 and rows 16..32.
   for (std::uint64_t y = 0; y < 64; ++y)
     for (std::uint64_t x = 0; x < w; ++x) {
@@ -128,7 +145,7 @@ TEST(GdalSource, RefusesWhatTheBuildCannotTake) {
   auto r = GdalSource::open({u16}, ranged);
   ASSERT_TRUE(r) << r.error().message;
   std::vector<std::uint8_t> rows(16 * 8 * 4);
-  ASSERT_TRUE((*r)->read_rows(0, 8, rows.data()));
+  ASSERT_TRUE((*r)->read_window(0, 16, 0, 8, rows.data()));
   EXPECT_EQ(rows[0], 0);         // 1000 -> 0
   EXPECT_EQ(rows[15 * 4], 255);  // 1150 -> 255
   EXPECT_EQ(rows[5 * 4], 85);    // 1050 -> 85
