@@ -12,6 +12,8 @@
 
 #include <xxhash.h>
 
+#include "build_plan.hpp"
+#include "cascade.hpp"
 #include "gdal_source.hpp"
 #include "image_source.hpp"
 #include "vts/builder/downsample.hpp"
@@ -70,133 +72,6 @@ struct Shared {
     bytes += payload->size();
     ++tiles_done;
   }
-};
-
-// The streaming level cascade: rows of the finest level are pushed in order; each level cuts its
-// tile rows as soon as their last (border) row arrives and feeds the next coarser level.
-class Cascade {
- public:
-  // The box filter reads the parent's two child rows straight from the level's ring (hence its
-  // T + 2B + 2 rows: the tile rows plus the pair being reduced). Lanczos-3 needs rows 2r - 5 ...
-  // 2r + 6 for parent row r; rather than keeping 12 extra 8-bit rows per level it filters every
-  // row horizontally as it arrives, into the LanczosReducer's ring of 12 half-width float rows, so
-  // the 8-bit ring stays at T + 2B + 2 rows for both filters.
-  // `only`: when not empty, the tiles of each level to write (a sparse footprint); the others are
-  // still made (their texels feed the coarser levels) but not encoded.
-  Cascade(const Geometry& g, DownsampleFilter filter, WorkQueue& queue, Shared& shared,
-          std::vector<TileRect> only)
-      : g_(g),
-        queue_(queue),
-        shared_(shared),
-        levels_(static_cast<std::size_t>(g.level_count())),
-        only_(std::move(only)) {
-    const std::uint32_t cap = g.stored_size() + 2;
-    for (int z = 0; z <= g.max_zoom(); ++z) {
-      Level& l = levels_[static_cast<std::size_t>(z)];
-      l.w = g.level_width(z);
-      l.h = g.level_height(z);
-      l.cap = cap;
-      l.ring.resize(std::size_t{cap} * l.w * 4);
-      l.parent_row.resize(z > 0 ? g.level_width(z - 1) * 4 : 0);
-      if (z > 0 && filter == DownsampleFilter::lanczos3)
-        l.reducer = std::make_unique<LanczosReducer>(l.w, l.h);
-    }
-  }
-
-  // Pushes the next row (RGBA8, level_width(z) texels) of level z.
-  void push_row(int z, const std::uint8_t* row) {
-    Level& l = levels_[static_cast<std::size_t>(z)];
-    assert(l.end_row < l.h);
-    assert(l.end_row < l.cap || l.end_row - l.cap < oldest_needed(z));
-    std::memcpy(slot(l, l.end_row), row, l.w * 4);
-    ++l.end_row;
-    const std::uint32_t T = g_.tile_size(), B = g_.border();
-    while (l.next_tile_row < g_.tiles_y(z)) {
-      const std::uint64_t need = std::min<std::uint64_t>((l.next_tile_row + 1ull) * T + B, l.h);
-      if (l.end_row < need) break;
-      emit_tile_row(z, l.next_tile_row++);
-    }
-    if (z == 0) return;
-    if (l.reducer) {
-      l.reducer->push_row(row);
-      while (l.reducer->ready()) {
-        l.reducer->pop_row(l.parent_row.data());
-        push_row(z - 1, l.parent_row.data());
-      }
-      return;
-    }
-    const std::uint64_t parent_h = g_.level_height(z - 1);
-    while (l.next_parent_row < parent_h) {
-      const std::uint64_t r0 = 2 * l.next_parent_row;
-      const std::uint64_t r1 = std::min(r0 + 1, l.h - 1);
-      if (l.end_row <= r1) break;
-      downsample_row_rgba8(slot(l, r0), slot(l, r1), l.w, l.parent_row.data(),
-                           g_.level_width(z - 1));
-      ++l.next_parent_row;
-      push_row(z - 1, l.parent_row.data());
-    }
-  }
-
- private:
-  struct Level {
-    std::uint64_t w = 0, h = 0;
-    std::uint32_t cap = 0;
-    std::vector<std::uint8_t> ring;        // cap rows; row y lives in slot y % cap
-    std::vector<std::uint8_t> parent_row;  // scratch row of level z-1
-    std::uint64_t end_row = 0;             // rows [0, end_row) have been pushed
-    std::uint32_t next_tile_row = 0;
-    std::uint64_t next_parent_row = 0;        // box: next row of level z-1 to make
-    std::unique_ptr<LanczosReducer> reducer;  // lanczos3: makes level z-1's rows instead
-  };
-
-  static std::uint8_t* slot(Level& l, std::uint64_t y) {
-    return l.ring.data() + (y % l.cap) * l.w * 4;
-  }
-
-  std::uint64_t oldest_needed(int z) const {
-    const Level& l = levels_[static_cast<std::size_t>(z)];
-    const std::int64_t tile_start =
-        std::int64_t{l.next_tile_row} * g_.tile_size() - std::int64_t{g_.border()};
-    const auto tiles = static_cast<std::uint64_t>(std::max<std::int64_t>(tile_start, 0));
-    // The reducer keeps its own (filtered) copy of what it still needs.
-    return l.reducer ? tiles : std::min<std::uint64_t>(tiles, 2 * l.next_parent_row);
-  }
-
-  void emit_tile_row(int z, std::uint32_t ty) {
-    Level& l = levels_[static_cast<std::size_t>(z)];
-    const std::uint32_t S = g_.stored_size();
-    TileRect keep{0, 0, g_.tiles_x(z), g_.tiles_y(z)};
-    if (!only_.empty()) keep = only_[static_cast<std::size_t>(z)];
-    if (ty < keep.y0 || ty >= keep.y1) return;
-    for (std::uint32_t tx = keep.x0; tx < keep.x1; ++tx) {
-      const TileId id{static_cast<std::uint8_t>(z), tx, ty};
-      TileImage img;
-      img.width = img.height = S;
-      img.pixels.resize(std::size_t{S} * S * 4);
-      const std::int64_t x_start = std::int64_t{tx} * g_.tile_size() - g_.border();
-      // Columns [0, left) clamp to texel 0, [left, right) copy, [right, S) clamp to w - 1.
-      const auto left = static_cast<std::uint32_t>(std::clamp<std::int64_t>(-x_start, 0, S));
-      const auto right = static_cast<std::uint32_t>(
-          std::clamp<std::int64_t>(static_cast<std::int64_t>(l.w) - x_start, left, S));
-      for (std::uint32_t sy = 0; sy < S; ++sy) {
-        const std::uint8_t* src = slot(l, g_.stored_to_level_y(id, sy));
-        std::uint8_t* dst = img.pixels.data() + std::size_t{sy} * S * 4;
-        for (std::uint32_t sx = 0; sx < left; ++sx) std::memcpy(dst + 4 * sx, src, 4);
-        if (right > left)
-          std::memcpy(dst + 4 * left, src + 4 * (x_start + left), std::size_t{right - left} * 4);
-        const std::uint8_t* last = src + 4 * (l.w - 1);
-        for (std::uint32_t sx = right; sx < S; ++sx) std::memcpy(dst + 4 * sx, last, 4);
-      }
-      Shared* shared = &shared_;
-      queue_.submit([shared, id, img = std::move(img)] { shared->store(id, img); });
-    }
-  }
-
-  const Geometry& g_;
-  WorkQueue& queue_;
-  Shared& shared_;
-  std::vector<Level> levels_;
-  std::vector<TileRect> only_;
 };
 
 // Strips of scanlines handed from the reader thread to the cascade, with a fixed number of
@@ -314,40 +189,68 @@ TileRange synthetic_range(const Geometry& g, const SyntheticSpec& spec, int z) {
   return r;
 }
 
-// Reads rows [y, y + count) of the finest level as RGBA8, in increasing order.
-using RowReader = std::function<Status(std::uint64_t y, std::uint32_t count, std::uint8_t* out)>;
+// Reads columns [x0, x1) of rows [y, y + count) of a pass's finest level as RGBA8; each pass
+// reads its rows in increasing order.
+using WindowReader = std::function<Status(std::uint64_t x0, std::uint64_t x1, std::uint64_t y,
+                                          std::uint32_t count, std::uint8_t* out)>;
 
-// The tiles of every level a sparse georeferenced build writes (empty: all of them).
-std::vector<TileRect> footprint_rects(const std::optional<Georeference>& geo, const Geometry& g) {
+// The tiles of every level a build writes: the footprint's (a sparse georeferenced build) or all.
+std::vector<TileRect> emit_rects(const std::optional<Georeference>& geo, const Geometry& g) {
   std::vector<TileRect> rects;
-  if (!geo) return rects;
   for (int z = 0; z <= g.max_zoom(); ++z)
-    rects.push_back(footprint_tiles(geo->tiling, g, z, geo->bounds));
+    rects.push_back(geo ? footprint_tiles(geo->tiling, g, z, geo->bounds)
+                        : TileRect{0, 0, g.tiles_x(z), g.tiles_y(z)});
   return rects;
 }
 
-void build_from_source(const BuildOptions& o, const RowReader& read_rows, const Geometry& g,
-                       std::vector<TileRect> only, Shared& shared, unsigned threads) {
-  std::uint64_t total = g.total_tile_count();
-  if (!only.empty()) {
-    total = 0;
-    for (const TileRect& r : only) total += r.count();
-  }
-  WorkQueue queue(threads, std::size_t{threads} * 4);
-  Cascade cascade(g, o.downsample, queue, shared, std::move(only));
-  const std::uint64_t row_bytes = g.width() * 4;
+// Everything the passes of one build share.
+struct PassContext {
+  const BuildOptions& o;
+  const Geometry& g;
+  Shared& shared;
+  WorkQueue& queue;
+  ProgressTicker& ticker;
+  std::uint64_t rows = 0;  // read so far, all passes
+};
+
+// One pass (build_plan.hpp): a reader thread reads strips of the window's rows, this thread pushes
+// them through the cascade, whose tiles go to the encoder pool and whose coarsest rows, for a
+// stripe, to its scratch raster.
+void run_pass(PassContext& c, const detail::Pass& pass, const WindowReader& read,
+              detail::ScratchRaster* scratch) {
+  const std::vector<TexelRect> windows = detail::pass_windows(c.g, c.o.downsample, pass);
+  const TexelRect& coarse = windows[static_cast<std::size_t>(pass.coarsest)];
+  Shared& shared = c.shared;
+  WorkQueue& queue = c.queue;
+  detail::Cascade::RowSink to_scratch;
+  if (scratch)
+    to_scratch = [&](std::uint64_t y, const std::uint8_t* row) {
+      if (shared.failed) return;
+      const std::uint8_t* from = row + (pass.core_x0 - coarse.x0) * 4;
+      if (Status st = scratch->write(y, pass.core_x0, pass.core_x1, from); !st)
+        shared.fail(st.error());
+    };
+  detail::Cascade cascade(
+      c.g, pass.finest, pass.coarsest, windows, c.o.downsample, pass.emit,
+      [&](TileId id, TileImage&& img) {
+        Shared* s = &shared;
+        queue.submit([s, id, img = std::move(img)] { s->store(id, img); });
+      },
+      to_scratch);
+  const TexelRect& w = pass.window;
+  const std::uint64_t row_bytes = w.width() * 4;
   // About 4 MiB per strip, at least one row, at most 64.
   const auto strip_rows =
       static_cast<std::uint32_t>(std::clamp<std::uint64_t>((4u << 20) / row_bytes, 1, 64));
   StripChannel channel(3, strip_rows * row_bytes);
   std::thread reader([&] {
     std::optional<Error> error;
-    for (std::uint64_t y = 0; y < g.height();) {
+    for (std::uint64_t y = w.y0; y < w.y1;) {
       auto strip = channel.take_free();
       if (!strip || shared.failed) break;
       strip->y = y;
-      strip->rows = static_cast<std::uint32_t>(std::min<std::uint64_t>(strip_rows, g.height() - y));
-      if (auto st = read_rows(y, strip->rows, strip->pixels.data()); !st) {
+      strip->rows = static_cast<std::uint32_t>(std::min<std::uint64_t>(strip_rows, w.y1 - y));
+      if (auto st = read(w.x0, w.x1, y, strip->rows, strip->pixels.data()); !st) {
         error = st.error();
         break;
       }
@@ -356,23 +259,48 @@ void build_from_source(const BuildOptions& o, const RowReader& read_rows, const 
     }
     channel.finish_reading(std::move(error));
   });
-  ProgressTicker ticker(o, shared, total, g.height());
   std::uint64_t rows = 0;
   while (auto strip = channel.take_full()) {
     for (std::uint32_t r = 0; r < strip->rows && !shared.stopping(); ++r)
-      cascade.push_row(g.max_zoom(), strip->pixels.data() + r * row_bytes);
+      cascade.push_row(strip->pixels.data() + r * row_bytes);
     rows += strip->rows;
     channel.give_back(std::move(*strip));
-    ticker.tick(rows);
+    c.ticker.tick(c.rows + rows);
     if (shared.stopping()) break;
   }
   channel.close();
   reader.join();
-  queue.close_and_join();
+  c.rows += rows;
   if (auto e = channel.error(); e && !shared.failed) shared.fail(*e);
-  if (!shared.failed && rows != g.height())
+  if (!shared.failed && rows != w.height())
     shared.fail(make_error(ErrorCode::internal, "input ended early"));
-  ticker.tick(rows, true);
+}
+
+// Runs the plan's passes in order: stripes fill their scratch rasters, which later passes read.
+void build_from_source(const BuildOptions& o, const WindowReader& read_input,
+                       const detail::BuildPlan& plan, const Geometry& g, Shared& shared,
+                       unsigned threads) {
+  std::vector<detail::ScratchRaster> scratch;
+  for (const detail::ScratchPlan& sp : plan.scratch) {
+    auto r = detail::ScratchRaster::create(o.output.parent_path(), sp.window);
+    if (!r) return shared.fail(std::move(r).error());
+    scratch.push_back(std::move(r).value());
+  }
+  WorkQueue queue(threads, std::size_t{threads} * 4);
+  ProgressTicker ticker(o, shared, plan.tiles, plan.rows);
+  PassContext c{o, g, shared, queue, ticker};
+  for (const detail::Pass& pass : plan.passes) {
+    if (shared.stopping()) break;
+    WindowReader from_scratch;
+    if (pass.source >= 0)
+      from_scratch = [&, i = static_cast<std::size_t>(pass.source)](
+                         std::uint64_t x0, std::uint64_t x1, std::uint64_t y, std::uint32_t n,
+                         std::uint8_t* out) { return scratch[i].read(x0, x1, y, n, out); };
+    run_pass(c, pass, pass.source >= 0 ? from_scratch : read_input,
+             pass.scratch >= 0 ? &scratch[static_cast<std::size_t>(pass.scratch)] : nullptr);
+  }
+  queue.close_and_join();
+  ticker.tick(c.rows, true);
 }
 
 void build_synthetic(const BuildOptions& o, const SyntheticSpec& spec, const Geometry& g,
@@ -517,6 +445,20 @@ Result<BuildReport> build_pyramid(const BuildOptions& o) {
   auto georeference = make_georeference(o, tiling, data_bounds, g, synthetic);
   if (!georeference) return std::move(georeference).error();
 
+  // Plain images are read whole rows at a time, once: one pass. Georeferenced ones are read in
+  // windows of their footprint, in stripes when it is wider than the window limit.
+  std::optional<detail::BuildPlan> plan;
+  if (!synthetic) {
+    const TexelRect window = gdal ? footprint_texels(tiling, g, (*georeference)->bounds)
+                                  : TexelRect{0, 0, width, height};
+    const std::uint64_t max_width =
+        !gdal ? UINT64_MAX : (o.max_window_width ? o.max_window_width : kDefaultWindowWidth);
+    auto p =
+        detail::make_build_plan(g, o.downsample, window, emit_rects(*georeference, g), max_width);
+    if (!p) return std::move(p).error();
+    plan = std::move(p).value();
+  }
+
   pmtiles::WriterOptions wo;
   if (*georeference)
     wo.bounds = pmtiles::georeferenced_bounds((*georeference)->bounds, (*georeference)->center);
@@ -537,17 +479,16 @@ Result<BuildReport> build_pyramid(const BuildOptions& o) {
   else if (gdal)
     build_from_source(
         o,
-        [&](std::uint64_t y, std::uint32_t n, std::uint8_t* out) {
-          return gdal->read_window(0, gdal->width(), y, n, out);
-        },
-        g, footprint_rects(*georeference, g), shared, threads);
+        [&](std::uint64_t x0, std::uint64_t x1, std::uint64_t y, std::uint32_t n,
+            std::uint8_t* out) { return gdal->read_window(x0, x1, y, n, out); },
+        *plan, g, shared, threads);
   else
     build_from_source(
         o,
-        [&](std::uint64_t y, std::uint32_t n, std::uint8_t* out) {
+        [&](std::uint64_t, std::uint64_t, std::uint64_t y, std::uint32_t n, std::uint8_t* out) {
           return source->read_rows(y, n, out);
         },
-        g, {}, shared, threads);
+        *plan, g, shared, threads);
   if (shared.failed) {
     (*writer)->abort();
     return *shared.error;
@@ -555,6 +496,10 @@ Result<BuildReport> build_pyramid(const BuildOptions& o) {
 
   BuildReport report;
   report.input_description = input_desc;
+  if (plan) {
+    report.passes = plan->passes.size();
+    report.window_width = plan->widest;
+  }
   TilesetInfo& info = report.info;
   info.geometry = g;
   info.codec = o.codec;

@@ -100,6 +100,14 @@ void print_json(const BuildArgs& a, const BuildOptions& o, const BuildReport& r)
   j["entries"] = r.stats.tile_entries;
   j["tile_bytes"] = r.stats.tile_bytes;
   j["file_bytes"] = r.stats.file_bytes;
+  if (const auto& geo = r.info.georeference) {
+    const LonLatBounds& b = geo->bounds;
+    j["georeference"] = {{"tiling", std::string(tiling_name(geo->tiling))},
+                         {"crs", std::string(tiling_crs(geo->tiling))},
+                         {"bounds", {b.west, b.south, b.east, b.north}}};
+  }
+  j["passes"] = r.passes;
+  j["window_width"] = r.window_width;
   j["seconds"] = r.seconds;
   j["tiles_per_second"] = r.seconds > 0 ? double(r.stats.addressed_tiles) / r.seconds : 0.0;
   std::printf("%s\n", j.dump(2).c_str());

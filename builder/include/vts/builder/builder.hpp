@@ -12,6 +12,9 @@
 //   + threads * 4 tiles being encoded + three input strips of <= 4 MiB,
 // independent of the image height and of the number of texels; a 100k x 50k RGB tiled BigTIFF at
 // T=256 peaked at 436 MiB RSS (bench/memory_bench.sh), ~130 MiB of it code and fixed buffers.
+// Georeferenced builds keep rows of their footprint only, W <= max_window_width (column stripes
+// through a scratch file beyond it: builder/src/build_plan.hpp), plus GDAL's block cache (256 MiB
+// unless GDAL_CACHEMAX is set): bounded whatever the grid's or footprint's size.
 // Tile encoding runs on a pool of worker threads.
 //
 // A build writes the archive under a temporary name and renames it at the end: a failed or
@@ -63,11 +66,12 @@ enum class Resampling { nearest, bilinear, cubic, lanczos };
 const char* resampling_name(Resampling r) noexcept;
 Result<Resampling> parse_resampling(std::string_view text);
 
-// The widest finest level a georeferenced build accepts, in texels (2^18 = 262144: level 10 of
-// WorldCRS84Quad or WebMercatorQuad at T = 256). The strip builder keeps rows of the whole grid
-// width at every level (~8 * (T + 2B + 2) * W bytes, 532 MiB at this limit with T = 256, B = 4);
-// finer levels need the bounded-window builder, which is not written yet.
-inline constexpr std::uint64_t kMaxGeoreferencedWidth = std::uint64_t{1} << 18;
+// The widest grid a georeferenced build accepts, in texels: GDAL addresses rasters with int
+// (2^30 = level 22 of WorldCRS84Quad at T = 256, 2^22 tiles around the equator, ~3.7 cm).
+inline constexpr std::uint64_t kMaxGeoreferencedWidth = std::uint64_t{1} << 30;
+// The widest window a georeferenced build's passes keep (BuildOptions::max_window_width's
+// default): with T = 256, B = 4 about 8 * 266 * 65536 = 140 MiB of level rings.
+inline constexpr std::uint64_t kDefaultWindowWidth = std::uint64_t{1} << 16;
 
 struct BuildOptions {
   std::vector<std::filesystem::path> inputs;  // row-major order for a grid
@@ -89,6 +93,10 @@ struct BuildOptions {
   Resampling resampling = Resampling::cubic;
   std::optional<int> max_level;
   std::optional<std::pair<double, double>> value_range;
+  // Georeferenced inputs: the widest window of the grid a pass keeps (0: kDefaultWindowWidth).
+  // A footprint wider than this is built in column stripes through a scratch file next to the
+  // output (builder/src/build_plan.hpp); the tiles are the same bytes whatever the width.
+  std::uint64_t max_window_width = 0;
   std::filesystem::path output;
   std::uint32_t tile_size = 256;
   std::uint32_t border = 4;
@@ -118,6 +126,9 @@ struct BuildReport {
   std::vector<LevelReport> levels;
   double seconds = 0;
   std::string input_description;  // "earth.jpg 2048x1024 3ch uint8" / "synthetic 3000x1700"
+  // How the grid was read (build_plan.hpp): passes over it (1 unless the footprint was cut into
+  // stripes; 0 for synthetic builds) and the widest window a pass kept, in texels.
+  std::uint64_t passes = 0, window_width = 0;
 };
 
 Result<BuildReport> build_pyramid(const BuildOptions& options);
