@@ -33,6 +33,9 @@ PACKAGES=(
   # GeoTIFF and other georeferenced inputs of vts build (builder/src/gdal_source.cpp); gdal-bin's
   # gdal_translate/gdalwarp make the test inputs and references
   libgdal-dev gdal-bin
+  # tests/integration/georef_placement.py measures sub-texel shifts with numpy (Debian's, for
+  # /usr/bin/python3)
+  python3-numpy
   # the OpenGL viewer (renderer/): GLFW 3.3, libepoxy (GL loader), GLM; its tests render under
   # Xvfb with Mesa's llvmpipe (GL 4.5 core, no GPU needed)
   libglfw3-dev libepoxy-dev libglm-dev xvfb xauth libgl1-mesa-dri
