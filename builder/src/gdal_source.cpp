@@ -134,6 +134,52 @@ bool gdal_is_georeferenced(const std::filesystem::path& path) {
 
 namespace {
 
+// Widens `b` (degrees) to the extremes of longitude and latitude along the raster's four edges. A
+// projected edge can peak between any fixed samples (a UTM edge's latitude at the zone's central
+// meridian: OCTTransformBounds' 21 points per edge missed 0.008 degrees), so each edge is sampled
+// at 1024 points and every extreme refined between its neighbours by golden-section search.
+void widen_to_edge_extremes(OGRCoordinateTransformationH ct, const double gt[6], int w, int h,
+                            LonLatBounds& b) {
+  const double corner[4][2] = {{0, 0}, {double(w), 0}, {double(w), double(h)}, {0, double(h)}};
+  for (int e = 0; e < 4; ++e) {
+    const double* p0 = corner[e];
+    const double* p1 = corner[(e + 1) % 4];
+    // Longitude (k = 0) or latitude (k = 1) at t along the edge; NaN where PROJ fails.
+    auto at = [&](double t, int k) {
+      const double px = p0[0] + t * (p1[0] - p0[0]), py = p0[1] + t * (p1[1] - p0[1]);
+      double x = gt[0] + px * gt[1] + py * gt[2], y = gt[3] + px * gt[4] + py * gt[5], z = 0;
+      int ok = 0;
+      if (!OCTTransformEx(ct, 1, &x, &y, &z, &ok) || !ok) return double(NAN);
+      return k == 0 ? x : y;
+    };
+    constexpr int kSamples = 1024;
+    for (int k = 0; k < 2; ++k)
+      for (const double sign : {-1.0, 1.0}) {  // minimum, maximum
+        int best = -1;
+        double best_v = -INFINITY;
+        for (int i = 0; i <= kSamples; ++i) {
+          const double v = sign * at(double(i) / kSamples, k);
+          if (v > best_v) best = i, best_v = v;
+        }
+        if (best < 0) continue;
+        double lo = double(std::max(best - 1, 0)) / kSamples;
+        double hi = double(std::min(best + 1, kSamples)) / kSamples;
+        const double g = (std::sqrt(5.0) - 1) / 2;
+        for (int it = 0; it < 60; ++it) {
+          const double m1 = hi - g * (hi - lo), m2 = lo + g * (hi - lo);
+          const double v1 = sign * at(m1, k), v2 = sign * at(m2, k);
+          if (v1 > v2 || std::isnan(v2))
+            hi = m2;
+          else
+            lo = m1;
+          best_v = std::max({best_v, v1, v2});
+        }
+        double& bound = k == 0 ? (sign < 0 ? b.west : b.east) : (sign < 0 ? b.south : b.north);
+        bound = sign < 0 ? std::min(bound, -best_v) : std::max(bound, best_v);
+      }
+  }
+}
+
 // Opens one input and checks what the build needs of it: a georeference, 1..4 bands, 8-bit data
 // or a value range; its extent in degrees and its pixel size in the scheme's CRS.
 Status open_input(GdalSource::Input& in, const GdalSourceOptions& o, const SrsPtr& lonlat) {
@@ -194,6 +240,7 @@ Status open_input(GdalSource::Input& in, const GdalSourceOptions& o, const SrsPt
   LonLatBounds& b = in.bounds;
   const bool ok = ct && OCTTransformBounds(ct, min_x, min_y, max_x, max_y, &b.west, &b.south,
                                            &b.east, &b.north, 21);
+  if (ok && b.west <= b.east) widen_to_edge_extremes(ct, gt, w, h, b);
   if (ct) OCTDestroyCoordinateTransformation(ct);
   if (!ok)
     return make_error(ErrorCode::invalid_argument,

@@ -1,12 +1,11 @@
 #!/usr/bin/env bash
-# FAILS TODAY (builder bug): a projected input's footprint must include the extreme of an edge
-# that lies between its corners. A UTM zone 31 piece at 62..68 N spanning 1.5 zones west and east
-# of the central meridian (3 E): its north edge (constant northing) is highest in latitude at the
-# central meridian, mid-edge. builder/src/gdal_source.cpp open_input() transforms the extent with
-# OCTTransformBounds(..., 21): 21 points per edge, none at 3 E here (the piece is placed so the
-# meridian falls midway between two of them), so the reported north bound is 67.6072 instead of
-# 67.6155 degrees, and the texel rows between are cut from the footprint: gdalwarp makes them
-# opaque, the build leaves them transparent.
+# A projected input's footprint includes the extreme of an edge that lies between its corners. A
+# UTM zone 31 piece at 62..68 N spanning 1.5 zones west and east of the central meridian (3 E): its
+# north edge (constant northing) is highest in latitude at the central meridian, mid-edge.
+# OCTTransformBounds(..., 21) alone (21 points per edge, none at 3 E here: the meridian falls
+# midway between two of them) gave 67.6072 instead of 67.6155 degrees and cut the texel rows
+# between from the footprint (gdalwarp makes them opaque); gdal_source.cpp's
+# widen_to_edge_extremes() refines every edge's extremes.
 # Checked: `vts info` bounds equal the extent gdaltransform gives for 20001 points along each edge
 # (1e-7 degrees), and in the level-8 tile over the central meridian's top every texel gdalwarp
 # makes opaque (same grid, same resampling) is not transparent in ours.
@@ -66,5 +65,5 @@ print(f"  {len(lost)} texels opaque in gdalwarp's tile are transparent in ours (
 sys.exit(1 if lost else 0)
 PY
 ((bounds_ok && texels_ok)) ||
-  fail "the footprint misses the north edge's extreme at the central meridian (OCTTransformBounds with 21 densified points per edge in builder/src/gdal_source.cpp open_input)"
+  fail "the footprint misses the north edge's extreme at the central meridian"
 note "ok"
