@@ -36,18 +36,9 @@ expect_ok "$VTS" build --synthetic 4096x4096 --tile 128 -o "$WORK/syn.pmtiles"
 start_server "$WORK/syn.pmtiles"
 
 note "the daemon, its cache on a 512 KiB tmpfs"
-: >"$LOGS/cache.out"
-"$VTS" cache serve --upstream "$BASE/syn" --cache-dir "$MNT/cache" --ram-size 0 \
-  --listen 127.0.0.1:0 --admin 127.0.0.1:0 >"$LOGS/cache.out" 2>"$LOGS/cache.err" </dev/null &
-DAEMON_PID=$!
-for ((i = 0; i < 200; i++)); do
-  grep -q 'listening on' "$LOGS/cache.out" && break
-  kill -0 "$DAEMON_PID" 2>/dev/null || { cat "$LOGS/cache.err" >&2; fail "vts cache serve exited"; }
-  sleep 0.05
-done
-D=$(sed -nE 's|.*listening on (http://[^ ,]*) .*|\1|p' "$LOGS/cache.out")
-DADMIN=$(sed -nE 's|.*\(admin (http://[^)]*)\).*|\1|p' "$LOGS/cache.out")
-[[ -n $D && -n $DADMIN ]] || { cat "$LOGS/cache.out" "$LOGS/cache.err" >&2; fail "no ports"; }
+start_daemon cache "$VTS" cache serve --upstream "$BASE/syn" --cache-dir "$MNT/cache" --ram-size 0 \
+  --listen 127.0.0.1:0 --admin 127.0.0.1:0
+[[ -n $DADMIN ]] || fail "the daemon has no admin port"
 [[ $(health) == "ok"*" 200" ]] || fail "a fresh daemon is not healthy: $(health)"
 [[ $(metric vts_cache_disk_writes_failing) == 0 ]] || fail "failing before any write"
 

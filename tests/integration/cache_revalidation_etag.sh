@@ -84,18 +84,8 @@ for mode in etag none; do
 j = json.load(open(sys.argv[1])); j["tiles"] = [sys.argv[2] + "/syn/{z}/{x}/{y}"]
 json.dump(j, open(sys.argv[3], "w"))' "$WORK/tilejson" "$ORIGIN" "$WORK/origin/syn.json"
 
-  : >"$LOGS/cache.out"
-  "$VTS" cache serve --upstream "$ORIGIN/syn.json" --cache-dir "$WORK/cache_$mode" \
-    --revalidate-after 0 --listen 127.0.0.1:0 --no-admin >"$LOGS/cache.out" 2>"$LOGS/cache.err" \
-    </dev/null &
-  DAEMON_PID=$!
-  for ((i = 0; i < 200; i++)); do
-    grep -q 'listening on' "$LOGS/cache.out" && break
-    kill -0 "$DAEMON_PID" 2>/dev/null || { cat "$LOGS/cache.err" >&2; fail "vts cache serve exited"; }
-    sleep 0.05
-  done
-  D=$(sed -nE 's|.*listening on (http://[^ ,]*).*|\1|p' "$LOGS/cache.out")
-  [[ -n $D ]] || { cat "$LOGS/cache.out" "$LOGS/cache.err" >&2; fail "cache daemon: no port"; }
+  start_daemon cache "$VTS" cache serve --upstream "$ORIGIN/syn.json" --cache-dir "$WORK/cache_$mode" \
+    --revalidate-after 0 --listen 127.0.0.1:0 --no-admin
 
   for n in 1 2; do
     curl -sf -D "$WORK/d_$n" "$D/syn/0/0/0" -o "$WORK/d_body" || fail "daemon GET $n failed"

@@ -89,17 +89,9 @@ for name in earth synth; do
     "warm: complete, all $ntiles tiles from the network, none failed, all pinned"
 
   note "$name: vts cache serve --upstream $S/$name.pmtiles, every tile byte for byte"
-  : >"$LOGS/cache.out"
-  "$VTS" cache serve --upstream "$S/$name.pmtiles" --cache-dir "$WORK/daemon_$name" \
-    --listen 127.0.0.1:0 --no-admin >"$LOGS/cache.out" 2>"$LOGS/cache.err" </dev/null &
-  REPLICA_PIDS[9]=$!
-  for ((i = 0; i < 200; i++)); do
-    grep -q 'listening on' "$LOGS/cache.out" && break
-    kill -0 "${REPLICA_PIDS[9]}" 2>/dev/null || { cat "$LOGS/cache.err" >&2; fail "vts cache serve exited"; }
-    sleep 0.05
-  done
-  D=$(sed -nE 's|.*listening on (http://[^ ,]*).*|\1|p' "$LOGS/cache.out")
-  [[ -n $D ]] || { cat "$LOGS/cache.out" "$LOGS/cache.err" >&2; fail "cache daemon: no port"; }
+  start_daemon cache "$VTS" cache serve --upstream "$S/$name.pmtiles" --cache-dir "$WORK/daemon_$name" \
+    --listen 127.0.0.1:0 --no-admin
+  REPLICA_PIDS[9]=$DAEMON_PID
   mkdir -p "$WORK/daemon_tiles_$name" "$WORK/ref_$name"
   : >"$LOGS/daemon.cfg"
   while read -r _ z x y off len; do

@@ -34,6 +34,26 @@ start_server() {
   ADMIN_BASE="http://127.0.0.1:$ADMIN"
 }
 
+# start_daemon NAME COMMAND...: starts COMMAND (vts cache serve, or another server that prints
+# "listening on http://HOST:PORT" and perhaps "(admin http://HOST:PORT)") in the background with
+# its output in $LOGS/NAME.out and .err, and waits for that line; sets DAEMON_PID, D (its base
+# URL) and DADMIN (its admin URL, empty when it has none).
+start_daemon() {
+  local name=$1 i
+  shift
+  : >"$LOGS/$name.out"
+  "$@" >"$LOGS/$name.out" 2>"$LOGS/$name.err" </dev/null &
+  DAEMON_PID=$!
+  for ((i = 0; i < 200; i++)); do
+    grep -q 'listening on' "$LOGS/$name.out" && break
+    kill -0 "$DAEMON_PID" 2>/dev/null || { cat "$LOGS/$name.err" >&2; fail "$name exited"; }
+    sleep 0.05
+  done
+  D=$(sed -nE 's|.*listening on (http://[^ ,]*).*|\1|p' "$LOGS/$name.out")
+  DADMIN=$(sed -nE 's|.*\(admin (http://[^ )]*)\).*|\1|p' "$LOGS/$name.out")
+  [[ -n $D ]] || { cat "$LOGS/$name.out" "$LOGS/$name.err" >&2; fail "$name: no port"; }
+}
+
 # stop_server: SIGTERM; the server must exit 0 within 15 s.
 stop_server() {
   kill -TERM "$SERVER_PID"
