@@ -29,9 +29,8 @@ struct ViewArgs {
   std::uint64_t ram_mb = 256;
   int width = 1280, height = 720;
   std::uint32_t slots = 256, window = 64, upload_tiles = 32;
-  int feedback = 8, anisotropy = 8, level = -1;
+  int feedback = 8, anisotropy = 8, level = -1, frames = 0;
   bool headless = false, json = false, until_complete = false, hud = false, print_camera = false;
-  int frames = 0;
 };
 
 void log_line(const std::string& text) {
@@ -97,11 +96,8 @@ Status scene_options(const ViewArgs& a, const std::optional<std::string>& path_t
   auto p = CameraPath::parse(*path_text, o.camera);
   if (!p) return make_error(p.error().code, a.camera_path + ": " + p.error().message);
   o.path = std::move(*p);
-  const bool globe = o.globe;
-  if (globe ? !o.path->has_globe() && o.path->has_plane()
-            : !o.path->has_plane() && o.path->has_globe())
-    log_line("warning: " + a.camera_path + " has only " + (globe ? "plane" : "globe") +
-             " fields; the " + (globe ? "globe" : "plane") + " camera stays where it is");
+  if (auto warning = fit_path_to_scene(*o.path, o.globe, o.tiling, info.geometry))
+    log_line("warning: " + a.camera_path + *warning);
   return {};
 }
 
@@ -200,7 +196,9 @@ Runner add_view(CLI::App& app) {
       ->capture_default_str();
   c->add_option("--scene", a->scene, "plane, globe, or FILE.json {\"scene\":..., \"camera\":{...}}")
       ->capture_default_str();
-  c->add_option("--camera-path", a->camera_path, "Keyframes FILE.json {\"keys\":[...]}");
+  c->add_option(
+      "--camera-path", a->camera_path,
+      "Keyframes FILE.json {\"keys\":[...]}; places in degrees fly a georeferenced plane");
   c->add_option("--center", a->center, "Georeferenced tilesets: start over LON,LAT (degrees)");
   c->add_option("--level", a->level,
                 "Georeferenced tilesets: start at about one texel of this level per pixel")

@@ -64,6 +64,36 @@ Result<CameraKey> camera_at(const CameraKey& base, Tiling t, const Geometry& g, 
   return k;
 }
 
+CameraPath plane_path_from_places(const CameraPath& path, Tiling t, const Geometry& g) {
+  const LonLatBounds ext = scheme_extent(t);
+  std::vector<CameraKey> keys = path.keys();
+  for (CameraKey& k : keys) {
+    const LonLat at{k.globe.lon_deg, std::clamp(k.globe.lat_deg, ext.south, ext.north)};
+    const TexelPoint p = lonlat_to_texel(t, g.tile_size(), g.max_zoom(), at);
+    k.plane.center_u = p.x;
+    k.plane.center_v = p.y;
+    // camera_at()'s altitude for a zoom, inverted.
+    const double pixel_rad = 2 * std::tan(k.globe.fov_y / 2) / kNominalHeightPx;
+    k.plane.texels_per_pixel = k.globe.altitude_m * pixel_rad * double(g.width()) /
+                               (2 * std::numbers::pi * k.globe.radius_m);
+    k.plane.heading = k.globe.heading;
+    k.plane.tilt = k.globe.tilt;
+  }
+  return CameraPath(std::move(keys), true, true);
+}
+
+std::optional<std::string> fit_path_to_scene(CameraPath& path, bool globe, Tiling t,
+                                             const Geometry& g) {
+  if (globe ? path.has_globe() || !path.has_plane() : path.has_plane() || !path.has_globe())
+    return std::nullopt;
+  if (!globe && t != Tiling::none) {
+    path = plane_path_from_places(path, t, g);
+    return std::nullopt;
+  }
+  return std::string(" has only ") + (globe ? "plane" : "globe") + " fields; the " +
+         (globe ? "globe" : "plane") + " camera stays where it is";
+}
+
 Status start_at_place(const std::optional<Georeference>& geo, const Geometry& g,
                       const std::string& center, int level, CameraKey& camera) {
   if (center.empty() && level < 0) return {};

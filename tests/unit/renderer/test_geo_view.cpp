@@ -123,3 +123,52 @@ TEST(GeoView, ThePlacesTextIsAtTheCursorWhenThereIsOneElseAtTheCentre) {
   EXPECT_EQ(plane_place_text(t, kGeo, p, 200, 100, std::pair{100.0, 0.0}),
             "lon 5.00000  lat 45.00000 (centre)");
 }
+
+TEST(GeoView, APathOfPlacesFliesThePlaneOverTheSamePlacesAtTheSameZoom) {
+  const CameraKey base = default_camera(kGeo, 1280, 720);
+  auto a = camera_at(base, vts::Tiling::world_crs84_quad, kGeo, {5, 45}, 4);
+  auto b = camera_at(base, vts::Tiling::world_crs84_quad, kGeo, {-10, 50}, 6);
+  ASSERT_TRUE(a && b);
+  auto path = CameraPath::parse(R"({"keys": [
+      {"frame": 0, "lon": 5, "lat": 45, "altitude_m": )" +
+                                    std::to_string(a->globe.altitude_m) +
+                                    R"(, "heading": 0.5, "tilt": 0.25},
+      {"frame": 10, "lon": -10, "lat": 50, "altitude_m": )" +
+                                    std::to_string(b->globe.altitude_m) + "}]}",
+                                base);
+  ASSERT_TRUE(path) << path.error().message;
+  ASSERT_FALSE(path->has_plane());
+  const CameraPath plane = plane_path_from_places(*path, vts::Tiling::world_crs84_quad, kGeo);
+  ASSERT_TRUE(plane.has_plane());
+  const PlaneView v0 = plane.plane_at(0), v1 = plane.plane_at(10);
+  EXPECT_NEAR(v0.center_u, a->plane.center_u, 1e-9);
+  EXPECT_NEAR(v0.center_v, a->plane.center_v, 1e-9);
+  EXPECT_NEAR(v0.texels_per_pixel, 4.0, 1e-5);  // level 4 of 6
+  EXPECT_EQ(v0.heading, 0.5);
+  EXPECT_EQ(v0.tilt, 0.25);
+  EXPECT_NEAR(v1.center_u, b->plane.center_u, 1e-9);
+  EXPECT_NEAR(v1.center_v, b->plane.center_v, 1e-9);
+  EXPECT_NEAR(v1.texels_per_pixel, 1.0, 1e-5);  // the finest level
+  // The globe half of the path is kept.
+  EXPECT_EQ(plane.globe_at(10).lon_deg, -10);
+}
+
+TEST(GeoView, APathFitsTheSceneOrSaysWhyNot) {
+  const CameraKey base = default_camera(kGeo, 1280, 720);
+  auto places = CameraPath::parse(R"({"keys": [{"frame": 0, "lon": 5, "lat": 45}]})", base);
+  auto plane = CameraPath::parse(R"({"keys": [{"frame": 0, "center": [10, 20]}]})", base);
+  ASSERT_TRUE(places && plane);
+  CameraPath p = *places;
+  EXPECT_EQ(fit_path_to_scene(p, false, vts::Tiling::world_crs84_quad, kGeo), std::nullopt);
+  EXPECT_TRUE(p.has_plane());  // flies the plane over the places
+  EXPECT_NEAR(p.plane_at(0).center_u, 185.0 / 360 * 16384, 1e-9);
+  p = *places;
+  auto w = fit_path_to_scene(p, false, vts::Tiling::none, kGeo);  // a plain image: no places
+  ASSERT_TRUE(w);
+  EXPECT_NE(w->find("only globe fields"), std::string::npos) << *w;
+  p = *plane;
+  w = fit_path_to_scene(p, true, vts::Tiling::world_crs84_quad, kGeo);
+  ASSERT_TRUE(w);
+  EXPECT_NE(w->find("only plane fields"), std::string::npos) << *w;
+  EXPECT_EQ(fit_path_to_scene(p, false, vts::Tiling::world_crs84_quad, kGeo), std::nullopt);
+}

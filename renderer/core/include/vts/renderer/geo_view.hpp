@@ -34,6 +34,20 @@ Status check_globe_tiling(Tiling t);
 Result<CameraKey> camera_at(const CameraKey& base, Tiling t, const Geometry& g, LonLat at,
                             int level);
 
+// A camera path in geographic units on the plane of a georeferenced tileset: every key's plane
+// view from its globe fields (lon, lat in degrees, altitude_m, heading, tilt): centre
+// lonlat_to_texel() of the place (latitude clamped to the scheme's extent), zoom the one
+// camera_at() pairs with that altitude (GlobeScene::texels_per_pixel() straight down). So one
+// path of places flies both scenes of a georeferenced archive.
+CameraPath plane_path_from_places(const CameraPath& path, Tiling t, const Geometry& g);
+
+// vts view's --camera-path on a scene: a path of places alone (globe keys) on the plane of a
+// georeferenced tileset becomes plane_path_from_places(); a path without the scene's kind of keys
+// otherwise stays as it is and the result says so (" has only plane fields; the globe camera
+// stays where it is"), nullopt when the path fits.
+std::optional<std::string> fit_path_to_scene(CameraPath& path, bool globe, Tiling t,
+                                             const Geometry& g);
+
 // vts view's --center / --level: `camera` moved by camera_at() to `center` ("LON,LAT" in degrees;
 // empty: the georeference's center) at `level` (-1: the georeference's level). Neither given:
 // nothing changes. Errors (invalid_argument) name the flag: a center not of the form LON,LAT, no
