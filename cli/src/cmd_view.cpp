@@ -196,9 +196,7 @@ Runner add_view(CLI::App& app) {
       ->capture_default_str();
   c->add_option("--scene", a->scene, "plane, globe, or FILE.json {\"scene\":..., \"camera\":{...}}")
       ->capture_default_str();
-  c->add_option(
-      "--camera-path", a->camera_path,
-      "Keyframes FILE.json {\"keys\":[...]}; places in degrees fly a georeferenced plane");
+  c->add_option("--camera-path", a->camera_path, "Keyframes FILE.json {\"keys\":[...]}");
   c->add_option("--center", a->center, "Georeferenced tilesets: start over LON,LAT (degrees)");
   c->add_option("--level", a->level,
                 "Georeferenced tilesets: start at about one texel of this level per pixel")
