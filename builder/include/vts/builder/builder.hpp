@@ -84,11 +84,24 @@ struct BuildOptions {
   Tiling tiling = Tiling::none;
   std::optional<LonLatBounds> bounds;
   // Georeferenced inputs only. max_level: our finest level (default: the first level whose texel
-  // is no larger than the finest input's pixel in the scheme's CRS). value_range: maps values
-  // linearly to 0..255 (clamped); required for inputs that are not 8-bit.
+  // is no larger than the finest input's pixel in the scheme's CRS). bands: the data bands
+  // (1-based) of every input, 1 (grey) or 3 (RGB), any band count (an alpha band not among them
+  // is still alpha); empty: 1 grey, 2 grey + alpha, 3 RGB, 4 RGBA. value_range: maps values of
+  // every band linearly to 0..255 (clamped); band_ranges: one such range per data band instead;
+  // auto_range: per data band, the 2 %..98 % percentiles of all inputs' values together
+  // (approximate histograms), reported in BuildReport::value_ranges. Without a range, values are
+  // used as they are, data beyond 0..255 is refused (invalid_argument naming the input and its
+  // values), and inputs whose values span under 1/16 of 0..255 get a warning (on_warning,
+  // BuildReport::warnings). Inputs are opened a few at a time (at most 32 at once), so any number
+  // of them can be built.
   Resampling resampling = Resampling::cubic;
   std::optional<int> max_level;
   std::optional<std::pair<double, double>> value_range;
+  std::vector<int> bands;
+  std::vector<std::pair<double, double>> band_ranges;
+  bool auto_range = false;
+  // Called with each warning as soon as it is known (before tiles are built); may be empty.
+  std::function<void(const std::string&)> on_warning;
   std::filesystem::path output;
   std::uint32_t tile_size = 256;
   std::uint32_t border = 4;
@@ -118,6 +131,10 @@ struct BuildReport {
   std::vector<LevelReport> levels;
   double seconds = 0;
   std::string input_description;  // "earth.jpg 2048x1024 3ch uint8" / "synthetic 3000x1700"
+  // Georeferenced inputs: what the user should know (BuildOptions::on_warning), and the value
+  // mapping used, one MIN,MAX per data band (empty: values as they are).
+  std::vector<std::string> warnings;
+  std::vector<std::pair<double, double>> value_ranges;
 };
 
 Result<BuildReport> build_pyramid(const BuildOptions& options);
