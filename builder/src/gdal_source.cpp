@@ -392,13 +392,60 @@ double round6(double v) {
   return std::strtod(buf, nullptr);
 }
 
-// The warning for an input whose values (as they are) span under 1/16 of 0..255, or none.
-std::optional<std::string> narrow_values_warning(const GdalSource::Input& in) {
-  const auto [lo, hi] = observed_union(in);
-  if (lo > hi || hi - lo >= 256.0 / 16) return std::nullopt;
-  return in.path.string() + ": values " + fmt_value(lo) + " .. " + fmt_value(hi) +
-         " use under 1/16 of 0..255 (the result will look flat or dark): give --range MIN,MAX "
-         "to stretch them, or --range auto";
+// Without a range: when the values of all the inputs together span under 1/16 of 0..255 (a dark or
+// flat result, e.g. 12-bit data read as it is), one warning per input naming it and its values (at
+// most kMaxWarnings, then how many more). A uniform input in a mosaic whose values vary (an ocean
+// or ice tile) is no reason for one.
+std::vector<std::string> narrow_values_warnings(
+    const std::vector<std::unique_ptr<GdalSource::Input>>& inputs) {
+  std::pair<double, double> all{INFINITY, -INFINITY};
+  for (const auto& in : inputs) {
+    const auto [lo, hi] = observed_union(*in);
+    all = {std::min(all.first, lo), std::max(all.second, hi)};
+  }
+  std::vector<std::string> out;
+  if (all.first > all.second || all.second - all.first >= 256.0 / 16) return out;
+  std::size_t named = 0;
+  for (const auto& in : inputs) {
+    const auto [lo, hi] = observed_union(*in);
+    if (lo > hi) continue;
+    if (++named > GdalSource::kMaxWarnings) continue;
+    out.push_back(in->path.string() + ": values " + fmt_value(lo) + " .. " + fmt_value(hi) +
+                  " use under 1/16 of 0..255 (the result will look flat or dark): give --range "
+                  "MIN,MAX to stretch them, or --range auto");
+  }
+  if (named > GdalSource::kMaxWarnings)
+    out.push_back("... and " + std::to_string(named - GdalSource::kMaxWarnings) +
+                  " more inputs whose values use under 1/16 of 0..255");
+  return out;
+}
+
+// A histogram of band `b` of `ds`: hist.size() buckets from lo to hi (values beyond go to the end
+// buckets), from a sample: the band read at most 1024 x 1024 (nearest; GDAL uses an overview when
+// there is one), without the texels its mask says are invalid (nodata, alpha or a mask). Done here
+// rather than by GDALGetRasterHistogramEx, which stores its result beside the file (.aux.xml).
+bool sample_histogram(GDALDatasetH ds, int b, double lo, double hi, std::vector<double>& hist,
+                      double& counted) {
+  GDALRasterBandH band = GDALGetRasterBand(ds, b);
+  const int w = GDALGetRasterXSize(ds), h = GDALGetRasterYSize(ds);
+  const int sw = std::min(w, 1024), sh = std::min(h, 1024);
+  std::vector<double> values(std::size_t(sw) * std::size_t(sh));
+  std::vector<std::uint8_t> valid(values.size());
+  if (GDALRasterIO(band, GF_Read, 0, 0, w, h, values.data(), sw, sh, GDT_Float64, 0, 0) !=
+          CE_None ||
+      GDALRasterIO(GDALGetMaskBand(band), GF_Read, 0, 0, w, h, valid.data(), sw, sh, GDT_Byte, 0,
+                   0) != CE_None)
+    return false;
+  std::fill(hist.begin(), hist.end(), 0.0);
+  counted = 0;
+  const double scale = double(hist.size()) / (hi - lo);
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    if (!valid[i] || !std::isfinite(values[i])) continue;
+    const double at = std::clamp((values[i] - lo) * scale, 0.0, double(hist.size() - 1));
+    hist[std::size_t(at)] += 1;
+    counted += 1;
+  }
+  return true;
 }
 
 }  // namespace
@@ -421,7 +468,6 @@ Result<std::unique_ptr<GdalSource>> GdalSource::open(
   double finest = INFINITY;
   const LonLatBounds extent = scheme_extent(options.tiling);
   bool first = true;
-  std::size_t narrow = 0;
   for (const auto& path : inputs) {
     auto in = std::make_unique<Input>();
     in->path = path;
@@ -437,9 +483,6 @@ Result<std::unique_ptr<GdalSource>> GdalSource::open(
       return make_error(ErrorCode::invalid_argument, path.string() + ": lies outside " +
                                                          std::string(tiling_name(options.tiling)) +
                                                          "'s extent");
-    if (options.value_ranges.empty() && !options.auto_range)
-      if (auto w = narrow_values_warning(*in); w && ++narrow <= kMaxWarnings)
-        s->warnings_.push_back(*w);
     finest = std::min(finest, in->pixel_size);
     LonLatBounds& u = s->bounds_;
     u = first ? b
@@ -448,9 +491,8 @@ Result<std::unique_ptr<GdalSource>> GdalSource::open(
     first = false;
     s->inputs_.push_back(std::move(in));
   }
-  if (narrow > kMaxWarnings)
-    s->warnings_.push_back("... and " + std::to_string(narrow - kMaxWarnings) +
-                           " more inputs whose values use under 1/16 of 0..255");
+  if (options.value_ranges.empty() && !options.auto_range)
+    s->warnings_ = narrow_values_warnings(s->inputs_);
   auto level = pick_level(options, finest);
   if (!level) return level.error();
   s->max_level_ = *level;
@@ -489,8 +531,8 @@ Result<std::unique_ptr<GdalSource>> GdalSource::open(
 }
 
 // --range auto: per data band, the kAutoRangeLow..kAutoRangeHigh percentiles of all the inputs'
-// values together, from GDAL's approximate histograms (an overview or a sample of the blocks),
-// each input weighted by its pixel count. Buckets: one per integer value for integer data (at
+// values together, from a sample of each input (sample_histogram: read at most 1024 x 1024), each
+// input weighted by its pixel count. Buckets: one per integer value for integer data (at
 // most 65536), else 65536 between the smallest and the largest value seen.
 Status GdalSource::choose_auto_ranges() {
   std::size_t nb = 0;
@@ -514,7 +556,7 @@ Status GdalSource::choose_auto_ranges() {
     const int buckets = per_value ? int(gmax - gmin) + 1 : 65536;
     const double lo = per_value ? gmin - 0.5 : gmin, hi = per_value ? gmax + 0.5 : gmax;
     std::vector<double> sum(std::size_t(buckets), 0.0);
-    std::vector<GUIntBig> hist(static_cast<std::size_t>(buckets));
+    std::vector<double> hist(sum.size());
     for (auto& in : inputs_) {
       if (k >= in->data_bands.size()) continue;
       GDALDatasetH ds = GDALOpenEx(in->path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY, nullptr,
@@ -522,18 +564,15 @@ Status GdalSource::choose_auto_ranges() {
       if (!ds)
         return make_error(ErrorCode::corrupt,
                           in->path.string() + ": cannot open: " + errors.text());
-      const CPLErr err =
-          GDALGetRasterHistogramEx(GDALGetRasterBand(ds, in->data_bands[k]), lo, hi, buckets,
-                                   hist.data(), TRUE, TRUE, GDALDummyProgress, nullptr);
-      GDALClose(ds);
-      if (err != CE_None)
-        return make_error(ErrorCode::corrupt,
-                          in->path.string() + ": cannot make a histogram: " + errors.text());
       double counted = 0;
-      for (GUIntBig c : hist) counted += double(c);
+      const bool ok = sample_histogram(ds, in->data_bands[k], lo, hi, hist, counted);
+      GDALClose(ds);
+      if (!ok)
+        return make_error(ErrorCode::corrupt,
+                          in->path.string() + ": cannot read its values: " + errors.text());
       if (counted <= 0) continue;
       const double weight = double(in->pixels) / counted;
-      for (std::size_t i = 0; i < hist.size(); ++i) sum[i] += double(hist[i]) * weight;
+      for (std::size_t i = 0; i < hist.size(); ++i) sum[i] += hist[i] * weight;
     }
     double total = 0;
     for (double c : sum) total += c;

@@ -37,7 +37,8 @@ struct GdalSourceOptions {
   // band (3 for RGB). Empty and no auto_range: values are used as they are (0..255), and data
   // beyond 0..255 is refused.
   std::vector<std::pair<double, double>> value_ranges;
-  // One range per data band for the whole mosaic, from the inputs' approximate histograms: the
+  // One range per data band for the whole mosaic, from a sample of each input's values (read at
+  // most 1024 x 1024, masked texels left out), each weighted by its pixel count: the
   // kAutoRangeLow..kAutoRangeHigh percentiles of all their values together (value_ranges unused).
   bool auto_range = false;
   // The most inputs kept open at once (each: its file and its warped VRT); at least 1.

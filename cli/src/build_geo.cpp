@@ -86,7 +86,7 @@ void add_geo_options(CLI::App* c, GeoArgs& a) {
   c->add_option("--range", a.range,
                 "Georeferenced inputs: MIN,MAX mapped linearly to 0..255 (clamped) for every band, "
                 "or MIN,MAX per band (R,G,B); or 'auto': per band, the 2%..98% percentiles of all "
-                "inputs' values together (approximate histograms), printed for reuse. Without it, "
+                "inputs' values together (sampled: approximate), printed for reuse. Without it, "
                 "values beyond 0..255 are refused");
 }
 

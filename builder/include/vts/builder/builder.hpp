@@ -89,8 +89,8 @@ struct BuildOptions {
   // is still alpha); empty: 1 grey, 2 grey + alpha, 3 RGB, 4 RGBA. value_range: maps values of
   // every band linearly to 0..255 (clamped); band_ranges: one such range per data band instead;
   // auto_range: per data band, the 2 %..98 % percentiles of all inputs' values together
-  // (approximate histograms), reported in BuildReport::value_ranges. Without a range, values are
-  // used as they are, data beyond 0..255 is refused (invalid_argument naming the input and its
+  // (a sample of each: approximate), reported in BuildReport::value_ranges. Without a range, values
+  // are used as they are, data beyond 0..255 is refused (invalid_argument naming the input and its
   // values), and inputs whose values span under 1/16 of 0..255 get a warning (on_warning,
   // BuildReport::warnings). Inputs are opened a few at a time (at most 32 at once), so any number
   // of them can be built.
