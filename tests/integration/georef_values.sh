@@ -207,7 +207,8 @@ many limited bash -c 'ulimit -n 64 && exec "$@"' sh "$VTS" build --input-list li
 many glob bash -c 'ulimit -n 64 && exec "$@"' sh "$VTS" build 'pieces/p*.tif'
 [[ $HASH == "$SMALL_HASH" ]] || fail "the glob built another archive"
 expect_clean_failure "$VTS" build 'pieces/q*.tif' -o x.pmtiles
-grep -q "input pattern 'pieces/q\*.tif' matches no file" "$ERR" || fail "an empty glob: $(cat "$ERR")"
+((RC == 3)) && grep -q "input pattern 'pieces/q\*.tif' matches no file" "$ERR" ||
+  fail "an empty glob (exit $RC): $(cat "$ERR")"
 [[ -z $(find . -name '*.tif.aux.xml' -o -name '*.vrt.aux.xml') ]] ||
   fail "statistics were written beside the inputs: $(find . -name '*.aux.xml')"
 note "ok"
