@@ -14,7 +14,9 @@
 #   a VRT of 16 pieces (gdalbuildvrt) builds the same archive as the whole file;
 #   300 pieces by --input-list and by a quoted glob build the same archive, also under
 #     `ulimit -n 64` (inputs are opened a few at a time), and the same as the file they were cut
-#     from; a glob matching nothing is refused naming it; no .aux.xml is left beside the inputs.
+#     from, and so do that file given before the list; a glob matching nothing (exit 3), a missing
+#     list (exit 3), malformed --bands / --range and --bands with a plain image (exit 2) are
+#     refused naming what is wrong; no .aux.xml is left beside the inputs.
 # shellcheck source=lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 require_tool python3
@@ -204,11 +206,28 @@ many list "$VTS" build --input-list list.txt
 [[ $HASH == "$SMALL_HASH" ]] || fail "the 300 pieces built another archive than the whole file"
 many limited bash -c 'ulimit -n 64 && exec "$@"' sh "$VTS" build --input-list list.txt
 [[ $HASH == "$SMALL_HASH" ]] || fail "under ulimit -n 64 the 300 pieces built another archive"
+many both "$VTS" build small.tif --input-list list.txt # given inputs first, then the list's
+[[ $HASH == "$SMALL_HASH" ]] || fail "an input and a list together"
 many glob bash -c 'ulimit -n 64 && exec "$@"' sh "$VTS" build 'pieces/p*.tif'
 [[ $HASH == "$SMALL_HASH" ]] || fail "the glob built another archive"
 expect_clean_failure "$VTS" build 'pieces/q*.tif' -o x.pmtiles
 ((RC == 3)) && grep -q "input pattern 'pieces/q\*.tif' matches no file" "$ERR" ||
   fail "an empty glob (exit $RC): $(cat "$ERR")"
+expect_clean_failure "$VTS" build --input-list missing.txt -o x.pmtiles
+((RC == 3)) && grep -q "input-list 'missing.txt' cannot be read" "$ERR" ||
+  fail "a missing list (exit $RC): $(cat "$ERR")"
+for bad in 0 1,2 1,2,3,4 x; do
+  expect_clean_failure "$VTS" build world.tif --bands "$bad" -o x.pmtiles
+  ((RC == 2)) && grep -q -- "--bands '$bad' is not B (grey) or R,G,B" "$ERR" ||
+    fail "--bands $bad (exit $RC): $(cat "$ERR")"
+done
+for bad in 1 1,2,3 5,1 1,2,3,4 auto,1; do
+  expect_clean_failure "$VTS" build u12.tif --range "$bad" -o x.pmtiles
+  ((RC == 2)) && grep -q -- "--range '$bad' is not" "$ERR" || fail "--range $bad (exit $RC): $(cat "$ERR")"
+done
+expect_clean_failure "$VTS" build "$EARTH" --bands 1 -o x.pmtiles
+((RC == 2)) && grep -q "bands and a value range apply to georeferenced inputs only" "$ERR" ||
+  fail "--bands with a plain image (exit $RC): $(cat "$ERR")"
 [[ -z $(find . -name '*.tif.aux.xml' -o -name '*.vrt.aux.xml') ]] ||
   fail "statistics were written beside the inputs: $(find . -name '*.aux.xml')"
 note "ok"

@@ -318,6 +318,13 @@ TEST(GdalSource, ValuesWithinAByteBuildAsTheyAreAndNarrowOnesAreWarnedAbout) {
   EXPECT_NE((*d)->warnings()[1].find("unit.tif: values 0 .. 1 "), std::string::npos)
       << (*d)->warnings()[1];
 
+  // Many narrow inputs: the first kMaxWarnings are named, then how many more.
+  std::vector<fs::path> many(GdalSource::kMaxWarnings + 2, dark);
+  auto m = GdalSource::open(many, options(4));
+  ASSERT_TRUE(m) << m.error().message;
+  ASSERT_EQ((*m)->warnings().size(), GdalSource::kMaxWarnings + 1);
+  EXPECT_EQ((*m)->warnings().back(), "... and 2 more inputs whose values use under 1/16 of 0..255");
+
   GdalSourceOptions ranged = options(4);
   ranged.value_ranges = {{0, 9}};
   auto r = GdalSource::open({dark}, ranged);
