@@ -2,6 +2,8 @@
 # vts build of georeferenced rasters whose values are not plain 8-bit RGB, and of many inputs, end
 # to end with real files made from the Earth image by gdal_translate/gdalbuildvrt:
 #   --bands: a 6-band file with R, G, B as bands 4, 3, 2 builds the same texels as the RGB file;
+#     --bands 1,2,3 of a file with nodata, an alpha band or a mask builds the same archive as
+#     without (nodata stays transparent);
 #     without --bands it is refused (exit 2, naming --bands), a band beyond its count too;
 #   --range auto on 12-bit data: the printed range (also in --json) is the 2 %..98 % percentiles per
 #     band computed here from the pixels (within 1 % of 4095: the sample is approximate),
@@ -22,6 +24,7 @@ source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 require_tool python3
 require_tool gdal_translate
 require_tool gdalbuildvrt
+require_tool gdalwarp
 
 cd "$WORK"
 T() { gdal_translate -q "$@" || fail "gdal_translate $*"; }
@@ -68,6 +71,32 @@ expect_clean_failure "$VTS" build six.tif -o x.pmtiles
 expect_clean_failure "$VTS" build six.tif --bands 1,7,2 -o x.pmtiles
 ((RC == 2)) && grep -q "six.tif: has 6 bands; --bands asks for band 7" "$ERR" ||
   fail "a band beyond the count (exit $RC): $(cat "$ERR")"
+
+note "--bands keeps nodata, an alpha band and a mask"
+T -srcwin 0 0 1024 1024 world.tif west.tif
+gdalwarp -q -te -180 -90 90 90 -dstnodata 0 west.tif nodata.tif || fail "gdalwarp" # 0..90 E: nodata
+T -b 1 -b 2 -b 3 -b mask -a_nodata none -co ALPHA=YES nodata.tif alpha.tif
+T -b 1 -b 2 -b 3 -a_nodata none -mask 1 nodata.tif masked.tif
+hash_of() {
+  expect_ok "$VTS" info "$1" --json
+  python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["content_hash"])' "$OUT"
+}
+for f in nodata alpha masked; do
+  expect_ok "$VTS" build "$f.tif" --max-level 2 -o "$f.pmtiles" --threads 2
+  expect_ok "$VTS" build "$f.tif" --bands 1,2,3 --max-level 2 -o "$f.b.pmtiles" --threads 2
+  [[ $(hash_of "$f.pmtiles") == $(hash_of "$f.b.pmtiles") ]] ||
+    fail "$f: --bands 1,2,3 built another archive"
+done
+expect_ok "$VTS" extract nodata.b.pmtiles --level 2 -o nodata.level.tif
+raw nodata.level.tif nodata.bil
+python3 - nodata.bil <<'PY' || fail "nodata is not transparent with --bands"
+import sys
+a = open(sys.argv[1], "rb").read()
+# Level 2 is 1024 x 512; the nodata covers longitudes 0..90: columns 512..768.
+bad = [(x, y) for y in range(0, 512, 3) for x in range(514, 766, 3) if a[4 * (y * 1024 + x) + 3] != 0]
+assert not bad, ("nodata texels not transparent", bad[:5])
+assert all(a[4 * (y * 1024 + 300) + 3] == 255 for y in range(512)), "the data part is not opaque"
+PY
 
 note "--range auto on 12-bit data: the 2%..98% percentiles, printed, reusable"
 T -ot UInt16 -scale 0 255 1000 3000 world.tif u12.tif # 12-bit values, not all of 0..4095
