@@ -365,8 +365,14 @@ Result<std::unique_ptr<GdalSource>> open_gdal(const BuildOptions& o) {
   go.border = o.border;
   go.max_level = o.max_level;
   go.resampling = o.resampling;
-  go.value_range = o.value_range;
-  return GdalSource::open(o.inputs, go);
+  go.bands = o.bands;
+  go.value_ranges = o.band_ranges;
+  if (o.value_range) go.value_ranges = {*o.value_range};
+  go.auto_range = o.auto_range;
+  auto s = GdalSource::open(o.inputs, go);
+  if (s && o.on_warning)
+    for (const std::string& w : (*s)->warnings()) o.on_warning(w);
+  return s;
 }
 
 }  // namespace
@@ -404,9 +410,10 @@ Result<BuildReport> build_pyramid(const BuildOptions& o) {
     if (tiling == Tiling::none) tiling = Tiling::world_crs84_quad;
     data_bounds = gdal->bounds();
   } else {
-    if (o.max_level || o.value_range)
+    if (o.max_level || o.value_range || !o.band_ranges.empty() || o.auto_range || !o.bands.empty())
       return make_error(ErrorCode::invalid_argument,
-                        "a maximum level and a value range apply to georeferenced inputs only "
+                        "a maximum level, bands and a value range apply to georeferenced inputs "
+                        "only "
                         "(" +
                             o.inputs.front().string() + " has no georeference)");
     auto src = ImageSource::open(o.inputs, o.grid_columns, o.grid_rows);
@@ -499,6 +506,10 @@ Result<BuildReport> build_pyramid(const BuildOptions& o) {
   if (plan) {
     report.passes = plan->passes.size();
     report.window_width = plan->widest;
+  }
+  if (gdal) {
+    report.warnings = gdal->warnings();
+    report.value_ranges = gdal->value_ranges();
   }
   TilesetInfo& info = report.info;
   info.geometry = g;

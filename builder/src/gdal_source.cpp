@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <mutex>
@@ -96,6 +97,13 @@ std::string fmt(double v) {
   return buf;
 }
 
+// A data value: 8 significant digits.
+std::string fmt_value(double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.8g", v);
+  return buf;
+}
+
 std::string short_name(const std::filesystem::path& p) {
   return p.filename().string();
 }
@@ -104,17 +112,31 @@ std::string short_name(const std::filesystem::path& p) {
 
 struct GdalSource::Input {
   std::filesystem::path path;
-  GDALDatasetH src = nullptr;
-  GDALDatasetH warped = nullptr;  // a VRT of the whole grid at the max level
-  int bands = 0;                  // of `warped`: data bands (1 grey or 3 RGB) + alpha
-  LonLatBounds bounds;            // its extent in degrees, clipped to the scheme
-  TexelRect texels;               // the grid texels it touches
-  double pixel_size = 0;          // in the scheme's CRS units
+  // Found by probing.
+  int src_bands = 0;
+  std::vector<int> data_bands;  // 1-based bands of the file: 1 (grey) or 3 (RGB)
+  int alpha_band = 0;           // its alpha band, 0 for none
+  bool tagged_alpha = false;    // the alpha band's colour interpretation says alpha
+  bool integer = true;          // integer data
+  std::uint64_t pixels = 0;
+  std::vector<std::pair<double, double>> observed;  // per data band: approximate min, max
+  LonLatBounds bounds;                              // its extent in degrees, clipped to the scheme
+  TexelRect texels;                                 // the grid texels it touches
+  double pixel_size = 0;                            // in the scheme's CRS units
   std::string description;
-  ~Input() {
+  // While open (GdalSource::acquire).
+  GDALDatasetH src = nullptr;
+  GDALDatasetH selected = nullptr;  // a VRT of the chosen bands of `src` (with --bands)
+  GDALDatasetH warped = nullptr;    // a VRT of the whole grid at the max level
+  int bands = 0;                    // of `warped`: the data bands + alpha
+  std::uint64_t last_use = 0;
+  void close() {
     if (warped) GDALClose(warped);
+    if (selected) GDALClose(selected);
     if (src) GDALClose(src);
+    warped = selected = src = nullptr;
   }
+  ~Input() { close(); }
 };
 
 bool gdal_is_georeferenced(const std::filesystem::path& path) {
@@ -180,9 +202,71 @@ void widen_to_edge_extremes(OGRCoordinateTransformationH ct, const double gt[6],
   }
 }
 
-// Opens one input and checks what the build needs of it: a georeference, 1..4 bands, 8-bit data
-// or a value range; its extent in degrees and its pixel size in the scheme's CRS.
-Status open_input(GdalSource::Input& in, const GdalSourceOptions& o, const SrsPtr& lonlat) {
+// Which bands of an input are data and which is alpha: by --bands, else by the band count.
+Status choose_bands(GdalSource::Input& in, GDALDatasetH ds, const GdalSourceOptions& o) {
+  const std::string name = in.path.string();
+  const int n = in.src_bands;
+  const auto is_alpha = [&](int b) {
+    return GDALGetRasterColorInterpretation(GDALGetRasterBand(ds, b)) == GCI_AlphaBand;
+  };
+  if (o.bands.empty()) {
+    if (n < 1 || n > 4)
+      return make_error(ErrorCode::invalid_argument,
+                        name + ": " + std::to_string(n) +
+                            " bands; 1 (grey), 2 (grey, alpha), 3 (RGB) or 4 (RGBA) are supported "
+                            "as they are: pick 1 or 3 with --bands, e.g. --bands 4,3,2");
+    in.data_bands = n <= 2 ? std::vector<int>{1} : std::vector<int>{1, 2, 3};
+    in.alpha_band = n == 2 || n == 4 ? n : 0;
+  } else {
+    for (int b : o.bands)
+      if (b < 1 || b > n)
+        return make_error(ErrorCode::invalid_argument,
+                          name + ": has " + std::to_string(n) + " band" + (n == 1 ? "" : "s") +
+                              "; --bands asks for band " + std::to_string(b));
+    in.data_bands = o.bands;
+    for (int b = 1; b <= n && !in.alpha_band; ++b)
+      if (is_alpha(b) && std::find(o.bands.begin(), o.bands.end(), b) == o.bands.end())
+        in.alpha_band = b;
+  }
+  in.tagged_alpha = in.alpha_band && is_alpha(in.alpha_band);
+  return {};
+}
+
+// The approximate min and max of each data band (GDAL's approximate statistics: an overview or a
+// sample of the blocks). A band with no valid value (all nodata) gets an empty range (min > max).
+void observe_values(GdalSource::Input& in, GDALDatasetH ds) {
+  in.observed.clear();
+  for (int b : in.data_bands) {
+    double mm[2] = {INFINITY, -INFINITY};
+    CPLErrorReset();
+    if (GDALComputeRasterMinMax(GDALGetRasterBand(ds, b), TRUE, mm) != CE_None ||
+        !std::isfinite(mm[0]) || !std::isfinite(mm[1]))
+      mm[0] = INFINITY, mm[1] = -INFINITY;
+    in.observed.emplace_back(mm[0], mm[1]);
+  }
+  CPLErrorReset();
+}
+
+std::pair<double, double> observed_union(const GdalSource::Input& in) {
+  std::pair<double, double> u{INFINITY, -INFINITY};
+  for (const auto& [lo, hi] : in.observed) u = {std::min(u.first, lo), std::max(u.second, hi)};
+  return u;
+}
+
+// Values used as they are (no range): refused when they go beyond 0..255 (they would clip).
+Status check_unmapped(const GdalSource::Input& in, GDALDataType type) {
+  const auto [lo, hi] = observed_union(in);
+  if (lo > hi || (lo >= 0 && hi <= 255)) return {};
+  return make_error(ErrorCode::invalid_argument,
+                    in.path.string() + ": " + GDALGetDataTypeName(type) + " data (values about " +
+                        fmt_value(lo) + " .. " + fmt_value(hi) +
+                        ") would clip to 0..255: give --range MIN,MAX to map values linearly to "
+                        "0..255, or --range auto (the mosaic's 2%..98% percentiles per band)");
+}
+
+// Opens one input, checks what the build needs of it (a georeference, its bands; its extent in
+// degrees and its pixel size in the scheme's CRS, its approximate values) and closes it.
+Status probe_input(GdalSource::Input& in, const GdalSourceOptions& o, const SrsPtr& lonlat) {
   const std::string name = in.path.string();
   // Not a FIFO or a device (GDAL would block on it or read forever), not missing, not empty.
   if (Status st = check_input_file(in.path); !st) {
@@ -196,35 +280,32 @@ Status open_input(GdalSource::Input& in, const GdalSourceOptions& o, const SrsPt
   ErrorCapture errors;
   if (!GDALIdentifyDriverEx(name.c_str(), GDAL_OF_RASTER, nullptr, nullptr))
     return make_error(ErrorCode::invalid_argument, name + ": not a raster GDAL reads");
-  in.src = GDALOpenEx(name.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY, nullptr, nullptr, nullptr);
-  if (!in.src) return make_error(ErrorCode::corrupt, name + ": cannot open: " + errors.text());
+  std::unique_ptr<void, void (*)(GDALDatasetH)> ds(
+      GDALOpenEx(name.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY, nullptr, nullptr, nullptr),
+      [](GDALDatasetH d) { GDALClose(d); });
+  if (!ds) return make_error(ErrorCode::corrupt, name + ": cannot open: " + errors.text());
   double gt[6];
-  OGRSpatialReferenceH srs = GDALGetSpatialRef(in.src);
-  if (GDALGetGeoTransform(in.src, gt) != CE_None || !srs)
+  OGRSpatialReferenceH srs = GDALGetSpatialRef(ds.get());
+  if (GDALGetGeoTransform(ds.get(), gt) != CE_None || !srs)
     return make_error(ErrorCode::invalid_argument,
                       name +
                           ": no georeference (a CRS and a geotransform); inputs of a "
                           "georeferenced build must all have one");
-  const int bands = GDALGetRasterCount(in.src);
-  if (bands < 1 || bands > 4)
+  in.src_bands = GDALGetRasterCount(ds.get());
+  if (Status st = choose_bands(in, ds.get(), o); !st) return st;
+  if (!o.value_ranges.empty() && o.value_ranges.size() != 1 &&
+      o.value_ranges.size() != in.data_bands.size())
     return make_error(ErrorCode::invalid_argument,
-                      name + ": " + std::to_string(bands) +
-                          " bands; 1 (grey), 2 (grey, alpha), 3 (RGB) or 4 (RGBA) are supported");
-  const GDALDataType type = GDALGetRasterDataType(GDALGetRasterBand(in.src, 1));
-  const int w = GDALGetRasterXSize(in.src), h = GDALGetRasterYSize(in.src);
-  if (type != GDT_Byte && !o.value_range) {
-    double lo = INFINITY, hi = -INFINITY;
-    for (int b = 1; b <= (bands == 2 || bands == 4 ? bands - 1 : bands); ++b) {
-      double mm[2] = {0, 0};
-      GDALComputeRasterMinMax(GDALGetRasterBand(in.src, b), TRUE, mm);
-      lo = std::min(lo, mm[0]);
-      hi = std::max(hi, mm[1]);
-    }
-    return make_error(ErrorCode::invalid_argument,
-                      name + ": " + GDALGetDataTypeName(type) + " data (values about " + fmt(lo) +
-                          " .. " + fmt(hi) +
-                          "); give --range MIN,MAX to map values linearly to 0..255");
-  }
+                      name + ": " + std::to_string(o.value_ranges.size()) +
+                          " value ranges for its " + std::to_string(in.data_bands.size()) +
+                          " data band(s): give one MIN,MAX for all, or one per band");
+  const GDALDataType type = GDALGetRasterDataType(GDALGetRasterBand(ds.get(), in.data_bands[0]));
+  in.integer = GDALDataTypeIsInteger(type);
+  const int w = GDALGetRasterXSize(ds.get()), h = GDALGetRasterYSize(ds.get());
+  in.pixels = std::uint64_t(w) * std::uint64_t(h);
+  observe_values(in, ds.get());
+  if (o.value_ranges.empty() && !o.auto_range)
+    if (Status st = check_unmapped(in, type); !st) return st;
   // The extent in its own CRS (the corners, for a rotated geotransform too), then in degrees.
   double min_x = INFINITY, min_y = INFINITY, max_x = -INFINITY, max_y = -INFINITY;
   for (int c = 0; c < 4; ++c) {
@@ -248,10 +329,10 @@ Status open_input(GdalSource::Input& in, const GdalSourceOptions& o, const SrsPt
   // Its pixel size on the scheme's CRS: what gdalwarp would choose without -tr.
   const std::string dst = std::string("DST_SRS=") + scheme_epsg(o.tiling);
   const char* topts[] = {dst.c_str(), nullptr};
-  void* tr = GDALCreateGenImgProjTransformer2(in.src, nullptr, const_cast<char**>(topts));
+  void* tr = GDALCreateGenImgProjTransformer2(ds.get(), nullptr, const_cast<char**>(topts));
   double ogt[6];
   int pixels = 0, lines = 0;
-  const bool sized = tr && GDALSuggestedWarpOutput(in.src, GDALGenImgProjTransform, tr, ogt,
+  const bool sized = tr && GDALSuggestedWarpOutput(ds.get(), GDALGenImgProjTransform, tr, ogt,
                                                    &pixels, &lines) == CE_None;
   if (tr) GDALDestroyGenImgProjTransformer(tr);
   if (!sized)
@@ -260,7 +341,7 @@ Status open_input(GdalSource::Input& in, const GdalSourceOptions& o, const SrsPt
         name + ": cannot be transformed to " + scheme_epsg(o.tiling) + ": " + errors.text());
   in.pixel_size = ogt[1];
   in.description = short_name(in.path) + " " + std::to_string(w) + "x" + std::to_string(h) + " " +
-                   std::to_string(bands) + "ch " + GDALGetDataTypeName(type);
+                   std::to_string(in.src_bands) + "ch " + GDALGetDataTypeName(type);
   return {};
 }
 
@@ -283,13 +364,42 @@ Result<int> pick_level(const GdalSourceOptions& o, double pixel_size) {
                     "the inputs' pixels (" + fmt(pixel_size) + ") are finer than the finest level");
 }
 
-// gdalwarp onto the grid: a VRT dataset (nothing is computed until it is read).
-Status warp_input(GdalSource::Input& in, const GdalSourceOptions& o, const Geometry& g, int z) {
+std::vector<char*> argv_of(std::vector<std::string>& args) {
+  std::vector<char*> argv;
+  for (auto& a : args) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  return argv;
+}
+
+// With --bands: a VRT of the chosen data bands of in.src, then its alpha band (gdal_translate -b).
+Status select_bands(GdalSource::Input& in) {
+  std::vector<std::string> args = {"-of", "VRT"};
+  for (int b : in.data_bands) args.insert(args.end(), {"-b", std::to_string(b)});
+  if (in.alpha_band) args.insert(args.end(), {"-b", std::to_string(in.alpha_band)});
+  std::vector<char*> argv = argv_of(args);
+  GDALTranslateOptions* to = GDALTranslateOptionsNew(argv.data(), nullptr);
+  int usage_error = 0;
+  in.selected = to ? GDALTranslate("", in.src, to, &usage_error) : nullptr;
+  if (to) GDALTranslateOptionsFree(to);
+  if (!in.selected) return make_error(ErrorCode::corrupt, in.path.string() + ": cannot pick bands");
+  return {};
+}
+
+// gdalwarp onto the grid (`width` x `height` texels at level z): a VRT dataset (nothing is
+// computed until it is read).
+Status warp_input(GdalSource::Input& in, const GdalSourceOptions& o, std::uint64_t width,
+                  std::uint64_t height, int z) {
   ErrorCapture errors;
+  in.src =
+      GDALOpenEx(in.path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY, nullptr, nullptr, nullptr);
+  if (!in.src)
+    return make_error(ErrorCode::corrupt, in.path.string() + ": cannot open: " + errors.text());
+  if (!o.bands.empty())
+    if (Status st = select_bands(in); !st) return st;
   const CrsBounds top_left = tile_bounds_crs(o.tiling, o.tile_size, TileId{std::uint8_t(z), 0, 0});
   const double cell = level_cell_size(o.tiling, o.tile_size, z);
   const double west = top_left.min_x, north = top_left.max_y;
-  const double east = west + cell * double(g.width()), south = north - cell * double(g.height());
+  const double east = west + cell * double(width), south = north - cell * double(height);
   // -et 0: the exact transformer at every texel, not a linear approximation within 1/8 texel
   // (which depends on how the warper chunks the grid, so reading windows would shift it).
   std::vector<std::string> args = {"-of",
@@ -302,8 +412,8 @@ Status warp_input(GdalSource::Input& in, const GdalSourceOptions& o, const Geome
                                    fmt(east),
                                    fmt(north),
                                    "-ts",
-                                   std::to_string(g.width()),
-                                   std::to_string(g.height()),
+                                   std::to_string(width),
+                                   std::to_string(height),
                                    "-r",
                                    resampling_name(o.resampling),
                                    "-et",
@@ -313,24 +423,84 @@ Status warp_input(GdalSource::Input& in, const GdalSourceOptions& o, const Geome
                                    "-dstalpha",
                                    "-wo",
                                    "DST_ALPHA_MAX=255"};
-  const int bands = GDALGetRasterCount(in.src);
-  if ((bands == 2 || bands == 4) &&
-      GDALGetRasterColorInterpretation(GDALGetRasterBand(in.src, bands)) != GCI_AlphaBand)
-    args.push_back("-srcalpha");
-  std::vector<char*> argv;
-  for (auto& a : args) argv.push_back(a.data());
-  argv.push_back(nullptr);
+  // An alpha band is the last band of what is warped; GDAL finds it alone when it says alpha.
+  if (in.alpha_band && !in.tagged_alpha) args.push_back("-srcalpha");
+  std::vector<char*> argv = argv_of(args);
   GDALWarpAppOptions* wo = GDALWarpAppOptionsNew(argv.data(), nullptr);
   int usage_error = 0;
-  in.warped = wo ? GDALWarp("", nullptr, 1, &in.src, wo, &usage_error) : nullptr;
+  GDALDatasetH from = in.selected ? in.selected : in.src;
+  in.warped = wo ? GDALWarp("", nullptr, 1, &from, wo, &usage_error) : nullptr;
   if (wo) GDALWarpAppOptionsFree(wo);
   if (!in.warped)
     return make_error(ErrorCode::corrupt, in.path.string() + ": cannot warp: " + errors.text());
   in.bands = GDALGetRasterCount(in.warped);
-  if (in.bands != 2 && in.bands != 4)
+  if (in.bands != int(in.data_bands.size()) + 1)
     return make_error(ErrorCode::internal, in.path.string() + ": the warped VRT has " +
                                                std::to_string(in.bands) + " bands");
   return {};
+}
+
+// A value for a --range argument: 6 significant digits, as it will be printed and reused.
+double round6(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.6g", v);
+  return std::strtod(buf, nullptr);
+}
+
+// Without a range: when the values of all the inputs together span under 1/16 of 0..255 (a dark or
+// flat result, e.g. 12-bit data read as it is), one warning per input naming it and its values (at
+// most kMaxWarnings, then how many more). A uniform input in a mosaic whose values vary (an ocean
+// or ice tile) is no reason for one.
+std::vector<std::string> narrow_values_warnings(
+    const std::vector<std::unique_ptr<GdalSource::Input>>& inputs) {
+  std::pair<double, double> all{INFINITY, -INFINITY};
+  for (const auto& in : inputs) {
+    const auto [lo, hi] = observed_union(*in);
+    all = {std::min(all.first, lo), std::max(all.second, hi)};
+  }
+  std::vector<std::string> out;
+  if (all.first > all.second || all.second - all.first >= 256.0 / 16) return out;
+  std::size_t named = 0;
+  for (const auto& in : inputs) {
+    const auto [lo, hi] = observed_union(*in);
+    if (lo > hi) continue;
+    if (++named > GdalSource::kMaxWarnings) continue;
+    out.push_back(in->path.string() + ": values " + fmt_value(lo) + " .. " + fmt_value(hi) +
+                  " use under 1/16 of 0..255 (the result will look flat or dark): give --range "
+                  "MIN,MAX to stretch them, or --range auto");
+  }
+  if (named > GdalSource::kMaxWarnings)
+    out.push_back("... and " + std::to_string(named - GdalSource::kMaxWarnings) +
+                  " more inputs whose values use under 1/16 of 0..255");
+  return out;
+}
+
+// A histogram of band `b` of `ds`: hist.size() buckets from lo to hi (values beyond go to the end
+// buckets), from a sample: the band read at most 1024 x 1024 (nearest; GDAL uses an overview when
+// there is one), without the texels its mask says are invalid (nodata, alpha or a mask). Done here
+// rather than by GDALGetRasterHistogramEx, which stores its result beside the file (.aux.xml).
+bool sample_histogram(GDALDatasetH ds, int b, double lo, double hi, std::vector<double>& hist,
+                      double& counted) {
+  GDALRasterBandH band = GDALGetRasterBand(ds, b);
+  const int w = GDALGetRasterXSize(ds), h = GDALGetRasterYSize(ds);
+  const int sw = std::min(w, 1024), sh = std::min(h, 1024);
+  std::vector<double> values(std::size_t(sw) * std::size_t(sh));
+  std::vector<std::uint8_t> valid(values.size());
+  if (GDALRasterIO(band, GF_Read, 0, 0, w, h, values.data(), sw, sh, GDT_Float64, 0, 0) !=
+          CE_None ||
+      GDALRasterIO(GDALGetMaskBand(band), GF_Read, 0, 0, w, h, valid.data(), sw, sh, GDT_Byte, 0,
+                   0) != CE_None)
+    return false;
+  std::fill(hist.begin(), hist.end(), 0.0);
+  counted = 0;
+  const double scale = double(hist.size()) / (hi - lo);
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    if (!valid[i] || !std::isfinite(values[i])) continue;
+    const double at = std::clamp((values[i] - lo) * scale, 0.0, double(hist.size() - 1));
+    hist[std::size_t(at)] += 1;
+    counted += 1;
+  }
+  return true;
 }
 
 }  // namespace
@@ -340,10 +510,15 @@ Result<std::unique_ptr<GdalSource>> GdalSource::open(
   register_gdal();
   if (options.tiling == Tiling::none)
     return make_error(ErrorCode::invalid_argument, "georeferenced inputs need a tiling scheme");
-  if (options.value_range && !(options.value_range->first < options.value_range->second))
-    return make_error(ErrorCode::invalid_argument, "--range MIN,MAX needs MIN < MAX");
+  if (options.bands.size() != 1 && options.bands.size() != 3 && !options.bands.empty())
+    return make_error(ErrorCode::invalid_argument, "--bands takes 1 band (grey) or 3 (RGB), not " +
+                                                       std::to_string(options.bands.size()));
+  for (const auto& [lo, hi] : options.value_ranges)
+    if (!(lo < hi))
+      return make_error(ErrorCode::invalid_argument, "--range MIN,MAX needs MIN < MAX");
   std::unique_ptr<GdalSource> s(new GdalSource());
   s->options_ = options;
+  s->options_.max_open = std::max<std::size_t>(1, options.max_open);
   const SrsPtr lonlat = lonlat_srs();
   double finest = INFINITY;
   const LonLatBounds extent = scheme_extent(options.tiling);
@@ -351,7 +526,7 @@ Result<std::unique_ptr<GdalSource>> GdalSource::open(
   for (const auto& path : inputs) {
     auto in = std::make_unique<Input>();
     in->path = path;
-    if (Status st = open_input(*in, options, lonlat); !st) return st.error();
+    if (Status st = probe_input(*in, options, lonlat); !st) return st.error();
     LonLatBounds& b = in->bounds;
     if (b.west > b.east)
       return make_error(ErrorCode::unsupported, path.string() + ": crosses the antimeridian (" +
@@ -371,6 +546,8 @@ Result<std::unique_ptr<GdalSource>> GdalSource::open(
     first = false;
     s->inputs_.push_back(std::move(in));
   }
+  if (options.value_ranges.empty() && !options.auto_range)
+    s->warnings_ = narrow_values_warnings(s->inputs_);
   auto level = pick_level(options, finest);
   if (!level) return level.error();
   s->max_level_ = *level;
@@ -387,15 +564,111 @@ Result<std::unique_ptr<GdalSource>> GdalSource::open(
   if (!g) return g.error();
   s->width_ = g->width();
   s->height_ = g->height();
+  if (options.auto_range) {
+    if (Status st = s->choose_auto_ranges(); !st) return st.error();
+  } else {
+    s->ranges_ = options.value_ranges;
+  }
+  std::size_t described = 0;
   for (auto& in : s->inputs_) {
     in->texels = footprint_texels(options.tiling, *g, in->bounds);
-    if (Status st = warp_input(*in, options, *g, *level); !st) return st.error();
+    // Warped once here, so that an input GDAL cannot warp is refused before the build starts.
+    if (Status st = s->acquire(*in); !st) return st.error();
+    if (++described > 3) continue;
     if (!s->description_.empty()) s->description_ += ", ";
     s->description_ += in->description;
   }
+  if (described > 3) s->description_ += ", ... (" + std::to_string(described) + " inputs)";
   s->description_ += " -> " + std::string(tiling_name(options.tiling)) + " level " +
                      std::to_string(*level) + " (" + resampling_name(options.resampling) + ")";
   return s;
+}
+
+// --range auto: per data band, the kAutoRangeLow..kAutoRangeHigh percentiles of all the inputs'
+// values together, from a sample of each input (sample_histogram: read at most 1024 x 1024), each
+// input weighted by its pixel count. Buckets: one per integer value for integer data (at
+// most 65536), else 65536 between the smallest and the largest value seen.
+Status GdalSource::choose_auto_ranges() {
+  std::size_t nb = 0;
+  bool integer = true;
+  for (const auto& in : inputs_) {
+    nb = std::max(nb, in->data_bands.size());
+    integer = integer && in->integer;
+  }
+  ranges_.assign(nb, {INFINITY, -INFINITY});
+  for (const auto& in : inputs_)
+    for (std::size_t k = 0; k < in->observed.size(); ++k)
+      ranges_[k] = {std::min(ranges_[k].first, in->observed[k].first),
+                    std::max(ranges_[k].second, in->observed[k].second)};
+  ErrorCapture errors;
+  for (std::size_t k = 0; k < nb; ++k) {
+    auto [gmin, gmax] = ranges_[k];
+    if (gmin > gmax)
+      return make_error(ErrorCode::invalid_argument,
+                        "--range auto: band " + std::to_string(k + 1) + " has no valid value");
+    const bool per_value = integer && gmax - gmin < 65536;
+    const int buckets = per_value ? int(gmax - gmin) + 1 : 65536;
+    const double lo = per_value ? gmin - 0.5 : gmin, hi = per_value ? gmax + 0.5 : gmax;
+    std::vector<double> sum(std::size_t(buckets), 0.0);
+    std::vector<double> hist(sum.size());
+    for (auto& in : inputs_) {
+      if (k >= in->data_bands.size()) continue;
+      GDALDatasetH ds = GDALOpenEx(in->path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY, nullptr,
+                                   nullptr, nullptr);
+      if (!ds)
+        return make_error(ErrorCode::corrupt,
+                          in->path.string() + ": cannot open: " + errors.text());
+      double counted = 0;
+      const bool ok = sample_histogram(ds, in->data_bands[k], lo, hi, hist, counted);
+      GDALClose(ds);
+      if (!ok)
+        return make_error(ErrorCode::corrupt,
+                          in->path.string() + ": cannot read its values: " + errors.text());
+      if (counted <= 0) continue;
+      const double weight = double(in->pixels) / counted;
+      for (std::size_t i = 0; i < hist.size(); ++i) sum[i] += hist[i] * weight;
+    }
+    double total = 0;
+    for (double c : sum) total += c;
+    // The value below which `p` percent of all values lie (interpolated within its bucket).
+    const auto percentile = [&](double p) {
+      const double want = total * p / 100, width = (hi - lo) / buckets;
+      double acc = 0;
+      for (std::size_t i = 0; i < sum.size(); ++i) {
+        if (acc + sum[i] >= want && sum[i] > 0) {
+          if (per_value) return gmin + double(i);
+          return lo + width * (double(i) + (want - acc) / sum[i]);
+        }
+        acc += sum[i];
+      }
+      return gmax;
+    };
+    double a = round6(percentile(kAutoRangeLow)), b = round6(percentile(kAutoRangeHigh));
+    if (!(a < b)) a = round6(gmin), b = round6(gmax);
+    if (!(a < b)) b = round6(a + std::max(1.0, std::abs(a) * 1e-3));
+    ranges_[k] = {a, b};
+  }
+  return {};
+}
+
+Status GdalSource::acquire(Input& in) {
+  in.last_use = ++tick_;
+  if (in.warped) return {};
+  if (open_.size() >= options_.max_open) {
+    auto lru = std::min_element(open_.begin(), open_.end(), [](const Input* a, const Input* b) {
+      return a->last_use < b->last_use;
+    });
+    (*lru)->close();
+    open_.erase(lru);
+  }
+  const int z = max_level_;
+  if (Status st = warp_input(in, options_, width_, height_, z); !st) {
+    in.close();
+    return st;
+  }
+  open_.push_back(&in);
+  peak_open_ = std::max(peak_open_, open_.size());
+  return {};
 }
 
 GdalSource::~GdalSource() = default;
@@ -405,13 +678,18 @@ Status GdalSource::read_window(std::uint64_t x0, std::uint64_t x1, std::uint64_t
   const std::uint64_t out_w = x1 - x0;
   std::memset(out, 0, std::size_t(out_w) * count * 4);
   ErrorCapture errors;
-  const double lo = options_.value_range ? options_.value_range->first : 0.0;
-  const double scale = options_.value_range ? 255.0 / (options_.value_range->second - lo) : 1.0;
+  double lo[3] = {0, 0, 0}, scale[3] = {1, 1, 1};
+  for (std::size_t k = 0; k < 3 && !ranges_.empty(); ++k) {
+    const auto& r = ranges_[std::min(k, ranges_.size() - 1)];
+    lo[k] = r.first;
+    scale[k] = 255.0 / (r.second - r.first);
+  }
   for (auto& in : inputs_) {
     const TexelRect& r = in->texels;
     const std::uint64_t y0 = std::max(y, r.y0), y1 = std::min(y + count, r.y1);
     const std::uint64_t c0 = std::max(x0, r.x0), c1 = std::min(x1, r.x1);
     if (y0 >= y1 || c0 >= c1) continue;
+    if (Status st = acquire(*in); !st) return st;
     const std::uint64_t w = c1 - c0, h = y1 - y0;
     const int nb = in->bands;
     scratch_.resize(std::size_t(w) * h * nb);
@@ -431,7 +709,8 @@ Status GdalSource::read_window(std::uint64_t x0, std::uint64_t x1, std::uint64_t
         if (a <= 0) continue;
         double c[3];
         for (int k = 0; k < 3; ++k) {
-          const double v = (src[nb == 2 ? 0 : k] - lo) * scale;
+          const int from = nb == 2 ? 0 : k;  // grey: its one band and its range
+          const double v = (src[from] - lo[from]) * scale[from];
           c[k] = std::clamp(v, 0.0, 255.0);
         }
         // Over: later inputs win where they are opaque.

@@ -3,6 +3,7 @@
 // thread-safe: one thread at a time uses it (it may be a different one from the opener's).
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <filesystem>
 #include <memory>
@@ -28,15 +29,36 @@ struct GdalSourceOptions {
   std::uint32_t tile_size = 256, border = 4;
   std::optional<int> max_level;
   Resampling resampling = Resampling::cubic;
-  std::optional<std::pair<double, double>> value_range;
+  // The data bands (1-based) read from every input: 1 (grey) or 3 (RGB); an alpha band (colour
+  // interpretation alpha) that is not among them is still used as alpha, and so are nodata values
+  // and masks. Empty: by the input's band count (1 grey, 2 grey + alpha, 3 RGB, 4 RGBA).
+  std::vector<int> bands;
+  // Values mapped linearly to 0..255 (clamped): one MIN,MAX for every data band, or one per data
+  // band (3 for RGB). Empty and no auto_range: values are used as they are (0..255), and data
+  // beyond 0..255 is refused.
+  std::vector<std::pair<double, double>> value_ranges;
+  // One range per data band for the whole mosaic, from a sample of each input's values (read at
+  // most 1024 x 1024, masked texels left out), each weighted by its pixel count: the
+  // kAutoRangeLow..kAutoRangeHigh percentiles of all their values together (value_ranges unused).
+  bool auto_range = false;
+  // The most inputs kept open at once (each: its file and its warped VRT); at least 1.
+  std::size_t max_open = 32;
 };
+
+// The percentiles --range auto clips at (QGIS's default cumulative count cut for imagery).
+inline constexpr double kAutoRangeLow = 2, kAutoRangeHigh = 98;
 
 class GdalSource {
  public:
-  // Opens every input (each must be georeferenced), picks the level, and prepares one warped VRT
-  // per input onto the grid. Errors: invalid_argument (no georeference, an unsupported band
-  // count, non-8-bit data without a range, a bad level, a footprint outside the scheme),
-  // too_large (a grid wider than kMaxGeoreferencedWidth), corrupt (GDAL cannot open or warp it).
+  // Probes every input (each must be georeferenced: its extent, pixel size, bands, type and
+  // approximate value range), picks the level, checks that each can be warped onto the grid, and
+  // chooses the value mapping. Inputs are closed after probing and opened again when a window
+  // needs them, at most options.max_open at once (least recently used closed first), so any
+  // number of inputs can be built. Errors: invalid_argument (no georeference, an unsupported band
+  // count or a band beyond it, values beyond 0..255 without a range, a bad level, a footprint
+  // outside the scheme), too_large (a grid wider than kMaxGeoreferencedWidth), corrupt (GDAL cannot
+  // open or warp it).
+  // Without a range, an input whose values span under 1/16 of 0..255 gets a warning (warnings()).
   static Result<std::unique_ptr<GdalSource>> open(const std::vector<std::filesystem::path>& inputs,
                                                   const GdalSourceOptions& options);
   ~GdalSource();
@@ -47,6 +69,14 @@ class GdalSource {
   // The union of the inputs' extents in degrees, clipped to the scheme's extent.
   const LonLatBounds& bounds() const { return bounds_; }
   std::string description() const { return description_; }
+  // What the build should tell its user: inputs whose values use under 1/16 of 0..255, each named
+  // with its observed range (at most kMaxWarnings, then how many more).
+  const std::vector<std::string>& warnings() const { return warnings_; }
+  static constexpr std::size_t kMaxWarnings = 10;
+  // The value mapping in use, one MIN,MAX per data band (1 or 3), or empty (values as they are).
+  const std::vector<std::pair<double, double>>& value_ranges() const { return ranges_; }
+  // The most inputs that were open at once so far.
+  std::size_t peak_open() const { return peak_open_; }
 
   // Grid columns [x0, x1) of rows [y, y + count) as RGBA8 ((x1 - x0) * 4 bytes per row). Texels no
   // input covers (or covers with nodata, a mask or alpha 0) are transparent black; later inputs
@@ -54,10 +84,14 @@ class GdalSource {
   Status read_window(std::uint64_t x0, std::uint64_t x1, std::uint64_t y, std::uint32_t count,
                      std::uint8_t* out);
 
-  struct Input;  // one opened input and its warped VRT (gdal_source.cpp)
+  struct Input;  // one input: what probing found, and its datasets while open (gdal_source.cpp)
 
  private:
   GdalSource() = default;
+  // Opens `in` (its file and its warped VRT) unless it is open, closing the least recently used
+  // input first when max_open are open.
+  Status acquire(Input& in);
+  Status choose_auto_ranges();
 
   GdalSourceOptions options_;
   std::vector<std::unique_ptr<Input>> inputs_;
@@ -65,6 +99,11 @@ class GdalSource {
   int max_level_ = 0;
   LonLatBounds bounds_;
   std::string description_;
+  std::vector<std::string> warnings_;
+  std::vector<std::pair<double, double>> ranges_;
+  std::vector<Input*> open_;  // the inputs open now
+  std::size_t peak_open_ = 0;
+  std::uint64_t tick_ = 0;
   std::vector<float> scratch_;
 };
 

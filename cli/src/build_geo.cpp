@@ -1,6 +1,8 @@
 // vts build's georeference options.
 #include "build_geo.hpp"
 
+#include <algorithm>
+#include <cstdio>
 #include <cstdlib>
 #include <vector>
 
@@ -25,6 +27,41 @@ bool parse_numbers(const std::string& text, std::size_t n, std::vector<double>& 
   return true;
 }
 
+// --bands B or R,G,B: 1-based band numbers.
+Status apply_bands(const std::string& text, BuildOptions& o) {
+  if (text.empty()) return {};
+  std::vector<double> v;
+  const std::size_t n = std::size_t(std::count(text.begin(), text.end(), ',')) + 1;
+  if ((n != 1 && n != 3) || !parse_numbers(text, n, v) ||
+      std::any_of(v.begin(), v.end(), [](double b) { return b < 1 || b > 65535 || b != int(b); }))
+    return make_error(ErrorCode::invalid_argument,
+                      "--bands '" + text + "' is not B (grey) or R,G,B: band numbers from 1");
+  for (double b : v) o.bands.push_back(int(b));
+  return {};
+}
+
+// --range MIN,MAX, MIN1,MAX1,MIN2,MAX2,MIN3,MAX3 or auto.
+Status apply_range(const std::string& text, BuildOptions& o) {
+  if (text.empty()) return {};
+  if (text == "auto") {
+    o.auto_range = true;
+    return {};
+  }
+  std::vector<double> v;
+  const std::size_t n = std::size_t(std::count(text.begin(), text.end(), ',')) + 1;
+  bool ok = (n == 2 || n == 6) && parse_numbers(text, n, v);
+  for (std::size_t i = 0; ok && i < v.size(); i += 2) ok = v[i] < v[i + 1];
+  if (!ok)
+    return make_error(
+        ErrorCode::invalid_argument,
+        "--range '" + text + "' is not MIN,MAX, MIN,MAX for each of 3 bands (MIN < MAX), or auto");
+  if (n == 2)
+    o.value_range = std::pair{v[0], v[1]};
+  else
+    for (std::size_t i = 0; i < n; i += 2) o.band_ranges.emplace_back(v[i], v[i + 1]);
+  return {};
+}
+
 }  // namespace
 
 void add_geo_options(CLI::App* c, GeoArgs& a) {
@@ -43,9 +80,24 @@ void add_geo_options(CLI::App* c, GeoArgs& a) {
                 "Georeferenced inputs: our finest level (default: the first level whose texel is "
                 "no larger than the finest input pixel)")
       ->check(CLI::Range(0, int(Geometry::kMaxZoom)));
+  c->add_option("--bands", a.bands,
+                "Georeferenced inputs: the bands B (grey) or R,G,B (1-based) of every input, e.g. "
+                "4,3,2 for a multispectral file (an alpha band, nodata or mask still applies)");
   c->add_option("--range", a.range,
-                "Georeferenced inputs: MIN,MAX mapped linearly to 0..255 (clamped); needed for "
-                "data that is not 8-bit");
+                "Georeferenced inputs: MIN,MAX mapped linearly to 0..255 (clamped) for every band, "
+                "or MIN,MAX per band (R,G,B); or 'auto': per band, the 2%..98% percentiles of all "
+                "inputs' values together (sampled: approximate), printed for reuse. Without it, "
+                "values beyond 0..255 are refused");
+}
+
+std::string range_argument(const std::vector<std::pair<double, double>>& ranges) {
+  std::string s;
+  char buf[32];
+  for (const auto& [lo, hi] : ranges) {
+    std::snprintf(buf, sizeof buf, "%s%.6g,%.6g", s.empty() ? "" : ",", lo, hi);
+    s += buf;
+  }
+  return s;
 }
 
 Status apply_geo_options(const GeoArgs& a, BuildOptions& o) {
@@ -59,12 +111,8 @@ Status apply_geo_options(const GeoArgs& a, BuildOptions& o) {
   o.resampling = *r;
   if (a.max_level >= 0) o.max_level = a.max_level;
   std::vector<double> v;
-  if (!a.range.empty()) {
-    if (!parse_numbers(a.range, 2, v) || !(v[0] < v[1]))
-      return make_error(ErrorCode::invalid_argument,
-                        "--range '" + a.range + "' is not of the form MIN,MAX with MIN < MAX");
-    o.value_range = std::pair{v[0], v[1]};
-  }
+  if (Status s = apply_bands(a.bands, o); !s) return s;
+  if (Status s = apply_range(a.range, o); !s) return s;
   if (a.bbox.empty()) return {};
   if (o.tiling == Tiling::none)
     return make_error(ErrorCode::invalid_argument, "--bbox needs --tiling");

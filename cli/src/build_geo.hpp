@@ -1,9 +1,11 @@
-// vts build's georeference options (--tiling, --bbox, --resampling, --max-level, --range), kept
-// apart from cmd_build.cpp. Built only with the builder.
+// vts build's georeference options (--tiling, --bbox, --resampling, --max-level, --bands, --range),
+// kept apart from cmd_build.cpp. Built only with the builder.
 #pragma once
 
 #include <CLI/CLI.hpp>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "vts/builder/builder.hpp"
 #include "vts/protocol/result.hpp"
@@ -11,13 +13,16 @@
 namespace vts::cli {
 
 struct GeoArgs {
-  std::string tiling, bbox, range;
+  std::string tiling, bbox, range, bands;
   std::string resampling = resampling_name(BuildOptions{}.resampling);
   int max_level = -1;  // -1: from the inputs' resolution
 };
 
 void add_geo_options(CLI::App* c, GeoArgs& a);
-// Fills BuildOptions::tiling, bounds, resampling, max_level, value_range; errors name the option.
+// Fills BuildOptions::tiling, bounds, resampling, max_level, bands, value_range, band_ranges,
+// auto_range; errors name the option.
 Status apply_geo_options(const GeoArgs& a, BuildOptions& o);
+// The value mapping as a --range argument ("MIN,MAX" or one pair per band), to reuse.
+std::string range_argument(const std::vector<std::pair<double, double>>& ranges);
 
 }  // namespace vts::cli

@@ -5,6 +5,7 @@
 #include <string_view>
 
 #include "build_geo.hpp"
+#include "build_inputs.hpp"
 #include "commands.hpp"
 #include "progress.hpp"
 #include "vts/builder/builder.hpp"
@@ -15,6 +16,7 @@ namespace {
 
 struct BuildArgs {
   std::vector<std::string> inputs;
+  std::string input_list;
   std::string output;
   std::uint32_t tile = 256, border = 4;
   std::string codec = "lossless";
@@ -47,7 +49,9 @@ Result<SyntheticSpec> synthetic_spec(const BuildArgs& a) {
 
 Result<BuildOptions> build_options(const BuildArgs& a) {
   BuildOptions o;
-  for (const auto& i : a.inputs) o.inputs.emplace_back(i);
+  auto inputs = expand_inputs(a.inputs, a.input_list);
+  if (!inputs) return inputs.error();
+  o.inputs = std::move(inputs).value();
   o.output = a.output;
   o.tile_size = a.tile;
   o.border = a.border;
@@ -108,6 +112,8 @@ void print_json(const BuildArgs& a, const BuildOptions& o, const BuildReport& r)
   }
   j["passes"] = r.passes;
   j["window_width"] = r.window_width;
+  if (!r.value_ranges.empty()) j["range"] = range_argument(r.value_ranges);
+  j["warnings"] = r.warnings;
   j["seconds"] = r.seconds;
   j["tiles_per_second"] = r.seconds > 0 ? double(r.stats.addressed_tiles) / r.seconds : 0.0;
   std::printf("%s\n", j.dump(2).c_str());
@@ -121,6 +127,8 @@ void print_text(const BuildArgs& a, const BuildReport& r) {
               (unsigned long long)r.stats.tile_contents, human_bytes(r.stats.file_bytes).c_str(),
               human_duration(r.seconds).c_str(),
               r.seconds > 0 ? double(r.stats.addressed_tiles) / r.seconds : 0.0);
+  if (!r.value_ranges.empty())
+    std::printf("value range: --range %s\n", range_argument(r.value_ranges).c_str());
 }
 
 int run_build(const BuildArgs& a) {
@@ -133,6 +141,10 @@ int run_build(const BuildArgs& a) {
   };
   // SIGINT/SIGTERM ask the build to stop cleanly (no output file is left); a second one kills.
   o->cancel = &install_stop_signals();
+  o->on_warning = [&](const std::string& w) {
+    bar.finish();
+    std::fprintf(stderr, "warning: %s\n", w.c_str());
+  };
   auto report = build_pyramid(*o);
   bar.finish();
   if (!report) return report_error(report.error());
@@ -150,7 +162,12 @@ Runner add_build(CLI::App& app) {
   CLI::App* c = app.add_subcommand("build", "Cut images into a tile pyramid archive (PMTiles)");
   c->add_option("inputs", a->inputs,
                 "Input image(s): anything OpenImageIO reads (C*R images row-major with --grid), "
-                "or georeferenced rasters GDAL reads (placed by their georeference)");
+                "or georeferenced rasters GDAL reads (placed by their georeference; a VRT too); "
+                "a quoted pattern ('tiles/*.tif') is expanded here, sorted");
+  c->add_option("--input-list", a->input_list,
+                "A file of input paths, one a line, after the inputs given (blank lines and lines "
+                "starting with # skipped; relative paths from the current directory, like "
+                "gdalbuildvrt -input_file_list)");
   c->add_option("-o,--output", a->output, "Output archive (.pmtiles)")->required();
   c->add_option("--tile", a->tile, "Tile content size T, a power of two")->capture_default_str();
   c->add_option("--border", a->border, "Border B copied from neighbours")->capture_default_str();

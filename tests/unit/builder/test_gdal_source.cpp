@@ -142,7 +142,7 @@ TEST(GdalSource, RefusesWhatTheBuildCannotTake) {
   EXPECT_NE(s.error().message.find("--range"), std::string::npos) << s.error().message;
 
   GdalSourceOptions ranged = options(4);
-  ranged.value_range = std::pair{1000.0, 1150.0};
+  ranged.value_ranges = {{1000.0, 1150.0}};
   auto r = GdalSource::open({u16}, ranged);
   ASSERT_TRUE(r) << r.error().message;
   std::vector<std::uint8_t> rows(16 * 8 * 4);
@@ -153,7 +153,7 @@ TEST(GdalSource, RefusesWhatTheBuildCannotTake) {
 
   auto wide = GdalSource::open({u16}, [] {
     GdalSourceOptions o = options(256, 23);  // 2^31 texels around: beyond GDAL's int
-    o.value_range = std::pair{0.0, 1.0};
+    o.value_ranges = {{0.0, 1.0}};
     return o;
   }());
   ASSERT_FALSE(wide);
@@ -170,6 +170,203 @@ TEST(GdalSource, RefusesWhatTheBuildCannotTake) {
   auto t = GdalSource::open({plain}, options(4));
   ASSERT_FALSE(t);
   EXPECT_NE(t.error().message.find("plain.txt"), std::string::npos) << t.error().message;
+}
+
+// Marks band `b` of a GeoTIFF as alpha.
+void tag_alpha(const fs::path& path, int b) {
+  GDALDatasetH ds = GDALOpen(path.c_str(), GA_Update);
+  ASSERT_NE(ds, nullptr);
+  GDALSetRasterColorInterpretation(GDALGetRasterBand(ds, b), GCI_AlphaBand);
+  GDALClose(ds);
+}
+
+std::vector<std::uint8_t> read_all(GdalSource& s) {
+  std::vector<std::uint8_t> rows(s.width() * s.height() * 4);
+  EXPECT_TRUE(s.read_window(0, s.width(), 0, std::uint32_t(s.height()), rows.data()));
+  return rows;
+}
+
+TEST(GdalSource, BandsPicksThoseOfAMultispectralInput) {
+  vts::test::TempDir dir;
+  const fs::path p = dir.path() / "six.tif";
+  write_geotiff(p, 16, 8, 6, GDT_Byte, -180, 90, 22.5, code);
+  auto refused = GdalSource::open({p}, options(4));
+  ASSERT_FALSE(refused);
+  EXPECT_NE(refused.error().message.find("six.tif: 6 bands"), std::string::npos);
+  EXPECT_NE(refused.error().message.find("--bands"), std::string::npos);
+
+  GdalSourceOptions o = options(4);
+  o.bands = {4, 3, 2};
+  auto s = GdalSource::open({p}, o);
+  ASSERT_TRUE(s) << s.error().message;
+  const auto rows = read_all(**s);
+  for (int y = 0; y < 8; ++y)
+    for (int x = 0; x < 16; ++x) {
+      const std::uint8_t* t = &rows[std::size_t((y * 16 + x) * 4)];
+      ASSERT_EQ(t[0], code(x, y, 4));
+      ASSERT_EQ(t[1], code(x, y, 3));
+      ASSERT_EQ(t[2], code(x, y, 2));
+      ASSERT_EQ(t[3], 255);
+    }
+
+  o.bands = {5};  // grey
+  auto grey = GdalSource::open({p}, o);
+  ASSERT_TRUE(grey) << grey.error().message;
+  const auto g = read_all(**grey);
+  EXPECT_EQ(g[(3 * 16 + 5) * 4], code(5, 3, 5));
+  EXPECT_EQ(g[(3 * 16 + 5) * 4 + 2], code(5, 3, 5));
+
+  o.bands = {1, 7, 2};
+  auto beyond = GdalSource::open({p}, o);
+  ASSERT_FALSE(beyond);
+  EXPECT_EQ(beyond.error().code, ErrorCode::invalid_argument);
+  EXPECT_NE(beyond.error().message.find("six.tif: has 6 bands; --bands asks for band 7"),
+            std::string::npos)
+      << beyond.error().message;
+}
+
+TEST(GdalSource, BandsKeepsTheInputsAlphaBand) {
+  vts::test::TempDir dir;
+  const fs::path p = dir.path() / "five.tif";
+  // Band 5 is alpha: transparent in the west half.
+  write_geotiff(p, 16, 8, 5, GDT_Byte, -180, 90, 22.5,
+                [](int x, int y, int b) { return b == 5 ? (x < 8 ? 0 : 255) : code(x, y, b); });
+  tag_alpha(p, 5);
+  GdalSourceOptions o = options(4);
+  o.bands = {3, 2, 1};
+  auto s = GdalSource::open({p}, o);
+  ASSERT_TRUE(s) << s.error().message;
+  const auto rows = read_all(**s);
+  for (int x = 0; x < 16; ++x) {
+    const std::uint8_t* t = &rows[std::size_t((2 * 16 + x) * 4)];
+    ASSERT_EQ(t[3], x < 8 ? 0 : 255) << x;
+    if (x >= 8) {
+      ASSERT_EQ(t[0], code(x, 2, 3));
+    }
+  }
+}
+
+TEST(GdalSource, ARangePerBandMapsEachBand) {
+  vts::test::TempDir dir;
+  const fs::path p = dir.path() / "deep3.tif";
+  write_geotiff(p, 16, 8, 3, GDT_UInt16, -180, 90, 22.5,
+                [](int x, int, int b) { return 1000 * b + x * 10; });
+  GdalSourceOptions o = options(4);
+  o.value_ranges = {{1000, 1150}, {2000, 2150}, {3000, 3150}};
+  auto s = GdalSource::open({p}, o);
+  ASSERT_TRUE(s) << s.error().message;
+  const auto rows = read_all(**s);
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_EQ(rows[std::size_t(k)], 0) << k;
+    EXPECT_EQ(rows[std::size_t(15 * 4 + k)], 255) << k;
+    EXPECT_EQ(rows[std::size_t(5 * 4 + k)], 85) << k;
+  }
+  EXPECT_TRUE((*s)->warnings().empty());
+  o.value_ranges = {{0, 1}, {0, 1}};
+  auto two = GdalSource::open({p}, o);
+  ASSERT_FALSE(two);
+  EXPECT_NE(two.error().message.find("deep3.tif: 2 value ranges"), std::string::npos)
+      << two.error().message;
+}
+
+TEST(GdalSource, AutoRangeIsOneMappingForTheWholeMosaic) {
+  vts::test::TempDir dir;
+  // Two halves of the world with different values: 100..163 and 164..227, one pixel each.
+  const fs::path a = dir.path() / "west.tif", b = dir.path() / "east.tif";
+  write_geotiff(a, 8, 8, 1, GDT_UInt16, -180, 90, 22.5,
+                [](int x, int y, int) { return 100 + x * 8 + y; });
+  write_geotiff(b, 8, 8, 1, GDT_UInt16, 0, 90, 22.5,
+                [](int x, int y, int) { return 164 + x * 8 + y; });
+  GdalSourceOptions o = options(4);
+  o.auto_range = true;
+  auto s = GdalSource::open({a, b}, o);
+  ASSERT_TRUE(s) << s.error().message;
+  // 128 values, one each: 2 % (2.56 values) falls on the 3rd (102), 98 % (125.44) on the 126th.
+  ASSERT_EQ((*s)->value_ranges().size(), 1u);
+  EXPECT_EQ((*s)->value_ranges()[0], (std::pair<double, double>{102, 225}));
+  const auto rows = read_all(**s);
+  // West (x, y) = (0, 2) holds 102 -> 0; east (7, 5) holds 164 + 61 = 225 -> 255; east (0, 0)
+  // holds 164 -> (164 - 102) * 255 / 123 = 128.5 -> 129 (rounded), by the same mapping.
+  EXPECT_EQ(rows[(2 * 16 + 0) * 4], 0);
+  EXPECT_EQ(rows[(5 * 16 + 15) * 4], 255);
+  EXPECT_EQ(rows[(0 * 16 + 8) * 4], 129);
+  EXPECT_TRUE((*s)->warnings().empty());
+}
+
+TEST(GdalSource, ValuesWithinAByteBuildAsTheyAreAndNarrowOnesAreWarnedAbout) {
+  vts::test::TempDir dir;
+  const fs::path u16 = dir.path() / "small16.tif", dark = dir.path() / "dark.tif",
+                 unit = dir.path() / "unit.tif";
+  write_geotiff(u16, 16, 8, 1, GDT_UInt16, -180, 90, 22.5,
+                [](int x, int y, int) { return x * 13 + y; });  // 0 .. 202
+  write_geotiff(dark, 16, 8, 3, GDT_Byte, -180, 90, 22.5,
+                [](int x, int, int) { return x % 10; });  // 0 .. 9
+  write_geotiff(unit, 16, 8, 1, GDT_Float32, -180, 90, 22.5,
+                [](int x, int, int) { return x / 15.0; });  // 0 .. 1
+  auto s = GdalSource::open({u16}, options(4));
+  ASSERT_TRUE(s) << s.error().message;
+  EXPECT_TRUE((*s)->warnings().empty());
+  EXPECT_TRUE((*s)->value_ranges().empty());
+  EXPECT_EQ(read_all(**s)[(3 * 16 + 5) * 4], 5 * 13 + 3);
+
+  auto d = GdalSource::open({dark, unit}, options(4));
+  ASSERT_TRUE(d) << d.error().message;
+  ASSERT_EQ((*d)->warnings().size(), 2u);
+  EXPECT_NE((*d)->warnings()[0].find((dir.path() / "dark.tif").string() + ": values 0 .. 9"),
+            std::string::npos)
+      << (*d)->warnings()[0];
+  EXPECT_NE((*d)->warnings()[0].find("under 1/16"), std::string::npos);
+  EXPECT_NE((*d)->warnings()[1].find("unit.tif: values 0 .. 1 "), std::string::npos)
+      << (*d)->warnings()[1];
+
+  // Many narrow inputs: the first kMaxWarnings are named, then how many more.
+  std::vector<fs::path> many(GdalSource::kMaxWarnings + 2, dark);
+  auto m = GdalSource::open(many, options(4));
+  ASSERT_TRUE(m) << m.error().message;
+  ASSERT_EQ((*m)->warnings().size(), GdalSource::kMaxWarnings + 1);
+  EXPECT_EQ((*m)->warnings().back(), "... and 2 more inputs whose values use under 1/16 of 0..255");
+
+  GdalSourceOptions ranged = options(4);
+  ranged.value_ranges = {{0, 9}};
+  auto r = GdalSource::open({dark}, ranged);
+  ASSERT_TRUE(r) << r.error().message;
+  EXPECT_TRUE((*r)->warnings().empty());
+  EXPECT_EQ(read_all(**r)[9 * 4], 255);
+}
+
+int open_descriptors() {
+  int n = 0;
+  for ([[maybe_unused]] const auto& e : fs::directory_iterator("/proc/self/fd")) ++n;
+  return n;
+}
+
+TEST(GdalSource, KeepsAtMostMaxOpenInputsOpen) {
+  vts::test::TempDir dir;
+  // 32 pieces of 4 x 2 pixels tiling the world (8 columns x 4 rows), read with 3 open at most.
+  std::vector<fs::path> pieces;
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 8; ++c) {
+      pieces.push_back(dir.path() / ("p" + std::to_string(r) + "_" + std::to_string(c) + ".tif"));
+      write_geotiff(pieces.back(), 2, 2, 3, GDT_Byte, -180 + c * 45.0, 90 - r * 45.0, 22.5,
+                    [&](int x, int y, int b) { return code(c * 2 + x, r * 2 + y, b); });
+    }
+  GdalSourceOptions few = options(4);
+  few.max_open = 3;
+  const int before = open_descriptors();
+  auto s = GdalSource::open(pieces, few);
+  ASSERT_TRUE(s) << s.error().message;
+  EXPECT_LE(open_descriptors(), before + 3);
+  const auto rows = read_all(**s);
+  EXPECT_LE(open_descriptors(), before + 3);
+  EXPECT_EQ((*s)->peak_open(), 3u);
+  EXPECT_NE((*s)->description().find("... (32 inputs)"), std::string::npos) << (*s)->description();
+  for (int y = 0; y < 8; ++y)
+    for (int x = 0; x < 16; ++x)
+      for (int b = 0; b < 4; ++b)
+        ASSERT_EQ(rows[std::size_t((y * 16 + x) * 4 + b)], b == 3 ? 255 : code(x, y, b + 1))
+            << x << "," << y << " band " << b;
+  s->reset();
+  EXPECT_EQ(open_descriptors(), before);
 }
 
 // A footprint wider than the window limit is built in column stripes through a scratch file, and

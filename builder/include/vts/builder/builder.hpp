@@ -88,8 +88,16 @@ struct BuildOptions {
   Tiling tiling = Tiling::none;
   std::optional<LonLatBounds> bounds;
   // Georeferenced inputs only. max_level: our finest level (default: the first level whose texel
-  // is no larger than the finest input's pixel in the scheme's CRS). value_range: maps values
-  // linearly to 0..255 (clamped); required for inputs that are not 8-bit.
+  // is no larger than the finest input's pixel in the scheme's CRS). bands: the data bands
+  // (1-based) of every input, 1 (grey) or 3 (RGB), any band count (an alpha band not among them
+  // is still alpha); empty: 1 grey, 2 grey + alpha, 3 RGB, 4 RGBA. value_range: maps values of
+  // every band linearly to 0..255 (clamped); band_ranges: one such range per data band instead;
+  // auto_range: per data band, the 2 %..98 % percentiles of all inputs' values together
+  // (a sample of each: approximate), reported in BuildReport::value_ranges. Without a range, values
+  // are used as they are, data beyond 0..255 is refused (invalid_argument naming the input and its
+  // values), and inputs whose values span under 1/16 of 0..255 get a warning (on_warning,
+  // BuildReport::warnings). Inputs are opened a few at a time (at most 32 at once), so any number
+  // of them can be built.
   Resampling resampling = Resampling::cubic;
   std::optional<int> max_level;
   std::optional<std::pair<double, double>> value_range;
@@ -97,6 +105,11 @@ struct BuildOptions {
   // A footprint wider than this is built in column stripes through a scratch file next to the
   // output (builder/src/build_plan.hpp); the tiles are the same bytes whatever the width.
   std::uint64_t max_window_width = 0;
+  std::vector<int> bands;
+  std::vector<std::pair<double, double>> band_ranges;
+  bool auto_range = false;
+  // Called with each warning as soon as it is known (before tiles are built); may be empty.
+  std::function<void(const std::string&)> on_warning;
   std::filesystem::path output;
   std::uint32_t tile_size = 256;
   std::uint32_t border = 4;
@@ -129,6 +142,10 @@ struct BuildReport {
   // How the grid was read (build_plan.hpp): passes over it (1 unless the footprint was cut into
   // stripes; 0 for synthetic builds) and the widest window a pass kept, in texels.
   std::uint64_t passes = 0, window_width = 0;
+  // Georeferenced inputs: what the user should know (BuildOptions::on_warning), and the value
+  // mapping used, one MIN,MAX per data band (empty: values as they are).
+  std::vector<std::string> warnings;
+  std::vector<std::pair<double, double>> value_ranges;
 };
 
 Result<BuildReport> build_pyramid(const BuildOptions& options);
