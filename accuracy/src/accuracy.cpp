@@ -69,6 +69,7 @@ std::string machine_description() {
 Result<AccuracyTable> run_table(const std::string& id, const AccuracyContext& ctx) {
   if (id == "codec") return codec_table(ctx);
   if (id == "downsample") return downsample_table(ctx);
+  if (id == "resampling") return resampling_table(ctx);
 #ifdef VTS_ACCURACY_HAVE_GL
   if (id == "feedback") return feedback_table(ctx);
   if (id == "filtering") return filtering_table(ctx);
@@ -126,9 +127,10 @@ Result<AccuracyReport> run_accuracy(const AccuracyOptions& options) {
   for (const std::string& id : options.tables) {
     if (std::find_if(std::begin(kAccuracyTableIds), std::end(kAccuracyTableIds),
                      [&](const char* k) { return id == k; }) == std::end(kAccuracyTableIds))
-      return Error{ErrorCode::invalid_argument,
-                   "unknown table \"" + id +
-                       "\" (known: codec, feedback, filtering, addressing, downsample)"};
+      return Error{
+          ErrorCode::invalid_argument,
+          "unknown table \"" + id +
+              "\" (known: codec, feedback, filtering, addressing, downsample, resampling)"};
   }
   for (const char* id : kAccuracyTableIds) {
     if (options.tables.empty() ||

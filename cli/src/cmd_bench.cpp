@@ -66,16 +66,19 @@ Runner add_bench(CLI::App& app) {
   c->require_subcommand(1);
   CLI::App* acc = c->add_subcommand(
       "accuracy",
-      "What accuracy costs in time: codec, feedback resolution, filtering, addressing precision "
-      "and downsampling tables (docs/ACCURACY.md)");
+      "What accuracy costs in time: codec, feedback resolution, filtering, addressing precision, "
+      "downsampling and warp resampling tables (docs/ACCURACY.md)");
   acc->add_option("--input", a->input,
                   "Source image (default: the Earth, /usr/share/xplanet/images/earth.jpg)");
   acc->add_option("--report", a->report,
                   "Write report.md, report.json and the SVG plots into this directory");
-  acc->add_option("--tables", a->tables,
-                  "Tables to run (default all): codec, feedback, filtering, addressing, downsample")
+  acc->add_option(
+         "--tables", a->tables,
+         "Tables to run (default all): codec, feedback, filtering, addressing, downsample, "
+         "resampling")
       ->delimiter(',')
-      ->check(CLI::IsMember({"codec", "feedback", "filtering", "addressing", "downsample"}));
+      ->check(CLI::IsMember(
+          {"codec", "feedback", "filtering", "addressing", "downsample", "resampling"}));
   acc->add_option("--size", a->size, "Viewport of the GL tables, WxH (default 640x400)");
   acc->add_flag("--quick", a->quick,
                 "Fewest settings, views and frames on a small viewport (what the tests run)");

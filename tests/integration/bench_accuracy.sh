@@ -1,10 +1,12 @@
 #!/usr/bin/env bash
 # `vts bench accuracy --quick` end to end under Xvfb with Mesa llvmpipe, on a small copy of the
-# Earth: every one of the five tables is produced (none skipped, none failed) with its rows, the
+# Earth: every one of the six tables is produced (none skipped, none failed) with its rows, the
 # report directory holds report.md, report.json and every plot as well-formed SVG, the JSON on
 # stdout agrees with the report, and the figures that must hold do (lossless is exact, bc1 is
-# lossy within bounds and 1/8 of the GPU bytes, 1/1 feedback finds every needed tile). Bad options
-# fail cleanly.
+# lossy within bounds and 1/8 of the GPU bytes, 1/1 feedback finds every needed tile, the warp's
+# resampling methods rank as interpolation theory says against the analytic reference, and no
+# method scores below the 8-bit rounding floor, which only a reference made by the warper itself
+# could). Bad options fail cleanly.
 #
 # Environment (besides lib.sh's): XVFB_RUN, the xvfb-run script.
 # shellcheck source=lib.sh
@@ -19,15 +21,15 @@ SMALL="$WORK/earth512.png"
 "$OIIOTOOL" "$EARTH" --resize 512x256 -o "$SMALL" || fail "cannot make the small input"
 R="$WORK/report"
 
-note "vts bench accuracy --quick (all five tables)"
+note "vts bench accuracy --quick (all six tables)"
 expect_ok "${XVFB[@]}" "$VTS" bench accuracy --quick --input "$SMALL" --report "$R" --json
 J="$WORK/accuracy.json"
 cp "$OUT" "$J"
 cat "$ERR" >&2
 
 json_check "$J" "JSON.stringify(j.tables.map(t => t.id)) === \
-JSON.stringify(['codec', 'feedback', 'filtering', 'addressing', 'downsample'])" \
-  "the five tables, in order"
+JSON.stringify(['codec', 'feedback', 'filtering', 'addressing', 'downsample', 'resampling'])" \
+  "the six tables, in order"
 json_check "$J" "j.skipped.length === 0" "no table skipped or failed"
 json_check "$J" "j.tables.every(t => t.rows.length > 0 && t.columns.length > 1 && t.notes.length > 0 \
 && t.plots.length > 0 && t.rows.every(r => Object.keys(r).length === t.columns.length))" \
@@ -53,12 +55,33 @@ note "table 2: 1/1 feedback finds every needed tile"
 json_check "$J" "j.tables[1].rows.length === 5" "five feedback divisors"
 json_check "$J" "Object.values(j.tables[1].rows[0]).includes(1)" "1/1 row present"
 
+note "table 6: warp resampling against the analytic pattern"
+res="j.tables[5].rows"
+rms="(p, m) => $res.find(r => r.pattern === p && r.resampling === m).rms_error"
+json_check "$J" "JSON.stringify($res.map(r => r.pattern + ' ' + r.resampling)) === \
+JSON.stringify(['smooth near', 'smooth bilinear', 'smooth cubic', 'smooth lanczos', \
+'fine near', 'fine bilinear', 'fine cubic', 'fine lanczos'])" "two patterns x four methods"
+json_check "$J" "(() => { const e = $rms; return e('smooth', 'cubic') < e('smooth', 'bilinear') \
+&& e('smooth', 'lanczos') < e('smooth', 'bilinear') && e('smooth', 'bilinear') < e('smooth', 'near'); \
+})()" "smooth pattern: cubic and lanczos beat bilinear, which beats near"
+json_check "$J" "(() => { const e = $rms; return e('fine', 'lanczos') < e('fine', 'cubic') \
+&& e('fine', 'cubic') < e('fine', 'bilinear') && e('fine', 'bilinear') < e('fine', 'near'); })()" \
+  "fine pattern: the longer the kernel, the smaller the error"
+json_check "$J" "(() => { const e = $rms; return e('smooth', 'cubic') < 0.4 \
+&& e('smooth', 'cubic') < e('smooth', 'lanczos') && e('smooth', 'lanczos') < 0.5; })()" \
+  "smooth: cubic at the 8-bit rounding floor (0.289 RMS), lanczos just above it"
+json_check "$J" "(() => { const e = $rms; return 2 * e('fine', 'lanczos') < e('fine', 'cubic') \
+&& 2 * e('fine', 'cubic') < e('fine', 'near'); })()" \
+  "fine: lanczos halves cubic's error, cubic halves near's"
+json_check "$J" "$res.every(r => r.rms_error >= 0.25 && r.max_error > 0.4 && r.texels > 1000 \
+&& r.build_s > 0)" "no row beats the 8-bit rounding floor; every row compared texels and was timed"
+
 note "the report directory: report.md, report.json, every plot"
 [[ -s $R/report.md && -s $R/report.json ]] || fail "report.md or report.json missing"
-for n in 1 2 3 4 5; do
+for n in 1 2 3 4 5 6; do
   grep -q "^### $n\. " "$R/report.md" || fail "report.md has no section $n"
 done
-json_check "$R/report.json" "j.tables.length === 5" "report.json holds the five tables"
+json_check "$R/report.json" "j.tables.length === 6" "report.json holds the six tables"
 plots=$(json_get "$J" "j.tables.flatMap(t => t.plots.map(p => p.id)).join(' ')")
 for p in $plots; do
   [[ -s $R/$p.svg ]] || fail "plot $p.svg missing from the report"

@@ -12,7 +12,9 @@
 //   4. addressing float32 UV vs integer + fraction texel addresses at virtual sizes 2^15 ... 2^25:
 //               max texel error against double precision, shader cost;
 //   5. downsample the builder's downsampling filter: PSNR of each level against a high-quality
-//               resize of the source, build time.
+//               resize of the source, build time;
+//   6. resampling the georeferenced warp's resampling method (near, bilinear, cubic, lanczos):
+//               error against the analytic pattern the source was sampled from, build time.
 //
 // The GL tables (1's upload column, 2, 3, 4) need a current OpenGL 4.5 core context on the calling
 // thread; run_accuracy() creates a hidden one. In a build without the renderer they are skipped
@@ -56,7 +58,7 @@ struct TablePlot {
 };
 
 struct AccuracyTable {
-  std::string id;  // "codec", "feedback", "filtering", "addressing", "downsample"
+  std::string id;  // one of kAccuracyTableIds
   std::string title;
   std::vector<Column> columns;
   std::vector<std::vector<Cell>> rows;  // each row has columns.size() cells
@@ -80,8 +82,8 @@ struct AccuracyContext {
 // ---- the command
 // ---------------------------------------------------------------------------------
 
-inline constexpr const char* kAccuracyTableIds[] = {"codec", "feedback", "filtering", "addressing",
-                                                    "downsample"};
+inline constexpr const char* kAccuracyTableIds[] = {"codec",      "feedback",   "filtering",
+                                                    "addressing", "downsample", "resampling"};
 
 struct AccuracyOptions {
   std::filesystem::path input;      // empty: the Earth (xplanet's earth.jpg, 2048 x 1024)
@@ -131,5 +133,7 @@ Result<AccuracyTable> feedback_table(const AccuracyContext& ctx);    // GL
 Result<AccuracyTable> filtering_table(const AccuracyContext& ctx);   // GL
 Result<AccuracyTable> addressing_table(const AccuracyContext& ctx);  // GL
 Result<AccuracyTable> downsample_table(const AccuracyContext& ctx);
+// Builds its own georeferenced sources in ctx.work_dir; does not read ctx.input.
+Result<AccuracyTable> resampling_table(const AccuracyContext& ctx);
 
 }  // namespace vts::accuracy
