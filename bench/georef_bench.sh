@@ -101,7 +101,6 @@ rm -rf "$OUTDIR"
 mkdir -p "$OUTDIR"
 cleanup_out() { ((KEEP)) || rm -rf "$@"; }
 
-ROWS=()
 declare -A WALL CPU RSS BYTES TILES
 run_step() { # NAME LOG CMD...: measures CMD, records its figures under NAME
   local name=$1 log=$2
@@ -170,8 +169,8 @@ if run_step gdalwarp "$OUTDIR/gdalwarp.log" gdalwarp -q -overwrite -t_srs EPSG:3
   COG=$OUTDIR/mosaic_cog.tif
   if run_step cog "$OUTDIR/cog.log" gdal_translate -q -of COG -co RESAMPLING="$RES" "$MOSAIC" "$COG"; then
     BYTES[cog]=$(bytes_of "$COG")
-    TILES[cog]="1 file, $(gdalinfo "$COG" | grep -c '^  Overviews:' || true) overview lists"
     OVR=$(gdalinfo "$COG" | sed -nE '0,/^  Overviews: /s/^  Overviews: //p')
+    TILES[cog]="1 file, $(awk -F', ' '{ print NF }' <<<"$OVR") overviews"
     cleanup_out "$COG"
   else
     FAILED+=(cog)
