@@ -31,8 +31,9 @@ PACKAGES=(
   # the bc1 tile codec's encoders: libsquish, and stb_dxt from libstb-dev (below)
   libsquish-dev
   # GeoTIFF and other georeferenced inputs of vts build (builder/src/gdal_source.cpp); gdal-bin's
-  # gdal_translate/gdalwarp make the test inputs and references
-  libgdal-dev gdal-bin
+  # gdal_translate/gdalwarp make the test inputs and references; python3-gdal is gdal2tiles.py's
+  # (bench/georef_bench.sh's peer; gdal-bin depends on it on bookworm, named here all the same)
+  libgdal-dev gdal-bin python3-gdal
   # tests/integration/georef_placement.py measures sub-texel shifts with numpy (Debian's, for
   # /usr/bin/python3)
   python3-numpy
