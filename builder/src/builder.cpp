@@ -365,6 +365,7 @@ Result<std::unique_ptr<GdalSource>> open_gdal(const BuildOptions& o) {
   go.border = o.border;
   go.max_level = o.max_level;
   go.resampling = o.resampling;
+  go.warp_error = o.warp_error;
   go.bands = o.bands;
   go.value_ranges = o.band_ranges;
   if (o.value_range) go.value_ranges = {*o.value_range};

@@ -29,6 +29,7 @@ struct GdalSourceOptions {
   std::uint32_t tile_size = 256, border = 4;
   std::optional<int> max_level;
   Resampling resampling = Resampling::cubic;
+  double warp_error = 0.01;  // BuildOptions::warp_error
   // The data bands (1-based) read from every input: 1 (grey) or 3 (RGB); an alpha band (colour
   // interpretation alpha) that is not among them is still used as alpha, and so are nodata values
   // and masks. Empty: by the input's band count (1 grey, 2 grey + alpha, 3 RGB, 4 RGBA).

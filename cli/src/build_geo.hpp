@@ -16,6 +16,7 @@ struct GeoArgs {
   std::string tiling, bbox, range, bands;
   std::string resampling = resampling_name(BuildOptions{}.resampling);
   int max_level = -1;  // -1: from the inputs' resolution
+  double warp_error = BuildOptions{}.warp_error;
 };
 
 void add_geo_options(CLI::App* c, GeoArgs& a);

@@ -58,9 +58,15 @@ json_check "$J" "Object.values(j.tables[1].rows[0]).includes(1)" "1/1 row presen
 note "table 6: warp resampling against the analytic pattern"
 res="j.tables[5].rows"
 rms="(p, m) => $res.find(r => r.pattern === p && r.resampling === m).rms_error"
-json_check "$J" "JSON.stringify($res.map(r => r.pattern + ' ' + r.resampling)) === \
-JSON.stringify(['smooth near', 'smooth bilinear', 'smooth cubic', 'smooth lanczos', \
-'fine near', 'fine bilinear', 'fine cubic', 'fine lanczos'])" "two patterns x four methods"
+json_check "$J" "JSON.stringify($res.map(r => r.pattern + ' ' + r.resampling + ' ' + r.warp_error)) === \
+JSON.stringify(['smooth near 0.01', 'smooth bilinear 0.01', 'smooth cubic 0.01', \
+'smooth lanczos 0.01', 'fine near 0.01', 'fine bilinear 0.01', 'fine cubic 0.01', \
+'fine lanczos 0.01', 'smooth cubic 0', 'smooth cubic 0.125', 'fine cubic 0', 'fine cubic 0.125'])" \
+  "two patterns x four methods, then cubic with the exact transformer and with -et 0.125"
+json_check "$J" "(() => { const e = (p, x) => $res.find(r => r.pattern === p && r.resampling === \
+'cubic' && r.warp_error === x).rms_error; return e('smooth', 0.01) < 1.05 * e('smooth', 0) \
+&& e('smooth', 0.125) > 1.5 * e('smooth', 0.01); })()" \
+  "smooth: -et 0.01 as exact as the exact transformer, gdalwarp's 0.125 clearly worse"
 json_check "$J" "(() => { const e = $rms; return e('smooth', 'cubic') < e('smooth', 'bilinear') \
 && e('smooth', 'lanczos') < e('smooth', 'bilinear') && e('smooth', 'bilinear') < e('smooth', 'near'); \
 })()" "smooth pattern: cubic and lanczos beat bilinear, which beats near"

@@ -146,7 +146,7 @@ TEST(AccuracyResampling, QuickTableRanksTheMethods) {
   auto t = resampling_table(ctx);
   ASSERT_TRUE(t) << t.error().message;
   EXPECT_EQ(t->id, "resampling");
-  ASSERT_EQ(t->rows.size(), 8u);
+  ASSERT_EQ(t->rows.size(), 12u);  // 2 patterns x 4 methods, then cubic at -et 0 and 0.125 each
   ASSERT_EQ(t->columns[2].key, "rms_error");
   auto rms = [&](std::size_t row) { return std::get<double>(t->rows[row][2]); };
   auto label = [&](std::size_t row) {
@@ -166,6 +166,17 @@ TEST(AccuracyResampling, QuickTableRanksTheMethods) {
   EXPECT_LT(rms(6), rms(5));
   EXPECT_LT(rms(7), rms(6));
   for (const auto& row : t->rows) EXPECT_GT(std::get<double>(row[7]), 0);  // build seconds
+  // The transformer: rows 8..11 are smooth cubic exact, smooth cubic 0.125, fine exact, fine 0.125.
+  ASSERT_EQ(t->columns[9].key, "warp_error");
+  auto et = [&](std::size_t row) { return std::get<double>(t->rows[row][9]); };
+  EXPECT_EQ(et(2), 0.01);
+  EXPECT_EQ(label(8), "smooth cubic");
+  EXPECT_EQ(et(8), 0.0);
+  EXPECT_EQ(et(9), 0.125);
+  // The default's error is the exact transformer's (on the smooth pattern it is the 8-bit floor);
+  // gdalwarp's default 0.125 px is clearly worse.
+  EXPECT_LT(rms(2), rms(8) * 1.05);
+  EXPECT_GT(rms(9), rms(2) * 1.5);
   // Nothing was left in the work directory.
   EXPECT_TRUE(fs::is_empty(dir.path()));
 }

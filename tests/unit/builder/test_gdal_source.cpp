@@ -9,6 +9,7 @@
 
 #include <cstdint>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -23,20 +24,19 @@ namespace fs = std::filesystem;
 using detail::GdalSource;
 using detail::GdalSourceOptions;
 
-// Writes a w x h GeoTIFF in EPSG:4326 with its top-left corner at (west, north), `deg` degrees per
-// pixel; band b of pixel (x, y) is value(x, y, b).
+// Writes a w x h GeoTIFF in EPSG:`epsg` (default 4326) with its top-left corner at (west, north)
+// and `deg` CRS units per pixel; band b of pixel (x, y) is value(x, y, b).
 template <class F>
 void write_geotiff(const fs::path& path, int w, int h, int bands, GDALDataType type, double west,
-                   double north, double deg, F value) {
+                   double north, double deg, F value, int epsg = 4326) {
   GDALAllRegister();
   GDALDriverH drv = GDALGetDriverByName("GTiff");
   GDALDatasetH ds = GDALCreate(drv, path.c_str(), w, h, bands, type, nullptr);
   ASSERT_NE(ds, nullptr);
   double gt[6] = {west, deg, 0, north, 0, -deg};
   GDALSetGeoTransform(ds, gt);
-  GDALSetProjection(ds, "EPSG:4326");
   OGRSpatialReferenceH srs = OSRNewSpatialReference(nullptr);
-  OSRImportFromEPSG(srs, 4326);
+  OSRImportFromEPSG(srs, epsg);
   GDALSetSpatialRef(ds, srs);
   OSRDestroySpatialReference(srs);
   std::vector<double> row(static_cast<std::size_t>(w));
@@ -367,6 +367,45 @@ TEST(GdalSource, KeepsAtMostMaxOpenInputsOpen) {
             << x << "," << y << " band " << b;
   s->reset();
   EXPECT_EQ(open_descriptors(), before);
+}
+
+// The warper's approximate transformer (-et 0.125) interpolates within blocks of the warped VRT,
+// which are the grid's, not the reader's: a UTM input (a curved mapping onto WorldCRS84Quad) read
+// as one window or as odd pieces gives the same texels, so stripes and strips cannot change tiles.
+TEST(GdalSource, TexelsDoNotDependOnTheWindowsThatReadThem) {
+  vts::test::TempDir dir;
+  const fs::path p = dir.path() / "utm.tif";
+  write_geotiff(
+      p, 300, 240, 3, GDT_Byte, 200000, 5300000, 2000,
+      [](int x, int y, int b) { return (x * 5 + y * 3 * b + (x * y) % 17) % 256; }, 32632);
+  GdalSourceOptions o = options(64, 8);  // 16384 x 8192 texels, 0.022 degrees: ~1.2 per pixel
+  o.resampling = Resampling::cubic;
+  auto s = GdalSource::open({p}, o);
+  ASSERT_TRUE(s) << s.error().message;
+  auto g = tiling_geometry(o.tiling, tms_level(o.tiling, 8), 64, 0);
+  ASSERT_TRUE(g);
+  const TexelRect r = footprint_texels(o.tiling, *g, (*s)->bounds());
+  ASSERT_GT(r.width(), 300u);
+  std::vector<std::uint8_t> whole(r.width() * r.height() * 4);
+  ASSERT_TRUE((*s)->read_window(r.x0, r.x1, r.y0, std::uint32_t(r.height()), whole.data()));
+  std::uint64_t opaque = 0;
+  for (std::size_t i = 3; i < whole.size(); i += 4) opaque += whole[i] == 255;
+  ASSERT_GT(opaque, r.width() * r.height() / 2);
+  // Pieces: columns split at odd places, rows read 7 at a time.
+  const std::uint64_t xs[] = {r.x0, r.x0 + 37, r.x0 + r.width() / 2 + 3, r.x1};
+  for (int c = 0; c < 3; ++c) {
+    const std::uint64_t w = xs[c + 1] - xs[c];
+    std::vector<std::uint8_t> piece(w * 7 * 4);
+    for (std::uint64_t y = r.y0; y < r.y1; y += 7) {
+      const auto n = std::uint32_t(std::min<std::uint64_t>(7, r.y1 - y));
+      ASSERT_TRUE((*s)->read_window(xs[c], xs[c + 1], y, n, piece.data()));
+      for (std::uint32_t k = 0; k < n; ++k)
+        ASSERT_EQ(0, std::memcmp(piece.data() + k * w * 4,
+                                 whole.data() + ((y + k - r.y0) * r.width() + (xs[c] - r.x0)) * 4,
+                                 w * 4))
+            << "row " << y + k << ", columns " << xs[c] << ".." << xs[c + 1];
+    }
+  }
 }
 
 // A footprint wider than the window limit is built in column stripes through a scratch file, and
