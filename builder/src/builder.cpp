@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <cstring>
 #include <deque>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <thread>
@@ -74,46 +75,55 @@ struct Shared {
   }
 };
 
-// Strips of scanlines handed from the reader thread to the cascade, with a fixed number of
-// buffers in flight.
+// Strips of scanlines handed from the reader threads to the cascade in order, with a fixed number
+// of buffers: reader k of n reads strips k, k + n, ...; strip i may take a buffer only while
+// i < next + buffers - 1 (next: the strip the cascade waits for), so the strip it waits for
+// always finds one and the readers never run ahead by more than the buffers.
 class StripChannel {
  public:
   struct Strip {
-    std::uint64_t y = 0;
+    std::uint64_t index = 0, y = 0;
     std::uint32_t rows = 0;
     std::vector<std::uint8_t> pixels;
   };
 
-  explicit StripChannel(std::size_t buffers, std::size_t bytes) {
+  StripChannel(std::size_t buffers, std::size_t bytes, unsigned readers)
+      : buffers_(buffers), readers_(readers) {
     for (std::size_t i = 0; i < buffers; ++i) free_.emplace_back().pixels.resize(bytes);
   }
-  // Reader side.
-  std::optional<Strip> take_free() {
+  // Reader side: a buffer for strip `index`, once its turn comes; nullopt when closed.
+  std::optional<Strip> take_free(std::uint64_t index) {
     std::unique_lock lock(m_);
-    cv_.wait(lock, [&] { return closed_ || !free_.empty(); });
+    cv_.wait(lock, [&] { return closed_ || (!free_.empty() && index + 1 < next_ + buffers_); });
     if (closed_) return std::nullopt;
     Strip s = std::move(free_.front());
     free_.pop_front();
+    s.index = index;
     return s;
   }
   void put_full(Strip s) {
     std::lock_guard lock(m_);
-    full_.push_back(std::move(s));
+    const std::uint64_t i = s.index;
+    full_.emplace(i, std::move(s));
     cv_.notify_all();
   }
+  // A reader is done (after its last strip, or on an error: the first one is kept).
   void finish_reading(std::optional<Error> error) {
     std::lock_guard lock(m_);
-    done_ = true;
-    error_ = std::move(error);
+    --readers_;
+    if (error && !error_) error_ = std::move(error);
     cv_.notify_all();
   }
-  // Consumer side: nullopt at the end (check error()).
+  // Consumer side: the next strip in order; nullopt at the end or after an error (check error()).
   std::optional<Strip> take_full() {
     std::unique_lock lock(m_);
-    cv_.wait(lock, [&] { return done_ || !full_.empty(); });
-    if (full_.empty()) return std::nullopt;
-    Strip s = std::move(full_.front());
-    full_.pop_front();
+    cv_.wait(lock, [&] { return error_ || readers_ == 0 || full_.count(next_); });
+    auto it = full_.find(next_);
+    if (error_ || it == full_.end()) return std::nullopt;
+    Strip s = std::move(it->second);
+    full_.erase(it);
+    ++next_;
+    cv_.notify_all();
     return s;
   }
   void give_back(Strip s) {
@@ -134,8 +144,12 @@ class StripChannel {
  private:
   std::mutex m_;
   std::condition_variable cv_;
-  std::deque<Strip> free_, full_;
-  bool done_ = false, closed_ = false;
+  std::deque<Strip> free_;
+  std::map<std::uint64_t, Strip> full_;
+  std::size_t buffers_;
+  unsigned readers_;
+  std::uint64_t next_ = 0;
+  bool closed_ = false;
   std::optional<Error> error_;
 };
 
@@ -189,6 +203,9 @@ TileRange synthetic_range(const Geometry& g, const SyntheticSpec& spec, int z) {
   return r;
 }
 
+// Strips start at multiples of this row (GdalSource's warped VRTs are made of blocks this high).
+constexpr std::uint32_t kStripAlign = detail::kWarpBlockRows;
+
 // Reads columns [x0, x1) of rows [y, y + count) of a pass's finest level as RGBA8; each pass
 // reads its rows in increasing order.
 using WindowReader = std::function<Status(std::uint64_t x0, std::uint64_t x1, std::uint64_t y,
@@ -216,7 +233,7 @@ struct PassContext {
 // One pass (build_plan.hpp): a reader thread reads strips of the window's rows, this thread pushes
 // them through the cascade, whose tiles go to the encoder pool and whose coarsest rows, for a
 // stripe, to its scratch raster.
-void run_pass(PassContext& c, const detail::Pass& pass, const WindowReader& read,
+void run_pass(PassContext& c, const detail::Pass& pass, const std::vector<WindowReader>& readers,
               detail::ScratchRaster* scratch) {
   const std::vector<TexelRect> windows = detail::pass_windows(c.g, c.o.downsample, pass);
   const TexelRect& coarse = windows[static_cast<std::size_t>(pass.coarsest)];
@@ -239,26 +256,34 @@ void run_pass(PassContext& c, const detail::Pass& pass, const WindowReader& read
       to_scratch);
   const TexelRect& w = pass.window;
   const std::uint64_t row_bytes = w.width() * 4;
-  // About 4 MiB per strip, at least one row, at most 64.
-  const auto strip_rows =
-      static_cast<std::uint32_t>(std::clamp<std::uint64_t>((4u << 20) / row_bytes, 1, 64));
-  StripChannel channel(3, strip_rows * row_bytes);
-  std::thread reader([&] {
-    std::optional<Error> error;
-    for (std::uint64_t y = w.y0; y < w.y1;) {
-      auto strip = channel.take_free();
-      if (!strip || shared.failed) break;
-      strip->y = y;
-      strip->rows = static_cast<std::uint32_t>(std::min<std::uint64_t>(strip_rows, w.y1 - y));
-      if (auto st = read(w.x0, w.x1, y, strip->rows, strip->pixels.data()); !st) {
-        error = st.error();
-        break;
+  // About 4 MiB per strip, but a multiple of kStripAlign rows (the warped VRTs' block height),
+  // starting at multiples of it: strips of different readers then never share a block of the
+  // warp, which each reader would otherwise compute again. (At most 32 MiB: 128 rows of 65536.)
+  const auto strip_rows = static_cast<std::uint32_t>(
+      std::max<std::uint64_t>((4u << 20) / row_bytes / kStripAlign, 1) * kStripAlign);
+  const std::uint64_t first = w.y0 / strip_rows * strip_rows;  // strip i: [first + i * rows, ...)
+  const auto nreaders = static_cast<unsigned>(readers.size());
+  StripChannel channel(nreaders + 2, strip_rows * row_bytes, nreaders);
+  std::vector<std::thread> threads;
+  for (unsigned k = 0; k < nreaders; ++k)
+    threads.emplace_back([&, k] {
+      std::optional<Error> error;
+      for (std::uint64_t i = k;; i += nreaders) {
+        const std::uint64_t y = std::max(w.y0, first + i * strip_rows);
+        if (y >= w.y1) break;
+        auto strip = channel.take_free(i);
+        if (!strip || shared.failed) break;
+        strip->y = y;
+        strip->rows = static_cast<std::uint32_t>(
+            std::min<std::uint64_t>(first + (i + 1) * strip_rows, w.y1) - y);
+        if (auto st = readers[k](w.x0, w.x1, y, strip->rows, strip->pixels.data()); !st) {
+          error = st.error();
+          break;
+        }
+        channel.put_full(std::move(*strip));
       }
-      y += strip->rows;
-      channel.put_full(std::move(*strip));
-    }
-    channel.finish_reading(std::move(error));
-  });
+      channel.finish_reading(std::move(error));
+    });
   std::uint64_t rows = 0;
   while (auto strip = channel.take_full()) {
     for (std::uint32_t r = 0; r < strip->rows && !shared.stopping(); ++r)
@@ -269,7 +294,7 @@ void run_pass(PassContext& c, const detail::Pass& pass, const WindowReader& read
     if (shared.stopping()) break;
   }
   channel.close();
-  reader.join();
+  for (auto& t : threads) t.join();
   c.rows += rows;
   if (auto e = channel.error(); e && !shared.failed) shared.fail(*e);
   if (!shared.failed && rows != w.height())
@@ -277,7 +302,7 @@ void run_pass(PassContext& c, const detail::Pass& pass, const WindowReader& read
 }
 
 // Runs the plan's passes in order: stripes fill their scratch rasters, which later passes read.
-void build_from_source(const BuildOptions& o, const WindowReader& read_input,
+void build_from_source(const BuildOptions& o, const std::vector<WindowReader>& read_input,
                        const detail::BuildPlan& plan, const Geometry& g, Shared& shared,
                        unsigned threads) {
   std::vector<detail::ScratchRaster> scratch;
@@ -291,11 +316,12 @@ void build_from_source(const BuildOptions& o, const WindowReader& read_input,
   PassContext c{o, g, shared, queue, ticker};
   for (const detail::Pass& pass : plan.passes) {
     if (shared.stopping()) break;
-    WindowReader from_scratch;
+    std::vector<WindowReader> from_scratch;
     if (pass.source >= 0)
-      from_scratch = [&, i = static_cast<std::size_t>(pass.source)](
-                         std::uint64_t x0, std::uint64_t x1, std::uint64_t y, std::uint32_t n,
-                         std::uint8_t* out) { return scratch[i].read(x0, x1, y, n, out); };
+      from_scratch.push_back([&, i = static_cast<std::size_t>(pass.source)](
+                                 std::uint64_t x0, std::uint64_t x1, std::uint64_t y,
+                                 std::uint32_t n,
+                                 std::uint8_t* out) { return scratch[i].read(x0, x1, y, n, out); });
     run_pass(c, pass, pass.source >= 0 ? from_scratch : read_input,
              pass.scratch >= 0 ? &scratch[static_cast<std::size_t>(pass.scratch)] : nullptr);
   }
@@ -484,19 +510,19 @@ Result<BuildReport> build_pyramid(const BuildOptions& o) {
   const unsigned threads = worker_count(o.threads);
   if (synthetic)
     build_synthetic(o, *synthetic, g, shared, threads);
-  else if (gdal)
-    build_from_source(
-        o,
-        [&](std::uint64_t x0, std::uint64_t x1, std::uint64_t y, std::uint32_t n,
-            std::uint8_t* out) { return gdal->read_window(x0, x1, y, n, out); },
-        *plan, g, shared, threads);
-  else
-    build_from_source(
-        o,
-        [&](std::uint64_t, std::uint64_t, std::uint64_t y, std::uint32_t n, std::uint8_t* out) {
-          return source->read_rows(y, n, out);
-        },
-        *plan, g, shared, threads);
+  else if (gdal) {
+    // The warp is most of the work: one reader per thread, each with its own GDAL datasets.
+    std::vector<WindowReader> readers;
+    for (GdalSource* r : gdal->split(threads))
+      readers.push_back([r](std::uint64_t x0, std::uint64_t x1, std::uint64_t y, std::uint32_t n,
+                            std::uint8_t* out) { return r->read_window(x0, x1, y, n, out); });
+    build_from_source(o, readers, *plan, g, shared, threads);
+  } else {
+    build_from_source(o,
+                      {[&](std::uint64_t, std::uint64_t, std::uint64_t y, std::uint32_t n,
+                           std::uint8_t* out) { return source->read_rows(y, n, out); }},
+                      *plan, g, shared, threads);
+  }
   if (shared.failed) {
     (*writer)->abort();
     return *shared.error;

@@ -24,6 +24,10 @@ namespace vts::detail {
 // to ImageSource, which reports its own errors.
 bool gdal_is_georeferenced(const std::filesystem::path& path);
 
+// The height of the blocks GDAL's warped VRTs compute (and cache) at a time (512 x 128, fixed by
+// GDALWarp for VRT output): reads of different threads should not share one, or each computes it.
+inline constexpr std::uint32_t kWarpBlockRows = 128;
+
 struct GdalSourceOptions {
   Tiling tiling = Tiling::world_crs84_quad;
   std::uint32_t tile_size = 256, border = 4;
@@ -78,6 +82,10 @@ class GdalSource {
   const std::vector<std::pair<double, double>>& value_ranges() const { return ranges_; }
   // The most inputs that were open at once so far.
   std::size_t peak_open() const { return peak_open_; }
+  // `n` readers of the same grid for n threads (GDAL datasets are not shared between threads):
+  // this one and n - 1 copies of what probing found, each opening its own datasets; max_open is
+  // divided between them, so the process still holds at most max_open inputs open.
+  std::vector<GdalSource*> split(unsigned n);
 
   // Grid columns [x0, x1) of rows [y, y + count) as RGBA8 ((x1 - x0) * 4 bytes per row). Texels no
   // input covers (or covers with nodata, a mask or alpha 0) are transparent black; later inputs
@@ -106,6 +114,7 @@ class GdalSource {
   std::size_t peak_open_ = 0;
   std::uint64_t tick_ = 0;
   std::vector<float> scratch_;
+  std::vector<std::unique_ptr<GdalSource>> copies_;  // split()'s
 };
 
 }  // namespace vts::detail

@@ -5,7 +5,7 @@
 # sparse archive of exactly the footprint's tiles (counted independently by footprint_count.py),
 # read in one pass over a window of the footprint's width; an input 80000 pixels wide (a footprint
 # of 131072 texels at level 9 of WorldCRS84Quad) is built in column stripes no wider than the
-# 65536-texel window limit plus a pass over their scratch level, still with the footprint's tile
+# 32768-texel window limit plus a pass over their scratch level, still with the footprint's tile
 # count, and its finest level equals gdalwarp's onto the same grid where both are opaque. (That
 # stripes give byte-identical tiles to one pass is checked by GdalBuild.StripesGiveTheSameTiles
 # AsOnePass; that windows equal a whole-grid reduction by test_cascade.cpp.)
@@ -61,7 +61,7 @@ import json, sys
 j = json.load(open(sys.argv[1]))
 assert j["max_zoom"] == 9 and j["width"] == 131072, (j["max_zoom"], j["width"])
 assert j["tiles"] == int(sys.argv[2]), (j["tiles"], sys.argv[2])
-assert j["passes"] > 2 and j["window_width"] <= 65536, (j["passes"], j["window_width"])
+assert j["passes"] > 2 and j["window_width"] <= 32768, (j["passes"], j["window_width"])
 PY
 expect_ok "$VTS" verify strip.pmtiles
 ls -A | grep -q "scratch" && fail "a scratch file was left behind"

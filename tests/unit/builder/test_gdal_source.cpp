@@ -4,6 +4,7 @@
 #include "gdal_source.hpp"
 
 #include <gdal.h>
+#include <gdal_utils.h>
 #include <gtest/gtest.h>
 #include <ogr_srs_api.h>
 
@@ -400,12 +401,33 @@ TEST(GdalSource, TexelsDoNotDependOnTheWindowsThatReadThem) {
       const auto n = std::uint32_t(std::min<std::uint64_t>(7, r.y1 - y));
       ASSERT_TRUE((*s)->read_window(xs[c], xs[c + 1], y, n, piece.data()));
       for (std::uint32_t k = 0; k < n; ++k)
-        ASSERT_EQ(0, std::memcmp(piece.data() + k * w * 4,
-                                 whole.data() + ((y + k - r.y0) * r.width() + (xs[c] - r.x0)) * 4,
-                                 w * 4))
+        ASSERT_EQ(
+            0, std::memcmp(piece.data() + k * w * 4,
+                           whole.data() + ((y + k - r.y0) * r.width() + (xs[c] - r.x0)) * 4, w * 4))
             << "row " << y + k << ", columns " << xs[c] << ".." << xs[c + 1];
     }
   }
+}
+
+// Readers on different threads read strips of kWarpBlockRows rows at multiples of it, so that no
+// two compute the same block of a warped VRT: that is GDALWarp's block height for VRT output.
+TEST(GdalSource, WarpedVrtBlocksAreKWarpBlockRowsHigh) {
+  vts::test::TempDir dir;
+  const fs::path p = dir.path() / "w.tif";
+  write_geotiff(p, 64, 32, 1, GDT_Byte, -180, 90, 5.625, code);
+  GDALDatasetH src = GDALOpen(p.c_str(), GA_ReadOnly);
+  ASSERT_NE(src, nullptr);
+  char of[] = "-of", vrt[] = "VRT", t[] = "-t_srs", srs[] = "EPSG:3857", ts[] = "-ts", n[] = "1024";
+  char* argv[] = {of, vrt, t, srs, ts, n, n, nullptr};  // taller than a block
+  GDALWarpAppOptions* wo = GDALWarpAppOptionsNew(argv, nullptr);
+  GDALDatasetH warped = GDALWarp("", nullptr, 1, &src, wo, nullptr);
+  GDALWarpAppOptionsFree(wo);
+  ASSERT_NE(warped, nullptr);
+  int bx = 0, by = 0;
+  GDALGetBlockSize(GDALGetRasterBand(warped, 1), &bx, &by);
+  EXPECT_EQ(std::uint32_t(by), detail::kWarpBlockRows);
+  GDALClose(warped);
+  GDALClose(src);
 }
 
 // A footprint wider than the window limit is built in column stripes through a scratch file, and

@@ -13,7 +13,7 @@
 // independent of the image height and of the number of texels; a 100k x 50k RGB tiled BigTIFF at
 // T=256 peaked at 436 MiB RSS (bench/memory_bench.sh), ~130 MiB of it code and fixed buffers.
 // Georeferenced builds keep rows of their footprint only, W <= max_window_width (column stripes
-// through a scratch file beyond it: builder/src/build_plan.hpp), plus GDAL's block cache (256 MiB
+// through a scratch file beyond it: builder/src/build_plan.hpp), plus GDAL's block cache (64 MiB
 // unless GDAL_CACHEMAX is set): bounded whatever the grid's or footprint's size.
 // Tile encoding runs on a pool of worker threads.
 //
@@ -70,8 +70,8 @@ Result<Resampling> parse_resampling(std::string_view text);
 // (2^30 = level 22 of WorldCRS84Quad at T = 256, 2^22 tiles around the equator, ~3.7 cm).
 inline constexpr std::uint64_t kMaxGeoreferencedWidth = std::uint64_t{1} << 30;
 // The widest window a georeferenced build's passes keep (BuildOptions::max_window_width's
-// default): with T = 256, B = 4 about 8 * 266 * 65536 = 140 MiB of level rings.
-inline constexpr std::uint64_t kDefaultWindowWidth = std::uint64_t{1} << 16;
+// default): with T = 256, B = 4 about 8 * 266 * 32768 = 70 MiB of level rings.
+inline constexpr std::uint64_t kDefaultWindowWidth = std::uint64_t{1} << 15;
 
 struct BuildOptions {
   std::vector<std::filesystem::path> inputs;  // row-major order for a grid
