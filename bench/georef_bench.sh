@@ -4,6 +4,7 @@
 # pick with GDAL, one after another on this machine, in one run:
 #   vts        vts build IN... --tiling WebMercatorQuad --max-level Z            (default: cubic)
 #   vts-R      the same with --resampling R                                      (R: the peers' -r)
+#   vts-z9     the default build with --zstd-level 9 (smaller tiles for a little CPU)
 #   gdalwarp   gdalwarp -t_srs EPSG:3857 -r R -dstalpha -multi -wo NUM_THREADS=ALL_CPUS
 #              -co TILED=YES IN... mosaic.tif   (one GeoTIFF; shared by the two pipelines below)
 #   gdal2tiles gdal2tiles.py --processes 2 --xyz -z 0-Z -r R -w none mosaic.tif DIR  (PNG tiles)
@@ -23,7 +24,7 @@
 # in zone 32N (EPSG:32632), each block two pieces either side of its zone's central meridian,
 # northings 4,400,000 .. 5,383,040 m: about 0..12.3 E, 39.7..48.6 N (south of France, the Alps,
 # northern Italy, Corsica, Sardinia). N = 2048 at 120 m per pixel (default: WebMercatorQuad level
-# Z = 10, the georeferenced builder's limit), or with --quick N = 512 at 480 m (Z = 8). The JPEG is
+# Z = 10), or with --quick N = 512 at 480 m (Z = 8). The JPEG is
 # upscaled ~160x, so the data is far smoother than real imagery: every tool's output is smaller and
 # faster to encode than on real data. The inputs are read once before the runs (page cache).
 #
@@ -147,6 +148,7 @@ vts_run() { # NAME RESAMPLING-ARGS...
 declare -A LEVELS
 vts_run vts
 vts_run "vts-$RES" --resampling "$RES"
+vts_run vts-z9 --zstd-level 9
 
 MOSAIC=$OUTDIR/mosaic_3857.tif
 if run_step gdalwarp "$OUTDIR/gdalwarp.log" gdalwarp -q -overwrite -t_srs EPSG:3857 -r "$RES" \
@@ -198,19 +200,24 @@ if have gdalwarp cog; then
   TILES[cog-total]=${TILES[cog]}
 fi
 
-# The stated memory bound of a georeferenced build (docs/ARCHITECTURE.md): level rings
-# 8 (S + 2) W bytes for the grid width W = 256 * 2^Z, S = 264; 4 x threads tiles of 4 S^2 bytes;
-# three 4 MiB strips; the fixed ~130 MiB; then GDAL's warp buffers (64 MiB, gdalwarp's default
-# -wm) and its block cache, which holds at most the inputs here (all of them fit its default of 5%
-# of RAM). 15% allowance for allocator slack, as bench/memory_bench.sh.
+# The stated memory bound of a georeferenced build (docs/ARCHITECTURE.md, "Memory bound"): for
+# the widest pass window Ww (the footprint's width at level Z, at most 32768), level rings
+# 8 (S + 2) Ww bytes, S = 264; threads + 2 strips of 4 x 128 Ww bytes; per reader (one per thread)
+# a Float32 strip of 16 x 128 Ww bytes and GDAL's 64 MiB warp buffer; GDAL's block cache (64 MiB);
+# 4 x threads tiles of 4 S^2 bytes; the fixed ~130 MiB. 15% allowance for allocator slack, as
+# bench/memory_bench.sh.
 THREADS=$(nproc)
-GRID_W=$((256 << Z))
-BOUND_MB=$((((8 * 266 * GRID_W + 4 * THREADS * 4 * 264 * 264) / 1048576 + 12 + 130 + 64 + \
-  IN_BYTES / 1048576) * 115 / 100))
+WW=$(node -e "const j = JSON.parse(require('fs').readFileSync('$OUTDIR/vts.info.json')); \
+  const [w, , e] = j.georeference.bounds; \
+  const x = (lon) => (lon + 180) / 360 * (256 << $Z); \
+  console.log(Math.min(32768, Math.ceil(x(e)) - Math.floor(x(w))))" 2>/dev/null || echo 32768)
+BOUND_MB=$((((8 * 266 * WW + (THREADS + 2) * 512 * WW + THREADS * 2048 * WW + \
+  4 * THREADS * 4 * 264 * 264) / 1048576 + THREADS * 64 + 64 + 130) * 115 / 100))
 
 step_label() {
   case "$1" in
     vts) echo "vts build --tiling WebMercatorQuad --max-level $Z (cubic, the default)" ;;
+    vts-z9) echo "vts build --tiling WebMercatorQuad --max-level $Z --zstd-level 9 (cubic)" ;;
     vts-*) echo "vts build --tiling WebMercatorQuad --max-level $Z --resampling $RES" ;;
     gdalwarp) echo "gdalwarp -t_srs EPSG:3857 -r $RES -dstalpha -multi (to one GeoTIFF${MOSAIC_SIZE:+, $MOSAIC_SIZE})" ;;
     gdal2tiles) echo "gdal2tiles.py --processes 2 --xyz -z 0-$Z -r $RES (PNG)" ;;
@@ -219,7 +226,7 @@ step_label() {
     cog-total) echo "**gdalwarp + COG**" ;;
   esac
 }
-STEPS=(vts "vts-$RES" gdalwarp gdal2tiles g2t-total cog cog-total)
+STEPS=(vts "vts-$RES" vts-z9 gdalwarp gdal2tiles g2t-total cog cog-total)
 BASE_WALL=${WALL[g2t-total]:-}
 BASE_BYTES=${BYTES[g2t-total]:-}
 
@@ -250,13 +257,13 @@ report() {
   echo "Tiles per zoom level (same area, same zoom range):"
   echo
   local k
-  for k in vts "vts-$RES" gdal2tiles; do
+  for k in vts "vts-$RES" vts-z9 gdal2tiles; do
     [[ -n ${LEVELS[$k]:-} ]] && echo "- $k: ${LEVELS[$k]} (total ${TILES[$k]})"
   done
   [[ -n ${DISK_T2:-} ]] && echo "- gdal2tiles' folder takes $(mb "$DISK_T2") MiB on disk (4 KiB blocks); the table counts the PNG files' bytes"
   echo
   if [[ -n $BASE_WALL ]]; then
-    for k in vts "vts-$RES"; do
+    for k in vts "vts-$RES" vts-z9; do
       [[ -n ${WALL[$k]:-} ]] || continue
       local r rb verdict
       r=$(ratio "${WALL[$k]}" "$BASE_WALL")
