@@ -256,11 +256,14 @@ void run_pass(PassContext& c, const detail::Pass& pass, const std::vector<Window
       to_scratch);
   const TexelRect& w = pass.window;
   const std::uint64_t row_bytes = w.width() * 4;
-  // About 4 MiB per strip, but a multiple of kStripAlign rows (the warped VRTs' block height),
-  // starting at multiples of it: strips of different readers then never share a block of the
-  // warp, which each reader would otherwise compute again. (At most 32 MiB: 128 rows of 65536.)
+  // About 4 MiB per strip. Several readers (the warp): a multiple of kStripAlign rows (the warped
+  // VRTs' block height) starting at multiples of it, so that strips of different readers never
+  // share a block of the warp, which each would otherwise compute again (at most 16 MiB: 128 rows
+  // of 32768). One reader: 1 to 64 rows.
+  const std::uint64_t fit = (4u << 20) / row_bytes;
   const auto strip_rows = static_cast<std::uint32_t>(
-      std::max<std::uint64_t>((4u << 20) / row_bytes / kStripAlign, 1) * kStripAlign);
+      readers.size() > 1 ? std::max<std::uint64_t>(fit / kStripAlign, 1) * kStripAlign
+                         : std::clamp<std::uint64_t>(fit, 1, 64));
   const std::uint64_t first = w.y0 / strip_rows * strip_rows;  // strip i: [first + i * rows, ...)
   const auto nreaders = static_cast<unsigned>(readers.size());
   StripChannel channel(nreaders + 2, strip_rows * row_bytes, nreaders);
@@ -392,6 +395,16 @@ Result<std::unique_ptr<GdalSource>> open_gdal(const BuildOptions& o) {
   go.max_level = o.max_level;
   go.resampling = o.resampling;
   go.warp_error = o.warp_error;
+  if (o.on_progress)
+    go.on_probe = [&o, last = Clock::time_point{}](std::size_t done, std::size_t total) mutable {
+      const auto now = Clock::now();
+      if (done < total && now - last < std::chrono::milliseconds(100)) return;
+      last = now;
+      BuildProgress p;
+      p.inputs_checked = done;
+      p.inputs_total = total;
+      o.on_progress(p);
+    };
   go.bands = o.bands;
   go.value_ranges = o.band_ranges;
   if (o.value_range) go.value_ranges = {*o.value_range};

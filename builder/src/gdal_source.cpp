@@ -530,6 +530,7 @@ Result<std::unique_ptr<GdalSource>> GdalSource::open(
     auto in = std::make_unique<Input>();
     in->path = path;
     if (Status st = probe_input(*in, options, lonlat); !st) return st.error();
+    if (options.on_probe) options.on_probe(s->inputs_.size() + 1, inputs.size());
     LonLatBounds& b = in->bounds;
     if (b.west > b.east)
       return make_error(ErrorCode::unsupported, path.string() + ": crosses the antimeridian (" +

@@ -6,6 +6,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -34,6 +35,8 @@ struct GdalSourceOptions {
   std::optional<int> max_level;
   Resampling resampling = Resampling::cubic;
   double warp_error = 0.01;  // BuildOptions::warp_error
+  // Called after each input is probed by open(): (inputs probed, inputs in all).
+  std::function<void(std::size_t, std::size_t)> on_probe;
   // The data bands (1-based) read from every input: 1 (grey) or 3 (RGB); an alpha band (colour
   // interpretation alpha) that is not among them is still used as alpha, and so are nodata values
   // and masks. Empty: by the input's band count (1 grey, 2 grey + alpha, 3 RGB, 4 RGBA).

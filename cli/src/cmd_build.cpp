@@ -136,6 +136,8 @@ int run_build(const BuildArgs& a) {
   if (!o) return report_error(o.error());
   ProgressBar bar("build", "tiles", !a.quiet && !a.json);
   o->on_progress = [&](const BuildProgress& p) {
+    if (p.tiles_total == 0 && p.inputs_total > 0)
+      return bar.update(p.inputs_checked, p.inputs_total, "checking inputs");
     bar.update(p.tiles_done, p.tiles_total,
                human_bytes(p.bytes_written) + (p.finishing ? "  writing archive..." : ""));
   };

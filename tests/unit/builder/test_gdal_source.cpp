@@ -430,6 +430,32 @@ TEST(GdalSource, WarpedVrtBlocksAreKWarpBlockRowsHigh) {
   GDALClose(src);
 }
 
+// Checking 10^4 inputs takes a while before the first tile: the build reports it.
+TEST(GdalBuild, ReportsTheInputsItHasCheckedBeforeItsTiles) {
+  vts::test::TempDir dir;
+  BuildOptions o;
+  for (int i = 0; i < 3; ++i) {
+    o.inputs.push_back(dir.path() / ("p" + std::to_string(i) + ".tif"));
+    write_geotiff(o.inputs.back(), 16, 8, 3, GDT_Byte, -180 + 90 * i, 90, 5.625, code);
+  }
+  o.output = dir.path() / "out.pmtiles";
+  o.tile_size = 16;
+  o.threads = 1;
+  std::vector<std::pair<std::uint64_t, std::uint64_t>> checked;
+  bool tiles_after_inputs = true;
+  o.on_progress = [&](const BuildProgress& p) {
+    if (p.inputs_total)
+      checked.emplace_back(p.inputs_checked, p.inputs_total);
+    else if (p.tiles_total == 0 || checked.empty())
+      tiles_after_inputs = false;
+  };
+  auto r = build_pyramid(o);
+  ASSERT_TRUE(r) << r.error().message;
+  ASSERT_FALSE(checked.empty());
+  EXPECT_EQ(checked.back(), (std::pair<std::uint64_t, std::uint64_t>{3, 3}));
+  EXPECT_TRUE(tiles_after_inputs);
+}
+
 // A footprint wider than the window limit is built in column stripes through a scratch file, and
 // the scratch level again when it is still too wide: the archive's content is the same as one
 // pass over the footprint's whole width, for both downsampling filters.

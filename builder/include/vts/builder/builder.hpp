@@ -57,6 +57,9 @@ struct BuildProgress {
   std::uint64_t bytes_written = 0;  // tile payload bytes so far (before dedup)
   double seconds = 0;
   bool finishing = false;  // every tile is encoded; the archive file is being assembled
+  // Georeferenced inputs checked so far, before any tile (extent, bands, values; 10^4 inputs take
+  // a while): tiles_total is 0 until they all are.
+  std::uint64_t inputs_checked = 0, inputs_total = 0;
 };
 
 // How georeferenced inputs are resampled onto the tiling scheme's grid (GDAL's warper).
