@@ -50,7 +50,7 @@ void ReloadLoop::run() {
 }
 
 void ReloadLoop::reload(bool force) {
-  auto result = registry_.reload(force);
+  auto result = registry_.reload(force, settle_);
   if (result.swapped > 0) {
     metrics_.reloads_swapped.fetch_add(std::uint64_t(result.swapped));
     std::fprintf(stderr, "vts serve: reloaded %d tileset(s)\n", result.swapped);

@@ -1,10 +1,13 @@
 // The background thread that keeps the registry current: registry.reload(false) every `interval`
 // (0 = never), and on request (force: registry.reload(true)). Requests that arrive while a reload
 // runs are merged into the next one, and unforced ones wait until kMinGap after the previous
-// reload: requests for tiles of an archive being copied in place ask for one each. Swaps,
+// reload: requests for tiles of an archive being copied in place ask for one each. A file
+// modified in place (or new in a folder) is opened once it has been left unmodified for a whole
+// interval (kMaxSettle at most; kIdleSettle when there is no interval). Swaps,
 // additions, removals and refusals are logged to stderr and counted in the metrics.
 #pragma once
 
+#include <algorithm>
 #include <chrono>
 #include <condition_variable>
 #include <memory>
@@ -20,7 +23,10 @@ class ReloadLoop {
  public:
   // `registry` and `metrics` must outlive the loop.
   ReloadLoop(TilesetRegistry& registry, Metrics& metrics, std::chrono::milliseconds interval)
-      : registry_(registry), metrics_(metrics), interval_(interval) {}
+      : registry_(registry),
+        metrics_(metrics),
+        interval_(interval),
+        settle_(interval.count() > 0 ? std::min(interval, kMaxSettle) : kIdleSettle) {}
   ReloadLoop(const ReloadLoop&) = delete;
   ReloadLoop& operator=(const ReloadLoop&) = delete;
   ~ReloadLoop() { stop(); }
@@ -38,10 +44,12 @@ class ReloadLoop {
   void reload(bool force);
 
   static constexpr std::chrono::milliseconds kMinGap{100};
+  static constexpr std::chrono::milliseconds kMaxSettle{2000}, kIdleSettle{1000};
 
   TilesetRegistry& registry_;
   Metrics& metrics_;
   const std::chrono::milliseconds interval_;
+  const std::chrono::milliseconds settle_;  // see TilesetRegistry::reload
   std::mutex mutex_;
   std::condition_variable cv_;
   bool quit_ = false, pending_ = false, force_ = false;

@@ -46,6 +46,17 @@ FileIdentity identity_of(const Tileset& t) {
   return {t.file_size, t.file_mtime_ns, t.file_inode};
 }
 
+// True when the file was modified less than `settle` ago (a modification time in the future, as
+// from a skewed clock, is not waited for).
+bool recently_modified(const FileIdentity& id, std::chrono::nanoseconds settle) {
+  if (settle.count() <= 0) return false;
+  const std::int64_t now = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                               std::chrono::system_clock::now().time_since_epoch())
+                               .count();
+  const std::int64_t age = now - id.mtime_ns;
+  return age >= 0 && age < settle.count();
+}
+
 bool is_archive_name(const fs::path& p) {
   return p.extension() == ".pmtiles";
 }
@@ -218,7 +229,9 @@ Status TilesetRegistry::load(const std::vector<fs::path>& paths) {
   return {};
 }
 
-TilesetRegistry::ReloadResult TilesetRegistry::reload(bool force) {
+TilesetRegistry::ReloadResult TilesetRegistry::reload(bool force,
+                                                      std::chrono::nanoseconds settle) {
+  if (force) settle = {};
   ReloadResult result;
   std::vector<fs::path> folders;
   {
@@ -238,8 +251,8 @@ TilesetRegistry::ReloadResult TilesetRegistry::reload(bool force) {
     }
     in_folders.insert(found->begin(), found->end());
   }
-  add_new_archives(in_folders, force, result);
-  refresh_loaded(folders, force, result);
+  add_new_archives(in_folders, force, settle, result);
+  refresh_loaded(folders, force, settle, result);
   if (listed_all) {
     std::lock_guard lock(mutex_);
     forget_gone_refusals(in_folders);
@@ -269,7 +282,7 @@ std::vector<SkippedArchive> TilesetRegistry::skipped() const {
 
 // Opens the archives of `in_folders` that are not served yet.
 void TilesetRegistry::add_new_archives(const std::set<fs::path>& in_folders, bool force,
-                                       ReloadResult& result) {
+                                       std::chrono::nanoseconds settle, ReloadResult& result) {
   std::set<fs::path> known;
   for (const auto& t : all()) known.insert(t->path);
   for (const auto& path : in_folders) {
@@ -280,6 +293,10 @@ void TilesetRegistry::add_new_archives(const std::set<fs::path>& in_folders, boo
       std::lock_guard lock(mutex_);
       auto r = refused_.find(path);
       if (!force && r != refused_.end() && r->second.identity == *id) continue;  // as refused
+    }
+    if (recently_modified(*id, settle)) {  // perhaps still being written
+      ++result.settling;
+      continue;
     }
     auto fresh = open_archive(path);
     std::lock_guard lock(mutex_);
@@ -309,7 +326,7 @@ void TilesetRegistry::add_new_archives(const std::set<fs::path>& in_folders, boo
 
 // Removes tilesets whose archive left its folder; re-opens those whose file changed.
 void TilesetRegistry::refresh_loaded(const std::vector<fs::path>& folders, bool force,
-                                     ReloadResult& result) {
+                                     std::chrono::nanoseconds settle, ReloadResult& result) {
   // Open outside the lock so lookups are never blocked by archive I/O.
   for (const auto& old : all()) {
     std::error_code ec;
@@ -334,6 +351,10 @@ void TilesetRegistry::refresh_loaded(const std::vector<fs::path>& folders, bool 
       std::lock_guard lock(mutex_);
       auto r = refused_.find(old->path);
       if (!force && r != refused_.end() && r->second.identity == *id) continue;  // as refused
+    }
+    if (id->inode == old->file_inode && recently_modified(*id, settle)) {  // a copy in place
+      ++result.settling;
+      continue;
     }
     auto fresh = open_archive(old->path);
     if (!fresh) {

@@ -2,9 +2,12 @@
 #include "vts/server/tileset_registry.hpp"
 
 #include <gtest/gtest.h>
+#include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <atomic>
+#include <chrono>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -312,6 +315,54 @@ TEST(TilesetRegistry, ReloadSwapsInAReplacedArchiveWhileTheOldSnapshotStaysReada
   const auto again = old->reader->get(vts::TileId{0, 0, 0});
   ASSERT_TRUE(again.ok());
   EXPECT_TRUE(std::equal(again->begin(), again->end(), old_bytes.begin(), old_bytes.end()));
+}
+
+// A copy over the served file (same inode) may pause with b's header and directories over a's
+// tile bytes: it is opened only once it has been left unmodified for `settle`.
+TEST(TilesetRegistry, ReloadWaitsForAFileModifiedInPlaceToSettle) {
+  RegistryTempDir dir;
+  build_archive(dir.path() / "a.pmtiles", 600, 300);
+  build_archive(dir.path() / "b.pmtiles.tmp", 500, 250);
+  vts::TilesetRegistry registry;
+  ASSERT_TRUE(registry.load({dir.path() / "a.pmtiles"}).ok());
+  auto old = registry.find("a");
+  const auto inode = old->file_inode;
+  fs::copy_file(dir.path() / "b.pmtiles.tmp", dir.path() / "a.pmtiles",
+                fs::copy_options::overwrite_existing);
+  ASSERT_EQ(fs::hard_link_count(dir.path() / "a.pmtiles"), 1u);
+
+  auto r = registry.reload(false, std::chrono::hours(1));
+  EXPECT_EQ(r.swapped, 0);
+  EXPECT_EQ(r.settling, 1);
+  EXPECT_TRUE(r.failures.empty());
+  EXPECT_EQ(registry.find("a"), old);
+  const auto changed = old->reader->get(vts::TileId{0, 0, 0});
+  ASSERT_FALSE(changed.ok());
+  EXPECT_EQ(changed.error().code, vts::ErrorCode::changed);
+
+  // Left alone for longer than `settle` (its modification time two hours back): swapped in.
+  struct stat st {};
+  ASSERT_EQ(::stat((dir.path() / "a.pmtiles").c_str(), &st), 0);
+  ASSERT_EQ(static_cast<std::uint64_t>(st.st_ino), inode) << "the copy did not write in place";
+  const timespec past[2] = {{st.st_atim.tv_sec - 7200, 0}, {st.st_mtim.tv_sec - 7200, 0}};
+  ASSERT_EQ(::utimensat(AT_FDCWD, (dir.path() / "a.pmtiles").c_str(), past, 0), 0);
+  r = registry.reload(false, std::chrono::hours(1));
+  EXPECT_EQ(r.swapped, 1);
+  EXPECT_EQ(r.settling, 0);
+  EXPECT_EQ(registry.find("a")->info.geometry.width(), 500u);
+}
+
+// A file renamed over the served one is complete: no settling.
+TEST(TilesetRegistry, ReloadSwapsARenamedReplacementAtOnceWhateverTheSettleTime) {
+  RegistryTempDir dir;
+  build_archive(dir.path() / "a.pmtiles", 600, 300);
+  vts::TilesetRegistry registry;
+  ASSERT_TRUE(registry.load({dir.path() / "a.pmtiles"}).ok());
+  build_archive(dir.path() / "b.tmp", 500, 250);
+  fs::rename(dir.path() / "b.tmp", dir.path() / "a.pmtiles");
+  const auto r = registry.reload(false, std::chrono::hours(1));
+  EXPECT_EQ(r.swapped, 1);
+  EXPECT_EQ(r.settling, 0);
 }
 
 TEST(TilesetRegistry, ReloadRefusesABrokenReplacementAndKeepsServingTheOldArchive) {

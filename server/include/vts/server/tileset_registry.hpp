@@ -6,6 +6,7 @@
 #pragma once
 
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <filesystem>
 #include <map>
@@ -73,11 +74,17 @@ class TilesetRegistry {
   // disappeared are removed. A refused archive, new or replacing a loaded one, is not tried again
   // until its file changes (or force), and listed by skipped() meanwhile. Files loaded by name
   // are never removed.
+  //
+  // Unless forced, a file modified less than `settle` ago is left for a later reload when it is
+  // new in a folder or was modified in place (same inode): a writer copying over a served file may
+  // pause with a valid header and directories over stale tile bytes, and nothing on the file
+  // changes while it pauses. (A file renamed into place is complete: it is opened at once.)
+  // `settling` counts the files so left.
   struct ReloadResult {
-    int swapped = 0, added = 0, removed = 0;
+    int swapped = 0, added = 0, removed = 0, settling = 0;
     std::vector<Error> failures;
   };
-  ReloadResult reload(bool force);
+  ReloadResult reload(bool force, std::chrono::nanoseconds settle = {});
 
   std::shared_ptr<const Tileset> find(std::string_view name) const;
   std::vector<std::shared_ptr<const Tileset>> all() const;  // sorted by name
@@ -99,9 +106,9 @@ class TilesetRegistry {
   void publish();
   // reload()'s two halves.
   void add_new_archives(const std::set<std::filesystem::path>& in_folders, bool force,
-                        ReloadResult& result);
+                        std::chrono::nanoseconds settle, ReloadResult& result);
   void refresh_loaded(const std::vector<std::filesystem::path>& folders, bool force,
-                      ReloadResult& result);
+                      std::chrono::nanoseconds settle, ReloadResult& result);
 
   mutable std::mutex mutex_;
   Map tilesets_;
