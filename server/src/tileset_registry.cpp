@@ -229,8 +229,7 @@ Status TilesetRegistry::load(const std::vector<fs::path>& paths) {
   return {};
 }
 
-TilesetRegistry::ReloadResult TilesetRegistry::reload(bool force,
-                                                      std::chrono::nanoseconds settle) {
+TilesetRegistry::ReloadResult TilesetRegistry::reload(bool force, std::chrono::nanoseconds settle) {
   if (force) settle = {};
   ReloadResult result;
   std::vector<fs::path> folders;

@@ -1,8 +1,8 @@
 // TilesetRegistry and open_tileset: loading files and folders, names, versions, hot reload.
 #include "vts/server/tileset_registry.hpp"
 
-#include <gtest/gtest.h>
 #include <fcntl.h>
+#include <gtest/gtest.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
