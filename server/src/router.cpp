@@ -55,19 +55,6 @@ std::string cache_control(bool is_private, std::uint32_t max_age, bool immutable
   return s;
 }
 
-}  // namespace router_detail
-
-namespace {
-
-using namespace router_detail;
-using nlohmann::ordered_json;
-
-constexpr const char* kTileType = "application/vnd.vtstream.tile";
-constexpr const char* kArchiveType = "application/vnd.pmtiles";
-constexpr const char* kJsonType = "application/json";
-constexpr std::uint32_t kImmutableMaxAge = 31536000;
-constexpr std::uint32_t kMetadataMaxAge = 60;  // TileJSON and the index carry the version
-
 HttpResponse tile_error(int status, std::string message) {
   HttpResponse r = error(status, std::move(message));
   r.route = Route::tile;
@@ -104,6 +91,18 @@ HttpResponse archive_changed(std::shared_ptr<const Tileset> t, const Error& e) {
   r.hold = std::move(t);  // names the tileset in access logs
   return r;
 }
+
+}  // namespace router_detail
+
+namespace {
+
+using namespace router_detail;
+using nlohmann::ordered_json;
+
+constexpr const char* kTileType = "application/vnd.vtstream.tile";
+constexpr const char* kArchiveType = "application/vnd.pmtiles";
+constexpr const char* kJsonType = "application/json";
+constexpr std::uint32_t kMetadataMaxAge = 60;  // TileJSON and the index carry the version
 
 HttpResponse unreadable_tile(std::shared_ptr<const Tileset> t, TileId id, const Error& e,
                              const std::string& cc) {
@@ -418,6 +417,7 @@ struct Address {
   std::string_view name;
   std::string_view version;
   std::vector<std::string_view> segments;
+  std::optional<WebFormat> web;  // /{ts}/{z}/{x}/{y}.{ext}: a web image (router_web.cpp)
   std::span<const std::string_view> zxy() const {
     return std::span<const std::string_view>(segments).subspan(1);
   }
@@ -438,7 +438,8 @@ std::optional<HttpResponse> parse_address(std::string_view path, Address& a) {
     } else {
       return error(404,
                    "no such resource; try /, /{tileset}.json, /{tileset}.pmtiles, "
-                   "/{tileset}/tilematrixset.json or /{tileset}/{z}/{x}/{y}");
+                   "/{tileset}/tilematrixset.json, /{tileset}/{z}/{x}/{y} or "
+                   "/{tileset}/{z}/{x}/{y}.png|.webp|.jpg");
     }
     return std::nullopt;
   }
@@ -453,6 +454,17 @@ std::optional<HttpResponse> parse_address(std::string_view path, Address& a) {
     a.version = a.name.substr(at + 1);
     a.name = a.name.substr(0, at);
     if (a.version.empty()) return error(400, "empty version after '@'");
+  }
+  if (const std::size_t dot = a.segments[3].find('.'); dot != std::string_view::npos) {
+    const std::string_view ext = a.segments[3].substr(dot + 1);
+    a.segments[3] = a.segments[3].substr(0, dot);
+    if (ext == "png") a.web = WebFormat::png;
+    if (ext == "webp") a.web = WebFormat::webp;
+    if (ext == "jpg" || ext == "jpeg") a.web = WebFormat::jpeg;
+    if (!a.web) {
+      return error(400, "unknown tile image extension \"." + std::string(ext) +
+                            "\"; use .png, .webp or .jpg (or no extension for the native tile)");
+    }
   }
   for (std::size_t i = 1; i < 4; ++i) {
     if (!parse_u32(a.segments[i])) {
@@ -516,6 +528,22 @@ HttpResponse serve_address(const HttpRequest& request, const Target& target, con
       return *denied;
     }
   }
+  const bool web =
+      a.web || (a.kind == Address::Kind::tilejson && (target.query.format || target.query.tiling));
+  if (web && provided) {
+    return error(404, "tileset \"" + provided->name +
+                          "\" is served from a cache: web images (.png, .webp, .jpg and "
+                          "/{tileset}.json?format=) are served by vts serve only");
+  }
+  if (web && a.kind == Address::Kind::tilejson) {
+    if (!target.query.format) {
+      HttpResponse r = error(400, "tiling= needs format=png, webp or jpg");
+      r.route = Route::tilejson;
+      return r;
+    }
+    return web_tilejson_route(*t, target.query, base, priv);
+  }
+  if (web) return web_tile_route(request, std::move(t), a.version, a.zxy(), *a.web, config, priv);
   if (provided) return serve_provided(request, std::move(provided), a, config, base, priv);
   return serve_archive(request, std::move(t), a, config, base, priv);
 }
@@ -633,6 +661,25 @@ HttpResponse complete_deferred(HttpResponse marker, ProvidedTile tile) {
   r.head_only = marker.head_only;
   if (r.status == 204 || r.status == 304) {
     r.owned.clear();
+    r.view = {};
+    r.keep.reset();
+    r.content_length = 0;
+  }
+  return r;
+}
+
+HttpResponse complete_web_wait(HttpResponse marker,
+                               const std::shared_ptr<const http_detail::WebTile>& tile,
+                               const std::string& why) {
+  assert(marker.web_wait);
+  const DeferredWebTile& d = *marker.web_wait;
+  HttpResponse r = tile ? web_image_response(tile, d.if_none_match, d.cache_control)
+                        : tile_error(500, "cannot encode the web image: " + why);
+  r.route = Route::tile;
+  r.hold = std::move(marker.hold);
+  for (auto& h : marker.headers) r.headers.push_back(std::move(h));  // CORS, from route()
+  r.head_only = marker.head_only;
+  if (r.status == 304) {
     r.view = {};
     r.keep.reset();
     r.content_length = 0;
