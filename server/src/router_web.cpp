@@ -1,4 +1,4 @@
-// Web images of tiles (docs/PROTOCOL.md §13): /{ts}[@{version}]/{z}/{x}/{y}.png|.webp|.jpg and the
+// Web images of tiles (docs/PROTOCOL.md §12): /{ts}[@{version}]/{z}/{x}/{y}.png|.webp|.jpg and the
 // TileJSON that points stock web maps at them. An image is encoded from the stored tile on the
 // request's own thread (decode, crop the border, encode), once per key however many requests
 // want it at the same time (WebTileCache's single flight), and kept in the bounded RAM cache.

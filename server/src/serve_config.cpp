@@ -107,7 +107,7 @@ Status apply_limits(const json& l, const std::string& file, HttpServerLimits& L)
   return bad;
 }
 
-// The "web" object: encoder settings and the RAM cache's cap of web images (docs/PROTOCOL.md §13).
+// The "web" object: encoder settings and the RAM cache's cap of web images (docs/PROTOCOL.md §12).
 Status apply_web(const json& w, const std::string& file, WebTileConfig& web) {
   if (auto st = check_keys(w, kWebKeys, "web.", file); !st.ok()) return st;
   Status bad;

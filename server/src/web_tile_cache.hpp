@@ -1,5 +1,5 @@
 // The RAM cache of web images (PNG / WebP / JPEG) that `vts serve` encodes from its tiles on
-// request (docs/PROTOCOL.md §13), with single flight: concurrent requests for one image encode
+// request (docs/PROTOCOL.md §12), with single flight: concurrent requests for one image encode
 // it once. Thread-safe; every method is short (a lock around a map), encoding happens outside.
 //
 // acquire() answers a key with the cached image (hit), or makes the caller the leader of a new

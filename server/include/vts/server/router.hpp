@@ -31,7 +31,7 @@ class Flight;
 struct WebTile;
 }  // namespace http_detail
 
-// Web images of tiles (/{ts}/{z}/{x}/{y}.png|.webp|.jpg; docs/PROTOCOL.md §13).
+// Web images of tiles (/{ts}/{z}/{x}/{y}.png|.webp|.jpg; docs/PROTOCOL.md §12).
 struct WebTileConfig {
   WebEncodeOptions encode;
   std::size_t cache_bytes = std::size_t(64) << 20;  // "cache_mib" (default 64 MiB; 0 = no cache)
