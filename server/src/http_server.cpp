@@ -54,7 +54,7 @@ class Server final : public HttpServer, public SessionHost {
         std::min(options_.router.max_target_bytes, options_.limits.max_target_bytes);
     if (!options_.router.web.cache) {
       options_.router.web.cache =
-          std::make_shared<http_detail::WebTileCache>(options_.router.web.cache_bytes);
+          std::make_shared<http_detail::WebTileCache>(options_.router.web.cache_bytes, n);
     }
     for (int i = 1; i < n; ++i) workers_.push_back(std::make_unique<asio::io_context>(1));
     // Deadline sweeps at an eighth of the shortest timeout (so a deadline is enforced within
@@ -67,6 +67,9 @@ class Server final : public HttpServer, public SessionHost {
     for (auto& w : workers_) sweepers_.push_back(std::make_unique<Sweeper>(*w, period));
   }
   ~Server() override {
+    // Web images still being encoded post their answers to the connections' threads: done
+    // before those go.
+    options_.router.web.cache->stop();
     destroying_ = true;
     error_code ec;
     acceptor_.close(ec);

@@ -1,6 +1,6 @@
 // Web images of tiles (docs/PROTOCOL.md §12): /{ts}[@{version}]/{z}/{x}/{y}.png|.webp|.jpg and the
 // TileJSON that points stock web maps at them. An image is encoded from the stored tile on the
-// request's own thread (decode, crop the border, encode), once per key however many requests
+// cache's encode workers (decode, crop the border, encode), once per key however many requests
 // want it at the same time (WebTileCache's single flight), and kept in the bounded RAM cache.
 #include <chrono>
 #include <cmath>
@@ -65,31 +65,13 @@ namespace {
 
 using Encoder = std::function<Result<std::vector<std::uint8_t>>()>;
 
-// The image under `key`: from the cache, encoded now by this thread (the first request to miss
-// it), or — when another request is encoding it — a web_wait marker the session completes once
-// that encoding is done, without blocking its thread.
-HttpResponse encoded(const RouterConfig& config, const std::string& key, std::string etag,
-                     const char* type, const Encoder& encode, std::string_view if_none_match,
-                     const std::string& cc) {
-  WebTileCache* cache = config.web.cache.get();
-  WebTileCache::Lookup found;
-  if (cache != nullptr) {
-    found = cache->acquire(key);
-    if (found.hit) return web_image_response(found.hit, if_none_match, cc);
-    if (found.wait) {
-      auto d = std::make_shared<DeferredWebTile>();
-      d->flight = std::move(found.wait);
-      d->if_none_match = std::string(if_none_match);
-      d->cache_control = cc;
-      HttpResponse r;
-      r.route = Route::tile;
-      r.web_wait = std::move(d);
-      return r;
-    }
-  }
+// Runs `encode`, counts it, and (with a cache) stores the image and ends the flight `lead`,
+// which answers the requests waiting for it. Null with `why` set when encoding failed.
+WebTilePtr encode_now(WebTileCache* cache, const std::string& key,
+                      const std::shared_ptr<http_detail::Flight>& lead, std::string etag,
+                      const char* type, const Encoder& encode, std::string& why) {
   const auto start = std::chrono::steady_clock::now();
   WebTilePtr tile;
-  std::string why;
   try {
     if (auto bytes = encode()) {
       tile = std::make_shared<const WebTile>(WebTile{std::move(*bytes), std::move(etag), type});
@@ -106,8 +88,48 @@ HttpResponse encoded(const RouterConfig& config, const std::string& key, std::st
     cache->encodes.fetch_add(1, std::memory_order_relaxed);
     cache->encode_us_sum.fetch_add(std::uint64_t(us), std::memory_order_relaxed);
     if (!tile) cache->encode_failures.fetch_add(1, std::memory_order_relaxed);
-    cache->finish(key, found.lead, tile, why);
+    cache->finish(key, lead, tile, why);
   }
+  return tile;
+}
+
+HttpResponse wait_for(std::shared_ptr<http_detail::Flight> flight, std::string_view if_none_match,
+                      const std::string& cc) {
+  auto d = std::make_shared<DeferredWebTile>();
+  d->flight = std::move(flight);
+  d->if_none_match = std::string(if_none_match);
+  d->cache_control = cc;
+  HttpResponse r;
+  r.route = Route::tile;
+  r.web_wait = std::move(d);
+  return r;
+}
+
+// The image under `key`: from the cache; else encoded by the cache's workers (the first request
+// to miss it starts the encoding, it and every request for the same image meanwhile wait for it:
+// a web_wait marker the session completes without blocking its thread); without workers (or
+// without a cache), encoded now on this thread. `encode` must own what it reads.
+HttpResponse encoded(const RouterConfig& config, const std::string& key, std::string etag,
+                     const char* type, Encoder encode, std::string_view if_none_match,
+                     const std::string& cc) {
+  WebTileCache* cache = config.web.cache.get();
+  WebTileCache::Lookup found;
+  if (cache != nullptr) {
+    found = cache->acquire(key);
+    if (found.hit) return web_image_response(found.hit, if_none_match, cc);
+    if (found.wait) return wait_for(std::move(found.wait), if_none_match, cc);
+    if (cache->has_workers()) {
+      // The cache outlives its jobs (its destructor runs the queued ones before it returns).
+      cache->run([cache, key, lead = found.lead, etag = std::move(etag), type,
+                  encode = std::move(encode)]() mutable {
+        std::string why;
+        encode_now(cache, key, lead, std::move(etag), type, encode, why);
+      });
+      return wait_for(std::move(found.lead), if_none_match, cc);
+    }
+  }
+  std::string why;
+  WebTilePtr tile = encode_now(cache, key, found.lead, std::move(etag), type, encode, why);
   if (!tile) return tile_error(500, "cannot encode the web image: " + why);
   return web_image_response(tile, if_none_match, cc);
 }
@@ -121,14 +143,14 @@ HttpResponse empty_tile(const Tileset& t, WebFormat f, const RouterConfig& confi
   const std::uint32_t size = t.info.geometry.tile_size();
   const std::string tag = options_tag(f, config.web.encode);
   const WebFormat as = f == WebFormat::jpeg ? WebFormat::png : f;
-  const Encoder encode = [size, as, &config] {
+  Encoder encode = [size, as, options = config.web.encode] {
     const TileImage clear{size, size, PixelFormat::rgba8,
                           std::vector<std::uint8_t>(std::size_t(size) * size * 4, 0)};
-    return encode_web_image(clear, as, config.web.encode);
+    return encode_web_image(clear, as, options);
   };
   const std::string key = "empty/" + std::to_string(size) + "/" + tag;
   return encoded(config, key, "\"empty-" + std::to_string(size) + "-" + tag + "\"",
-                 web_format_content_type(as).data(), encode, if_none_match, cc);
+                 web_format_content_type(as).data(), std::move(encode), if_none_match, cc);
 }
 
 }  // namespace
@@ -201,16 +223,19 @@ HttpResponse web_tile_route(const HttpRequest& request, std::shared_ptr<const Ti
   }
   if (memo) memo->remember(tile_id, header->checksum);
   const std::string key = t->name + "@" + t->version + "/" + std::to_string(tile_id) + "/" + tag;
-  const Encoder encode = [&payload, &g, id, format,
-                          &config]() -> Result<std::vector<std::uint8_t>> {
-    auto stored = decode_tile(*payload);
+  Encoder encode = [stored_payload =
+                        std::make_shared<const std::vector<std::uint8_t>>(std::move(*payload)),
+                    tileset = t, id, format,
+                    options = config.web.encode]() -> Result<std::vector<std::uint8_t>> {
+    auto stored = decode_tile(*stored_payload);
     if (!stored) return stored.error();
-    auto content = tile_content(*stored, g, id);
+    auto content = tile_content(*stored, tileset->info.geometry, id);
     if (!content) return content.error();
-    return encode_web_image(*content, format, config.web.encode);
+    return encode_web_image(*content, format, options);
   };
   return finish(encoded(config, key, etag_of(header->checksum),
-                        web_format_content_type(format).data(), encode, request.if_none_match, cc));
+                        web_format_content_type(format).data(), std::move(encode),
+                        request.if_none_match, cc));
 }
 
 HttpResponse web_tilejson_route(const Tileset& t, const Query& q, const std::string& base,

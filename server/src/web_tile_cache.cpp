@@ -24,6 +24,47 @@ void Flight::complete(WebTilePtr tile, std::string error) {
   for (auto& cb : waiters) cb(tile_, error_);  // tile_ and error_ no longer change
 }
 
+WebTileCache::WebTileCache(std::size_t capacity_bytes, int encode_threads)
+    : capacity_(capacity_bytes) {
+  for (int i = 0; i < encode_threads; ++i) {
+    workers_.emplace_back([this] {
+      while (true) {
+        std::function<void()> job;
+        {
+          std::unique_lock lock(jobs_m_);
+          jobs_cv_.wait(lock, [this] { return stopping_ || !jobs_.empty(); });
+          if (jobs_.empty()) return;  // stopping, and nothing left to encode
+          job = std::move(jobs_.front());
+          jobs_.pop_front();
+        }
+        job();
+      }
+    });
+  }
+}
+
+WebTileCache::~WebTileCache() {
+  stop();
+}
+
+void WebTileCache::stop() {
+  {
+    std::lock_guard lock(jobs_m_);
+    stopping_ = true;
+  }
+  jobs_cv_.notify_all();
+  for (auto& w : workers_) w.join();
+  workers_.clear();
+}
+
+void WebTileCache::run(std::function<void()> job) {
+  {
+    std::lock_guard lock(jobs_m_);
+    jobs_.push_back(std::move(job));
+  }
+  jobs_cv_.notify_one();
+}
+
 WebTileCache::Lookup WebTileCache::acquire(const std::string& key) {
   std::lock_guard lock(m_);
   if (auto it = map_.find(key); it != map_.end()) {

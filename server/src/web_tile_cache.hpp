@@ -7,14 +7,18 @@
 // way (the caller registers a callback with Flight::on_done and waits without blocking).
 #pragma once
 
+#include <array>
 #include <atomic>
+#include <condition_variable>
 #include <cstdint>
+#include <deque>
 #include <functional>
 #include <list>
 #include <memory>
 #include <mutex>
 #include <string>
 #include <string_view>
+#include <thread>
 #include <unordered_map>
 #include <vector>
 
@@ -50,7 +54,20 @@ class Flight {
 class WebTileCache {
  public:
   // At most `capacity_bytes` of image bytes are kept (0: none; single flight still applies).
-  explicit WebTileCache(std::size_t capacity_bytes) : capacity_(capacity_bytes) {}
+  // With `encode_threads` > 0, encodings run on that many worker threads (run()); with 0, on
+  // the caller's thread.
+  explicit WebTileCache(std::size_t capacity_bytes, int encode_threads = 0);
+  // stop().
+  ~WebTileCache();
+  // Finishes the encodings queued, then joins the workers; later encodings run on the caller's
+  // thread. Call it before the threads the flights' callbacks post to go away.
+  void stop();
+  WebTileCache(const WebTileCache&) = delete;
+  WebTileCache& operator=(const WebTileCache&) = delete;
+
+  bool has_workers() const noexcept { return !workers_.empty(); }
+  // Queues `job` for a worker (has_workers() must be true).
+  void run(std::function<void()> job);
 
   struct Lookup {
     WebTilePtr hit;                // a cached image
@@ -82,6 +99,12 @@ class WebTileCache {
   std::list<std::string> lru_;  // front = most recently used
   std::unordered_map<std::string, std::shared_ptr<Flight>> flights_;
   std::size_t used_ = 0;
+  // The encode workers.
+  std::mutex jobs_m_;
+  std::condition_variable jobs_cv_;
+  std::deque<std::function<void()>> jobs_;
+  bool stopping_ = false;
+  std::vector<std::thread> workers_;
 };
 
 // Prometheus lines of the cache's counters (vts_web_*).

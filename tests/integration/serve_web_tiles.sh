@@ -25,23 +25,31 @@ header_of() {
 
 build_earth "$WORK/earth.pmtiles"
 build_earth "$WORK/bc1.pmtiles" --codec bc1
-echo '{"web": {"cache_mib": 1}}' >"$WORK/config.json"
-start_server "$WORK/earth.pmtiles" "$WORK/bc1.pmtiles" --config "$WORK/config.json" \
-  --access-log "$WORK/access.log"
 
-note "single flight: 24 concurrent requests for one image, one encoding"
+note "single flight: 24 concurrent requests for one image, one encoding, the others wait for it"
+# 1024-texel tiles in lossless WebP at method 6 take most of a second to encode: the requests
+# overlap it, on four I/O threads.
+build_earth "$WORK/big.pmtiles" --tile 1024
+echo '{"web": {"webp_lossless": true, "webp_method": 6}}' >"$WORK/slow.json"
+start_server "$WORK/big.pmtiles" --config "$WORK/slow.json" --threads 4
 : >"$WORK/burst.cfg"
 for ((i = 0; i < 24; i++)); do
-  printf 'url = "%s/earth/3/4/2.webp"\noutput = "%s/burst_%d.webp"\n' "$BASE" "$WORK" "$i" \
+  printf 'url = "%s/big/1/0/0.webp"\noutput = "%s/burst_%d.webp"\n' "$BASE" "$WORK" "$i" \
     >>"$WORK/burst.cfg"
 done
 curl -sf --parallel --parallel-immediate --parallel-max 24 -K "$WORK/burst.cfg" 2>"$LOGS/curl.err" ||
   fail "a concurrent request for one web image failed"
 [[ $(metric vts_web_encodes_total) == 1 ]] ||
   fail "24 concurrent requests encoded $(metric vts_web_encodes_total) times, expected once"
+(($(metric vts_web_cache_waits_total) > 0)) || fail "no request waited for the encoding under way"
 for ((i = 1; i < 24; i++)); do
   cmp -s "$WORK/burst_0.webp" "$WORK/burst_$i.webp" || fail "concurrent answers differ ($i)"
 done
+stop_server
+
+echo '{"web": {"cache_mib": 1}}' >"$WORK/config.json"
+start_server "$WORK/earth.pmtiles" "$WORK/bc1.pmtiles" --config "$WORK/config.json" \
+  --access-log "$WORK/access.log"
 
 for A in earth bc1; do
   note "$A: PNG == vts extract; WebP and JPEG within PSNR bounds"
@@ -140,7 +148,8 @@ done
 bytes=$(metric vts_web_cache_bytes)
 ((bytes > 0 && bytes <= 1048576)) || fail "the web cache holds $bytes bytes (cap 1048576)"
 (($(metric vts_web_cache_evictions_total) > 0)) || fail "no evictions under a 1 MiB cap"
-curl -sf "$ADMIN_BASE/metrics" | grep -q '^vts_web_tile_requests_total{format="jpg"} [1-9]' ||
+curl -sf "$ADMIN_BASE/metrics" -o "$WORK/metrics.txt" || fail "no /metrics"
+grep -q '^vts_web_tile_requests_total{format="jpg"} [1-9]' "$WORK/metrics.txt" ||
   fail "no jpg requests counted"
 grep -q '/earth/3/1/0.png' "$WORK/access.log" || fail "web tiles are not in the access log"
 

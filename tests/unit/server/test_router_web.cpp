@@ -3,6 +3,8 @@
 // bounded cache with single flight.
 #include <gtest/gtest.h>
 
+#include <condition_variable>
+#include <mutex>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
@@ -310,6 +312,32 @@ TEST(ServeConfigWeb, KeysApplyAndBadValuesNameTheKey) {
     ASSERT_FALSE(st.ok()) << bad;
     EXPECT_NE(st.error().message.find("web"), std::string::npos) << st.error().message;
   }
+}
+
+}  // namespace
+
+namespace {
+
+TEST_F(RouterWeb, WithWorkersEveryMissWaitsForTheEncodingOffTheIoThread) {
+  auto c = std::make_shared<WebTileCache>(1 << 20, 1);
+  config_.web.cache = c;
+  auto marker = get("/dense/2/1/0.jpg");  // a miss: encoded by the worker, never here
+  ASSERT_TRUE(marker.web_wait) << marker.status;
+  std::mutex m;
+  std::condition_variable cv;
+  std::optional<vts::HttpResponse> done;
+  marker.web_wait->flight->on_done([&](const WebTilePtr& img, const std::string& why) {
+    std::lock_guard lock(m);
+    done = vts::complete_web_wait(std::move(marker), img, why);
+    cv.notify_one();
+  });
+  std::unique_lock lock(m);
+  ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(30), [&] { return done.has_value(); }));
+  EXPECT_EQ(done->status, 200);
+  EXPECT_EQ(header(*done, "Content-Type"), "image/jpeg");
+  EXPECT_EQ(c->encodes.load(), 1u);
+  lock.unlock();
+  EXPECT_EQ(get("/dense/2/1/0.jpg").status, 200);  // now a hit, answered at once
 }
 
 }  // namespace
