@@ -141,8 +141,14 @@ TEST(WebMercator, ZoomZeroIsOneOpaqueTileFromPlusToMinus85Degrees) {
   auto out = render_web_mercator_tile(info, 0, 0, 0, src.fetch(), kCodes);
   ASSERT_TRUE(out.ok() && out->has_value());
   for (std::size_t k = 3; k < (*out)->pixels.size(); k += 4) EXPECT_EQ((*out)->pixels[k], 255);
-  // The top row's centre: 1/8 of the way down the Mercator square.
+  // The top row's centre: 1/8 of the way down the Mercator square, 79.17 degrees, is north of
+  // level 0's first row centre (67.5 degrees): clamped to that row (G 0), as the bottom row to
+  // the last (G 8).
   EXPECT_NEAR(mercator_texel_centre(0, 0, 0, 0, 0).lat, 79.17, 0.01);
+  for (std::uint32_t i = 0; i < kT; ++i) {
+    EXPECT_EQ(texel(**out, i, 0)[1], 0);
+    EXPECT_EQ(texel(**out, i, kT - 1)[1], 8);
+  }
   auto range = web_mercator_range(info);
   ASSERT_TRUE(range.ok());
   EXPECT_EQ(*range,
@@ -201,6 +207,33 @@ TEST(WebMercator, AbsentSourceTilesAreTransparent) {
     }
     EXPECT_GT(transparent, 20);
     EXPECT_GT(opaque, 20);
+  }
+}
+
+// Beside an absent tile, the transparent texels lower the alpha, never the colour: a uniform
+// colour stays that colour at every partial alpha, in both blends.
+TEST(WebMercator, AbsentNeighboursLowerAlphaNotColour) {
+  const TilesetInfo info = crs84_info();
+  for (bool linear : {true, false}) {
+    int partial = 0;
+    for (std::uint32_t x = 14; x < 18; ++x) {
+      Source src{info.geometry};
+      src.paint = [](std::uint64_t, std::uint64_t, int, std::uint8_t* t) {
+        t[0] = 200, t[1] = 30, t[2] = 90, t[3] = 255;
+      };
+      src.present = [](TileId id) { return id.x >= 8; };
+      auto out = render_web_mercator_tile(info, 5, x, 16, src.fetch(), WebMercatorOptions{linear});
+      ASSERT_TRUE(out.ok() && out->has_value());
+      for (std::uint32_t i = 0; i < kT; ++i) {
+        const std::uint8_t* t = texel(**out, i, 0);
+        if (t[3] == 0) continue;
+        partial += t[3] < 255;
+        EXPECT_EQ(t[0], 200);
+        EXPECT_EQ(t[1], 30);
+        EXPECT_EQ(t[2], 90);
+      }
+    }
+    EXPECT_GT(partial, 0) << "no texel straddles the edge of the absent tiles";
   }
 }
 
