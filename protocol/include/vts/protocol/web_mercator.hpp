@@ -43,10 +43,12 @@ struct WebMercatorOptions {
 // Each output texel centre is mapped to degrees and onto the source level; its value is the
 // bilinear blend of the four source texels whose centres surround it. A source texel is read from
 // the stored texels (border included) of the tile holding the top-left of the four when they
-// reach it, else from the tile whose content holds it; longitude wraps at the antimeridian (the
-// level spans exactly 360 degrees). A texel whose tile is absent, or outside the level's image, is
-// transparent (alpha 0): it keeps its weight, so it lowers the alpha and not the colour. Zero
-// weights are skipped, so an output tile at z <= max_zoom reads one source tile column.
+// reach it, else from the tile whose content holds it. Longitude wraps at the antimeridian (the
+// level spans exactly 360 degrees) and latitude clamps to the polar rows (a centre between the
+// last row's centre and the pole is still inside the image), so no texel falls outside the
+// level. A texel whose tile is absent is transparent (alpha 0): it keeps its weight, so it lowers
+// the alpha and not the colour. Zero weights are skipped, so an output tile at z <= max_zoom
+// reads one source tile column.
 //
 // std::nullopt when the tile lies wholly outside info.georeference->bounds (sharing only an
 // edge counts as outside): nothing to draw. invalid_argument for a tileset that is not
