@@ -418,6 +418,7 @@ struct Address {
   std::string_view version;
   std::vector<std::string_view> segments;
   std::optional<WebFormat> web;  // /{ts}/{z}/{x}/{y}.{ext}: a web image (router_web.cpp)
+  bool web_mercator = false;     // /{ts}/WebMercatorQuad/{z}/{x}/{y}.{ext}
   std::span<const std::string_view> zxy() const {
     return std::span<const std::string_view>(segments).subspan(1);
   }
@@ -447,6 +448,15 @@ std::optional<HttpResponse> parse_address(std::string_view path, Address& a) {
     a.kind = Address::Kind::tile_matrix_set;
     a.name = a.segments[0];
     return std::nullopt;
+  }
+  if (a.segments.size() == 5 && a.segments[1] == "WebMercatorQuad") {
+    a.web_mercator = true;
+    a.segments.erase(a.segments.begin() + 1);
+    if (a.segments[3].find('.') == std::string_view::npos) {
+      return error(400,
+                   "a WebMercatorQuad tile is an image: /{tileset}/WebMercatorQuad/{z}/{x}/{y}"
+                   ".png, .webp or .jpg");
+    }
   }
   if (a.segments.size() != 4) return error(400, "tile address must be /{tileset}/{z}/{x}/{y}");
   a.name = a.segments[0];
@@ -542,6 +552,9 @@ HttpResponse serve_address(const HttpRequest& request, const Target& target, con
       return r;
     }
     return web_tilejson_route(*t, target.query, base, priv);
+  }
+  if (web && a.web_mercator) {
+    return web_mercator_tile_route(request, std::move(t), a.version, a.zxy(), *a.web, config, priv);
   }
   if (web) return web_tile_route(request, std::move(t), a.version, a.zxy(), *a.web, config, priv);
   if (provided) return serve_provided(request, std::move(provided), a, config, base, priv);

@@ -95,6 +95,12 @@ std::optional<HttpResponse> check_access(const TilesetAccess& access, const Http
 HttpResponse web_tile_route(const HttpRequest& request, std::shared_ptr<const Tileset> t,
                             std::string_view version, std::span<const std::string_view> zxy,
                             WebFormat format, const RouterConfig& config, bool priv);
+// GET /{ts}[@{version}]/WebMercatorQuad/{z}/{x}/{y}.{ext} of a WorldCRS84Quad tileset: the tile
+// resampled to Web Mercator (render_web_mercator_tile), as an image.
+HttpResponse web_mercator_tile_route(const HttpRequest& request, std::shared_ptr<const Tileset> t,
+                                     std::string_view version,
+                                     std::span<const std::string_view> zxy, WebFormat format,
+                                     const RouterConfig& config, bool priv);
 // GET /{ts}.json?format=...[&tiling=...]: the TileJSON stock web maps read; 400 for an unknown
 // format or a tiling this tileset cannot be served in.
 // 200 with an encoded image, or 304 when `if_none_match` names its ETag.

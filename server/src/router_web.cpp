@@ -2,6 +2,7 @@
 // TileJSON that points stock web maps at them. An image is encoded from the stored tile on the
 // cache's encode workers (decode, crop the border, encode), once per key however many requests
 // want it at the same time (WebTileCache's single flight), and kept in the bounded RAM cache.
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <nlohmann/json.hpp>
@@ -11,6 +12,7 @@
 #include "vts/protocol/codec.hpp"
 #include "vts/protocol/tilejson.hpp"
 #include "vts/protocol/tiling.hpp"
+#include "vts/protocol/web_mercator.hpp"
 #include "web_tile_cache.hpp"
 
 namespace vts::router_detail {
@@ -238,6 +240,121 @@ HttpResponse web_tile_route(const HttpRequest& request, std::shared_ptr<const Ti
                         request.if_none_match, cc));
 }
 
+HttpResponse web_mercator_tile_route(const HttpRequest& request, std::shared_ptr<const Tileset> t,
+                                     std::string_view version,
+                                     std::span<const std::string_view> zxy, WebFormat format,
+                                     const RouterConfig& config, bool priv) {
+  if (!version.empty() && version != t->version) return not_current(version, t->name, t->version);
+  const std::uint32_t z = *parse_u32(zxy[0]), x = *parse_u32(zxy[1]), y = *parse_u32(zxy[2]);
+  auto range = web_mercator_range(t->info);
+  if (!range) {
+    return tile_error(404, "tileset \"" + t->name + "\" has no WebMercatorQuad tiles (" +
+                               range.error().message + "); use /" + t->name + "/{z}/{x}/{y}." +
+                               std::string(web_format_extension(format)));
+  }
+  if (z > std::uint32_t(range->max_zoom) || x >= (std::uint32_t(1) << z) ||
+      y >= (std::uint32_t(1) << z)) {
+    return tile_error(404, "WebMercatorQuad tile " + std::to_string(z) + "/" + std::to_string(x) +
+                               "/" + std::to_string(y) + " is outside the pyramid of " + t->name);
+  }
+  if (config.web.cache) {
+    config.web.cache->requests_by_format[static_cast<std::size_t>(format)].fetch_add(
+        1, std::memory_order_relaxed);
+  }
+  const std::string cc = version.empty() ? cache_control(priv, config.max_age_seconds, false)
+                                         : cache_control(priv, kImmutableMaxAge, true);
+  // Wholly outside the footprint: the transparent filler, without reading the archive.
+  const double n = std::ldexp(1.0, int(z)), pi = std::acos(-1.0);
+  auto lat = [&](double row) {
+    return std::atan(std::sinh(pi * (1.0 - 2.0 * row / n))) * 180 / pi;
+  };
+  const LonLatBounds& b = range->bounds;
+  if (x / n * 360 - 180 >= b.east || (x + 1) / n * 360 - 180 <= b.west || lat(y) <= b.south ||
+      lat(y + 1.0) >= b.north) {
+    HttpResponse r = empty_tile(*t, format, config, request.if_none_match, cc);
+    r.hold = std::move(t);
+    return r;
+  }
+  // The tile is a function of the archive's content (its version) and of z/x/y and the options.
+  const std::string tag = options_tag(format, config.web.encode);
+  const std::string zxy_text =
+      std::to_string(z) + "-" + std::to_string(x) + "-" + std::to_string(y);
+  const std::string etag = "\"" + t->version + "-wmq-" + zxy_text + "-" + tag + "\"";
+  HttpResponse r;
+  if (none_match(request.if_none_match, etag)) {
+    r.status = 304;
+    r.route = Route::tile;
+    add(r, "ETag", etag);
+    add(r, "Cache-Control", cc);
+  } else {
+    Encoder encode = [tileset = t, z, x, y, format,
+                      options = config.web.encode]() -> Result<std::vector<std::uint8_t>> {
+      const FetchStoredTile fetch = [&tileset](TileId id) -> Result<std::optional<TileImage>> {
+        auto payload = tileset->reader->get(id);
+        if (!payload) {
+          if (http_status(payload.error().code) == 404) return std::optional<TileImage>();
+          return payload.error();
+        }
+        auto stored = decode_tile(*payload);
+        if (!stored) return stored.error();
+        if (stored->format == PixelFormat::bc1) {
+          auto rgba = bc1_to_rgba8(*stored);
+          if (!rgba) return rgba.error();
+          return std::optional<TileImage>(std::move(*rgba));
+        }
+        return std::optional<TileImage>(std::move(*stored));
+      };
+      auto tile = render_web_mercator_tile(tileset->info, int(z), x, y, fetch);
+      if (!tile) return tile.error();
+      if (!*tile) {  // only an edge shared with the footprint: nothing to draw
+        const std::uint32_t s = tileset->info.geometry.tile_size();
+        *tile =
+            TileImage{s, s, PixelFormat::rgba8, std::vector<std::uint8_t>(std::size_t(s) * s * 4)};
+      }
+      return encode_web_image(**tile, format, options);
+    };
+    r = encoded(config, t->name + "@" + t->version + "/wmq/" + zxy_text + "/" + tag, etag,
+                web_format_content_type(format).data(), std::move(encode), request.if_none_match,
+                cc);
+  }
+  r.hold = std::move(t);
+  return r;
+}
+
+namespace {
+
+// The TileJSON of a WorldCRS84Quad tileset served as WebMercatorQuad (web_mercator_tile_route).
+HttpResponse web_mercator_tilejson(const Tileset& t, WebFormat format, const std::string& base,
+                                   bool priv) {
+  auto range = web_mercator_range(t.info);
+  if (!range) {
+    HttpResponse r = error(400, "tileset \"" + t.name + "\": " + range.error().message);
+    r.route = Route::tilejson;
+    return r;
+  }
+  const std::string tiles = base + "/" + t.name + "@" + t.version +
+                            "/WebMercatorQuad/{z}/{x}/{y}." +
+                            std::string(web_format_extension(format));
+  auto j = nlohmann::ordered_json::parse(write_tilejson(
+      {.tileset = t.name, .info = &t.info, .version = t.version, .tiles_url = tiles}));
+  j.erase("vtstream");
+  const LonLatBounds& b = range->bounds;
+  j["tileSize"] = t.info.geometry.tile_size();
+  j["minzoom"] = range->min_zoom;
+  j["maxzoom"] = range->max_zoom;
+  j["bounds"] = {b.west, b.south, b.east, b.north};
+  const auto& c = t.info.georeference->center;
+  j["center"] = {std::clamp(c.lon, b.west, b.east), std::clamp(c.lat, b.south, b.north),
+                 std::min(c.level, range->max_zoom)};
+  HttpResponse r;
+  r.route = Route::tilejson;
+  set_owned(r, j.dump(2) + "\n", "application/json");
+  add(r, "Cache-Control", cache_control(priv, 60, false));
+  return r;
+}
+
+}  // namespace
+
 HttpResponse web_tilejson_route(const Tileset& t, const Query& q, const std::string& base,
                                 bool priv) {
   auto fail = [](std::string why) {
@@ -254,11 +371,12 @@ HttpResponse web_tilejson_route(const Tileset& t, const Query& q, const std::str
       return fail("tiling \"" + std::string(*q.tiling) +
                   "\": the one tiling web tiles are offered in is WebMercatorQuad");
     }
+    if (native == Tiling::world_crs84_quad) return web_mercator_tilejson(t, *format, base, priv);
     if (native != Tiling::web_mercator_quad) {
-      return fail("tileset \"" + t.name + "\" is " +
-                  (native == Tiling::none ? std::string("a plain image (no georeference)")
-                                          : std::string(tiling_name(native))) +
-                  "; tiling=WebMercatorQuad is served for WebMercatorQuad tilesets only");
+      return fail("tileset \"" + t.name +
+                  "\" is a plain image (no georeference): it has no WebMercatorQuad tiles; "
+                  "tiling=WebMercatorQuad is served for WebMercatorQuad and WorldCRS84Quad "
+                  "tilesets");
     }
   }
   const std::string ext(web_format_extension(*format));

@@ -154,6 +154,36 @@ grep -q '^vts_web_tile_requests_total{format="jpg"} [1-9]' "$WORK/metrics.txt" |
 grep -q '/earth/3/1/0.png' "$WORK/access.log" || fail "web tiles are not in the access log"
 
 stop_server
+
+note "WebMercatorQuad from a WorldCRS84Quad archive: TileJSON and resampled tiles"
+expect_ok "$VTS" build --synthetic 4096x2048 --tiling WorldCRS84Quad --bbox=-10.5,35.25,30.125,60.1 \
+  -o "$WORK/geo.pmtiles" --threads 2
+start_server "$WORK/geo.pmtiles" "$WORK/earth.pmtiles"
+gv=$(curl -sf "$BASE/geo.json" | sed -nE 's/.*"version": "([^"]+)".*/\1/p' | head -n1)
+curl -sf "$BASE/geo.json?format=png&tiling=WebMercatorQuad" -o "$WORK/wmq.json"
+json_check "$WORK/wmq.json" "j.tiles[0] === '$BASE/geo@$gv/WebMercatorQuad/{z}/{x}/{y}.png'"
+json_check "$WORK/wmq.json" "j.minzoom === 0 && j.tileSize === 256 && j.scheme === 'xyz'"
+json_check "$WORK/wmq.json" "j.bounds[0] === -10.5 && j.bounds[3] === 60.1"
+mz=$(json_get "$WORK/wmq.json" j.maxzoom)
+# Paris lies inside the footprint: tile of (2.35 E, 48.85 N) at zoom mz.
+read -r px py < <(awk -v z="$mz" 'BEGIN { pi = atan2(0, -1); n = 2 ^ z; lat = 48.85 * pi / 180;
+  printf "%d %d\n", (2.35 + 180) / 360 * n, (1 - log(sin(lat) / cos(lat) + 1 / cos(lat)) / pi) / 2 * n }')
+curl -sf "$BASE/geo@$gv/WebMercatorQuad/$mz/$px/$py.png" -o "$WORK/wmq.png" ||
+  fail "no WebMercatorQuad tile $mz/$px/$py"
+[[ $(image_dims "$WORK/wmq.png") == "256 256 "* ]] || fail "WebMercatorQuad tile is $(image_dims "$WORK/wmq.png")"
+[[ $(header_of Cache-Control "$BASE/geo@$gv/WebMercatorQuad/$mz/$px/$py.png") == *immutable* ]] ||
+  fail "a versioned WebMercatorQuad tile is not immutable"
+etag=$(header_of ETag "$BASE/geo/WebMercatorQuad/$mz/$px/$py.webp")
+expect_status 304 -H "If-None-Match: $etag" "$BASE/geo/WebMercatorQuad/$mz/$px/$py.webp"
+# Zoom 1 tile 0/1 (south-west quarter) is outside the footprint: transparent.
+curl -sf "$BASE/geo/WebMercatorQuad/1/0/1.png" -o "$WORK/wmq_out.png"
+"$OIIOTOOL" "$WORK/wmq_out.png" --ch R,G,B,A -d uint8 -o "$WORK/wmq_out4.png"
+expect_same_pixels "$WORK/wmq_out4.png" "$WORK/clear256.png"
+expect_status 404 "$BASE/geo/WebMercatorQuad/$((mz + 1))/0/0.png"
+expect_status 404 "$BASE/earth/WebMercatorQuad/0/0/0.png"  # a plain image
+expect_status 400 "$BASE/geo/WebMercatorQuad/0/0/0"          # an image extension is required
+stop_server
+
 note "bad web config values are refused, naming the key"
 for bad in '{"web": {"png_level": 10}}' '{"web": {"cache_mib": -1}}' '{"web": {"jpeg_quality": 0}}' \
   '{"web": {"webp_lossless": 1}}' '{"web": {"colour": 1}}'; do
