@@ -101,12 +101,20 @@ HttpResponse web_mercator_tile_route(const HttpRequest& request, std::shared_ptr
                                      std::string_view version,
                                      std::span<const std::string_view> zxy, WebFormat format,
                                      const RouterConfig& config, bool priv);
+// The answer to a provided tile (vts cache serve) wanted as a web image, once it has arrived:
+// `payload` (null: absent from a sparse origin, the transparent filler).
+HttpResponse provided_web_image(const DeferredTile& d, const std::vector<std::uint8_t>* payload);
+// The transparent filler of a tile with nothing to show (T x T texels).
+HttpResponse web_filler(std::uint32_t tile_size, WebFormat f, const RouterConfig& config,
+                        std::string_view if_none_match, const std::string& cc);
 // GET /{ts}.json?format=...[&tiling=...]: the TileJSON stock web maps read; 400 for an unknown
 // format or a tiling this tileset cannot be served in.
 // 200 with an encoded image, or 304 when `if_none_match` names its ETag.
 HttpResponse web_image_response(const std::shared_ptr<const http_detail::WebTile>& tile,
                                 std::string_view if_none_match, const std::string& cc);
-HttpResponse web_tilejson_route(const Tileset& t, const Query& q, const std::string& base,
-                                bool priv);
+// `versioned`: the template names the version (archives); provided tilesets' tiles are not.
+HttpResponse web_tilejson_route(const std::string& name, const TilesetInfo& info,
+                                const std::string& version, bool versioned, const Query& q,
+                                const std::string& base, bool priv);
 
 }  // namespace vts::router_detail

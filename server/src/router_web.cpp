@@ -142,7 +142,13 @@ HttpResponse encoded(const RouterConfig& config, const std::string& key, std::st
 // would hide what lies under the layer.
 HttpResponse empty_tile(const Tileset& t, WebFormat f, const RouterConfig& config,
                         std::string_view if_none_match, const std::string& cc) {
-  const std::uint32_t size = t.info.geometry.tile_size();
+  return web_filler(t.info.geometry.tile_size(), f, config, if_none_match, cc);
+}
+
+}  // namespace
+
+HttpResponse web_filler(std::uint32_t size, WebFormat f, const RouterConfig& config,
+                        std::string_view if_none_match, const std::string& cc) {
   const std::string tag = options_tag(f, config.web.encode);
   const WebFormat as = f == WebFormat::jpeg ? WebFormat::png : f;
   Encoder encode = [size, as, options = config.web.encode] {
@@ -154,8 +160,6 @@ HttpResponse empty_tile(const Tileset& t, WebFormat f, const RouterConfig& confi
   return encoded(config, key, "\"empty-" + std::to_string(size) + "-" + tag + "\"",
                  web_format_content_type(as).data(), std::move(encode), if_none_match, cc);
 }
-
-}  // namespace
 
 HttpResponse web_tile_route(const HttpRequest& request, std::shared_ptr<const Tileset> t,
                             std::string_view version, std::span<const std::string_view> zxy,
@@ -321,29 +325,70 @@ HttpResponse web_mercator_tile_route(const HttpRequest& request, std::shared_ptr
   return r;
 }
 
+HttpResponse provided_web_image(const DeferredTile& d, const std::vector<std::uint8_t>* payload) {
+  RouterConfig config;  // the parts encoded() reads
+  config.web.encode = d.web_options;
+  config.web.cache = d.web_cache;
+  const std::string& name = d.tileset->name;
+  if (payload == nullptr) {
+    return web_filler(d.tileset->info.geometry.tile_size(), *d.web, config, d.if_none_match,
+                      d.cache_control);
+  }
+  auto header = parse_tile_header(*payload);
+  if (!header) {
+    return tile_error(502, "tile " + d.id.to_string() + " of " + name +
+                               " is damaged: " + header.error().to_string());
+  }
+  const std::string tag = options_tag(*d.web, d.web_options);
+  const std::string etag = "\"" + hex16(header->checksum) + "-" + tag + "\"";
+  if (none_match(d.if_none_match, etag)) {
+    HttpResponse r;
+    r.status = 304;
+    r.route = Route::tile;
+    add(r, "ETag", etag);
+    add(r, "Cache-Control", d.cache_control);
+    return r;
+  }
+  // Keyed by content (the checksum) and tile: a provided tileset's version may be unknown.
+  const std::string key =
+      "provided/" + name + "/" + d.id.to_string() + "/" + hex16(header->checksum) + "/" + tag;
+  Encoder encode = [stored_payload = std::make_shared<const std::vector<std::uint8_t>>(*payload),
+                    tileset = d.tileset, id = d.id, format = *d.web,
+                    options = d.web_options]() -> Result<std::vector<std::uint8_t>> {
+    auto stored = decode_tile(*stored_payload);
+    if (!stored) return stored.error();
+    auto content = tile_content(*stored, tileset->info.geometry, id);
+    if (!content) return content.error();
+    return encode_web_image(*content, format, options);
+  };
+  return encoded(config, key, etag, web_format_content_type(*d.web).data(), std::move(encode),
+                 d.if_none_match, d.cache_control);
+}
+
 namespace {
 
 // The TileJSON of a WorldCRS84Quad tileset served as WebMercatorQuad (web_mercator_tile_route).
-HttpResponse web_mercator_tilejson(const Tileset& t, WebFormat format, const std::string& base,
-                                   bool priv) {
-  auto range = web_mercator_range(t.info);
+HttpResponse web_mercator_tilejson(const std::string& name, const TilesetInfo& info,
+                                   const std::string& version, bool versioned, WebFormat format,
+                                   const std::string& base, bool priv) {
+  auto range = web_mercator_range(info);
   if (!range) {
-    HttpResponse r = error(400, "tileset \"" + t.name + "\": " + range.error().message);
+    HttpResponse r = error(400, "tileset \"" + name + "\": " + range.error().message);
     r.route = Route::tilejson;
     return r;
   }
-  const std::string tiles = base + "/" + t.name + "@" + t.version +
+  const std::string tiles = base + "/" + name + (versioned ? "@" + version : std::string()) +
                             "/WebMercatorQuad/{z}/{x}/{y}." +
                             std::string(web_format_extension(format));
-  auto j = nlohmann::ordered_json::parse(write_tilejson(
-      {.tileset = t.name, .info = &t.info, .version = t.version, .tiles_url = tiles}));
+  auto j = nlohmann::ordered_json::parse(
+      write_tilejson({.tileset = name, .info = &info, .version = version, .tiles_url = tiles}));
   j.erase("vtstream");
   const LonLatBounds& b = range->bounds;
-  j["tileSize"] = t.info.geometry.tile_size();
+  j["tileSize"] = info.geometry.tile_size();
   j["minzoom"] = range->min_zoom;
   j["maxzoom"] = range->max_zoom;
   j["bounds"] = {b.west, b.south, b.east, b.north};
-  const auto& c = t.info.georeference->center;
+  const auto& c = info.georeference->center;
   j["center"] = {std::clamp(c.lon, b.west, b.east), std::clamp(c.lat, b.south, b.north),
                  std::min(c.level, range->max_zoom)};
   HttpResponse r;
@@ -355,8 +400,9 @@ HttpResponse web_mercator_tilejson(const Tileset& t, WebFormat format, const std
 
 }  // namespace
 
-HttpResponse web_tilejson_route(const Tileset& t, const Query& q, const std::string& base,
-                                bool priv) {
+HttpResponse web_tilejson_route(const std::string& name, const TilesetInfo& info,
+                                const std::string& version, bool versioned, const Query& q,
+                                const std::string& base, bool priv) {
   auto fail = [](std::string why) {
     HttpResponse r = error(400, std::move(why));
     r.route = Route::tilejson;
@@ -364,29 +410,32 @@ HttpResponse web_tilejson_route(const Tileset& t, const Query& q, const std::str
   };
   auto format = parse_web_format(*q.format);
   if (!format) return fail("format: " + format.error().message);
-  const Tiling native = t.info.georeference ? t.info.georeference->tiling : Tiling::none;
+  const Tiling native = info.georeference ? info.georeference->tiling : Tiling::none;
   if (q.tiling) {
     auto tiling = parse_tiling(*q.tiling);
     if (!tiling || *tiling != Tiling::web_mercator_quad) {
       return fail("tiling \"" + std::string(*q.tiling) +
                   "\": the one tiling web tiles are offered in is WebMercatorQuad");
     }
-    if (native == Tiling::world_crs84_quad) return web_mercator_tilejson(t, *format, base, priv);
+    if (native == Tiling::world_crs84_quad) {
+      return web_mercator_tilejson(name, info, version, versioned, *format, base, priv);
+    }
     if (native != Tiling::web_mercator_quad) {
-      return fail("tileset \"" + t.name +
+      return fail("tileset \"" + name +
                   "\" is a plain image (no georeference): it has no WebMercatorQuad tiles; "
                   "tiling=WebMercatorQuad is served for WebMercatorQuad and WorldCRS84Quad "
                   "tilesets");
     }
   }
   const std::string ext(web_format_extension(*format));
-  const std::string tiles = base + "/" + t.name + "@" + t.version + "/{z}/{x}/{y}." + ext;
-  auto j = nlohmann::ordered_json::parse(write_tilejson(
-      {.tileset = t.name, .info = &t.info, .version = t.version, .tiles_url = tiles}));
+  const std::string tiles =
+      base + "/" + name + (versioned ? "@" + version : std::string()) + "/{z}/{x}/{y}." + ext;
+  auto j = nlohmann::ordered_json::parse(
+      write_tilejson({.tileset = name, .info = &info, .version = version, .tiles_url = tiles}));
   j.erase("vtstream");  // the tiles are images, not our codec: native clients must not read it
-  const Geometry& g = t.info.geometry;
+  const Geometry& g = info.geometry;
   j["tileSize"] = g.tile_size();
-  if (!t.info.georeference) {
+  if (!info.georeference) {
     // Pixel space placed as if Web Mercator: level max_zoom's pixels are the world's at that
     // zoom, from the top-left (north-west) corner.
     const double world = double(g.tile_size()) * std::ldexp(1.0, g.max_zoom());

@@ -413,6 +413,7 @@ void Session::finish_deferred(std::uint64_t seq, ProvidedTile tile) {
   if (it == queue_.end() || (*it)->ready) return;
   Outgoing& o = **it;
   o.response = complete_deferred(std::move(o.response), std::move(tile));
+  if (o.response.web_wait) return start_web_wait(o);  // a web image, being encoded
   o.ready = true;
   prepare(o);
   // Inside write_next() (the answer came at once, while completing a response resumed reading),

@@ -182,6 +182,28 @@ expect_same_pixels "$WORK/wmq_out4.png" "$WORK/clear256.png"
 expect_status 404 "$BASE/geo/WebMercatorQuad/$((mz + 1))/0/0.png"
 expect_status 404 "$BASE/earth/WebMercatorQuad/0/0/0.png"  # a plain image
 expect_status 400 "$BASE/geo/WebMercatorQuad/0/0/0"          # an image extension is required
+
+note "vts cache serve: the same web images from its provider (the origin: vts serve)"
+start_daemon cache "$VTS" cache serve --upstream "$BASE/earth.json" --cache-dir "$WORK/cache" \
+  --listen 127.0.0.1:0 --no-admin
+curl -sf "$BASE/earth/3/5/2.png" -o "$WORK/origin.png" || fail "origin PNG"
+for n in 1 2; do  # a miss (fetched from the origin), then a hit
+  curl -sf "$D/earth/3/5/2.png" -o "$WORK/daemon.png" || fail "daemon PNG ($n)"
+  cmp -s "$WORK/origin.png" "$WORK/daemon.png" || fail "the daemon's PNG differs from vts serve's ($n)"
+done
+etag=$(header_of ETag "$D/earth/3/5/2.webp")
+[[ $etag == "$(header_of ETag "$BASE/earth/3/5/2.webp")" ]] || fail "daemon ETag $etag differs"
+expect_status 304 -H "If-None-Match: $etag" "$D/earth/3/5/2.webp"
+[[ $(header_of Content-Type "$D/earth/3/5/2.jpg") == image/jpeg ]] || fail "daemon .jpg"
+curl -sf "$D/earth/3/2/6.png" -o "$WORK/d_outside.png" || fail "daemon filler"
+"$OIIOTOOL" "$WORK/d_outside.png" --ch R,G,B,A -d uint8 -o "$WORK/d_outside4.png"
+expect_same_pixels "$WORK/d_outside4.png" "$WORK/clear256.png"
+expect_status 400 "$D/earth/3/1/0.gif"
+expect_status 404 "$D/earth/4/0/0.png"
+curl -sf "$D/earth.json?format=png" -o "$WORK/d_web.json" || fail "daemon web TileJSON"
+json_check "$WORK/d_web.json" "j.tiles[0] === '$D/earth/{z}/{x}/{y}.png' && j.tileSize === 256"
+kill -TERM "$DAEMON_PID"
+wait "$DAEMON_PID" || true
 stop_server
 
 note "bad web config values are refused, naming the key"

@@ -86,6 +86,10 @@ struct DeferredTile {
   TileId id;
   std::string if_none_match;
   std::string cache_control;
+  // A web image of the tile (/{ts}/{z}/{x}/{y}.{ext}): encoded once the tile arrives.
+  std::optional<WebFormat> web;
+  WebEncodeOptions web_options;
+  std::shared_ptr<http_detail::WebTileCache> web_cache;
 };
 
 // route()'s marker for a web image another request is encoding (single flight): wait for
@@ -155,7 +159,8 @@ HttpResponse route_admin(const HttpRequest& request, const AdminState& state);
 
 // Finishes a deferred response (`marker`, as route() returned it) with the provider's answer:
 // 200 / 304 / 204 / 404 / 502 / 503 (docs/PROTOCOL.md §11), keeping the marker's CORS headers
-// and HEAD flag. A payload whose tile header frame is damaged is a 502.
+// and HEAD flag. A payload whose tile header frame is damaged is a 502. For a web image the
+// answer may be a `web_wait` response (its encoding under way): wait for it as for route()'s.
 HttpResponse complete_deferred(HttpResponse marker, ProvidedTile tile);
 
 // Finishes a `web_wait` response (`marker`) once its flight is done: 200 / 304 with the image, or
