@@ -191,6 +191,13 @@ HttpResponse web_tile_route(const HttpRequest& request, std::shared_ptr<const Ti
     return "\"" + hex16(checksum) + "-" + tag + "\"";
   };
   const std::uint64_t tile_id = pmtiles::zxy_to_tile_id(id.z, id.x, id.y);
+  const std::string key = t->name + "@" + t->version + "/" + std::to_string(tile_id) + "/" + tag;
+  if (config.web.cache) {
+    // A cached image answers without reading the archive (its key names the archive's version).
+    if (auto hit = config.web.cache->peek(key)) {
+      return finish(web_image_response(hit, request.if_none_match, cc));
+    }
+  }
   http_detail::TileTagMemo* memo = t->tags.get();
   if (!request.if_none_match.empty() && memo) {
     // A tag read before from this file answers without touching it.
@@ -228,7 +235,6 @@ HttpResponse web_tile_route(const HttpRequest& request, std::shared_ptr<const Ti
                                " is damaged: " + header.error().to_string());
   }
   if (memo) memo->remember(tile_id, header->checksum);
-  const std::string key = t->name + "@" + t->version + "/" + std::to_string(tile_id) + "/" + tag;
   Encoder encode = [stored_payload =
                         std::make_shared<const std::vector<std::uint8_t>>(std::move(*payload)),
                     tileset = t, id, format,

@@ -65,6 +65,15 @@ void WebTileCache::run(std::function<void()> job) {
   jobs_cv_.notify_one();
 }
 
+WebTilePtr WebTileCache::peek(const std::string& key) {
+  std::lock_guard lock(m_);
+  auto it = map_.find(key);
+  if (it == map_.end()) return nullptr;
+  lru_.splice(lru_.begin(), lru_, it->second.lru);
+  hits.fetch_add(1, std::memory_order_relaxed);
+  return it->second.tile;
+}
+
 WebTileCache::Lookup WebTileCache::acquire(const std::string& key) {
   std::lock_guard lock(m_);
   if (auto it = map_.find(key); it != map_.end()) {

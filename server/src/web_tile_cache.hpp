@@ -75,6 +75,8 @@ class WebTileCache {
     std::shared_ptr<Flight> wait;  // a miss under way: wait->on_done(...)
   };
   Lookup acquire(const std::string& key);
+  // The cached image, or null (counting nothing then: the acquire() that follows counts the miss).
+  WebTilePtr peek(const std::string& key);
   // Stores `tile` (when it fits, evicting the least recently used), ends the flight, then wakes
   // its waiters on this thread.
   void finish(const std::string& key, const std::shared_ptr<Flight>& flight, WebTilePtr tile,

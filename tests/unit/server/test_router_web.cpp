@@ -341,3 +341,22 @@ TEST_F(RouterWeb, WithWorkersEveryMissWaitsForTheEncodingOffTheIoThread) {
 }
 
 }  // namespace
+
+namespace {
+
+TEST_F(RouterWeb, ASecondRequestIsACacheHitAndIsNotEncodedAgain) {
+  auto& c = *config_.web.cache;
+  const auto first = get("/dense/2/2/0.webp");
+  ASSERT_EQ(first.status, 200);
+  const auto second = get("/dense/2/2/0.webp");
+  EXPECT_EQ(second.status, 200);
+  EXPECT_EQ(body(first), body(second));
+  EXPECT_EQ(c.misses.load(), 1u);
+  EXPECT_EQ(c.hits.load(), 1u);
+  EXPECT_EQ(c.encodes.load(), 1u);
+  req_.if_none_match = *header(first, "ETag");
+  EXPECT_EQ(get("/dense/2/2/0.webp").status, 304);  // from the cached image's tag
+  EXPECT_EQ(c.encodes.load(), 1u);
+}
+
+}  // namespace
