@@ -354,7 +354,8 @@ TEST_F(RouterWeb, ASecondRequestIsACacheHitAndIsNotEncodedAgain) {
   EXPECT_EQ(c.misses.load(), 1u);
   EXPECT_EQ(c.hits.load(), 1u);
   EXPECT_EQ(c.encodes.load(), 1u);
-  req_.if_none_match = *header(first, "ETag");
+  const std::string tag = *header(first, "ETag");
+  req_.if_none_match = tag;
   EXPECT_EQ(get("/dense/2/2/0.webp").status, 304);  // from the cached image's tag
   EXPECT_EQ(c.encodes.load(), 1u);
 }
