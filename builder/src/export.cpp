@@ -87,6 +87,9 @@ class FolderSink final : public TileSink {
     std::string tmpl = (parent / ("." + dest.filename().string() + ".partial-XXXXXX")).string();
     if (::mkdtemp(tmpl.data()) == nullptr)
       return io_error("create a folder in", parent, errno).error();
+    // mkdtemp makes it 0700; a folder for static hosting is readable by the web server.
+    std::error_code perm_ec;
+    fs::permissions(tmpl, fs::perms(0755), perm_ec);
     auto s = std::unique_ptr<FolderSink>(new FolderSink);
     s->dest_ = dest;
     s->tmp_ = tmpl;
@@ -103,7 +106,8 @@ class FolderSink final : public TileSink {
     const fs::path dir = tmp_ / std::to_string(id.z) / std::to_string(id.x);
     std::error_code ec;
     fs::create_directories(dir, ec);
-    if (ec) return make_error(ErrorCode::io, "cannot create '" + dir.string() + "': " + ec.message());
+    if (ec)
+      return make_error(ErrorCode::io, "cannot create '" + dir.string() + "': " + ec.message());
     if (Status s = write_file(dir / (std::to_string(id.y) + "." + std::string(ext_)), bytes); !s)
       return s;
     std::lock_guard lock(mutex_);
@@ -122,7 +126,8 @@ class FolderSink final : public TileSink {
     if (fs::is_directory(dest_, ec)) fs::remove(dest_, ec);  // empty (checked at create)
     fs::rename(tmp_, dest_, ec);
     if (ec)
-      return make_error(ErrorCode::io, "cannot rename to '" + dest_.string() + "': " + ec.message());
+      return make_error(ErrorCode::io,
+                        "cannot rename to '" + dest_.string() + "': " + ec.message());
     tmp_.clear();
     return stats_;
   }

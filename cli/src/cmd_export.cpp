@@ -30,9 +30,9 @@ Result<ExportOptions> export_options(const ExportArgs& a) {
                         "--quality applies to webp and jpg; png is lossless (leave it out)");
     const int lo = o.format == WebFormat::jpeg ? 1 : 0;
     if (a.quality < lo || a.quality > 100)
-      return make_error(ErrorCode::invalid_argument,
-                        "--quality " + std::to_string(a.quality) + " is outside " +
-                            std::to_string(lo) + "..100");
+      return make_error(
+          ErrorCode::invalid_argument,
+          "--quality " + std::to_string(a.quality) + " is outside " + std::to_string(lo) + "..100");
     o.encode.webp_quality = o.encode.jpeg_quality = a.quality;
   }
   if (!a.tiling.empty()) {
@@ -106,8 +106,9 @@ int run_export(const ExportArgs& a) {
 Runner add_export(CLI::App& app) {
   auto a = std::make_shared<ExportArgs>();
   CLI::App* c = app.add_subcommand(
-      "export", "Write an archive's tiles as standard web images (PNG, WebP, JPEG) in a raster "
-                "PMTiles archive or a {z}/{x}/{y} folder, for stock web maps");
+      "export",
+      "Write an archive's tiles as standard web images (PNG, WebP, JPEG) in a raster "
+      "PMTiles archive or a {z}/{x}/{y} folder, for stock web maps");
   c->add_option("archive", a->archive, "vtstream archive (.pmtiles)")->required();
   c->add_option("-o,--output", a->output, "Output archive (.pmtiles), or folder with --layout xyz")
       ->required();

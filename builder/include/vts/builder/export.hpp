@@ -54,7 +54,7 @@ struct ExportOptions {
 };
 
 struct ExportReport {
-  std::uint64_t source_tiles = 0;  // tiles read from the source archive
+  std::uint64_t source_tiles = 0;   // tiles read from the source archive
   std::uint64_t tiles_written = 0;  // output tiles (addressed)
   std::uint64_t tiles_skipped = 0;  // wholly transparent: not written
   std::uint64_t unique_tiles = 0;   // distinct payloads (archive; = tiles_written for a folder)
