@@ -9,10 +9,12 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <map>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <thread>
 
+#include "vts/protocol/web_mercator.hpp"
 #include "work_queue.hpp"
 
 namespace vts {
@@ -159,7 +161,11 @@ pmtiles::TileType tile_type(WebFormat f) {
 }
 
 LonLatLevel export_center(const TilesetInfo& info, const LonLatBounds& b) {
-  if (info.georeference) return info.georeference->center;
+  if (info.georeference) {  // inside b (a reprojection clips the latitudes)
+    LonLatLevel c = info.georeference->center;
+    c.lat = std::clamp(c.lat, b.south, b.north);
+    return c;
+  }
   const Geometry& g = info.geometry;
   int z = 0;
   while (z < g.max_zoom() &&
@@ -256,6 +262,80 @@ class EntryJob {
   Counters& counters_;
 };
 
+// Decoded stored texels of a source tile as rgba8; nullopt when the archive lacks it.
+Result<std::optional<TileImage>> load_stored(const pmtiles::Reader& reader, const TilesetInfo& info,
+                                             TileId id) {
+  auto bytes = reader.get(id);
+  if (!bytes && bytes.error().code == ErrorCode::not_found) return std::optional<TileImage>{};
+  if (!bytes) return bytes.error();
+  auto img = decode_tile(*bytes, info.tile_spec());
+  if (img && img->format == PixelFormat::bc1) img = bc1_to_rgba8(*img);
+  if (!img) {
+    Error e = std::move(img).error();
+    e.message = "tile " + id.to_string() + ": " + e.message;
+    return e;
+  }
+  return std::optional<TileImage>(std::move(img).value());
+}
+
+// One column (z, x) of WebMercatorQuad tiles, rows [y0, y1), reprojected from a WorldCRS84Quad
+// source (web_mercator.hpp). Going down the column, the source tiles of the previous output tile
+// are kept for the next one (neighbours share source rows), nothing older: at most the source
+// tiles of two output tiles are held.
+class ColumnJob {
+ public:
+  ColumnJob(const pmtiles::Reader& r, const TilesetInfo& info, const ExportOptions& o, TileSink& s,
+            Counters& c)
+      : reader_(r), info_(info), options_(o), sink_(s), counters_(c) {}
+
+  Status run(int z, std::uint32_t x, std::uint32_t y0, std::uint32_t y1) const {
+    using Cache = std::map<std::uint64_t, std::optional<TileImage>>;
+    Cache previous, current;
+    const FetchStoredTile fetch = [&](TileId id) -> Result<std::optional<TileImage>> {
+      const std::uint64_t key = tile_key(id);
+      if (auto it = current.find(key); it != current.end()) return it->second;
+      if (auto it = previous.find(key); it != previous.end())
+        return current.emplace(key, std::move(it->second)).first->second;
+      auto img = load_stored(reader_, info_, id);
+      if (!img) return img.error();
+      return current.emplace(key, std::move(img).value()).first->second;
+    };
+    for (std::uint32_t y = y0; y < y1; ++y) {
+      if (Status s = render(z, x, y, fetch); !s) return s;
+      previous = std::move(current);
+      current.clear();
+      counters_.done.fetch_add(1);
+    }
+    return {};
+  }
+
+ private:
+  Status render(int z, std::uint32_t x, std::uint32_t y, const FetchStoredTile& fetch) const {
+    const TileId id{static_cast<std::uint8_t>(z), x, y};
+    auto tile = render_web_mercator_tile(info_, z, x, y, fetch);
+    if (!tile) {
+      Error e = std::move(tile).error();
+      e.message = "WebMercatorQuad tile " + id.to_string() + ": " + e.message;
+      return e;
+    }
+    if (!*tile || wholly_transparent(**tile)) {
+      counters_.skipped.fetch_add(1);
+      return {};
+    }
+    auto bytes = encode_web_image(**tile, options_.format, options_.encode);
+    if (!bytes) return bytes.error();
+    if (Status s = sink_.put(id, *bytes); !s) return s;
+    counters_.written.fetch_add(1);
+    return {};
+  }
+
+  const pmtiles::Reader& reader_;
+  const TilesetInfo& info_;
+  const ExportOptions& options_;
+  TileSink& sink_;
+  Counters& counters_;
+};
+
 Status check_tiling(const TilesetInfo& info, Tiling wanted) {
   if (wanted == Tiling::none) return {};
   if (wanted != Tiling::web_mercator_quad)
@@ -267,16 +347,32 @@ Status check_tiling(const TilesetInfo& info, Tiling wanted) {
     return make_error(ErrorCode::invalid_argument,
                       "--tiling WebMercatorQuad needs a georeferenced archive; this one is a plain "
                       "image (export it on its own grid: leave out --tiling)");
-  if (info.georeference->tiling == Tiling::world_crs84_quad)
-    return make_error(ErrorCode::unsupported,
-                      "--tiling WebMercatorQuad from a WorldCRS84Quad archive (reprojection) is "
-                      "not yet available; export on the archive's own grid, or build the archive "
-                      "with --tiling WebMercatorQuad");
   return {};
 }
 
+// What the export writes: the zoom range and bounds of its grid, and whether tiles are
+// reprojected (WorldCRS84Quad source, WebMercatorQuad output).
+struct Plan {
+  int min_zoom = 0, max_zoom = 0;
+  LonLatBounds bounds;
+  bool reproject = false;
+};
+
+Result<Plan> make_plan(const TilesetInfo& info, Tiling wanted) {
+  Plan p;
+  p.max_zoom = info.geometry.max_zoom();
+  p.bounds = export_bounds(info);
+  if (wanted == Tiling::web_mercator_quad &&
+      info.georeference->tiling == Tiling::world_crs84_quad) {
+    auto range = web_mercator_range(info);
+    if (!range) return range.error();
+    p = {range->min_zoom, range->max_zoom, range->bounds, true};
+  }
+  return p;
+}
+
 Result<std::unique_ptr<TileSink>> open_sink(const TilesetInfo& info, const ExportOptions& o,
-                                            const LonLatBounds& bounds) {
+                                            const Plan& plan) {
   if (o.layout == ExportLayout::xyz) {
     auto s = FolderSink::create(o.output, o.format);
     if (!s) return s.error();
@@ -287,9 +383,9 @@ Result<std::unique_ptr<TileSink>> open_sink(const TilesetInfo& info, const Expor
   w.internal_compression = pmtiles::Compression::gzip;
   w.tile_compression = pmtiles::Compression::none;
   w.tile_type = tile_type(o.format);
-  w.min_zoom = 0;
-  w.max_zoom = static_cast<std::uint8_t>(info.geometry.max_zoom());
-  w.bounds = pmtiles::georeferenced_bounds(bounds, export_center(info, bounds));
+  w.min_zoom = static_cast<std::uint8_t>(plan.min_zoom);
+  w.max_zoom = static_cast<std::uint8_t>(plan.max_zoom);
+  w.bounds = pmtiles::georeferenced_bounds(plan.bounds, export_center(info, plan.bounds));
   auto writer = pmtiles::Writer::create(std::move(w));
   if (!writer) {
     Error e = std::move(writer).error();
@@ -299,39 +395,80 @@ Result<std::unique_ptr<TileSink>> open_sink(const TilesetInfo& info, const Expor
   return std::unique_ptr<TileSink>(std::make_unique<ArchiveSink>(std::move(writer).value()));
 }
 
-// Walks the source directory on this thread, decoding and encoding on the pool.
-Status walk(const pmtiles::Reader& reader, const TilesetInfo& info, const ExportOptions& o,
-            TileSink& sink, Counters& counters) {
-  const unsigned threads =
-      o.threads ? o.threads : std::max(1u, std::thread::hardware_concurrency());
-  const std::uint64_t total = reader.header().addressed_tiles;
-  FirstError first;
-  EntryJob job(reader, info, o, sink, counters);
-  auto last = Clock::now();
-  Status walked;
-  {
-    detail::WorkQueue queue(threads, std::size_t{threads} * 4);
-    walked = reader.for_each_entry([&](const pmtiles::Entry& e) {
-      if (first.failed()) return false;
-      if (o.cancel && o.cancel->load()) {
-        first.set(make_error(ErrorCode::cancelled, "export cancelled"));
-        return false;
-      }
-      queue.submit([&job, &first, e] {
-        if (first.failed()) return;
-        if (Status s = job.run(e); !s) first.set(s.error());
-      });
-      if (o.on_progress && Clock::now() - last > std::chrono::milliseconds(100)) {
-        last = Clock::now();
-        o.on_progress(counters.done.load(), total);
-      }
-      return true;
+// The pool both walks feed from the calling thread: the first error stops them, so do
+// cancellation; progress is reported from the calling thread.
+class Feeder {
+ public:
+  Feeder(const ExportOptions& o, const Counters& c, std::uint64_t total)
+      : options_(o), counters_(c), total_(total), queue_(threads(o), std::size_t{threads(o)} * 4) {}
+
+  // Queues the job (blocking while the queue is full); false when the walk should stop.
+  bool submit(std::function<Status()> job) {
+    if (first_.failed()) return false;
+    if (options_.cancel && options_.cancel->load()) {
+      first_.set(make_error(ErrorCode::cancelled, "export cancelled"));
+      return false;
+    }
+    queue_.submit([this, job = std::move(job)] {
+      if (first_.failed()) return;
+      if (Status s = job(); !s) first_.set(s.error());
     });
+    if (options_.on_progress && Clock::now() - last_ > std::chrono::milliseconds(100)) {
+      last_ = Clock::now();
+      options_.on_progress(counters_.done.load(), total_);
+    }
+    return true;
   }
-  if (auto e = first.take()) return *e;
-  if (!walked) return walked;
-  if (o.on_progress) o.on_progress(counters.done.load(), total);
-  return {};
+  // Waits for the queued jobs; the first error, else the walk's own status.
+  Status finish(Status walked) {
+    queue_.close_and_join();
+    if (auto e = first_.take()) return *e;
+    if (!walked) return walked;
+    if (options_.on_progress) options_.on_progress(counters_.done.load(), total_);
+    return {};
+  }
+
+ private:
+  static unsigned threads(const ExportOptions& o) {
+    return o.threads ? o.threads : std::max(1u, std::thread::hardware_concurrency());
+  }
+  const ExportOptions& options_;
+  const Counters& counters_;
+  std::uint64_t total_;
+  Clock::time_point last_ = Clock::now();
+  FirstError first_;
+  detail::WorkQueue queue_;  // last: joined before the members its jobs use go away
+};
+
+// The archive's own grid: walks the source directory, one job per entry.
+Status walk_entries(const pmtiles::Reader& reader, const TilesetInfo& info, const ExportOptions& o,
+                    TileSink& sink, Counters& counters) {
+  EntryJob job(reader, info, o, sink, counters);
+  Feeder feeder(o, counters, reader.header().addressed_tiles);
+  Status walked = reader.for_each_entry(
+      [&](const pmtiles::Entry& e) { return feeder.submit([&job, e] { return job.run(e); }); });
+  return feeder.finish(walked);
+}
+
+// WebMercatorQuad from WorldCRS84Quad: every zoom's tiles over the bounds, one job per column.
+Status walk_reprojected(const pmtiles::Reader& reader, const TilesetInfo& info,
+                        const ExportOptions& o, const Plan& plan, TileSink& sink,
+                        Counters& counters) {
+  auto web =
+      tiling_geometry(Tiling::web_mercator_quad, plan.max_zoom, info.geometry.tile_size(), 0);
+  if (!web) return web.error();
+  std::uint64_t total = 0;
+  for (int z = plan.min_zoom; z <= plan.max_zoom; ++z)
+    total += footprint_tiles(Tiling::web_mercator_quad, *web, z, plan.bounds).count();
+  ColumnJob job(reader, info, o, sink, counters);
+  Feeder feeder(o, counters, total);
+  for (int z = plan.min_zoom; z <= plan.max_zoom; ++z) {
+    const TileRect r = footprint_tiles(Tiling::web_mercator_quad, *web, z, plan.bounds);
+    for (std::uint32_t x = r.x0; x < r.x1; ++x)
+      if (!feeder.submit([&job, z, x, r] { return job.run(z, x, r.y0, r.y1); }))
+        return feeder.finish({});
+  }
+  return feeder.finish({});
 }
 
 }  // namespace
@@ -349,7 +486,7 @@ LonLatBounds export_bounds(const TilesetInfo& info) {
 std::string export_metadata_json(const TilesetInfo& info, const std::string& source_metadata,
                                  const std::string& source_name, const std::string& source_version,
                                  WebFormat format, const LonLatBounds& b, int min_zoom,
-                                 int max_zoom) {
+                                 int max_zoom, Tiling grid) {
   const LonLatLevel c = export_center(info, b);
   nlohmann::json j;
   j["name"] = info.name;
@@ -364,6 +501,7 @@ std::string export_metadata_json(const TilesetInfo& info, const std::string& sou
   j["minzoom"] = min_zoom;
   j["maxzoom"] = max_zoom;
   j["tileSize"] = info.geometry.tile_size();
+  j["tiling"] = std::string(tiling_name(grid));
   nlohmann::json s;
   s["archive"] = source_name;
   s["version"] = source_version;
@@ -383,16 +521,24 @@ Result<ExportReport> export_web_tiles(const pmtiles::Reader& reader, const Tiles
   if (Status s = validate(o.encode); !s) return s.error();
   if (Status s = check_tiling(info, o.tiling); !s) return s.error();
   if (o.output.empty()) return make_error(ErrorCode::invalid_argument, "no output given");
+  auto plan = make_plan(info, o.tiling);
+  if (!plan) return plan.error();
   ExportReport r;
-  r.bounds = export_bounds(info);
-  r.max_zoom = info.geometry.max_zoom();
-  auto sink = open_sink(info, o, r.bounds);
+  r.bounds = plan->bounds;
+  r.min_zoom = plan->min_zoom;
+  r.max_zoom = plan->max_zoom;
+  const Tiling grid = plan->reproject     ? Tiling::web_mercator_quad
+                      : info.georeference ? info.georeference->tiling
+                                          : Tiling::none;
+  auto sink = open_sink(info, o, *plan);
   if (!sink) return sink.error();
   Counters counters;
-  if (Status s = walk(reader, info, o, **sink, counters); !s) return s.error();
+  Status walked = plan->reproject ? walk_reprojected(reader, info, o, *plan, **sink, counters)
+                                  : walk_entries(reader, info, o, **sink, counters);
+  if (!walked) return walked.error();
   auto stats = (*sink)->finish(export_metadata_json(info, reader.metadata_json(), o.source_name,
                                                     reader.version(), o.format, r.bounds,
-                                                    r.min_zoom, r.max_zoom));
+                                                    r.min_zoom, r.max_zoom, grid));
   if (!stats) return stats.error();
   r.source_tiles = counters.done.load();
   r.tiles_written = counters.written.load();

@@ -120,7 +120,7 @@ Runner add_export(CLI::App& app) {
       ->capture_default_str();
   c->add_option("--tiling", a->tiling,
                 "Output grid: the archive's own (default) or WebMercatorQuad (native for a "
-                "WebMercatorQuad archive)");
+                "WebMercatorQuad archive, reprojected from a WorldCRS84Quad one)");
   c->add_option("--threads", a->threads, "Encoder threads (0 = all cores)")
       ->check(CLI::Range(0u, kMaxThreads))
       ->capture_default_str();

@@ -4,8 +4,9 @@
 # bounds) and every tile of a PNG, WebP and JPEG export of a lossless and a bc1 archive. PNG tiles
 # decode to exactly what `vts extract` gives for the same tile (padded with transparent texels
 # beyond the image's edge); WebP and JPEG tiles stay above PSNR bounds. --layout xyz writes the same
-# tile set, byte for byte; wholly transparent tiles are not written; bad inputs fail cleanly with
-# no output left.
+# tile set, byte for byte; wholly transparent tiles are not written; a WorldCRS84Quad archive
+# exported with --tiling WebMercatorQuad holds exactly web_mercator_tile's tiles; bad inputs fail
+# cleanly with no output left.
 # shellcheck source=lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 : "${PMTILES_JS:?PMTILES_JS must name tests/integration/pmtiles_js}"
@@ -112,9 +113,31 @@ json_check "$LOGS/web.json" "Math.abs(j.minLon + 20) < 1e-6 && Math.abs(j.minLat
 expect_ok "$VTS" info --json "$W"
 json_check "$LOGS/web.json" "j.tiles_read === $(json_get "$OUT" j.tiles)" "every footprint tile"
 
-note "bad inputs fail cleanly and leave nothing"
+note "WorldCRS84Quad reprojected to WebMercatorQuad: every tile is web_mercator_tile's"
+: "${WEB_MERCATOR_TILE:?WEB_MERCATOR_TILE must name tests/integration/web_mercator_tile}"
 G="$WORK/geo.pmtiles"
-expect_ok "$VTS" build --synthetic 2048x1024 --tiling WorldCRS84Quad --bbox=0,0,20,20 -o "$G"
+expect_ok "$VTS" build --synthetic 2048x1024 --tiling WorldCRS84Quad --bbox=-40,-30,50,88 -o "$G"
+expect_ok "$VTS" export "$G" -o "$WORK/geo_web.pmtiles" --format png --tiling WebMercatorQuad --json
+cp "$OUT" "$LOGS/geo_export.json"
+expect_ok "$NODE" "$PMTILES_JS/read_export.mjs" "$WORK/geo_web.pmtiles" "$WORK/js_geo"
+cp "$OUT" "$LOGS/geo.json"
+json_check "$LOGS/geo.json" "j.tileType === 2 && j.minZoom === 0 && j.maxZoom === 3 &&
+    j.metadata.tiling === 'WebMercatorQuad' && Math.abs(j.minLon + 40) < 1e-6 &&
+    Math.abs(j.maxLat - 85.0511288) < 1e-6 && Math.abs(j.minLat + 30) < 1e-6" \
+  "reprojected: PNG, zooms 0..3 (our levels), bounds clipped to 85.0511"
+json_check "$LOGS/geo.json" "j.tiles_read === $(json_get "$LOGS/geo_export.json" j.tiles) &&
+    j.tiles_read > 10" "every reprojected tile read"
+: >"$LOGS/list_geo.txt"
+for f in "$WORK"/js_geo/*/*/*.png; do
+  IFS=/ read -r z x y <<<"${f#"$WORK"/js_geo/}"
+  y=${y%.png}
+  expect_ok "$WEB_MERCATOR_TILE" "$G" "$z" "$x" "$y" "$WORK/wm_${z}_${x}_$y.rgba"
+  echo "$f $WORK/wm_${z}_${x}_$y.rgba" >>"$LOGS/list_geo.txt"
+done
+expect_ok "$WEB_TILE_COMPARE" exact "$LOGS/list_geo.txt"
+note "reprojected: $(cat "$OUT")"
+
+note "bad inputs fail cleanly and leave nothing"
 mkdir -p "$WORK/bad" "$WORK/full"
 touch "$WORK/full/keep"
 expect_bad() { # EXIT_CODE MESSAGE_REGEX ARGS...
@@ -133,7 +156,6 @@ expect_bad 2 "png is lossless" "$L" -o "$WORK/bad/x.pmtiles" --format png --qual
 expect_bad 4 "nowhere" "$L" -o "$WORK/nowhere/x.pmtiles" --format png
 expect_bad 2 "plain image" "$L" -o "$WORK/bad/x.pmtiles" --format png --tiling WebMercatorQuad
 expect_bad 2 "not an export grid" "$G" -o "$WORK/bad/x.pmtiles" --format png --tiling WorldCRS84Quad
-expect_bad 6 "not yet" "$G" -o "$WORK/bad/x.pmtiles" --format png --tiling WebMercatorQuad
 expect_bad 2 "not an empty folder" "$L" --layout xyz -o "$WORK/full" --format png
 [[ $(ls -A "$WORK/full") == keep ]] || fail "a refused export touched the non-empty folder"
 expect_bad 2 "is an input|same file" "$L" -o "$L" --format png

@@ -5,7 +5,8 @@
 //   web_tile_compare exact LIST      every texel equal, and every texel beyond w x h (0,0,0,0)
 //   web_tile_compare rgba LIST MIN   PSNR over the w x h content, RGBA, >= MIN dB
 //   web_tile_compare rgb LIST MIN    the same over R, G, B only (JPEG: no alpha)
-// LIST: one "EXPORTED REFERENCE" pair a line. A 3-channel image reads as RGB with alpha 255.
+// LIST: one "EXPORTED REFERENCE" pair a line. A 3-channel image reads as RGB with alpha 255; a
+// REFERENCE named *.rgba is raw square RGBA8 (tests/integration/web_mercator_tile's output).
 // Prints "tiles=N min_psnr=P worst=EXPORTED". Exit 0 when all pass, 1 otherwise (first failure on
 // stderr), 2 on bad usage or an unreadable image.
 #include <OpenImageIO/imagebuf.h>
@@ -15,6 +16,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <fstream>
+#include <iterator>
 #include <limits>
 #include <string>
 #include <vector>
@@ -28,7 +30,20 @@ struct Rgba {
   std::vector<std::uint8_t> px;
 };
 
+bool load_raw(const std::string& path, Rgba& out) {
+  std::ifstream in(path, std::ios::binary);
+  out.px.assign(std::istreambuf_iterator<char>(in), {});
+  const auto side = static_cast<int>(std::lround(std::sqrt(double(out.px.size()) / 4)));
+  if (side == 0 || std::size_t(side) * side * 4 != out.px.size()) {
+    std::fprintf(stderr, "%s is not square raw RGBA8\n", path.c_str());
+    return false;
+  }
+  out.width = out.height = side;
+  return true;
+}
+
 bool load(const std::string& path, Rgba& out) {
+  if (path.size() > 5 && path.ends_with(".rgba")) return load_raw(path, out);
   OIIO::ImageBuf buf(path);
   if (!buf.read(0, 0, true, OIIO::TypeDesc::UINT8)) {
     std::fprintf(stderr, "cannot read %s: %s\n", path.c_str(), buf.geterror().c_str());

@@ -11,6 +11,7 @@
 
 #include "vts/protocol/codec.hpp"
 #include "vts/protocol/pmtiles.hpp"
+#include "vts/protocol/web_mercator.hpp"
 #include "vts/test/temp_dir.hpp"
 
 namespace vts {
@@ -249,17 +250,53 @@ TEST(Export, GeoreferencedBoundsAndTilings) {
   EXPECT_EQ(out->header().min_lon_e7, -200000000);
   EXPECT_EQ(out->header().max_lat_e7, 400000000);
   EXPECT_EQ(out->header().center_zoom, 1);
+}
 
-  // Reprojection from WorldCRS84Quad is not wired yet: refused before anything is written.
-  TempDir dir2;
-  Georeference crs84{Tiling::world_crs84_quad, {0, 0, 20, 20}, {10, 10, 1}};
-  Source geo = make_source(dir2, crs84, 1024, 512);
-  o.output = dir2 / "web.pmtiles";
-  r = export_web_tiles(*geo.reader, geo.info, o);
-  ASSERT_FALSE(r);
-  EXPECT_EQ(r.error().code, ErrorCode::unsupported);
-  EXPECT_NE(r.error().message.find("not yet"), std::string::npos) << r.error().message;
-  EXPECT_EQ(listing(dir2.path()), std::set<std::string>{"src.pmtiles"});
+// WebMercatorQuad from a WorldCRS84Quad archive: every tile over the footprint is
+// render_web_mercator_tile()'s (tested against gdalwarp in the protocol's tests), fetched from the
+// archive's real tiles, in PNG; zooms and bounds are web_mercator_range()'s.
+TEST(Export, ReprojectsWorldCrs84QuadToWebMercatorQuad) {
+  TempDir dir;
+  Georeference crs84{Tiling::world_crs84_quad, {-30, -70, 60, 88}, {10, 10, 1}};
+  Source src = make_source(dir, crs84, 1024, 512);  // our levels 0..2, 2/1/0 absent
+  ExportOptions o;
+  o.output = dir / "web.pmtiles";
+  o.format = WebFormat::png;
+  o.tiling = Tiling::web_mercator_quad;
+  o.threads = 2;
+  auto r = export_web_tiles(*src.reader, src.info, o);
+  ASSERT_TRUE(r) << r.error().message;
+  const WebMercatorRange range = web_mercator_range(src.info).value();
+  EXPECT_EQ(r->bounds, range.bounds);
+  EXPECT_LT(range.bounds.north, 85.06);  // clipped to Web Mercator
+  auto out = pmtiles::Reader::open(o.output).value();
+  EXPECT_EQ(out->header().min_zoom, range.min_zoom);
+  EXPECT_EQ(out->header().max_zoom, range.max_zoom);
+  EXPECT_EQ(out->header().tile_type, pmtiles::TileType::png);
+  EXPECT_EQ(nlohmann::json::parse(out->metadata_json())["tiling"], "WebMercatorQuad");
+
+  const FetchStoredTile fetch = [&](TileId id) -> Result<std::optional<TileImage>> {
+    auto bytes = src.reader->get(id);
+    if (!bytes) return std::optional<TileImage>{};
+    return std::optional<TileImage>(decode_tile(*bytes).value());
+  };
+  std::uint64_t expected = 0;
+  for (int z = range.min_zoom; z <= range.max_zoom; ++z)
+    for (std::uint32_t y = 0; y < (1u << z); ++y)
+      for (std::uint32_t x = 0; x < (1u << z); ++x) {
+        const TileId id{static_cast<std::uint8_t>(z), x, y};
+        auto want = render_web_mercator_tile(src.info, z, x, y, fetch).value();
+        bool visible = false;
+        if (want)
+          for (std::size_t i = 3; i < want->pixels.size(); i += 4) visible |= want->pixels[i] != 0;
+        auto got = out->get(id);
+        ASSERT_EQ(bool(got), visible) << id.to_string();
+        if (!visible) continue;
+        ++expected;
+        EXPECT_EQ(decode_web_image(*got).value().pixels, want->pixels) << id.to_string();
+      }
+  EXPECT_GT(expected, 5u);
+  EXPECT_EQ(r->tiles_written, expected);
 }
 
 TEST(Export, MetadataCarriesTheSourceAttribution) {
@@ -267,13 +304,14 @@ TEST(Export, MetadataCarriesTheSourceAttribution) {
   info.name = "earth";
   const std::string json =
       export_metadata_json(info, R"({"attribution":"(c) NASA"})", "a.pmtiles", "0123456789abcdef",
-                           WebFormat::jpeg, {-10, -5, 10, 5}, 0, 3);
+                           WebFormat::jpeg, {-10, -5, 10, 5}, 0, 3, Tiling::none);
   auto j = nlohmann::json::parse(json);
   EXPECT_EQ(j["attribution"], "(c) NASA");
   EXPECT_EQ(j["format"], "jpg");
   EXPECT_EQ(j["bounds"], nlohmann::json({-10, -5, 10, 5}));
   EXPECT_EQ(j["minzoom"], 0);
   EXPECT_EQ(j["maxzoom"], 3);
+  EXPECT_EQ(j["tiling"], "none");
   EXPECT_EQ(j["vtstream_source"]["version"], "0123456789abcdef");
 }
 

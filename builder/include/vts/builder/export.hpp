@@ -42,7 +42,9 @@ struct ExportOptions {
   WebFormat format = WebFormat::webp;
   WebEncodeOptions encode;
   // none: the archive's own grid (our z/x/y). web_mercator_quad: the Web Mercator grid; native for
-  // a WebMercatorQuad archive, reprojected from a WorldCRS84Quad one, refused for a plain image.
+  // a WebMercatorQuad archive, reprojected from a WorldCRS84Quad one (web_mercator.hpp: zooms and
+  // bounds of web_mercator_range(), tiles of render_web_mercator_tile()), refused for a plain
+  // image.
   Tiling tiling = Tiling::none;
   unsigned threads = 0;  // 0 = one per hardware thread
   // The source archive's path, recorded in the metadata ("vtstream_source").
@@ -70,16 +72,21 @@ struct ExportReport {
 // square (where a web map shows our z/x/y tiles).
 LonLatBounds export_bounds(const TilesetInfo& info);
 
-// The metadata JSON of an exported archive (docs/FORMAT.md "Exported web tiles").
+// The metadata JSON of an exported archive (docs/FORMAT.md §7); `grid` is the output's tiling
+// (none for a plain image's own grid).
 std::string export_metadata_json(const TilesetInfo& info, const std::string& source_metadata,
                                  const std::string& source_name, const std::string& source_version,
                                  WebFormat format, const LonLatBounds& bounds, int min_zoom,
-                                 int max_zoom);
+                                 int max_zoom, Tiling grid);
 
 // Exports `reader` (whose metadata is `info`). Errors: invalid_argument for bad options (an
 // encoder setting out of range, a tiling the archive cannot give, a non-empty output folder),
-// unsupported for a reprojection not available yet, io for an unwritable output, the reader's
+// io for an unwritable output, the reader's
 // errors for a damaged source, cancelled.
+//
+// Reprojection walks each zoom's tiles over the bounds one column per job; a job keeps the
+// decoded source tiles of its previous output tile only, so the bound above holds with "tile in
+// flight" meaning the source tiles of two output tiles (a few stored tiles).
 Result<ExportReport> export_web_tiles(const pmtiles::Reader& reader, const TilesetInfo& info,
                                       const ExportOptions& options);
 
