@@ -2,6 +2,7 @@
 // or a {z}/{x}/{y}.ext folder (builder/include/vts/builder/export.hpp).
 #include <cstdio>
 #include <nlohmann/json.hpp>
+#include <optional>
 
 #include "commands.hpp"
 #include "progress.hpp"
@@ -14,7 +15,7 @@ namespace {
 
 struct ExportArgs {
   std::string archive, output, format, layout = "pmtiles", tiling;
-  int quality = -1;  // -1: the format's default
+  std::optional<int> quality;  // unset: the format's default
   unsigned threads = 0;
   bool json = false, quiet = false;
 };
@@ -24,16 +25,16 @@ Result<ExportOptions> export_options(const ExportArgs& a) {
   auto format = parse_web_format(a.format);
   if (!format) return Error{ErrorCode::invalid_argument, "--format: " + format.error().message};
   o.format = *format;
-  if (a.quality >= 0) {
+  if (a.quality) {
     if (o.format == WebFormat::png)
       return make_error(ErrorCode::invalid_argument,
                         "--quality applies to webp and jpg; png is lossless (leave it out)");
     const int lo = o.format == WebFormat::jpeg ? 1 : 0;
-    if (a.quality < lo || a.quality > 100)
-      return make_error(
-          ErrorCode::invalid_argument,
-          "--quality " + std::to_string(a.quality) + " is outside " + std::to_string(lo) + "..100");
-    o.encode.webp_quality = o.encode.jpeg_quality = a.quality;
+    if (*a.quality < lo || *a.quality > 100)
+      return make_error(ErrorCode::invalid_argument, "--quality " + std::to_string(*a.quality) +
+                                                         " is outside " + std::to_string(lo) +
+                                                         "..100");
+    o.encode.webp_quality = o.encode.jpeg_quality = *a.quality;
   }
   if (!a.tiling.empty()) {
     auto t = parse_tiling(a.tiling);

@@ -81,6 +81,13 @@ for fmt in png webp jpg; do
   check_export "$C" "$WORK/ref_bc1" "$fmt" 17
 done
 
+note "--quality is applied: Q50 is smaller than the default Q90"
+for fmt in webp jpg; do
+  expect_ok "$VTS" export "$L" -o "$WORK/q50_$fmt.pmtiles" --format "$fmt" --quality 50
+  q50=$(stat -c %s "$WORK/q50_$fmt.pmtiles") q90=$(stat -c %s "$WORK/lossless_$fmt.pmtiles")
+  ((q50 < q90 * 3 / 4)) || fail "$fmt: --quality 50 gave $q50 bytes, Q90 $q90"
+done
+
 note "--layout xyz: the same tiles, byte for byte"
 expect_ok "$VTS" export "$L" --layout xyz -o "$WORK/xyz" --format png
 (cd "$WORK/xyz" && find . -name '*.png' | LC_ALL=C sort) >"$LOGS/xyz_list.txt"
@@ -152,6 +159,11 @@ expect_bad 3 "missing.pmtiles" "$WORK/missing.pmtiles" -o "$WORK/bad/x.pmtiles" 
 expect_bad 2 "gif" "$L" -o "$WORK/bad/x.pmtiles" --format gif
 expect_bad 2 "--quality 101" "$L" -o "$WORK/bad/x.pmtiles" --format webp --quality 101
 expect_bad 2 "--quality 0" "$L" -o "$WORK/bad/x.pmtiles" --format jpg --quality 0
+expect_bad 2 "--quality -5" "$L" -o "$WORK/bad/x.pmtiles" --format webp --quality -5
+expect_bad 2 "--quality" "$L" -o "$WORK/bad/x.pmtiles" --format webp --quality 99999999999
+expect_bad 2 "--threads" "$L" -o "$WORK/bad/x.pmtiles" --format webp --threads 100000
+expect_bad 2 "--layout" "$L" -o "$WORK/bad/x.pmtiles" --format webp --layout zxy
+expect_bad 2 "--tiling" "$L" -o "$WORK/bad/x.pmtiles" --format webp --tiling Mercator
 expect_bad 2 "png is lossless" "$L" -o "$WORK/bad/x.pmtiles" --format png --quality 50
 expect_bad 4 "nowhere" "$L" -o "$WORK/nowhere/x.pmtiles" --format png
 expect_bad 2 "plain image" "$L" -o "$WORK/bad/x.pmtiles" --format png --tiling WebMercatorQuad
