@@ -11,6 +11,7 @@
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 : "${PMTILES_JS:?PMTILES_JS must name tests/integration/pmtiles_js}"
 require_tool "$NODE"
+require_tool /usr/bin/time
 require_tool "$OIIOTOOL"
 : "${PMTILES_DUMP:?PMTILES_DUMP must name the pmtiles_dump tool}"
 : "${WEB_TILE_COMPARE:?WEB_TILE_COMPARE must name tests/integration/web_tile_compare}"
@@ -143,6 +144,19 @@ for f in "$WORK"/js_geo/*/*/*.png; do
 done
 expect_ok "$WEB_TILE_COMPARE" exact "$LOGS/list_geo.txt"
 note "reprojected: $(cat "$OUT")"
+
+note "memory does not grow with the tile count: 117 tiles vs 10,923 tiles"
+peak_rss_kib() { # ARCHIVE OUT: peak RSS (KiB) of a JPEG export
+  /usr/bin/time -f %M -o "$LOGS/rss.txt" "$VTS" export "$1" -o "$2" --format jpg -q ||
+    fail "vts export $1 failed"
+  cat "$LOGS/rss.txt"
+}
+expect_ok "$VTS" build --synthetic 3000x1700 -o "$WORK/small.pmtiles"
+expect_ok "$VTS" build --synthetic 32768x16384 -o "$WORK/large.pmtiles"
+small=$(peak_rss_kib "$WORK/small.pmtiles" "$WORK/small.jpg.pmtiles")
+large=$(peak_rss_kib "$WORK/large.pmtiles" "$WORK/large.jpg.pmtiles")
+note "peak RSS: $small KiB (117 tiles), $large KiB (10,923 tiles)"
+((large < small + 16384)) || fail "peak RSS grew from $small KiB to $large KiB with the tile count"
 
 note "bad inputs fail cleanly and leave nothing"
 mkdir -p "$WORK/bad" "$WORK/full"
