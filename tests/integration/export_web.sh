@@ -158,6 +158,25 @@ large=$(peak_rss_kib "$WORK/large.pmtiles" "$WORK/large.jpg.pmtiles")
 note "peak RSS: $small KiB (117 tiles), $large KiB (10,923 tiles)"
 ((large < small + 16384)) || fail "peak RSS grew from $small KiB to $large KiB with the tile count"
 
+note "SIGINT during an export: exit 130, nothing left (polled: interrupted once tiles are written)"
+mkdir -p "$WORK/int"
+"$VTS" export "$WORK/large.pmtiles" --layout xyz -o "$WORK/int/site" --format webp --threads 1 \
+  -q >"$OUT" 2>"$ERR" </dev/null &
+pid=$!
+deadline=$((SECONDS + 60))
+until [[ -n $(find "$WORK/int" -name '*.webp' -print -quit) ]]; do
+  kill -0 "$pid" 2>/dev/null || fail "the export ended before any tile was seen"
+  ((SECONDS < deadline)) || fail "no tile written within 60 s"
+  sleep 0.05 # poll interval
+done
+kill -INT "$pid"
+set +e
+wait "$pid"
+RC=$?
+set -e
+((RC == 130)) || { show_output; fail "interrupted export exited $RC, expected 130"; }
+[[ -z $(ls -A "$WORK/int") ]] || fail "an interrupted export left $(ls -A "$WORK/int")"
+
 note "bad inputs fail cleanly and leave nothing"
 mkdir -p "$WORK/bad" "$WORK/full"
 touch "$WORK/full/keep"
