@@ -301,6 +301,9 @@ class ColumnJob {
       return current.emplace(key, std::move(img).value()).first->second;
     };
     for (std::uint32_t y = y0; y < y1; ++y) {
+      // A column can be long (2^z rows): cancellation is checked per tile, not per job.
+      if (options_.cancel && options_.cancel->load())
+        return make_error(ErrorCode::cancelled, "export cancelled");
       if (Status s = render(z, x, y, fetch); !s) return s;
       previous = std::move(current);
       current.clear();
