@@ -86,6 +86,10 @@ class FolderSink final : public TileSink {
     const fs::path dest = out.has_filename() ? out : out.parent_path();
     fs::path parent = dest.parent_path();
     if (parent.empty()) parent = ".";
+    // Like `mkdir -p`: a site's tile folder often goes a few levels down a fresh tree.
+    fs::create_directories(parent, ec);
+    if (ec)
+      return make_error(ErrorCode::io, "cannot create '" + parent.string() + "': " + ec.message());
     std::string tmpl = (parent / ("." + dest.filename().string() + ".partial-XXXXXX")).string();
     if (::mkdtemp(tmpl.data()) == nullptr)
       return io_error("create a folder in", parent, errno).error();

@@ -150,6 +150,12 @@ TEST(Export, XyzFolderHoldsTheSameTilesAsTheArchive) {
   auto r = export_web_tiles(*src.reader, src.info, o);
   ASSERT_TRUE(r) << r.error().message;
   EXPECT_EQ(r->tiles_written, 7u);
+  // Missing parent folders are created.
+  o.output = dir / "www" / "maps" / "site";
+  r = export_web_tiles(*src.reader, src.info, o);
+  ASSERT_TRUE(r) << r.error().message;
+  EXPECT_EQ(listing(dir / "www" / "maps" / "site"), listing(dir / "site"));
+  fs::remove_all(dir / "www");
   auto archive = pmtiles::Reader::open(dir / "web.pmtiles").value();
   std::set<std::string> from_archive{"metadata.json"};
   ASSERT_TRUE(archive->for_each_entry([&](const pmtiles::Entry& e) {

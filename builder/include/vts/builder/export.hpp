@@ -37,7 +37,9 @@ namespace vts {
 enum class ExportLayout : std::uint8_t { pmtiles, xyz };
 
 struct ExportOptions {
-  std::filesystem::path output;  // archive file, or folder (must not exist, or be empty) for xyz
+  // Archive file, or for xyz a folder that must not exist or be empty (its missing parent
+  // folders are created, as mkdir -p does).
+  std::filesystem::path output;
   ExportLayout layout = ExportLayout::pmtiles;
   WebFormat format = WebFormat::webp;
   WebEncodeOptions encode;
