@@ -22,6 +22,7 @@ Runner add_info(CLI::App& app);
 Runner add_verify(CLI::App& app);
 #ifdef VTS_HAVE_BUILDER
 Runner add_extract(CLI::App& app);
+Runner add_export(CLI::App& app);  // vts export (cmd_export.cpp)
 #endif
 Runner add_serve(CLI::App& app);
 Runner add_sign(CLI::App& app);

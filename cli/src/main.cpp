@@ -59,6 +59,7 @@ int main(int argc, char** argv) {
   add(&vts::cli::add_verify);
 #ifdef VTS_HAVE_BUILDER
   add(&vts::cli::add_extract);
+  add(&vts::cli::add_export);
 #endif
   add(&vts::cli::add_serve);
   add(&vts::cli::add_sign);

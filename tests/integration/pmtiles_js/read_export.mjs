@@ -1,0 +1,109 @@
+// Reads an exported web-tile archive (vts export) the way a web map does: through the npm `pmtiles`
+// library with its default decompressor (no custom one), so only what stock readers support works.
+//
+//   node read_export.mjs ARCHIVE OUTDIR
+// Prints the header and metadata as one JSON object on stdout and writes every tile to
+// OUTDIR/z/x/y.EXT (EXT from the header's tile type). Tiles are found twice, independently: by
+// walking the directories with the library's parser and, when the pyramid is small enough, by
+// asking getZxy() for every slot of every level; both must agree.
+// Exit status: 0 on success, 1 on any error or disagreement (message on stderr), 2 on bad usage.
+import { mkdir, open, writeFile } from "node:fs/promises";
+import { PMTiles, TileType, tileIdToZxy, zxyToTileId } from "pmtiles";
+
+class NodeFileSource {
+  constructor(path) {
+    this.path = path;
+    this.handle = null;
+  }
+  getKey() {
+    return this.path;
+  }
+  async getBytes(offset, length) {
+    this.handle ??= await open(this.path, "r");
+    const buf = Buffer.alloc(length);
+    let done = 0;
+    while (done < length) {
+      const { bytesRead } = await this.handle.read(buf, done, length - done, offset + done);
+      if (bytesRead === 0) break;
+      done += bytesRead;
+    }
+    return { data: buf.buffer.slice(buf.byteOffset, buf.byteOffset + done) };
+  }
+  async close() {
+    await this.handle?.close();
+    this.handle = null;
+  }
+}
+
+async function walkDirectories(pm, header) {
+  const ids = [];
+  const visit = async (offset, length, depth) => {
+    if (depth > 4) throw new Error("directory nesting deeper than 4");
+    const entries = await pm.cache.getDirectory(pm.source, offset, length, header);
+    for (const e of entries) {
+      if (e.runLength === 0) await visit(header.leafDirectoryOffset + e.offset, e.length, depth + 1);
+      else for (let i = 0; i < e.runLength; i++) ids.push(e.tileId + i);
+    }
+  };
+  await visit(header.rootDirectoryOffset, header.rootDirectoryLength, 0);
+  return ids;
+}
+
+async function probeAllSlots(pm, header) {
+  let slots = 0;
+  for (let z = header.minZoom; z <= header.maxZoom; z++) slots += 4 ** z;
+  if (slots > 1 << 18) return null;
+  const found = [];
+  for (let z = header.minZoom; z <= header.maxZoom; z++)
+    for (let y = 0; y < 2 ** z; y++)
+      for (let x = 0; x < 2 ** z; x++)
+        if ((await pm.getZxy(z, x, y)) !== undefined) found.push(zxyToTileId(z, x, y));
+  return found;
+}
+
+const kExtension = { [TileType.Png]: "png", [TileType.Jpeg]: "jpg", [TileType.Webp]: "webp" };
+
+async function main(argv) {
+  if (argv.length !== 2) {
+    process.stderr.write("usage: node read_export.mjs ARCHIVE OUTDIR\n");
+    return 2;
+  }
+  const [path, outdir] = argv;
+  const source = new NodeFileSource(path);
+  const pm = new PMTiles(source); // the library's default decompressor
+  try {
+    const header = await pm.getHeader();
+    const metadata = await pm.getMetadata();
+    const ext = kExtension[header.tileType];
+    if (ext === undefined) throw new Error(`tile type ${header.tileType} is not a web image`);
+    const ids = await walkDirectories(pm, header);
+    const probed = await probeAllSlots(pm, header);
+    if (probed !== null) {
+      const a = [...ids].sort((x, y) => x - y).join(",");
+      const b = [...probed].sort((x, y) => x - y).join(",");
+      if (a !== b) throw new Error("directory walk and getZxy() disagree on the tile set");
+    }
+    for (const id of ids) {
+      const [z, x, y] = tileIdToZxy(id);
+      const resp = await pm.getZxy(z, x, y);
+      if (resp === undefined) throw new Error(`getZxy(${z}, ${x}, ${y}) found no tile`);
+      await mkdir(`${outdir}/${z}/${x}`, { recursive: true });
+      await writeFile(`${outdir}/${z}/${x}/${y}.${ext}`, new Uint8Array(resp.data));
+    }
+    const out = { ...header, etag: undefined, metadata, tiles_read: ids.length };
+    process.stdout.write(JSON.stringify(out) + "\n");
+    return 0;
+  } finally {
+    await source.close();
+  }
+}
+
+main(process.argv.slice(2)).then(
+  (code) => {
+    process.exitCode = code;
+  },
+  (err) => {
+    process.stderr.write(`read_export.mjs: ${err?.stack ?? err}\n`);
+    process.exitCode = 1;
+  },
+);
