@@ -3,6 +3,7 @@
 
 #include <cstdint>
 #include <optional>
+#include <span>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -72,5 +73,23 @@ RangeDecision decide_range(std::string_view header, std::uint64_t size);
 std::optional<HttpResponse> check_access(const TilesetAccess& access, const HttpRequest& request,
                                          std::string_view raw_path, const Query& query,
                                          const RouterConfig& config);
+
+// ---- the browser viewer (router_web_page.cpp, web_assets.cpp)
+
+// A file embedded in the binary at build time (server/CMakeLists.txt generates web_assets.cpp).
+struct WebAsset {
+  std::string_view name;          // "ol.js"
+  std::string_view url_name;      // "ol.<first 16 hex digits of its SHA-256>.js"
+  std::string_view hash;          // those 16 hex digits (the ETag)
+  std::string_view content_type;  // "text/javascript; charset=utf-8"
+  std::span<const std::uint8_t> bytes;
+};
+std::span<const WebAsset> web_assets();
+
+// GET / from a browser (Accept: text/html), /{ts}/ and /_viewer/<asset>; nullopt for any other
+// path (and for / without text/html, which stays the JSON index).
+std::optional<HttpResponse> web_page(const HttpRequest& request, const Target& target,
+                                     const TilesetRegistry& registry, const RouterConfig& config,
+                                     const AsyncTileProvider* provider);
 
 }  // namespace vts::router_detail

@@ -1,0 +1,123 @@
+#!/usr/bin/env bash
+# The browser viewer of `vts serve` in a real browser: Debian's chromium, driven by the pinned npm
+# puppeteer-core (browser_js/view.mjs), opens GET /{tileset}/ for a plain image, a WorldCRS84Quad
+# and a WebMercatorQuad archive, sets a view of one screen pixel per texel of a level, waits for
+# its tiles, and the screenshot must show, pixel for pixel (within 1/255), the window of that level
+# that `vts extract --level` writes; the page must log no error, and the cursor readout must name
+# the texel (plain image) or the lon/lat (georeferenced) under a known pixel. Also over curl: the
+# HTML index for a browser (names escaped) while the JSON index stays as it was, and the embedded
+# assets' content types, immutable caching, ETag and 304.
+# shellcheck source=lib.sh
+source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
+# shellcheck source=serve_lib.sh
+source "$(dirname "${BASH_SOURCE[0]}")/serve_lib.sh"
+BROWSER_JS=${BROWSER_JS:-$(dirname "${BASH_SOURCE[0]}")/browser_js}
+export CHROMIUM=${CHROMIUM:-$(command -v chromium || true)}
+[[ -x $CHROMIUM ]] || fail "missing chromium (Debian package; run scripts/setup.sh)"
+[[ -f $BROWSER_JS/node_modules/puppeteer-core/package.json ]] ||
+  fail "npm package puppeteer-core is not installed in $BROWSER_JS (run scripts/setup.sh)"
+require_tool python3
+export HOME="$WORK/home" # chromium's profile and crash files stay in the test's directory
+mkdir -p "$HOME"
+
+D="$WORK/tilesets"
+mkdir -p "$D"
+expect_ok "$VTS" build --synthetic 1000x700 -o "$D/plain.pmtiles" --threads 2
+expect_ok "$VTS" build --synthetic 4096x2048 --tiling WorldCRS84Quad -o "$D/crs84.pmtiles" --threads 2
+expect_ok "$VTS" build --synthetic 2048x2048 --tiling WebMercatorQuad -o "$D/merc.pmtiles" --threads 2
+start_server "$D"
+
+note "GET / for a browser is an HTML list of viewers; without text/html the JSON"
+curl -sf -H 'Accept: text/html,application/xhtml+xml,*/*;q=0.8' -D "$WORK/index.h" "$BASE/" \
+  >"$WORK/index.html" || fail "GET / (Accept: text/html) failed"
+grep -qi '^content-type: text/html; charset=utf-8' "$WORK/index.h" || fail "the HTML index's type"
+grep -qi '^vary: accept' "$WORK/index.h" || fail "the HTML index has no Vary: Accept"
+grep -qF '<a href="plain/">plain</a>' "$WORK/index.html" || fail "no link to plain/: $(cat "$WORK/index.html")"
+grep -qF '<a href="crs84/">crs84</a> (georeferenced)' "$WORK/index.html" || fail "no crs84 link"
+curl -sf -D "$WORK/json.h" "$BASE/" >"$WORK/index.json" || fail "GET / failed"
+grep -qi '^content-type: application/json' "$WORK/json.h" || fail "GET / without text/html is not JSON"
+json_check "$WORK/index.json" 'j.length === 3 && j[1].name === "crs84" && j[1].tilejson.endsWith("/crs84.json")'
+
+note "GET /{ts}/ is the viewer page; its assets are embedded, immutable, with ETag and 304"
+curl -sf -D "$WORK/page.h" "$BASE/plain/" >"$WORK/page.html" || fail "GET /plain/ failed"
+grep -qi '^content-type: text/html; charset=utf-8' "$WORK/page.h" || fail "the page's type"
+grep -qF 'data-tileset="plain" data-tilejson="../plain.json"' "$WORK/page.html" ||
+  fail "the page does not name its tileset escaped: $(cat "$WORK/page.html")"
+expect_status 404 "$BASE/nosuch/"
+for asset in $(grep -oE '_viewer/[a-z]+\.[0-9a-f]{16}\.(js|css)' "$WORK/page.html"); do
+  curl -sf -D "$WORK/asset.h" -o "$WORK/asset.body" "$BASE/$asset" || fail "GET /$asset failed"
+  case $asset in
+    *.js) want='text/javascript; charset=utf-8' ;;
+    *) want='text/css; charset=utf-8' ;;
+  esac
+  grep -qi "^content-type: $want" "$WORK/asset.h" || fail "/$asset is not $want"
+  grep -qi '^cache-control: public, max-age=31536000, immutable' "$WORK/asset.h" ||
+    fail "/$asset is not cached as immutable"
+  hash=$(sha256sum "$WORK/asset.body" | cut -c1-16)
+  [[ $asset == *".$hash."* ]] || fail "/$asset does not name its content's hash ($hash)"
+  grep -qi "^etag: \"$hash\"" "$WORK/asset.h" || fail "/$asset's ETag is not \"$hash\""
+  expect_status 304 -H "If-None-Match: \"$hash\"" "$BASE/$asset"
+done
+[[ $(grep -c '_viewer/' "$WORK/page.html") == 4 ]] || fail "the page links 4 assets"
+expect_status 404 "$BASE/_viewer/ol.0000000000000000.js"
+
+# view NAME Z PX PY MX MY: the page of NAME in chromium; one screen pixel per image pixel of level
+# Z, image pixel (PX, PY) at the top-left corner; the mouse at (MX, MY). Leaves $WORK/NAME.png
+# (the screenshot) and $WORK/NAME.json (readout, tile counts, problems); fails on any problem.
+view() {
+  local name=$1
+  expect_ok "$NODE" "$BROWSER_JS/view.mjs" "$BASE/$name/" "$2" "$3" "$4" "$WORK/$name.png" "$5" "$6"
+  tail -n 1 "$OUT" >"$WORK/$name.json"
+  json_check "$WORK/$name.json" 'j.problems.length === 0' "$name: the page met no error"
+  json_check "$WORK/$name.json" 'j.tiles.loaded > 0 && j.tiles.failed === 0' "$name: tiles loaded"
+}
+
+# same_window NAME Z PX PY: the 384x256 window at (64, 64) of the screenshot (away from the
+# controls) equals that window of level Z as `vts extract` writes it.
+same_window() {
+  local name=$1 z=$2 px=$3 py=$4
+  expect_ok "$VTS" extract "$D/$name.pmtiles" --level "$z" --channels 3 -o "$WORK/$name.level.png"
+  crop_ref "$WORK/$name.level.png" 384 256 $((px + 64)) $((py + 64)) "$WORK/$name.want.png"
+  "$OIIOTOOL" "$WORK/$name.png" --ch R,G,B --cut 384x256+64+64 --origin +0+0 --fullpixels \
+    -o "$WORK/$name.got.png"
+  if ! "$IDIFF" -fail 0.004 -warn 0.004 "$WORK/$name.got.png" "$WORK/$name.want.png" \
+    >"$LOGS/idiff.$name.txt" 2>&1; then
+    cat "$LOGS/idiff.$name.txt" >&2
+    fail "$name: the browser shows other pixels than level $z of the archive"
+  fi
+}
+
+note "a plain image in pixel space: level 2 texels (300, 200) at the top-left"
+view plain 2 300 200 100 50
+same_window plain 2 300 200
+# Level 2 of 2 is full resolution: the texel under screen pixel (100, 50) is (400, 250).
+json_check "$WORK/plain.json" 'j.kind === "pixels" && j.readout === "x 400, y 250"' "plain readout"
+
+note "WorldCRS84Quad on EPSG:4326: our level 4 (TMS 3), pixels (1500, 500) at the top-left"
+view crs84 4 1500 500 100 50
+same_window crs84 4 1500 500
+readout=$(json_get "$WORK/crs84.json" j.readout)
+python3 - "$readout" <<'PY' || fail "crs84: the cursor readout '$readout' is not where the mouse is"
+import sys
+lon, lat = (float(p.split()[1]) for p in sys.argv[1].split(", "))
+res = 360 / 4096  # degrees per texel of level 4
+want_lon, want_lat = -180 + (1500 + 100) * res, 90 - (500 + 50) * res
+assert abs(lon - want_lon) < 1e-5 and abs(lat - want_lat) < 1e-5, (lon, lat, want_lon, want_lat)
+PY
+
+note "WebMercatorQuad on EPSG:3857: level 3, pixels (700, 600) at the top-left"
+view merc 3 700 600 100 50
+same_window merc 3 700 600
+readout=$(json_get "$WORK/merc.json" j.readout)
+python3 - "$readout" <<'PY' || fail "merc: the cursor readout '$readout' is not where the mouse is"
+import math, sys
+lon, lat = (float(p.split()[1]) for p in sys.argv[1].split(", "))
+n = 2048  # texels per side of level 3
+x, y = (700 + 100) / n, (600 + 50) / n
+want_lon = x * 360 - 180
+want_lat = math.degrees(math.atan(math.sinh(math.pi * (1 - 2 * y))))
+assert abs(lon - want_lon) < 1e-5 and abs(lat - want_lat) < 1e-5, (lon, lat, want_lon, want_lat)
+PY
+
+stop_server
+echo "browser viewer OK"
