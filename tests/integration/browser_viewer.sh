@@ -1,12 +1,13 @@
 #!/usr/bin/env bash
 # The browser viewer of `vts serve` in a real browser: Debian's chromium, driven by the pinned npm
-# puppeteer-core (browser_js/view.mjs), opens GET /{tileset}/ for a plain image, a WorldCRS84Quad
-# and a WebMercatorQuad archive, sets a view of one screen pixel per texel of a level, waits for
-# its tiles, and the screenshot must show, pixel for pixel (within 1/255), the window of that level
-# that `vts extract --level` writes; the page must log no error, and the cursor readout must name
-# the texel (plain image) or the lon/lat (georeferenced) under a known pixel. Also over curl: the
-# HTML index for a browser (names escaped) while the JSON index stays as it was, and the embedded
-# assets' content types, immutable caching, ETag and 304.
+# puppeteer-core (browser_js/view.mjs), opens GET /{tileset}/ for the Earth as a plain image, a
+# WorldCRS84Quad and a WebMercatorQuad archive, sets a view of one screen pixel per texel of a
+# level, waits for its tiles, and the screenshot must show, pixel for pixel (within 1/255), the
+# window of that level that `vts extract --level` writes; the page must log no error and fail no
+# request, and the cursor readout must name the texel (plain image) or the lon/lat
+# (georeferenced) under a known pixel. Also over curl: the HTML index for a browser while the
+# JSON index stays as it was, the page's 404 for an unknown tileset, and the embedded assets'
+# content types, immutable caching, content hash in the URL, ETag and 304.
 # shellcheck source=lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 # shellcheck source=serve_lib.sh
@@ -17,14 +18,20 @@ export CHROMIUM=${CHROMIUM:-$(command -v chromium || true)}
 [[ -f $BROWSER_JS/node_modules/puppeteer-core/package.json ]] ||
   fail "npm package puppeteer-core is not installed in $BROWSER_JS (run scripts/setup.sh)"
 require_tool python3
+require_tool gdal_translate
 export HOME="$WORK/home" # chromium's profile and crash files stay in the test's directory
 mkdir -p "$HOME"
 
 D="$WORK/tilesets"
 mkdir -p "$D"
-expect_ok "$VTS" build --synthetic 1000x700 -o "$D/plain.pmtiles" --threads 2
-expect_ok "$VTS" build --synthetic 4096x2048 --tiling WorldCRS84Quad -o "$D/crs84.pmtiles" --threads 2
-expect_ok "$VTS" build --synthetic 2048x2048 --tiling WebMercatorQuad -o "$D/merc.pmtiles" --threads 2
+# The Earth (real content: a misplaced tile shows), as a plain image and, placed on the whole
+# world by a GeoTIFF, in both grids.
+build_earth "$D/plain.pmtiles" --threads 2
+gdal_translate -q -of GTiff -a_srs EPSG:4326 -a_ullr -180 90 180 -90 "$EARTH" "$WORK/earth.tif" ||
+  fail "gdal_translate could not georeference the Earth image"
+expect_ok "$VTS" build "$WORK/earth.tif" --tiling WorldCRS84Quad -o "$D/crs84.pmtiles" --threads 2
+expect_ok "$VTS" build "$WORK/earth.tif" --tiling WebMercatorQuad --max-level 3 -o "$D/merc.pmtiles" \
+  --threads 2
 start_server "$D"
 
 note "GET / for a browser is an HTML list of viewers; without text/html the JSON"
@@ -87,21 +94,21 @@ same_window() {
   fi
 }
 
-note "a plain image in pixel space: level 2 texels (300, 200) at the top-left"
-view plain 2 300 200 100 50
-same_window plain 2 300 200
-# Level 2 of 2 is full resolution: the texel under screen pixel (100, 50) is (400, 250).
-json_check "$WORK/plain.json" 'j.kind === "pixels" && j.readout === "x 400, y 250"' "plain readout"
+note "a plain image in pixel space: level 3 (2048x1024) texels (700, 300) at the top-left"
+view plain 3 700 300 100 50
+same_window plain 3 700 300
+# Level 3 of 3 is full resolution: the texel under screen pixel (100, 50) is (800, 350).
+json_check "$WORK/plain.json" 'j.kind === "pixels" && j.readout === "x 800, y 350"' "plain readout"
 
-note "WorldCRS84Quad on EPSG:4326: our level 4 (TMS 3), pixels (1500, 500) at the top-left"
-view crs84 4 1500 500 100 50
-same_window crs84 4 1500 500
+note "WorldCRS84Quad on EPSG:4326: our level 3 (TMS 2, 2048x1024), pixels (1000, 300) at the top-left"
+view crs84 3 1000 300 100 50
+same_window crs84 3 1000 300
 readout=$(json_get "$WORK/crs84.json" j.readout)
 python3 - "$readout" <<'PY' || fail "crs84: the cursor readout '$readout' is not where the mouse is"
 import sys
 lon, lat = (float(p.split()[1]) for p in sys.argv[1].split(", "))
-res = 360 / 4096  # degrees per texel of level 4
-want_lon, want_lat = -180 + (1500 + 100) * res, 90 - (500 + 50) * res
+res = 360 / 2048  # degrees per texel of our level 3
+want_lon, want_lat = -180 + (1000 + 100) * res, 90 - (300 + 50) * res
 assert abs(lon - want_lon) < 1e-5 and abs(lat - want_lat) < 1e-5, (lon, lat, want_lon, want_lat)
 PY
 
