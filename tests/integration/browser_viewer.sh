@@ -22,17 +22,17 @@ require_tool gdal_translate
 export HOME="$WORK/home" # chromium's profile and crash files stay in the test's directory
 mkdir -p "$HOME"
 
-D="$WORK/tilesets"
-mkdir -p "$D"
+TS="$WORK/tilesets"
+mkdir -p "$TS"
 # The Earth (real content: a misplaced tile shows), as a plain image and, placed on the whole
 # world by a GeoTIFF, in both grids.
-build_earth "$D/plain.pmtiles" --threads 2
+build_earth "$TS/plain.pmtiles" --threads 2
 gdal_translate -q -of GTiff -a_srs EPSG:4326 -a_ullr -180 90 180 -90 "$EARTH" "$WORK/earth.tif" ||
   fail "gdal_translate could not georeference the Earth image"
-expect_ok "$VTS" build "$WORK/earth.tif" --tiling WorldCRS84Quad -o "$D/crs84.pmtiles" --threads 2
-expect_ok "$VTS" build "$WORK/earth.tif" --tiling WebMercatorQuad --max-level 3 -o "$D/merc.pmtiles" \
+expect_ok "$VTS" build "$WORK/earth.tif" --tiling WorldCRS84Quad -o "$TS/crs84.pmtiles" --threads 2
+expect_ok "$VTS" build "$WORK/earth.tif" --tiling WebMercatorQuad --max-level 3 -o "$TS/merc.pmtiles" \
   --threads 2
-start_server "$D"
+start_server "$TS"
 
 note "GET / for a browser is an HTML list of viewers; without text/html the JSON"
 curl -sf -H 'Accept: text/html,application/xhtml+xml,*/*;q=0.8' -D "$WORK/index.h" "$BASE/" \
@@ -43,7 +43,7 @@ grep -qF '<a href="plain/">plain</a>' "$WORK/index.html" || fail "no link to pla
 grep -qF '<a href="crs84/">crs84</a> (georeferenced)' "$WORK/index.html" || fail "no crs84 link"
 curl -sf -D "$WORK/json.h" "$BASE/" >"$WORK/index.json" || fail "GET / failed"
 grep -qi '^content-type: application/json' "$WORK/json.h" || fail "GET / without text/html is not JSON"
-json_check "$WORK/index.json" 'j.length === 3 && j[1].name === "crs84" && j[1].tilejson.endsWith("/crs84.json")'
+json_check "$WORK/index.json" 'j.length === 3 && j[0].name === "crs84" && j[0].tilejson.endsWith("/crs84.json")'
 
 note "GET /{ts}/ is the viewer page; its assets are embedded, immutable, with ETag and 304"
 curl -sf -D "$WORK/page.h" "$BASE/plain/" >"$WORK/page.html" || fail "GET /plain/ failed"
@@ -68,6 +68,19 @@ done
 [[ $(grep -c '_viewer/' "$WORK/page.html") == 4 ]] || fail "the page links 4 assets"
 expect_status 404 "$BASE/_viewer/ol.0000000000000000.js"
 
+note "vts cache serve answers the same pages for the tilesets it provides"
+start_daemon cache "$VTS" cache serve --upstream "$BASE/plain" --cache-dir "$WORK/cache" \
+  --listen 127.0.0.1:0 --admin 127.0.0.1:0
+curl -sf -H 'Accept: text/html' "$D/" >"$WORK/daemon_index.html" || fail "daemon: GET / (HTML)"
+grep -qF '<a href="plain/">plain</a>' "$WORK/daemon_index.html" ||
+  fail "the daemon's HTML index does not link plain/: $(cat "$WORK/daemon_index.html")"
+curl -sf "$D/plain/" >"$WORK/daemon_page.html" || fail "daemon: GET /plain/"
+cmp -s "$WORK/daemon_page.html" "$WORK/page.html" || fail "the daemon's page of plain differs"
+asset=$(grep -oE '_viewer/ol\.[0-9a-f]{16}\.js' "$WORK/page.html")
+expect_status 200 "$D/$asset"
+kill -TERM "$DAEMON_PID"
+wait "$DAEMON_PID" || true
+
 # view NAME Z PX PY MX MY: the page of NAME in chromium; one screen pixel per image pixel of level
 # Z, image pixel (PX, PY) at the top-left corner; the mouse at (MX, MY). Leaves $WORK/NAME.png
 # (the screenshot) and $WORK/NAME.json (readout, tile counts, problems); fails on any problem.
@@ -83,7 +96,7 @@ view() {
 # controls) equals that window of level Z as `vts extract` writes it.
 same_window() {
   local name=$1 z=$2 px=$3 py=$4
-  expect_ok "$VTS" extract "$D/$name.pmtiles" --level "$z" --channels 3 -o "$WORK/$name.level.png"
+  expect_ok "$VTS" extract "$TS/$name.pmtiles" --level "$z" --channels 3 -o "$WORK/$name.level.png"
   crop_ref "$WORK/$name.level.png" 384 256 $((px + 64)) $((py + 64)) "$WORK/$name.want.png"
   "$OIIOTOOL" "$WORK/$name.png" --ch R,G,B --cut 384x256+64+64 --origin +0+0 --fullpixels \
     -o "$WORK/$name.got.png"
