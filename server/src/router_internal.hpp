@@ -86,6 +86,11 @@ struct WebAsset {
 };
 std::span<const WebAsset> web_assets();
 
+// Text for HTML content and quoted attribute values: & < > " ' as character references.
+std::string html_escape(std::string_view s);
+// A URL path segment: every byte but RFC 3986's unreserved ones percent-encoded.
+std::string url_segment(std::string_view s);
+
 // GET / from a browser (Accept: text/html), /{ts}/ and /_viewer/<asset>; nullopt for any other
 // path (and for / without text/html, which stays the JSON index).
 std::optional<HttpResponse> web_page(const HttpRequest& request, const Target& target,

@@ -10,6 +10,7 @@
 #include <optional>
 #include <string>
 
+#include "router_internal.hpp"
 #include "tile_tag_memo.hpp"
 #include "vts/builder/builder.hpp"
 #include "vts/protocol/codec.hpp"
@@ -625,6 +626,12 @@ TEST_F(Router, ViewerPageOfATilesetLinksItsTileJsonAndTheEmbeddedAssets) {
   EXPECT_EQ(assets, 4);
   EXPECT_EQ(get("/_viewer/ol.js").status, 404);  // only the hashed names
   EXPECT_EQ(get("/_viewer/").status, 404);
+}
+
+// Tileset names are [A-Za-z0-9._-] today; the pages escape them all the same.
+TEST(ViewerPage, NamesAreEscapedForHtmlAndUrls) {
+  EXPECT_EQ(vts::router_detail::html_escape("a<b>&\"c'd"), "a&lt;b&gt;&amp;&quot;c&#39;d");
+  EXPECT_EQ(vts::router_detail::url_segment("a b/c%d.e-f_g~h\xff"), "a%20b%2Fc%25d.e-f_g~h%FF");
 }
 
 TEST_F(Router, ASpecificCorsOriginVariesOnOrigin) {
