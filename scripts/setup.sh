@@ -30,6 +30,8 @@ PACKAGES=(
   libspdlog-dev libfmt-dev libboost1.81-dev libssl-dev libcurl4-openssl-dev libsqlite3-dev
   # the bc1 tile codec's encoders: libsquish, and stb_dxt from libstb-dev (below)
   libsquish-dev
+  # standard web images of tiles (PNG, WebP, JPEG) for web maps and `vts export`
+  libpng-dev libwebp-dev libturbojpeg0-dev
   # GeoTIFF and other georeferenced inputs of vts build (builder/src/gdal_source.cpp); gdal-bin's
   # gdal_translate/gdalwarp make the test inputs and references; python3-gdal is gdal2tiles.py's
   # (bench/georef_bench.sh's peer; gdal-bin depends on it on bookworm, named here all the same)
