@@ -7,7 +7,8 @@
 # request, and the cursor readout must name the texel (plain image) or the lon/lat
 # (georeferenced) under a known pixel. Also over curl: the HTML index for a browser while the
 # JSON index stays as it was, the page's 404 for an unknown tileset, and the embedded assets'
-# content types, immutable caching, content hash in the URL, ETag and 304.
+# content types, immutable caching, content hash in the URL, ETag and 304. Last, stock MapLibre GL
+# JS (pinned npm maplibre-gl) on the web TileJSON of the WebMercatorQuad archive: the same pixels.
 # shellcheck source=lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 # shellcheck source=serve_lib.sh
@@ -92,18 +93,21 @@ view() {
   json_check "$WORK/$name.json" 'j.tiles.loaded > 0 && j.tiles.failed === 0' "$name: tiles loaded"
 }
 
-# same_window NAME Z PX PY: the 384x256 window at (64, 64) of the screenshot (away from the
-# controls) equals that window of level Z as `vts extract` writes it.
+# same_window NAME Z PX PY [SHOT]: the 384x256 window at (64, 64) of the screenshot SHOT (default
+# $WORK/NAME.png; away from the controls) equals that window of level Z of archive NAME as
+# `vts extract` writes it.
 same_window() {
-  local name=$1 z=$2 px=$3 py=$4
+  local name=$1 z=$2 px=$3 py=$4 shot=${5:-$WORK/$1.png}
+  local tag
+  tag=$(basename "$shot" .png)
   expect_ok "$VTS" extract "$TS/$name.pmtiles" --level "$z" --channels 3 -o "$WORK/$name.level.png"
-  crop_ref "$WORK/$name.level.png" 384 256 $((px + 64)) $((py + 64)) "$WORK/$name.want.png"
-  "$OIIOTOOL" "$WORK/$name.png" --ch R,G,B --cut 384x256+64+64 --origin +0+0 --fullpixels \
-    -o "$WORK/$name.got.png"
-  if ! "$IDIFF" -fail 0.004 -warn 0.004 "$WORK/$name.got.png" "$WORK/$name.want.png" \
-    >"$LOGS/idiff.$name.txt" 2>&1; then
-    cat "$LOGS/idiff.$name.txt" >&2
-    fail "$name: the browser shows other pixels than level $z of the archive"
+  crop_ref "$WORK/$name.level.png" 384 256 $((px + 64)) $((py + 64)) "$WORK/$tag.want.png"
+  "$OIIOTOOL" "$shot" --ch R,G,B --cut 384x256+64+64 --origin +0+0 --fullpixels \
+    -o "$WORK/$tag.got.png"
+  if ! "$IDIFF" -fail 0.004 -warn 0.004 "$WORK/$tag.got.png" "$WORK/$tag.want.png" \
+    >"$LOGS/idiff.$tag.txt" 2>&1; then
+    cat "$LOGS/idiff.$tag.txt" >&2
+    fail "$tag: the browser shows other pixels than level $z of $name"
   fi
 }
 
@@ -138,6 +142,13 @@ want_lon = x * 360 - 180
 want_lat = math.degrees(math.atan(math.sinh(math.pi * (1 - 2 * y))))
 assert abs(lon - want_lon) < 1e-5 and abs(lat - want_lat) < 1e-5, (lon, lat, want_lon, want_lat)
 PY
+
+note "stock MapLibre GL JS on the web TileJSON (?format=png) of the WebMercatorQuad archive"
+expect_ok "$NODE" "$BROWSER_JS/maplibre.mjs" "$BASE" "$BASE/merc.json?format=png" 3 700 600 \
+  "$WORK/maplibre.png"
+tail -n 1 "$OUT" >"$WORK/maplibre.json"
+json_check "$WORK/maplibre.json" 'j.problems.length === 0 && j.loaded > 0' "MapLibre met no error"
+same_window merc 3 700 600 "$WORK/maplibre.png"
 
 stop_server
 echo "browser viewer OK"
