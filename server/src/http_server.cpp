@@ -26,6 +26,7 @@
 #include "metrics.hpp"
 #include "reload_loop.hpp"
 #include "session.hpp"
+#include "web_tile_cache.hpp"
 
 namespace vts {
 namespace {
@@ -51,6 +52,10 @@ class Server final : public HttpServer, public SessionHost {
     // The router checks the target (414 beyond the smaller of its bound and the listener's).
     options_.router.max_target_bytes =
         std::min(options_.router.max_target_bytes, options_.limits.max_target_bytes);
+    if (!options_.router.web.cache) {
+      options_.router.web.cache =
+          std::make_shared<http_detail::WebTileCache>(options_.router.web.cache_bytes, n);
+    }
     for (int i = 1; i < n; ++i) workers_.push_back(std::make_unique<asio::io_context>(1));
     // Deadline sweeps at an eighth of the shortest timeout (so a deadline is enforced within
     // 12.5% of its length), between 10 ms and 250 ms.
@@ -62,6 +67,9 @@ class Server final : public HttpServer, public SessionHost {
     for (auto& w : workers_) sweepers_.push_back(std::make_unique<Sweeper>(*w, period));
   }
   ~Server() override {
+    // Web images still being encoded post their answers to the connections' threads: done
+    // before those go.
+    options_.router.web.cache->stop();
     destroying_ = true;
     error_code ec;
     acceptor_.close(ec);
@@ -141,7 +149,8 @@ class Server final : public HttpServer, public SessionHost {
 
   std::string metrics_text() const override {
     return prometheus_text(metrics_, registry_->size(), registry_->skipped().size(),
-                           options_.provider.get());
+                           options_.provider.get()) +
+           web_metrics_text(*options_.router.web.cache);
   }
 
   // -- SessionHost --

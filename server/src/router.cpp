@@ -18,6 +18,7 @@
 #include "vts/protocol/file_io.hpp"
 #include "vts/protocol/tilejson.hpp"
 #include "vts/protocol/tiling.hpp"
+#include "web_tile_cache.hpp"
 
 namespace vts {
 
@@ -55,19 +56,6 @@ std::string cache_control(bool is_private, std::uint32_t max_age, bool immutable
   return s;
 }
 
-}  // namespace router_detail
-
-namespace {
-
-using namespace router_detail;
-using nlohmann::ordered_json;
-
-constexpr const char* kTileType = "application/vnd.vtstream.tile";
-constexpr const char* kArchiveType = "application/vnd.pmtiles";
-constexpr const char* kJsonType = "application/json";
-constexpr std::uint32_t kImmutableMaxAge = 31536000;
-constexpr std::uint32_t kMetadataMaxAge = 60;  // TileJSON and the index carry the version
-
 HttpResponse tile_error(int status, std::string message) {
   HttpResponse r = error(status, std::move(message));
   r.route = Route::tile;
@@ -104,6 +92,18 @@ HttpResponse archive_changed(std::shared_ptr<const Tileset> t, const Error& e) {
   r.hold = std::move(t);  // names the tileset in access logs
   return r;
 }
+
+}  // namespace router_detail
+
+namespace {
+
+using namespace router_detail;
+using nlohmann::ordered_json;
+
+constexpr const char* kTileType = "application/vnd.vtstream.tile";
+constexpr const char* kArchiveType = "application/vnd.pmtiles";
+constexpr const char* kJsonType = "application/json";
+constexpr std::uint32_t kMetadataMaxAge = 60;  // TileJSON and the index carry the version
 
 HttpResponse unreadable_tile(std::shared_ptr<const Tileset> t, TileId id, const Error& e,
                              const std::string& cc) {
@@ -418,6 +418,8 @@ struct Address {
   std::string_view name;
   std::string_view version;
   std::vector<std::string_view> segments;
+  std::optional<WebFormat> web;  // /{ts}/{z}/{x}/{y}.{ext}: a web image (router_web.cpp)
+  bool web_mercator = false;     // /{ts}/WebMercatorQuad/{z}/{x}/{y}.{ext}
   std::span<const std::string_view> zxy() const {
     return std::span<const std::string_view>(segments).subspan(1);
   }
@@ -438,7 +440,8 @@ std::optional<HttpResponse> parse_address(std::string_view path, Address& a) {
     } else {
       return error(404,
                    "no such resource; try /, /{tileset}.json, /{tileset}.pmtiles, "
-                   "/{tileset}/tilematrixset.json or /{tileset}/{z}/{x}/{y}");
+                   "/{tileset}/tilematrixset.json, /{tileset}/{z}/{x}/{y} or "
+                   "/{tileset}/{z}/{x}/{y}.png|.webp|.jpg");
     }
     return std::nullopt;
   }
@@ -447,12 +450,32 @@ std::optional<HttpResponse> parse_address(std::string_view path, Address& a) {
     a.name = a.segments[0];
     return std::nullopt;
   }
+  if (a.segments.size() == 5 && a.segments[1] == "WebMercatorQuad") {
+    a.web_mercator = true;
+    a.segments.erase(a.segments.begin() + 1);
+    if (a.segments[3].find('.') == std::string_view::npos) {
+      return error(400,
+                   "a WebMercatorQuad tile is an image: /{tileset}/WebMercatorQuad/{z}/{x}/{y}"
+                   ".png, .webp or .jpg");
+    }
+  }
   if (a.segments.size() != 4) return error(400, "tile address must be /{tileset}/{z}/{x}/{y}");
   a.name = a.segments[0];
   if (const std::size_t at = a.name.find('@'); at != std::string_view::npos) {
     a.version = a.name.substr(at + 1);
     a.name = a.name.substr(0, at);
     if (a.version.empty()) return error(400, "empty version after '@'");
+  }
+  if (const std::size_t dot = a.segments[3].find('.'); dot != std::string_view::npos) {
+    const std::string_view ext = a.segments[3].substr(dot + 1);
+    a.segments[3] = a.segments[3].substr(0, dot);
+    if (ext == "png") a.web = WebFormat::png;
+    if (ext == "webp") a.web = WebFormat::webp;
+    if (ext == "jpg" || ext == "jpeg") a.web = WebFormat::jpeg;
+    if (!a.web) {
+      return error(400, "unknown tile image extension \"." + std::string(ext) +
+                            "\"; use .png, .webp or .jpg (or no extension for the native tile)");
+    }
   }
   for (std::size_t i = 1; i < 4; ++i) {
     if (!parse_u32(a.segments[i])) {
@@ -501,6 +524,65 @@ HttpResponse serve_archive(const HttpRequest& request, std::shared_ptr<const Til
   return tile_route(request, std::move(t), a.version, a.zxy(), config, priv);
 }
 
+// Web images of a provided tileset (vts cache serve): the tile comes from the provider
+// (deferred), then is encoded as for archives (provided_web_image). Not versioned as immutable,
+// as its native tiles. WebMercatorQuad resampling is not served from a provider.
+HttpResponse provided_web(const HttpRequest& request, std::shared_ptr<const ProvidedTileset> t,
+                          const Target& target, const Address& a, const RouterConfig& config,
+                          const std::string& base, bool priv) {
+  const Tiling native = t->info.georeference ? t->info.georeference->tiling : Tiling::none;
+  if (a.kind == Address::Kind::tilejson) {
+    HttpResponse r = error(400, "tiling= needs format=png, webp or jpg");
+    if (!target.query.format) {
+      r.route = Route::tilejson;
+      return r;
+    }
+    if (target.query.tiling && native == Tiling::world_crs84_quad) {
+      r = error(400, "tileset \"" + t->name +
+                         "\" is served from a cache: its WebMercatorQuad tiles are served by vts "
+                         "serve only");
+      r.route = Route::tilejson;
+      return r;
+    }
+    return web_tilejson_route(t->name, t->info, t->version, false, target.query, base, priv);
+  }
+  if (a.web_mercator) {
+    return tile_error(404, "tileset \"" + t->name +
+                               "\" is served from a cache: WebMercatorQuad tiles are served by "
+                               "vts serve only");
+  }
+  const auto zxy = a.zxy();
+  if (!a.version.empty() && (t->version.empty() || a.version != t->version)) {
+    return not_current(a.version, t->name, t->version.empty() ? "unknown" : t->version);
+  }
+  const std::uint32_t z = *parse_u32(zxy[0]), x = *parse_u32(zxy[1]), y = *parse_u32(zxy[2]);
+  const Geometry& g = t->info.geometry;
+  if (z > static_cast<std::uint32_t>(g.max_zoom())) return outside_pyramid(z, x, y, t->name);
+  const TileId id{static_cast<std::uint8_t>(z), x, y};
+  const std::uint32_t side = std::uint32_t(1) << z;
+  if (x >= std::max(side, g.tiles_x(id.z)) || y >= std::max(side, g.tiles_y(id.z))) {
+    return outside_pyramid(z, x, y, t->name);
+  }
+  if (config.web.cache) {
+    config.web.cache->requests_by_format[static_cast<std::size_t>(*a.web)].fetch_add(
+        1, std::memory_order_relaxed);
+  }
+  const std::string cc = cache_control(priv, config.max_age_seconds, false);
+  if (!g.exists(id)) return web_filler(g.tile_size(), *a.web, config, request.if_none_match, cc);
+  auto d = std::make_shared<DeferredTile>();
+  d->id = id;
+  d->if_none_match = std::string(request.if_none_match);
+  d->cache_control = cc;
+  d->tileset = std::move(t);
+  d->web = *a.web;
+  d->web_options = config.web.encode;
+  d->web_cache = config.web.cache;
+  HttpResponse r;
+  r.route = Route::tile;
+  r.deferred = std::move(d);
+  return r;
+}
+
 // Looks the address up (archives first, then the provider), checks credentials, answers.
 HttpResponse serve_address(const HttpRequest& request, const Target& target, const Address& a,
                            const TilesetRegistry& registry, const RouterConfig& config,
@@ -516,6 +598,22 @@ HttpResponse serve_address(const HttpRequest& request, const Target& target, con
       return *denied;
     }
   }
+  const bool web =
+      a.web || (a.kind == Address::Kind::tilejson && (target.query.format || target.query.tiling));
+  if (web && provided)
+    return provided_web(request, std::move(provided), target, a, config, base, priv);
+  if (web && a.kind == Address::Kind::tilejson) {
+    if (!target.query.format) {
+      HttpResponse r = error(400, "tiling= needs format=png, webp or jpg");
+      r.route = Route::tilejson;
+      return r;
+    }
+    return web_tilejson_route(t->name, t->info, t->version, true, target.query, base, priv);
+  }
+  if (web && a.web_mercator) {
+    return web_mercator_tile_route(request, std::move(t), a.version, a.zxy(), *a.web, config, priv);
+  }
+  if (web) return web_tile_route(request, std::move(t), a.version, a.zxy(), *a.web, config, priv);
   if (provided) return serve_provided(request, std::move(provided), a, config, base, priv);
   return serve_archive(request, std::move(t), a, config, base, priv);
 }
@@ -611,35 +709,61 @@ HttpResponse complete_deferred(HttpResponse marker, ProvidedTile tile) {
   const DeferredTile& d = *marker.deferred;
   const std::string& name = d.tileset->name;
   HttpResponse r;
-  switch (tile.kind) {
-    case ProvidedTile::Kind::ok:
-      r = payload_response(tile.payload, d.if_none_match, d.cache_control, 502, d.id, name);
-      if (r.status == 200) r.keep = std::move(tile.keep);
-      break;
-    case ProvidedTile::Kind::absent:
-      if (d.tileset->info.sparse) {
-        r.status = 204;  // known-empty: cacheable like a tile
-        add(r, "Cache-Control", d.cache_control);
-      } else {
-        r = error(404, "tile " + d.id.to_string() + " is missing from the origin of " + name +
-                           " (origin incomplete)");
-      }
-      break;
-    case ProvidedTile::Kind::unavailable:
-      r = error(503, "tile " + d.id.to_string() + " of " + name +
-                         " is not cached and its origin is unavailable" +
-                         (tile.message.empty() ? std::string() : ": " + tile.message));
-      break;
-    case ProvidedTile::Kind::bad_origin:
-      r = error(502, "the origin of " + name + " sent an unusable tile " + d.id.to_string() +
-                         (tile.message.empty() ? std::string() : ": " + tile.message));
-      break;
+  const bool web_ok =
+      d.web && (tile.kind == ProvidedTile::Kind::ok ||
+                (tile.kind == ProvidedTile::Kind::absent && d.tileset->info.sparse));
+  if (web_ok) {
+    const std::vector<std::uint8_t> bytes(tile.payload.begin(), tile.payload.end());
+    r = provided_web_image(d, tile.kind == ProvidedTile::Kind::ok ? &bytes : nullptr);
   }
+  if (!web_ok) switch (tile.kind) {
+      case ProvidedTile::Kind::unavailable:
+        r = error(503, "tile " + d.id.to_string() + " of " + name +
+                           " is not cached and its origin is unavailable" +
+                           (tile.message.empty() ? std::string() : ": " + tile.message));
+        break;
+      case ProvidedTile::Kind::ok:
+        r = payload_response(tile.payload, d.if_none_match, d.cache_control, 502, d.id, name);
+        if (r.status == 200) r.keep = std::move(tile.keep);
+        break;
+      case ProvidedTile::Kind::absent:
+        if (d.tileset->info.sparse) {
+          r.status = 204;  // known-empty: cacheable like a tile
+          add(r, "Cache-Control", d.cache_control);
+        } else {
+          r = error(404, "tile " + d.id.to_string() + " is missing from the origin of " + name +
+                             " (origin incomplete)");
+        }
+        break;
+      case ProvidedTile::Kind::bad_origin:
+        r = error(502, "the origin of " + name + " sent an unusable tile " + d.id.to_string() +
+                           (tile.message.empty() ? std::string() : ": " + tile.message));
+        break;
+    }
   r.route = Route::tile;
   for (auto& h : marker.headers) r.headers.push_back(std::move(h));  // CORS, from route()
   r.head_only = marker.head_only;
   if (r.status == 204 || r.status == 304) {
     r.owned.clear();
+    r.view = {};
+    r.keep.reset();
+    r.content_length = 0;
+  }
+  return r;
+}
+
+HttpResponse complete_web_wait(HttpResponse marker,
+                               const std::shared_ptr<const http_detail::WebTile>& tile,
+                               const std::string& why) {
+  assert(marker.web_wait);
+  const DeferredWebTile& d = *marker.web_wait;
+  HttpResponse r = tile ? web_image_response(tile, d.if_none_match, d.cache_control)
+                        : tile_error(500, "cannot encode the web image: " + why);
+  r.route = Route::tile;
+  r.hold = std::move(marker.hold);
+  for (auto& h : marker.headers) r.headers.push_back(std::move(h));  // CORS, from route()
+  r.head_only = marker.head_only;
+  if (r.status == 304) {
     r.view = {};
     r.keep.reset();
     r.content_length = 0;

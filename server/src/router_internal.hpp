@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <span>
 #include <string>
@@ -23,6 +24,17 @@ void set_owned(HttpResponse& r, std::string body, const char* type);
 HttpResponse error(int status, std::string message);
 // "public|private, max-age=N[, immutable]".
 std::string cache_control(bool is_private, std::uint32_t max_age, bool immutable);
+inline constexpr std::uint32_t kImmutableMaxAge = 31536000;  // of versioned tile URLs
+
+// Tile answers shared by the native and the web tile routes (router.cpp).
+HttpResponse tile_error(int status, std::string message);
+// 404 with Vts-Error: version-not-current.
+HttpResponse not_current(std::string_view version, const std::string& name,
+                         const std::string& current);
+HttpResponse outside_pyramid(std::uint32_t z, std::uint32_t x, std::uint32_t y,
+                             const std::string& name);
+// 503 with Retry-After for an archive modified in place (and archive_changed set).
+HttpResponse archive_changed(std::shared_ptr<const Tileset> t, const Error& e);
 
 // ---- request target (router_target.cpp)
 
@@ -33,6 +45,8 @@ std::optional<std::uint32_t> parse_u32(std::string_view s);
 struct Query {
   std::optional<std::string_view> expires;
   std::optional<std::string_view> sig;
+  std::optional<std::string_view> format;  // /{ts}.json?format=png|webp|jpg
+  std::optional<std::string_view> tiling;  // /{ts}.json?format=...&tiling=WebMercatorQuad
 };
 
 // The request target, checked once for both listeners: origin-form, at most max_target_bytes
@@ -73,6 +87,35 @@ RangeDecision decide_range(std::string_view header, std::uint64_t size);
 std::optional<HttpResponse> check_access(const TilesetAccess& access, const HttpRequest& request,
                                          std::string_view raw_path, const Query& query,
                                          const RouterConfig& config);
+
+// ---- web images of tiles (router_web.cpp)
+
+// GET /{ts}[@{version}]/{z}/{x}/{y}.{ext}: the tile's content as a PNG / WebP / JPEG image, from
+// the web tile cache (single flight) or encoded now. `zxy` are validated decimals.
+HttpResponse web_tile_route(const HttpRequest& request, std::shared_ptr<const Tileset> t,
+                            std::string_view version, std::span<const std::string_view> zxy,
+                            WebFormat format, const RouterConfig& config, bool priv);
+// GET /{ts}[@{version}]/WebMercatorQuad/{z}/{x}/{y}.{ext} of a WorldCRS84Quad tileset: the tile
+// resampled to Web Mercator (render_web_mercator_tile), as an image.
+HttpResponse web_mercator_tile_route(const HttpRequest& request, std::shared_ptr<const Tileset> t,
+                                     std::string_view version,
+                                     std::span<const std::string_view> zxy, WebFormat format,
+                                     const RouterConfig& config, bool priv);
+// The answer to a provided tile (vts cache serve) wanted as a web image, once it has arrived:
+// `payload` (null: absent from a sparse origin, the transparent filler).
+HttpResponse provided_web_image(const DeferredTile& d, const std::vector<std::uint8_t>* payload);
+// The transparent filler of a tile with nothing to show (T x T texels).
+HttpResponse web_filler(std::uint32_t tile_size, WebFormat f, const RouterConfig& config,
+                        std::string_view if_none_match, const std::string& cc);
+// GET /{ts}.json?format=...[&tiling=...]: the TileJSON stock web maps read; 400 for an unknown
+// format or a tiling this tileset cannot be served in.
+// 200 with an encoded image, or 304 when `if_none_match` names its ETag.
+HttpResponse web_image_response(const std::shared_ptr<const http_detail::WebTile>& tile,
+                                std::string_view if_none_match, const std::string& cc);
+// `versioned`: the template names the version (archives); provided tilesets' tiles are not.
+HttpResponse web_tilejson_route(const std::string& name, const TilesetInfo& info,
+                                const std::string& version, bool versioned, const Query& q,
+                                const std::string& base, bool priv);
 
 // ---- the browser viewer (router_web_page.cpp, web_assets.cpp)
 

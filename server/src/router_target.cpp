@@ -44,8 +44,8 @@ std::optional<std::string> decode_path(std::string_view raw, std::string& why) {
   return out;
 }
 
-// Only `expires` and `sig` mean anything; every other parameter is ignored. A repeated
-// `expires` or `sig` is ambiguous (a cache and we might disagree on which counts): refused.
+// Only `expires`, `sig`, `format` and `tiling` mean anything; every other parameter is ignored.
+// A repeated one of these is ambiguous (a cache and we might disagree on which counts): refused.
 bool parse_query(std::string_view q, Query& out, std::string& why) {
   while (!q.empty()) {
     const std::size_t amp = q.find('&');
@@ -58,6 +58,8 @@ bool parse_query(std::string_view q, Query& out, std::string& why) {
     std::optional<std::string_view>* slot = nullptr;
     if (key == "expires") slot = &out.expires;
     if (key == "sig") slot = &out.sig;
+    if (key == "format") slot = &out.format;
+    if (key == "tiling") slot = &out.tiling;
     if (slot == nullptr) continue;
     if (slot->has_value()) {
       why = "repeated query parameter \"" + std::string(key) + "\"";

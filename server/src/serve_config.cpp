@@ -4,6 +4,7 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <stdexcept>
+#include <type_traits>
 
 #include "vts/protocol/file_io.hpp"
 
@@ -12,9 +13,12 @@ namespace {
 
 using nlohmann::json;
 
-constexpr std::array<std::string_view, 10> kTopKeys = {
+constexpr std::array<std::string_view, 11> kTopKeys = {
     "listen",     "admin",      "threads", "cors_origin",        "max_age",
-    "public_url", "access_log", "access",  "reload_interval_ms", "limits"};
+    "public_url", "access_log", "access",  "reload_interval_ms", "limits",
+    "web"};
+constexpr std::array<std::string_view, 6> kWebKeys = {
+    "png_level", "webp_quality", "webp_lossless", "webp_method", "jpeg_quality", "cache_mib"};
 constexpr std::array<std::string_view, 9> kLimitKeys = {
     "max_header_bytes", "max_target_bytes",  "max_connections",  "max_pipeline",    "min_send_rate",
     "idle_timeout_ms",  "header_timeout_ms", "write_timeout_ms", "drain_timeout_ms"};
@@ -103,6 +107,40 @@ Status apply_limits(const json& l, const std::string& file, HttpServerLimits& L)
   return bad;
 }
 
+// The "web" object: encoder settings and the RAM cache's cap of web images (docs/PROTOCOL.md §12).
+Status apply_web(const json& w, const std::string& file, WebTileConfig& web) {
+  if (auto st = check_keys(w, kWebKeys, "web.", file); !st.ok()) return st;
+  Status bad;
+  auto whole = [&](const char* key, std::int64_t lo, std::int64_t hi, auto& out) {
+    if (!w.contains(key) || !bad.ok()) return;
+    const json& v = w.at(key);
+    if (!v.is_number_integer() || v.get<std::int64_t>() < lo || v.get<std::int64_t>() > hi) {
+      bad = config_error(file, "web." + std::string(key) + " is " + v.dump() + ": a whole number " +
+                                   std::to_string(lo) + " to " + std::to_string(hi));
+      return;
+    }
+    out = static_cast<std::remove_reference_t<decltype(out)>>(v.get<std::int64_t>());
+  };
+  whole("png_level", 0, 9, web.encode.png_level);
+  whole("webp_quality", 0, 100, web.encode.webp_quality);
+  whole("webp_method", 0, 6, web.encode.webp_method);
+  whole("jpeg_quality", 1, 100, web.encode.jpeg_quality);
+  std::int64_t mib = -1;
+  whole("cache_mib", 0, 1 << 20, mib);
+  if (mib >= 0) web.cache_bytes = std::size_t(mib) << 20;
+  if (bad.ok() && w.contains("webp_lossless")) {
+    if (!w.at("webp_lossless").is_boolean())
+      return config_error(
+          file, "web.webp_lossless is " + w.at("webp_lossless").dump() + ": true or false");
+    web.encode.webp_lossless = w.at("webp_lossless").get<bool>();
+  }
+  if (bad.ok()) {
+    if (Status st = validate(web.encode); !st.ok())
+      return config_error(file, "web: " + st.error().message);
+  }
+  return bad;
+}
+
 // Throws nlohmann::json::exception on a value of the wrong type.
 Status apply(const json& j, const std::string& file, HttpServerOptions& o) {
   if (auto st = check_keys(j, kTopKeys, "", file); !st.ok()) return st;
@@ -141,6 +179,8 @@ Status apply(const json& j, const std::string& file, HttpServerOptions& o) {
     if (auto st = apply_access(j.at("access"), file, o.router); !st.ok()) return st;
   if (j.contains("limits"))
     if (auto st = apply_limits(j.at("limits"), file, o.limits); !st.ok()) return st;
+  if (j.contains("web"))
+    if (auto st = apply_web(j.at("web"), file, o.router.web); !st.ok()) return st;
   return {};
 }
 

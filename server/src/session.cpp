@@ -1,5 +1,7 @@
 #include "session.hpp"
 
+#include "web_tile_cache.hpp"
+
 #include <algorithm>
 #include <atomic>
 #include <boost/asio/dispatch.hpp>
@@ -333,13 +335,16 @@ void Session::enqueue(std::unique_ptr<Outgoing> out) {
   out->seq = next_seq_++;
   Outgoing& o = *out;
   const bool deferred = o.response.deferred != nullptr;
-  if (deferred)
+  const bool web_wait = o.response.web_wait != nullptr;
+  if (deferred || web_wait)
     o.ready = false;
   else
     prepare(o);
   queue_.push_back(std::move(out));
   if (deferred)
     start_deferred(o);  // may finish it at once (a cache hit)
+  else if (web_wait)
+    start_web_wait(o);  // may finish it at once (the encoding ended meanwhile)
   else if (!writing_ && !in_write_)
     write_next();
 }
@@ -377,6 +382,31 @@ void Session::start_deferred(const Outgoing& o) {
     finish_deferred(seq, std::move(call->answer));
 }
 
+// Waits for the encoding of a web image another request leads (single flight). The flight's
+// callback runs on the leader's thread when it finishes (or here at once when it has finished
+// already) and posts the answer to this connection's thread: no thread ever blocks waiting.
+void Session::start_web_wait(const Outgoing& o) {
+  o.response.web_wait->flight->on_done(
+      [self = shared_from_this(), seq = o.seq, executor = socket_.get_executor()](
+          const WebTilePtr& tile, const std::string& why) mutable {
+        asio::post(executor, [session = std::move(self), seq, tile, why] {
+          session->finish_web_wait(seq, tile, why);
+        });
+      });
+}
+
+void Session::finish_web_wait(std::uint64_t seq, const WebTilePtr& tile, const std::string& why) {
+  if (closed_) return;
+  auto it = std::find_if(queue_.begin(), queue_.end(),
+                         [seq](const std::unique_ptr<Outgoing>& o) { return o->seq == seq; });
+  if (it == queue_.end() || (*it)->ready) return;
+  Outgoing& o = **it;
+  o.response = complete_web_wait(std::move(o.response), tile, why);
+  o.ready = true;
+  prepare(o);
+  if (!writing_ && !in_write_) write_next();
+}
+
 // On the connection's thread: the provider answered response `seq`. Dropped when the
 // connection has closed meanwhile (its queue is gone or going).
 void Session::finish_deferred(std::uint64_t seq, ProvidedTile tile) {
@@ -386,6 +416,7 @@ void Session::finish_deferred(std::uint64_t seq, ProvidedTile tile) {
   if (it == queue_.end() || (*it)->ready) return;
   Outgoing& o = **it;
   o.response = complete_deferred(std::move(o.response), std::move(tile));
+  if (o.response.web_wait) return start_web_wait(o);  // a web image, being encoded
   o.ready = true;
   prepare(o);
   // Inside write_next() (the answer came at once, while completing a response resumed reading),

@@ -75,6 +75,9 @@ class Session final : public std::enable_shared_from_this<Session>, public Swept
   void prepare(Outgoing& o);
   void start_deferred(const Outgoing& o);
   void finish_deferred(std::uint64_t seq, ProvidedTile tile);
+  void start_web_wait(const Outgoing& o);
+  void finish_web_wait(std::uint64_t seq, const std::shared_ptr<const WebTile>& tile,
+                       const std::string& why);
   void write_next();
   void wait_writable();
   bool complete_front();

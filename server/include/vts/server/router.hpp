@@ -20,9 +20,24 @@
 #include "vts/protocol/geometry.hpp"
 #include "vts/protocol/tile_provider.hpp"
 #include "vts/protocol/tileset.hpp"
+#include "vts/protocol/web_image.hpp"
 #include "vts/server/tileset_registry.hpp"
 
 namespace vts {
+
+namespace http_detail {
+class WebTileCache;  // web_tile_cache.hpp
+class Flight;
+struct WebTile;
+}  // namespace http_detail
+
+// Web images of tiles (/{ts}/{z}/{x}/{y}.png|.webp|.jpg; docs/PROTOCOL.md §12).
+struct WebTileConfig {
+  WebEncodeOptions encode;
+  std::size_t cache_bytes = std::size_t(64) << 20;  // "cache_mib" (default 64 MiB; 0 = no cache)
+  // Made by HttpServer from cache_bytes when null; route() without one encodes every request.
+  std::shared_ptr<http_detail::WebTileCache> cache;
+};
 
 // Per-tileset access control (from the config file). A tileset with neither tokens nor keys is
 // public.
@@ -39,6 +54,7 @@ struct RouterConfig {
   std::size_t max_target_bytes = 8192;                       // longer request targets are 414
   // Clock for signed-URL expiry (seconds since the Unix epoch); tests substitute their own.
   std::int64_t (*now_unix_seconds)() = nullptr;
+  WebTileConfig web;
 };
 
 enum class HttpMethod : std::uint8_t { get, head, options, other };
@@ -72,6 +88,18 @@ struct DeferredTile {
   TileId id;
   std::string if_none_match;
   std::string cache_control;
+  // A web image of the tile (/{ts}/{z}/{x}/{y}.{ext}): encoded once the tile arrives.
+  std::optional<WebFormat> web;
+  WebEncodeOptions web_options;
+  std::shared_ptr<http_detail::WebTileCache> web_cache;
+};
+
+// route()'s marker for a web image another request is encoding (single flight): wait for
+// `flight` (Flight::on_done), then complete_web_wait().
+struct DeferredWebTile {
+  std::shared_ptr<http_detail::Flight> flight;
+  std::string if_none_match;
+  std::string cache_control;
 };
 
 struct HttpResponse {
@@ -98,6 +126,9 @@ struct HttpResponse {
   // Set (and nothing else but `route`, CORS headers and head_only) when the answer depends on
   // a provided tile: call provider->tile(), then complete_deferred() with its answer.
   std::shared_ptr<const DeferredTile> deferred;
+  // Set (with `route`, `hold`, CORS headers and head_only) when the answer is a web image being
+  // encoded for another request: wait for its flight, then call complete_web_wait().
+  std::shared_ptr<const DeferredWebTile> web_wait;
 };
 
 // The answer to a request refused before it could be routed (the network layer: a request that
@@ -131,8 +162,15 @@ HttpResponse route_admin(const HttpRequest& request, const AdminState& state);
 
 // Finishes a deferred response (`marker`, as route() returned it) with the provider's answer:
 // 200 / 304 / 204 / 404 / 502 / 503 (docs/PROTOCOL.md §11), keeping the marker's CORS headers
-// and HEAD flag. A payload whose tile header frame is damaged is a 502.
+// and HEAD flag. A payload whose tile header frame is damaged is a 502. For a web image the
+// answer may be a `web_wait` response (its encoding under way): wait for it as for route()'s.
 HttpResponse complete_deferred(HttpResponse marker, ProvidedTile tile);
+
+// Finishes a `web_wait` response (`marker`) once its flight is done: 200 / 304 with the image, or
+// 500 when its encoding failed (`error`).
+HttpResponse complete_web_wait(HttpResponse marker,
+                               const std::shared_ptr<const http_detail::WebTile>& tile,
+                               const std::string& error);
 
 // Signs a URL path for an HMAC-protected tileset: returns "?expires=<t>&sig=<hex>" to append.
 std::string sign_path(std::string_view path, std::int64_t expires_unix, std::string_view key);

@@ -5,7 +5,9 @@
 //   access: {"<tileset>": {"tokens": [...], "hmac_keys": [...]}},
 //   limits: {max_header_bytes, max_target_bytes, max_connections, max_pipeline, min_send_rate,
 //            idle_timeout_ms, header_timeout_ms, write_timeout_ms,
-//            drain_timeout_ms}.
+//            drain_timeout_ms},
+//   web: {png_level 0..9, webp_quality 0..100, webp_lossless, webp_method 0..6,
+//         jpeg_quality 1..100, cache_mib 0..1048576}.
 // A key not in this list, at any level, is an error naming the key and the file: a misspelt
 // limit must not silently leave the default in force.
 #pragma once

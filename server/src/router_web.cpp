@@ -1,0 +1,464 @@
+// Web images of tiles (docs/PROTOCOL.md §12): /{ts}[@{version}]/{z}/{x}/{y}.png|.webp|.jpg and the
+// TileJSON that points stock web maps at them. An image is encoded from the stored tile on the
+// cache's encode workers (decode, crop the border, encode), once per key however many requests
+// want it at the same time (WebTileCache's single flight), and kept in the bounded RAM cache.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <nlohmann/json.hpp>
+
+#include "router_internal.hpp"
+#include "tile_tag_memo.hpp"
+#include "vts/protocol/codec.hpp"
+#include "vts/protocol/tilejson.hpp"
+#include "vts/protocol/tiling.hpp"
+#include "vts/protocol/web_mercator.hpp"
+#include "web_tile_cache.hpp"
+
+namespace vts::router_detail {
+namespace {
+
+using http_detail::WebTile;
+using http_detail::WebTileCache;
+using http_detail::WebTilePtr;
+
+// What the encoding options change in the bytes of `f`: part of the ETag and the cache key, so
+// a server restarted with other options never answers a stale client copy with 304.
+std::string options_tag(WebFormat f, const WebEncodeOptions& o) {
+  switch (f) {
+    case WebFormat::png:
+      return "png" + std::to_string(o.png_level);
+    case WebFormat::webp:
+      return o.webp_lossless
+                 ? "webpll" + std::to_string(o.webp_method)
+                 : "webp" + std::to_string(o.webp_quality) + "m" + std::to_string(o.webp_method);
+    case WebFormat::jpeg:
+      return "jpg" + std::to_string(o.jpeg_quality);
+  }
+  return "";
+}
+
+std::string hex16(std::uint64_t v) {
+  std::string s(16, '0');
+  for (int i = 0; i < 16; ++i) s[std::size_t(i)] = "0123456789abcdef"[(v >> (60 - 4 * i)) & 0xf];
+  return s;
+}
+
+}  // namespace
+
+HttpResponse web_image_response(const WebTilePtr& tile, std::string_view if_none_match,
+                                const std::string& cc) {
+  HttpResponse r;
+  r.route = Route::tile;
+  add(r, "ETag", tile->etag);
+  add(r, "Cache-Control", cc);
+  if (none_match(if_none_match, tile->etag)) {
+    r.status = 304;
+    return r;
+  }
+  add(r, "Content-Type", tile->content_type);
+  r.view = tile->bytes;
+  r.content_length = r.view.size();
+  r.keep = tile;
+  return r;
+}
+
+namespace {
+
+using Encoder = std::function<Result<std::vector<std::uint8_t>>()>;
+
+// Runs `encode`, counts it, and (with a cache) stores the image and ends the flight `lead`,
+// which answers the requests waiting for it. Null with `why` set when encoding failed.
+WebTilePtr encode_now(WebTileCache* cache, const std::string& key,
+                      const std::shared_ptr<http_detail::Flight>& lead, std::string etag,
+                      const char* type, const Encoder& encode, std::string& why) {
+  const auto start = std::chrono::steady_clock::now();
+  WebTilePtr tile;
+  try {
+    if (auto bytes = encode()) {
+      tile = std::make_shared<const WebTile>(WebTile{std::move(*bytes), std::move(etag), type});
+    } else {
+      why = bytes.error().to_string();
+    }
+  } catch (const std::exception& e) {  // bad_alloc: the waiters must still be answered
+    why = e.what();
+  }
+  if (cache != nullptr) {
+    const auto us = std::chrono::duration_cast<std::chrono::microseconds>(
+                        std::chrono::steady_clock::now() - start)
+                        .count();
+    cache->encodes.fetch_add(1, std::memory_order_relaxed);
+    cache->encode_us_sum.fetch_add(std::uint64_t(us), std::memory_order_relaxed);
+    if (!tile) cache->encode_failures.fetch_add(1, std::memory_order_relaxed);
+    cache->finish(key, lead, tile, why);
+  }
+  return tile;
+}
+
+HttpResponse wait_for(std::shared_ptr<http_detail::Flight> flight, std::string_view if_none_match,
+                      const std::string& cc) {
+  auto d = std::make_shared<DeferredWebTile>();
+  d->flight = std::move(flight);
+  d->if_none_match = std::string(if_none_match);
+  d->cache_control = cc;
+  HttpResponse r;
+  r.route = Route::tile;
+  r.web_wait = std::move(d);
+  return r;
+}
+
+// The image under `key`: from the cache; else encoded by the cache's workers (the first request
+// to miss it starts the encoding, it and every request for the same image meanwhile wait for it:
+// a web_wait marker the session completes without blocking its thread); without workers (or
+// without a cache), encoded now on this thread. `encode` must own what it reads.
+HttpResponse encoded(const RouterConfig& config, const std::string& key, std::string etag,
+                     const char* type, Encoder encode, std::string_view if_none_match,
+                     const std::string& cc) {
+  WebTileCache* cache = config.web.cache.get();
+  WebTileCache::Lookup found;
+  if (cache != nullptr) {
+    found = cache->acquire(key);
+    if (found.hit) return web_image_response(found.hit, if_none_match, cc);
+    if (found.wait) return wait_for(std::move(found.wait), if_none_match, cc);
+    if (cache->has_workers()) {
+      // The cache outlives its jobs (its destructor runs the queued ones before it returns).
+      cache->run([cache, key, lead = found.lead, etag = std::move(etag), type,
+                  encode = std::move(encode)]() mutable {
+        std::string why;
+        encode_now(cache, key, lead, std::move(etag), type, encode, why);
+      });
+      return wait_for(std::move(found.lead), if_none_match, cc);
+    }
+  }
+  std::string why;
+  WebTilePtr tile = encode_now(cache, key, found.lead, std::move(etag), type, encode, why);
+  if (!tile) return tile_error(500, "cannot encode the web image: " + why);
+  return web_image_response(tile, if_none_match, cc);
+}
+
+// A tile with nothing to show (beyond the image's edge, or absent from a sparse archive): a
+// fully transparent T x T image, 200, cacheable like a tile. For .jpg (no alpha in JPEG) it is a
+// PNG, with Content-Type image/png: browsers decode images by their bytes, and a black square
+// would hide what lies under the layer.
+HttpResponse empty_tile(const Tileset& t, WebFormat f, const RouterConfig& config,
+                        std::string_view if_none_match, const std::string& cc) {
+  return web_filler(t.info.geometry.tile_size(), f, config, if_none_match, cc);
+}
+
+}  // namespace
+
+HttpResponse web_filler(std::uint32_t size, WebFormat f, const RouterConfig& config,
+                        std::string_view if_none_match, const std::string& cc) {
+  const std::string tag = options_tag(f, config.web.encode);
+  const WebFormat as = f == WebFormat::jpeg ? WebFormat::png : f;
+  Encoder encode = [size, as, options = config.web.encode] {
+    const TileImage clear{size, size, PixelFormat::rgba8,
+                          std::vector<std::uint8_t>(std::size_t(size) * size * 4, 0)};
+    return encode_web_image(clear, as, options);
+  };
+  const std::string key = "empty/" + std::to_string(size) + "/" + tag;
+  return encoded(config, key, "\"empty-" + std::to_string(size) + "-" + tag + "\"",
+                 web_format_content_type(as).data(), std::move(encode), if_none_match, cc);
+}
+
+HttpResponse web_tile_route(const HttpRequest& request, std::shared_ptr<const Tileset> t,
+                            std::string_view version, std::span<const std::string_view> zxy,
+                            WebFormat format, const RouterConfig& config, bool priv) {
+  if (!version.empty() && version != t->version) return not_current(version, t->name, t->version);
+  const std::uint32_t z = *parse_u32(zxy[0]), x = *parse_u32(zxy[1]), y = *parse_u32(zxy[2]);
+  const Geometry& g = t->info.geometry;
+  if (z > static_cast<std::uint32_t>(g.max_zoom())) return outside_pyramid(z, x, y, t->name);
+  const TileId id{static_cast<std::uint8_t>(z), x, y};
+  // The XYZ grid of level z (at least 2^z x 2^z, as web maps address it): beyond it, 404.
+  const std::uint32_t side = std::uint32_t(1) << z;
+  if (x >= std::max(side, g.tiles_x(id.z)) || y >= std::max(side, g.tiles_y(id.z))) {
+    return outside_pyramid(z, x, y, t->name);
+  }
+  if (config.web.cache) {
+    config.web.cache->requests_by_format[static_cast<std::size_t>(format)].fetch_add(
+        1, std::memory_order_relaxed);
+  }
+  const std::string cc = version.empty() ? cache_control(priv, config.max_age_seconds, false)
+                                         : cache_control(priv, kImmutableMaxAge, true);
+  auto finish = [&t](HttpResponse r) {
+    r.hold = t;  // names the tileset in access logs
+    return r;
+  };
+  if (!g.exists(id)) return finish(empty_tile(*t, format, config, request.if_none_match, cc));
+
+  const std::string tag = options_tag(format, config.web.encode);
+  auto etag_of = [&tag](std::uint64_t checksum) {
+    return "\"" + hex16(checksum) + "-" + tag + "\"";
+  };
+  const std::uint64_t tile_id = pmtiles::zxy_to_tile_id(id.z, id.x, id.y);
+  const std::string key = t->name + "@" + t->version + "/" + std::to_string(tile_id) + "/" + tag;
+  if (config.web.cache) {
+    // A cached image answers without reading the archive (its key names the archive's version).
+    if (auto hit = config.web.cache->peek(key)) {
+      return finish(web_image_response(hit, request.if_none_match, cc));
+    }
+  }
+  http_detail::TileTagMemo* memo = t->tags.get();
+  if (!request.if_none_match.empty() && memo) {
+    // A tag read before from this file answers without touching it.
+    if (auto known = memo->find(tile_id);
+        known && none_match(request.if_none_match, etag_of(*known))) {
+      HttpResponse r;
+      r.status = 304;
+      r.route = Route::tile;
+      add(r, "ETag", etag_of(*known));
+      add(r, "Cache-Control", cc);
+      return finish(std::move(r));
+    }
+  }
+  auto payload = t->reader->get(id);
+  if (!payload) {
+    const Error& e = payload.error();
+    if (e.code == ErrorCode::changed) {
+      HttpResponse r = archive_changed(t, e);
+      r.route = Route::tile;
+      return r;
+    }
+    if (http_status(e.code) == 404 && t->info.sparse) {
+      return finish(empty_tile(*t, format, config, request.if_none_match, cc));
+    }
+    if (http_status(e.code) == 404) {
+      return tile_error(404, "tile " + id.to_string() + " is missing from the archive of " +
+                                 t->name + " (archive incomplete)");
+    }
+    return tile_error(http_status(e.code),
+                      "archive of " + t->name + " is damaged: " + e.to_string());
+  }
+  auto header = parse_tile_header(*payload);
+  if (!header) {
+    return tile_error(500, "tile " + id.to_string() + " of " + t->name +
+                               " is damaged: " + header.error().to_string());
+  }
+  if (memo) memo->remember(tile_id, header->checksum);
+  Encoder encode = [stored_payload =
+                        std::make_shared<const std::vector<std::uint8_t>>(std::move(*payload)),
+                    tileset = t, id, format,
+                    options = config.web.encode]() -> Result<std::vector<std::uint8_t>> {
+    auto stored = decode_tile(*stored_payload);
+    if (!stored) return stored.error();
+    auto content = tile_content(*stored, tileset->info.geometry, id);
+    if (!content) return content.error();
+    return encode_web_image(*content, format, options);
+  };
+  return finish(encoded(config, key, etag_of(header->checksum),
+                        web_format_content_type(format).data(), std::move(encode),
+                        request.if_none_match, cc));
+}
+
+HttpResponse web_mercator_tile_route(const HttpRequest& request, std::shared_ptr<const Tileset> t,
+                                     std::string_view version,
+                                     std::span<const std::string_view> zxy, WebFormat format,
+                                     const RouterConfig& config, bool priv) {
+  if (!version.empty() && version != t->version) return not_current(version, t->name, t->version);
+  const std::uint32_t z = *parse_u32(zxy[0]), x = *parse_u32(zxy[1]), y = *parse_u32(zxy[2]);
+  auto range = web_mercator_range(t->info);
+  if (!range) {
+    return tile_error(404, "tileset \"" + t->name + "\" has no WebMercatorQuad tiles (" +
+                               range.error().message + "); use /" + t->name + "/{z}/{x}/{y}." +
+                               std::string(web_format_extension(format)));
+  }
+  if (z > std::uint32_t(range->max_zoom) || x >= (std::uint32_t(1) << z) ||
+      y >= (std::uint32_t(1) << z)) {
+    return tile_error(404, "WebMercatorQuad tile " + std::to_string(z) + "/" + std::to_string(x) +
+                               "/" + std::to_string(y) + " is outside the pyramid of " + t->name);
+  }
+  if (config.web.cache) {
+    config.web.cache->requests_by_format[static_cast<std::size_t>(format)].fetch_add(
+        1, std::memory_order_relaxed);
+  }
+  const std::string cc = version.empty() ? cache_control(priv, config.max_age_seconds, false)
+                                         : cache_control(priv, kImmutableMaxAge, true);
+  // Wholly outside the footprint: the transparent filler, without reading the archive.
+  const double n = std::ldexp(1.0, int(z)), pi = std::acos(-1.0);
+  auto lat = [&](double row) {
+    return std::atan(std::sinh(pi * (1.0 - 2.0 * row / n))) * 180 / pi;
+  };
+  const LonLatBounds& b = range->bounds;
+  if (x / n * 360 - 180 >= b.east || (x + 1) / n * 360 - 180 <= b.west || lat(y) <= b.south ||
+      lat(y + 1.0) >= b.north) {
+    HttpResponse r = empty_tile(*t, format, config, request.if_none_match, cc);
+    r.hold = std::move(t);
+    return r;
+  }
+  // The tile is a function of the archive's content (its version) and of z/x/y and the options.
+  const std::string tag = options_tag(format, config.web.encode);
+  const std::string zxy_text =
+      std::to_string(z) + "-" + std::to_string(x) + "-" + std::to_string(y);
+  const std::string etag = "\"" + t->version + "-wmq-" + zxy_text + "-" + tag + "\"";
+  HttpResponse r;
+  if (none_match(request.if_none_match, etag)) {
+    r.status = 304;
+    r.route = Route::tile;
+    add(r, "ETag", etag);
+    add(r, "Cache-Control", cc);
+  } else {
+    Encoder encode = [tileset = t, z, x, y, format,
+                      options = config.web.encode]() -> Result<std::vector<std::uint8_t>> {
+      const FetchStoredTile fetch = [&tileset](TileId id) -> Result<std::optional<TileImage>> {
+        auto payload = tileset->reader->get(id);
+        if (!payload) {
+          if (http_status(payload.error().code) == 404) return std::optional<TileImage>();
+          return payload.error();
+        }
+        auto stored = decode_tile(*payload);
+        if (!stored) return stored.error();
+        if (stored->format == PixelFormat::bc1) {
+          auto rgba = bc1_to_rgba8(*stored);
+          if (!rgba) return rgba.error();
+          return std::optional<TileImage>(std::move(*rgba));
+        }
+        return std::optional<TileImage>(std::move(*stored));
+      };
+      auto tile = render_web_mercator_tile(tileset->info, int(z), x, y, fetch);
+      if (!tile) return tile.error();
+      if (!*tile) {  // only an edge shared with the footprint: nothing to draw
+        const std::uint32_t s = tileset->info.geometry.tile_size();
+        *tile =
+            TileImage{s, s, PixelFormat::rgba8, std::vector<std::uint8_t>(std::size_t(s) * s * 4)};
+      }
+      return encode_web_image(**tile, format, options);
+    };
+    r = encoded(config, t->name + "@" + t->version + "/wmq/" + zxy_text + "/" + tag, etag,
+                web_format_content_type(format).data(), std::move(encode), request.if_none_match,
+                cc);
+  }
+  r.hold = std::move(t);
+  return r;
+}
+
+HttpResponse provided_web_image(const DeferredTile& d, const std::vector<std::uint8_t>* payload) {
+  RouterConfig config;  // the parts encoded() reads
+  config.web.encode = d.web_options;
+  config.web.cache = d.web_cache;
+  const std::string& name = d.tileset->name;
+  if (payload == nullptr) {
+    return web_filler(d.tileset->info.geometry.tile_size(), *d.web, config, d.if_none_match,
+                      d.cache_control);
+  }
+  auto header = parse_tile_header(*payload);
+  if (!header) {
+    return tile_error(502, "tile " + d.id.to_string() + " of " + name +
+                               " is damaged: " + header.error().to_string());
+  }
+  const std::string tag = options_tag(*d.web, d.web_options);
+  const std::string etag = "\"" + hex16(header->checksum) + "-" + tag + "\"";
+  if (none_match(d.if_none_match, etag)) {
+    HttpResponse r;
+    r.status = 304;
+    r.route = Route::tile;
+    add(r, "ETag", etag);
+    add(r, "Cache-Control", d.cache_control);
+    return r;
+  }
+  // Keyed by content (the checksum) and tile: a provided tileset's version may be unknown.
+  const std::string key =
+      "provided/" + name + "/" + d.id.to_string() + "/" + hex16(header->checksum) + "/" + tag;
+  Encoder encode = [stored_payload = std::make_shared<const std::vector<std::uint8_t>>(*payload),
+                    tileset = d.tileset, id = d.id, format = *d.web,
+                    options = d.web_options]() -> Result<std::vector<std::uint8_t>> {
+    auto stored = decode_tile(*stored_payload);
+    if (!stored) return stored.error();
+    auto content = tile_content(*stored, tileset->info.geometry, id);
+    if (!content) return content.error();
+    return encode_web_image(*content, format, options);
+  };
+  return encoded(config, key, etag, web_format_content_type(*d.web).data(), std::move(encode),
+                 d.if_none_match, d.cache_control);
+}
+
+namespace {
+
+// The TileJSON of a WorldCRS84Quad tileset served as WebMercatorQuad (web_mercator_tile_route).
+HttpResponse web_mercator_tilejson(const std::string& name, const TilesetInfo& info,
+                                   const std::string& version, bool versioned, WebFormat format,
+                                   const std::string& base, bool priv) {
+  auto range = web_mercator_range(info);
+  if (!range) {
+    HttpResponse r = error(400, "tileset \"" + name + "\": " + range.error().message);
+    r.route = Route::tilejson;
+    return r;
+  }
+  const std::string tiles = base + "/" + name + (versioned ? "@" + version : std::string()) +
+                            "/WebMercatorQuad/{z}/{x}/{y}." +
+                            std::string(web_format_extension(format));
+  auto j = nlohmann::ordered_json::parse(
+      write_tilejson({.tileset = name, .info = &info, .version = version, .tiles_url = tiles}));
+  j.erase("vtstream");
+  const LonLatBounds& b = range->bounds;
+  j["tileSize"] = info.geometry.tile_size();
+  j["minzoom"] = range->min_zoom;
+  j["maxzoom"] = range->max_zoom;
+  j["bounds"] = {b.west, b.south, b.east, b.north};
+  const auto& c = info.georeference->center;
+  j["center"] = {std::clamp(c.lon, b.west, b.east), std::clamp(c.lat, b.south, b.north),
+                 std::min(c.level, range->max_zoom)};
+  HttpResponse r;
+  r.route = Route::tilejson;
+  set_owned(r, j.dump(2) + "\n", "application/json");
+  add(r, "Cache-Control", cache_control(priv, 60, false));
+  return r;
+}
+
+}  // namespace
+
+HttpResponse web_tilejson_route(const std::string& name, const TilesetInfo& info,
+                                const std::string& version, bool versioned, const Query& q,
+                                const std::string& base, bool priv) {
+  auto fail = [](std::string why) {
+    HttpResponse r = error(400, std::move(why));
+    r.route = Route::tilejson;
+    return r;
+  };
+  auto format = parse_web_format(*q.format);
+  if (!format) return fail("format: " + format.error().message);
+  const Tiling native = info.georeference ? info.georeference->tiling : Tiling::none;
+  if (q.tiling) {
+    auto tiling = parse_tiling(*q.tiling);
+    if (!tiling || *tiling != Tiling::web_mercator_quad) {
+      return fail("tiling \"" + std::string(*q.tiling) +
+                  "\": the one tiling web tiles are offered in is WebMercatorQuad");
+    }
+    if (native == Tiling::world_crs84_quad) {
+      return web_mercator_tilejson(name, info, version, versioned, *format, base, priv);
+    }
+    if (native != Tiling::web_mercator_quad) {
+      return fail("tileset \"" + name +
+                  "\" is a plain image (no georeference): it has no WebMercatorQuad tiles; "
+                  "tiling=WebMercatorQuad is served for WebMercatorQuad and WorldCRS84Quad "
+                  "tilesets");
+    }
+  }
+  const std::string ext(web_format_extension(*format));
+  const std::string tiles =
+      base + "/" + name + (versioned ? "@" + version : std::string()) + "/{z}/{x}/{y}." + ext;
+  auto j = nlohmann::ordered_json::parse(
+      write_tilejson({.tileset = name, .info = &info, .version = version, .tiles_url = tiles}));
+  j.erase("vtstream");  // the tiles are images, not our codec: native clients must not read it
+  const Geometry& g = info.geometry;
+  j["tileSize"] = g.tile_size();
+  if (!info.georeference) {
+    // Pixel space placed as if Web Mercator: level max_zoom's pixels are the world's at that
+    // zoom, from the top-left (north-west) corner.
+    const double world = double(g.tile_size()) * std::ldexp(1.0, g.max_zoom());
+    const double fx = std::min(1.0, double(g.width()) / world);
+    const double fy = std::min(1.0, double(g.height()) / world);
+    const double pi = std::acos(-1.0);
+    const double east = -180.0 + 360.0 * fx;
+    const double south = std::atan(std::sinh(pi * (1.0 - 2.0 * fy))) * 180.0 / pi;
+    const double north = 85.0511287798066;
+    j["bounds"] = {-180.0, south, east, north};
+    j["center"] = {(east - 180.0) / 2.0, std::atan(std::sinh(pi * (1.0 - fy))) * 180.0 / pi, 0};
+  }
+  HttpResponse r;
+  r.route = Route::tilejson;
+  set_owned(r, j.dump(2) + "\n", "application/json");
+  add(r, "Cache-Control", cache_control(priv, 60, false));
+  return r;
+}
+
+}  // namespace vts::router_detail

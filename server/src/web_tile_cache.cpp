@@ -1,0 +1,156 @@
+#include "web_tile_cache.hpp"
+
+namespace vts::http_detail {
+
+void Flight::on_done(Callback cb) {
+  std::unique_lock lock(m_);
+  if (!done_) {
+    waiters_.push_back(std::move(cb));
+    return;
+  }
+  lock.unlock();
+  cb(tile_, error_);
+}
+
+void Flight::complete(WebTilePtr tile, std::string error) {
+  std::vector<Callback> waiters;
+  {
+    std::lock_guard lock(m_);
+    tile_ = std::move(tile);
+    error_ = std::move(error);
+    done_ = true;
+    waiters.swap(waiters_);
+  }
+  for (auto& cb : waiters) cb(tile_, error_);  // tile_ and error_ no longer change
+}
+
+WebTileCache::WebTileCache(std::size_t capacity_bytes, int encode_threads)
+    : capacity_(capacity_bytes) {
+  for (int i = 0; i < encode_threads; ++i) {
+    workers_.emplace_back([this] {
+      while (true) {
+        std::function<void()> job;
+        {
+          std::unique_lock lock(jobs_m_);
+          jobs_cv_.wait(lock, [this] { return stopping_ || !jobs_.empty(); });
+          if (jobs_.empty()) return;  // stopping, and nothing left to encode
+          job = std::move(jobs_.front());
+          jobs_.pop_front();
+        }
+        job();
+      }
+    });
+  }
+}
+
+WebTileCache::~WebTileCache() {
+  stop();
+}
+
+void WebTileCache::stop() {
+  {
+    std::lock_guard lock(jobs_m_);
+    stopping_ = true;
+  }
+  jobs_cv_.notify_all();
+  for (auto& w : workers_) w.join();
+  workers_.clear();
+}
+
+void WebTileCache::run(std::function<void()> job) {
+  {
+    std::lock_guard lock(jobs_m_);
+    jobs_.push_back(std::move(job));
+  }
+  jobs_cv_.notify_one();
+}
+
+WebTilePtr WebTileCache::peek(const std::string& key) {
+  std::lock_guard lock(m_);
+  auto it = map_.find(key);
+  if (it == map_.end()) return nullptr;
+  lru_.splice(lru_.begin(), lru_, it->second.lru);
+  hits.fetch_add(1, std::memory_order_relaxed);
+  return it->second.tile;
+}
+
+WebTileCache::Lookup WebTileCache::acquire(const std::string& key) {
+  std::lock_guard lock(m_);
+  if (auto it = map_.find(key); it != map_.end()) {
+    lru_.splice(lru_.begin(), lru_, it->second.lru);
+    hits.fetch_add(1, std::memory_order_relaxed);
+    return {.hit = it->second.tile};
+  }
+  misses.fetch_add(1, std::memory_order_relaxed);
+  if (auto it = flights_.find(key); it != flights_.end()) {
+    waits.fetch_add(1, std::memory_order_relaxed);
+    return {.wait = it->second};
+  }
+  auto flight = std::make_shared<Flight>();
+  flights_.emplace(key, flight);
+  return {.lead = std::move(flight)};
+}
+
+void WebTileCache::finish(const std::string& key, const std::shared_ptr<Flight>& flight,
+                          WebTilePtr tile, std::string error) {
+  {
+    std::lock_guard lock(m_);
+    flights_.erase(key);
+    const std::size_t size = tile ? tile->bytes.size() : 0;
+    if (tile && size <= capacity_ && !map_.contains(key)) {
+      while (used_ + size > capacity_ && !lru_.empty()) {
+        auto victim = map_.find(lru_.back());
+        used_ -= victim->second.tile->bytes.size();
+        map_.erase(victim);
+        lru_.pop_back();
+        evictions.fetch_add(1, std::memory_order_relaxed);
+      }
+      lru_.push_front(key);
+      map_.emplace(key, Entry{tile, lru_.begin()});
+      used_ += size;
+    }
+    bytes.store(used_, std::memory_order_relaxed);
+    entries.store(map_.size(), std::memory_order_relaxed);
+  }
+  flight->complete(std::move(tile), std::move(error));
+}
+
+std::string web_metrics_text(const WebTileCache& c) {
+  auto v = [](const std::atomic<std::uint64_t>& a) {
+    return std::to_string(a.load(std::memory_order_relaxed));
+  };
+  std::string s;
+  s += "# HELP vts_web_tile_requests_total Web image tile requests (PNG/WebP/JPEG) by format.\n";
+  s += "# TYPE vts_web_tile_requests_total counter\n";
+  constexpr WebFormat kFormats[] = {WebFormat::png, WebFormat::webp, WebFormat::jpeg};
+  for (WebFormat f : kFormats) {
+    s += "vts_web_tile_requests_total{format=\"" + std::string(web_format_extension(f)) + "\"} " +
+         v(c.requests_by_format[static_cast<std::size_t>(f)]) + "\n";
+  }
+  auto counter = [&](const char* name, const char* help, const std::atomic<std::uint64_t>& a,
+                     const char* type = "counter") {
+    s += std::string("# HELP ") + name + " " + help + "\n# TYPE " + name + " " + type + "\n" +
+         name + " " + v(a) + "\n";
+  };
+  counter("vts_web_cache_hits_total", "Web images answered from the RAM cache.", c.hits);
+  counter("vts_web_cache_misses_total", "Web images not in the RAM cache.", c.misses);
+  counter("vts_web_cache_waits_total",
+          "Misses that waited for the encoding of the same image under way (single flight).",
+          c.waits);
+  counter("vts_web_cache_evictions_total", "Web images evicted from the RAM cache.", c.evictions);
+  counter("vts_web_cache_bytes", "Bytes of web images held in the RAM cache.", c.bytes, "gauge");
+  counter("vts_web_cache_entries", "Web images held in the RAM cache.", c.entries, "gauge");
+  s += "# HELP vts_web_cache_capacity_bytes The RAM cache's byte cap (web.cache_mib).\n";
+  s += "# TYPE vts_web_cache_capacity_bytes gauge\n";
+  s += "vts_web_cache_capacity_bytes " + std::to_string(c.capacity()) + "\n";
+  counter("vts_web_encodes_total", "Web images encoded (tile decoded, cropped, encoded).",
+          c.encodes);
+  counter("vts_web_encode_failures_total", "Web image encodings that failed.", c.encode_failures);
+  s += "# HELP vts_web_encode_seconds_sum Time spent decoding tiles and encoding web images.\n";
+  s += "# TYPE vts_web_encode_seconds_sum counter\n";
+  s += "vts_web_encode_seconds_sum " +
+       std::to_string(double(c.encode_us_sum.load(std::memory_order_relaxed)) / 1e6) + "\n";
+  return s;
+}
+
+}  // namespace vts::http_detail
