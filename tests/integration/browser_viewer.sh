@@ -9,7 +9,9 @@
 # JSON index stays as it was, the page's 404 for an unknown tileset, and the embedded assets'
 # content types, immutable caching, content hash in the URL, ETag and 304 (and exit 77, skipped,
 # after those, for a vts without the web image tiles the page shows). Last, stock MapLibre GL
-# JS (pinned npm maplibre-gl) on the web TileJSON of the WebMercatorQuad archive: the same pixels.
+# JS (pinned npm maplibre-gl) on the web TileJSON of the WebMercatorQuad archive (the same pixels
+# as vts extract) and on the WorldCRS84Quad archive resampled to WebMercatorQuad (the same pixels
+# as the tiles that TileJSON names).
 # shellcheck source=lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 # shellcheck source=serve_lib.sh
@@ -21,6 +23,7 @@ export CHROMIUM=${CHROMIUM:-$(command -v chromium || true)}
   fail "npm package puppeteer-core is not installed in $BROWSER_JS (run scripts/setup.sh)"
 require_tool python3
 require_tool gdal_translate
+require_tool vips
 export HOME="$WORK/home" # chromium's profile and crash files stay in the test's directory
 mkdir -p "$HOME"
 
@@ -158,6 +161,38 @@ expect_ok "$NODE" "$BROWSER_JS/maplibre.mjs" "$BASE" "$BASE/merc.json?format=png
 tail -n 1 "$OUT" >"$WORK/maplibre.json"
 json_check "$WORK/maplibre.json" 'j.problems.length === 0 && j.loaded > 0' "MapLibre met no error"
 same_window merc 3 700 600 "$WORK/maplibre.png"
+
+note "stock MapLibre GL JS on the WorldCRS84Quad archive resampled to WebMercatorQuad"
+curl -sf "$BASE/crs84.json?format=png&tiling=WebMercatorQuad" >"$WORK/crs84_wmq.json" ||
+  fail "GET /crs84.json?format=png&tiling=WebMercatorQuad failed"
+template=$(json_get "$WORK/crs84_wmq.json" 'j.tiles[0]')
+expect_ok "$NODE" "$BROWSER_JS/maplibre.mjs" "$BASE" "$BASE/crs84.json?format=png&tiling=WebMercatorQuad" \
+  3 700 600 "$WORK/maplibre_wmq.png"
+tail -n 1 "$OUT" >"$WORK/maplibre_wmq.json"
+json_check "$WORK/maplibre_wmq.json" 'j.problems.length === 0 && j.loaded > 0' \
+  "MapLibre on the resampled tiles met no error"
+# The reference: the tiles the TileJSON names, x 2..4 and y 2..3 of zoom 3, joined; the window
+# (764, 664) of zoom 3's world is at (252, 152) in them.
+tiles=()
+for y in 2 3; do
+  for x in 2 3 4; do
+    url=${template//\{z\}/3}
+    url=${url//\{x\}/$x}
+    url=${url//\{y\}/$y}
+    curl -sf -o "$WORK/wmq_${x}_$y.png" "$url" || fail "GET $url failed"
+    tiles+=("$WORK/wmq_${x}_$y.png")
+  done
+done
+vips arrayjoin "${tiles[*]}" "$WORK/wmq_mosaic.png" --across 3 || fail "vips arrayjoin failed"
+"$OIIOTOOL" "$WORK/wmq_mosaic.png" --ch R,G,B --cut 384x256+252+152 --origin +0+0 --fullpixels \
+  -o "$WORK/wmq.want.png"
+"$OIIOTOOL" "$WORK/maplibre_wmq.png" --ch R,G,B --cut 384x256+64+64 --origin +0+0 --fullpixels \
+  -o "$WORK/wmq.got.png"
+if ! "$IDIFF" -fail 0.004 -warn 0.004 "$WORK/wmq.got.png" "$WORK/wmq.want.png" \
+  >"$LOGS/idiff.wmq.txt" 2>&1; then
+  cat "$LOGS/idiff.wmq.txt" >&2
+  fail "MapLibre shows other pixels than the resampled tiles its TileJSON names"
+fi
 
 stop_server
 echo "browser viewer OK"
