@@ -112,7 +112,7 @@ for tool in node npm cmake ninja oiiotool idiff vips gdal_translate gdalwarp; do
   }
 done
 
-# npm packages for the integration tests: exactly what package-lock.json pins. A stamp holding the
+# npm packages for the build (server/web) and the integration tests: exactly what package-lock.json pins. A stamp holding the
 # lock file's hash makes re-runs instant; a changed lock file (or VTS_SETUP_FORCE=1) reinstalls.
 npm_ci() { # DIR
   local dir=$1 stamp want
@@ -127,7 +127,12 @@ npm_ci() { # DIR
   printf '%s\n' "$want" >"$stamp"
 }
 export npm_config_update_notifier=false
+# server/web: OpenLayers for the browser viewer, which the build embeds in vts (CMake stops with
+# a message naming this script when it is missing); tests/integration/browser_js: puppeteer-core,
+# which drives Debian's chromium against that viewer.
+npm_ci "$ROOT/server/web"
 npm_ci "$ROOT/tests/integration/pmtiles_js"
 npm_ci "$ROOT/tests/integration/deploy_js"
+npm_ci "$ROOT/tests/integration/browser_js"
 
 log "done"

@@ -635,7 +635,12 @@ HttpResponse dispatch(const HttpRequest& request, const TilesetRegistry& registr
   if (config.public_base_url.empty() && !request.host.empty() && !valid_host(request.host)) {
     return error(400, "malformed Host header");
   }
-  if (target->path == "/") return index_route(registry, provider, config, base);
+  if (auto page = web_page(request, *target, registry, config, provider)) return std::move(*page);
+  if (target->path == "/") {
+    HttpResponse r = index_route(registry, provider, config, base);
+    add(r, "Vary", "Accept");  // a browser gets the HTML index (router_web_page.cpp)
+    return r;
+  }
   Address a;
   if (auto bad = parse_address(target->path, a)) return std::move(*bad);
   return serve_address(request, *target, a, registry, config, provider, base);
@@ -659,6 +664,8 @@ const char* route_name(Route r) noexcept {
       return "error";
     case Route::admin:
       return "admin";
+    case Route::viewer:
+      return "viewer";
   }
   return "error";
 }

@@ -117,4 +117,27 @@ HttpResponse web_tilejson_route(const std::string& name, const TilesetInfo& info
                                 const std::string& version, bool versioned, const Query& q,
                                 const std::string& base, bool priv);
 
+// ---- the browser viewer (router_web_page.cpp, web_assets.cpp)
+
+// A file embedded in the binary at build time (server/CMakeLists.txt generates web_assets.cpp).
+struct WebAsset {
+  std::string_view name;          // "ol.js"
+  std::string_view url_name;      // "ol.<first 16 hex digits of its SHA-256>.js"
+  std::string_view hash;          // those 16 hex digits (the ETag)
+  std::string_view content_type;  // "text/javascript; charset=utf-8"
+  std::span<const std::uint8_t> bytes;
+};
+std::span<const WebAsset> web_assets();
+
+// Text for HTML content and quoted attribute values: & < > " ' as character references.
+std::string html_escape(std::string_view s);
+// A URL path segment: every byte but RFC 3986's unreserved ones percent-encoded.
+std::string url_segment(std::string_view s);
+
+// GET / from a browser (Accept: text/html), /{ts}/ and /_viewer/<asset>; nullopt for any other
+// path (and for / without text/html, which stays the JSON index).
+std::optional<HttpResponse> web_page(const HttpRequest& request, const Target& target,
+                                     const TilesetRegistry& registry, const RouterConfig& config,
+                                     const AsyncTileProvider* provider);
+
 }  // namespace vts::router_detail

@@ -57,6 +57,9 @@ void read_fields(const RequestParser::value_type& req, HttpRequest& hr) {
       case http::field::access_control_request_method:
         slot = &hr.access_control_request_method;
         break;
+      case http::field::accept:
+        slot = &hr.accept;
+        break;
       default:
         continue;
     }

@@ -3,7 +3,7 @@
 // view inside the held archive mapping, a Content-Length that matches it, no body on 204/304, and
 // no CR/LF/NUL in any header (no response splitting). The input is split on '\n' into
 //   method, target, Host, If-None-Match, Range, If-Range, Origin, Authorization,
-//   Access-Control-Request-Method
+//   Access-Control-Request-Method, Accept
 // (missing lines are absent headers). In the target, "X@cur" becomes "X@<current version of X>" so
 // the fuzzer reaches the immutable versioned-tile path. Three tiny archives are built once into a
 // temp folder: "t" (dense, z 0..3), "s" (sparse) and "p" (protected: token "secret", HMAC key "k").
@@ -92,7 +92,7 @@ void check_response(const vts::HttpRequest& req, const vts::HttpResponse& r) {
     check(r.file_offset <= r.hold->reader->size() &&
           r.content_length <= r.hold->reader->size() - r.file_offset);
   } else if (!r.view.empty()) {
-    check(r.keep != nullptr);
+    check(r.keep != nullptr || r.route == vts::Route::viewer);  // viewer assets: static storage
     check(r.content_length == r.view.size());
   } else {
     check(r.content_length == r.owned.size());
@@ -108,7 +108,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   Fixture& f = fixture();
   const std::string_view input(reinterpret_cast<const char*>(data), size);
   std::vector<std::string_view> lines;
-  for (std::size_t start = 0; start <= input.size() && lines.size() < 9;) {
+  for (std::size_t start = 0; start <= input.size() && lines.size() < 10;) {
     const std::size_t nl = input.find('\n', start);
     if (nl == std::string_view::npos) {
       lines.push_back(input.substr(start));
@@ -117,7 +117,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     lines.push_back(input.substr(start, nl - start));
     start = nl + 1;
   }
-  lines.resize(9);
+  lines.resize(10);
 
   vts::HttpRequest req;
   req.method_text = lines[0];
@@ -140,6 +140,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   req.origin = lines[6];
   req.authorization = lines[7];
   req.access_control_request_method = lines[8];
+  req.accept = lines[9];
 
   for (const auto* config : {&f.open_config, &f.strict_config}) {
     const vts::HttpResponse r = vts::route(req, f.registry, *config);

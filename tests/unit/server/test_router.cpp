@@ -10,6 +10,7 @@
 #include <optional>
 #include <string>
 
+#include "router_internal.hpp"
 #include "tile_tag_memo.hpp"
 #include "vts/builder/builder.hpp"
 #include "vts/protocol/codec.hpp"
@@ -549,10 +550,88 @@ TEST_F(Router, EveryResponseCarriesCorsHeadersIncludingErrors) {
     SCOPED_TRACE(target);
     EXPECT_EQ(header(r, "Access-Control-Allow-Origin"), "*");
     EXPECT_EQ(header(r, "Access-Control-Expose-Headers"), "ETag, Content-Range, Content-Length");
-    EXPECT_FALSE(header(r, "Vary").has_value());
+    if (std::string_view(target) == "/") {
+      EXPECT_EQ(header(r, "Vary"), "Accept");  // a browser gets the HTML index
+    } else {
+      EXPECT_FALSE(header(r, "Vary").has_value());
+    }
   }
   EXPECT_EQ(header(get("/dense/0/0/0", vts::HttpMethod::other), "Access-Control-Allow-Origin"),
             "*");
+}
+
+// ---------------------------------------------------------------------------------------------
+// The browser viewer (router_web_page.cpp)
+
+std::string body_text(const vts::HttpResponse& r) {
+  if (!r.view.empty())
+    return std::string(reinterpret_cast<const char*>(r.view.data()), r.view.size());
+  return r.owned;
+}
+
+TEST_F(Router, IndexIsHtmlForABrowserAndTheSameJsonOtherwise) {
+  const std::string index_json = get("/").owned;
+  ASSERT_EQ(nlohmann::json::parse(index_json).size(), 3u);
+  req_.accept = "text/html,application/xhtml+xml,application/xml;q=0.9,*/*;q=0.8";
+  auto html = get("/");
+  EXPECT_EQ(html.status, 200);
+  EXPECT_EQ(html.route, vts::Route::viewer);
+  EXPECT_EQ(header(html, "Content-Type"), "text/html; charset=utf-8");
+  EXPECT_EQ(header(html, "Vary"), "Accept");
+  for (const char* name : {"dense", "secret", "sparse"}) {
+    EXPECT_NE(html.owned.find("<a href=\"" + std::string(name) + "/\">" + name + "</a>"),
+              std::string::npos)
+        << html.owned;
+  }
+  req_.accept = "*/*";
+  EXPECT_EQ(get("/").owned, index_json);
+  req_.accept = "";
+  EXPECT_EQ(get("/").owned, index_json);
+}
+
+TEST_F(Router, ViewerPageOfATilesetLinksItsTileJsonAndTheEmbeddedAssets) {
+  auto r = get("/dense/");
+  EXPECT_EQ(r.status, 200);
+  EXPECT_EQ(r.route, vts::Route::viewer);
+  EXPECT_EQ(header(r, "Content-Type"), "text/html; charset=utf-8");
+  EXPECT_NE(r.owned.find("data-tileset=\"dense\" data-tilejson=\"../dense.json\""),
+            std::string::npos);
+  EXPECT_EQ(get("/nope/").status, 404);
+  EXPECT_EQ(get("/secret/").status, 401);  // a protected tileset's page needs its credentials
+  req_.authorization = "Bearer tok-1";
+  EXPECT_EQ(get("/secret/").status, 200);
+  // Every asset the page names is served with its type, an immutable lifetime and its ETag.
+  int assets = 0;
+  for (std::size_t at = r.owned.find("../_viewer/"); at != std::string::npos;
+       at = r.owned.find("../_viewer/", at + 1)) {
+    const std::string url = r.owned.substr(at + 2, r.owned.find('"', at) - at - 2);
+    SCOPED_TRACE(url);
+    auto a = get(url);
+    ++assets;
+    EXPECT_EQ(a.status, 200);
+    EXPECT_EQ(a.route, vts::Route::viewer);
+    EXPECT_GT(body_text(a).size(), 100u);
+    EXPECT_EQ(header(a, "Content-Type"),
+              url.ends_with(".js") ? "text/javascript; charset=utf-8" : "text/css; charset=utf-8");
+    EXPECT_EQ(header(a, "Cache-Control"), "public, max-age=31536000, immutable");
+    const auto etag = header(a, "ETag");
+    ASSERT_TRUE(etag.has_value());
+    EXPECT_NE(url.find("." + etag->substr(1, 16) + "."), std::string::npos);
+    req_.if_none_match = *etag;
+    auto not_modified = get(url);
+    EXPECT_EQ(not_modified.status, 304);
+    EXPECT_EQ(not_modified.content_length, 0u);
+    req_.if_none_match = "";
+  }
+  EXPECT_EQ(assets, 4);
+  EXPECT_EQ(get("/_viewer/ol.js").status, 404);  // only the hashed names
+  EXPECT_EQ(get("/_viewer/").status, 404);
+}
+
+// Tileset names are [A-Za-z0-9._-] today; the pages escape them all the same.
+TEST(ViewerPage, NamesAreEscapedForHtmlAndUrls) {
+  EXPECT_EQ(vts::router_detail::html_escape("a<b>&\"c'd"), "a&lt;b&gt;&amp;&quot;c&#39;d");
+  EXPECT_EQ(vts::router_detail::url_segment("a b/c%d.e-f_g~h\xff"), "a%20b%2Fc%25d.e-f_g~h%FF");
 }
 
 TEST_F(Router, ASpecificCorsOriginVariesOnOrigin) {
@@ -857,7 +936,8 @@ TEST(RouteNames, EveryRouteHasAStableMetricsLabel) {
   EXPECT_STREQ(vts::route_name(vts::Route::admin), "admin");
   EXPECT_STREQ(vts::route_name(vts::Route::tile), "tile");
   EXPECT_STREQ(vts::route_name(vts::Route::error), "error");
-  EXPECT_EQ(vts::kRouteCount, int(vts::Route::admin) + 1);
+  EXPECT_STREQ(vts::route_name(vts::Route::viewer), "viewer");
+  EXPECT_EQ(vts::kRouteCount, int(vts::Route::viewer) + 1);
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -71,12 +71,14 @@ struct HttpRequest {
   std::string_view origin;
   std::string_view authorization;
   std::string_view access_control_request_method;
+  std::string_view accept;  // "text/html" in it: GET / answers the HTML index (a browser)
 };
 
 // Which route answered, for metrics labels (stable names). `admin` is every answer of the admin
 // listener.
-enum class Route : std::uint8_t { index, tilejson, tile, archive, preflight, error, admin };
-inline constexpr int kRouteCount = 7;
+// `viewer` is the browser viewer's pages and assets.
+enum class Route : std::uint8_t { index, tilejson, tile, archive, preflight, error, admin, viewer };
+inline constexpr int kRouteCount = 8;
 const char* route_name(Route r) noexcept;
 
 // route()'s marker for a tile that must come from the provider: what complete_deferred() needs
@@ -107,8 +109,9 @@ struct HttpResponse {
   // for every request, and a name never needs a copy.
   std::vector<std::pair<std::string_view, std::string>> headers;
   // The body is one of: `owned`; `view` (into bytes owned by `keep`: a tile read from an
-  // archive, a provided tile); or, with `file_body`, bytes [file_offset, file_offset +
-  // content_length) of `hold`'s archive, read as they are sent.
+  // archive, a provided tile; or, with no `keep`, a viewer asset embedded in the binary); or, with
+  // `file_body`, bytes [file_offset, file_offset + content_length) of `hold`'s archive, read as
+  // they are sent.
   std::string owned;
   std::span<const std::uint8_t> view;
   std::shared_ptr<const Tileset> hold;  // the tileset answered from (access logs, file bodies)
