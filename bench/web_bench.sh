@@ -122,7 +122,7 @@ for fmt in png webp; do
   start_web 4096
   sed "s|^|url = \"http://127.0.0.1:$VTS_PORT|; s|\$|\"\noutput = \"/dev/null\"|" "$T/vts.$fmt" \
     >"$T/warm.cfg"
-  curl -sf --parallel --parallel-max 8 -K "$T/warm.cfg" || die "warm-up of the web cache failed"
+  curl -sSf --parallel --parallel-max 8 --no-progress-meter -K "$T/warm.cfg" || die "warm-up of the web cache failed"
   run_wrk "hot.$fmt" "http://127.0.0.1:$VTS_PORT" "$T/vts.$fmt"
   stop_vts
 done

@@ -3,7 +3,8 @@
 # replicas on loopback (plain HTTP and TLS + HTTP/2 listeners, a self-signed certificate):
 #   1. tiles, TileJSON and archive ranges are byte-exact through the front; ETag and
 #      Cache-Control pass through; HTTP/2 over TLS works;
-#   2. a repeated tile is a cache HIT (X-Cache-Status); "version not current" 404s are not cached;
+#   2. a repeated tile is a cache HIT (X-Cache-Status), web images (.png) too; "version not
+#      current" 404s are not cached; the index varies by Accept (HTML or JSON) through the cache;
 #   3. a rebuilt archive is rolled out (renamed into place on both replicas, which hot-reload):
 #      the new TileJSON's versioned URLs give the new bytes; an old versioned URL gives the old
 #      bytes where a cache holds them and 404 "not current" elsewhere; no response ever carries a
@@ -120,6 +121,22 @@ u=$(url_of "$template" 2/1/1)
 [[ $(header_of X-Cache-Status "$u") == HIT ]] || fail "second versioned request is not a HIT"
 [[ $(header_of Cache-Control "$u") == "public, max-age=31536000, immutable" ]] ||
   fail "versioned tile is not immutable through the front"
+# Web images and the web TileJSON go through the same cache: a versioned PNG is immutable and a
+# HIT the second time; the index answers HTML to a browser and JSON otherwise, through one cache.
+web=$(curl -sf "$F/earth.json?format=png" | json_get /dev/stdin 'j.tiles[0]')
+[[ $web == "$F/earth@$V1/{z}/{x}/{y}.png" ]] || fail "web TileJSON tiles through the front: $web"
+u=$(url_of "$web" 2/1/1)
+[[ $(header_of X-Cache-Status "$u") == MISS ]] || fail "first web image request is not a MISS"
+[[ $(header_of X-Cache-Status "$u") == HIT ]] || fail "second web image request is not a HIT"
+[[ $(header_of Content-Type "$u") == image/png ]] || fail "web image through the front is not a PNG"
+[[ $(header_of Cache-Control "$u") == "public, max-age=31536000, immutable" ]] ||
+  fail "versioned web image is not immutable through the front"
+for i in 1 2; do
+  [[ $(header_of Content-Type -H 'Accept: text/html' "$F/") == text/html* ]] ||
+    fail "a browser got no HTML index through the front (try $i)"
+  [[ $(header_of Content-Type "$F/") == application/json* ]] ||
+    fail "a client got no JSON index through the front (try $i)"
+done
 bogus="$F/earth@0123456789abcdef/0/0/0"
 for i in 1 2; do
   expect_status 404 "$bogus"
