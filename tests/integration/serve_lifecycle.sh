@@ -69,7 +69,7 @@ done
 grep -q 'reload refused' "$LOGS/serve.err" || fail "broken archive not refused"
 [[ $(version) == "$v" ]] || fail "version changed after a broken replacement"
 expect_status 200 "$BASE/tiles/1/1/0"
-curl -sf "$ADMIN_BASE/metrics" | grep -qE '^vts_reloads_total\{result="refused"\} [1-9]' ||
+grep -qE '^vts_reloads_total\{result="refused"\} [1-9]' <<<"$(curl -sf "$ADMIN_BASE/metrics")" ||
   fail "refusal not counted in /metrics"
 
 note "SIGHUP reloads (a fixed archive comes back)"
