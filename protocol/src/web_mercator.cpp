@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <deque>
 #include <string>
 #include <utility>
 #include <vector>
@@ -65,7 +66,8 @@ class TileCache {
   const Geometry& g_;
   int level_;
   const FetchStoredTile& fetch_;
-  std::vector<std::pair<TileId, std::optional<TileImage>>> tiles_;
+  // A deque: get() hands out pointers that must survive later insertions.
+  std::deque<std::pair<TileId, std::optional<TileImage>>> tiles_;
 };
 
 // Premultiplied accumulation of weighted texels.
