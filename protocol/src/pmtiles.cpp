@@ -290,6 +290,14 @@ std::uint64_t zxy_to_tile_id(std::uint8_t z, std::uint32_t x, std::uint32_t y) {
   return tiles_before_level(z) + d;
 }
 
+TileIdRange subtree_tile_ids(TileId root, std::uint8_t z) {
+  assert(root.z <= z && z <= kMaxZ);
+  const std::uint64_t h = zxy_to_tile_id(root.z, root.x, root.y) - tiles_before_level(root.z);
+  const unsigned shift = 2u * static_cast<unsigned>(z - root.z);
+  const std::uint64_t first = tiles_before_level(z) + (h << shift);
+  return {first, first + (std::uint64_t{1} << shift) - 1};
+}
+
 Result<TileId> tile_id_to_zxy(std::uint64_t tile_id) {
   int z = 0;
   while (z < kMaxZ && tile_id >= tiles_before_level(z + 1)) ++z;

@@ -175,6 +175,48 @@ TEST(TileId, MatchesSpecValuesAtLowZooms) {
   EXPECT_EQ(zxy_to_tile_id(3, 7, 0), 84u);
 }
 
+// Every tile's id lies in the range of each of its ancestors' sub-pyramids, and the range holds
+// exactly the ancestor's 4^(z - L) descendants: exhaustively to level 7, sampled to level 31.
+TEST(TileId, EverySubPyramidIsOneContiguousIdRangePerLevel) {
+  for (std::uint8_t z = 0; z <= 7; ++z) {
+    for (std::uint32_t x = 0; x < (1u << z); ++x) {
+      for (std::uint32_t y = 0; y < (1u << z); ++y) {
+        const std::uint64_t id = zxy_to_tile_id(z, x, y);
+        for (std::uint8_t l = 0; l <= z; ++l) {
+          const TileId root{l, x >> (z - l), y >> (z - l)};
+          const TileIdRange r = subtree_tile_ids(root, z);
+          ASSERT_LE(r.first, id) << root.to_string() << " at " << int(z);
+          ASSERT_GE(r.last, id) << root.to_string() << " at " << int(z);
+          ASSERT_EQ(r.last - r.first + 1, std::uint64_t{1} << (2 * (z - l)));
+        }
+      }
+    }
+  }
+  std::mt19937_64 rng(20261126);
+  for (int i = 0; i < 20000; ++i) {
+    const auto z = static_cast<std::uint8_t>(rng() % 32);
+    const auto x = static_cast<std::uint32_t>(rng() & ((std::uint64_t{1} << z) - 1));
+    const auto y = static_cast<std::uint32_t>(rng() & ((std::uint64_t{1} << z) - 1));
+    const auto l = static_cast<std::uint8_t>(rng() % (z + 1u));
+    const TileIdRange r = subtree_tile_ids(TileId{l, x >> (z - l), y >> (z - l)}, z);
+    const std::uint64_t id = zxy_to_tile_id(z, x, y);
+    ASSERT_TRUE(r.first <= id && id <= r.last)
+        << z << "/" << x << "/" << y << " under level " << int(l);
+    // The range's ends are the root's descendants too.
+    for (std::uint64_t end : {r.first, r.last}) {
+      auto t = tile_id_to_zxy(end);
+      ASSERT_TRUE(t.ok());
+      EXPECT_EQ(t->z, z);
+      EXPECT_EQ(t->x >> (z - l), x >> (z - l));
+      EXPECT_EQ(t->y >> (z - l), y >> (z - l));
+    }
+  }
+  // Sub-pyramids sorted by their root's id are in id order at every deeper level.
+  const TileIdRange a = subtree_tile_ids(TileId{2, 1, 3}, 9),
+                    b = subtree_tile_ids(TileId{2, 2, 3}, 9);
+  EXPECT_EQ(zxy_to_tile_id(2, 1, 3) < zxy_to_tile_id(2, 2, 3), a.last < b.first);
+}
+
 TEST(TileId, MatchesReferenceImplementationValuesAtHighZooms) {
   // Values asserted by the protomaps reference implementations' own tests.
   EXPECT_EQ(zxy_to_tile_id(20, 0, 0), 366503875925u);

@@ -34,6 +34,16 @@ constexpr int kMaxDirectoryDepth = 4;  // root + up to 3 leaf levels; deeper mea
 std::uint64_t zxy_to_tile_id(std::uint8_t z, std::uint32_t x, std::uint32_t y);
 Result<TileId> tile_id_to_zxy(std::uint64_t tile_id);
 
+// The tile ids of the sub-pyramid under `root` at level z (root.z <= z <= 31): one contiguous
+// range, because the Hilbert position of a tile's parent is its own divided by 4. So a
+// sub-pyramid is one id range per level, and sub-pyramids sorted by their root's id are in
+// archive order at every level (what a sharded build and its merge rely on).
+struct TileIdRange {
+  std::uint64_t first = 0, last = 0;  // inclusive
+  bool operator==(const TileIdRange&) const = default;
+};
+TileIdRange subtree_tile_ids(TileId root, std::uint8_t z);
+
 struct Header {
   std::uint64_t root_dir_offset = 0, root_dir_length = 0;
   std::uint64_t metadata_offset = 0, metadata_length = 0;
