@@ -115,13 +115,21 @@ struct WriterStats {
 // Builds an archive. Payloads are spooled to a temporary file beside the destination as they
 // arrive (any order, any thread); finish() orders them by tile id, writes the final file under a
 // temporary name, fsyncs it and renames it into place. Dropping an unfinished writer removes
-// every temporary file. Payloads with equal 128-bit XXH3 hashes (and equal bytes) are stored once.
-class Writer {
+// every temporary file. The layout (which equal payloads share bytes, the directories) is the
+// rule of pmtiles_part.hpp, which merge_parts() follows too: the file depends only on the tiles.
+// Where a build's encoded tiles go: an archive (Writer) or one shard's part (pmtiles_part.hpp).
+class TileSink {
  public:
-  static Result<std::unique_ptr<Writer>> create(WriterOptions options);
-  virtual ~Writer() = default;
+  virtual ~TileSink() = default;
   // Thread-safe. Adding the same tile twice is an invalid_argument error.
   virtual Status add_tile(TileId id, std::span<const std::uint8_t> payload) = 0;
+};
+
+class Writer : public TileSink {
+ public:
+  static Result<std::unique_ptr<Writer>> create(WriterOptions options);
+  ~Writer() override = default;
+  Status add_tile(TileId id, std::span<const std::uint8_t> payload) override = 0;
   // Not thread-safe with add_tile(). metadata_json is stored as given (gzip-compressed).
   virtual Result<WriterStats> finish(const std::string& metadata_json) = 0;
   // Removes temporary files; the destination is left untouched.
