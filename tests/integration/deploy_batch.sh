@@ -212,6 +212,45 @@ miss=$(missing_pkgs "$BATCH/Dockerfile")
 [[ -z $miss ]] || fail "deploy/batch/Dockerfile's runtime stage lacks ${miss//$'\n'/ } (vts needs them: readelf -d)"
 note "${needed[*]}"
 
+# ---- docs/PLANET.md's arithmetic -------------------------------------------------------------------
+note "docs/PLANET.md: the tile counts, shard table and hours recomputed"
+"$PY" - "$DEPLOY/../docs/PLANET.md" <<'PYTHON' || fail "docs/PLANET.md's figures do not follow from its formulas (above)"
+import re, sys
+doc = re.sub(r"(?<=\d) (?=\d{3}\b)", "", open(sys.argv[1]).read())  # "11 453 246 123" -> digits
+errors = []
+def has(text, what):
+    if text not in doc:
+        errors.append(f"{what}: expected {text!r}")
+maxz, T = 17, 256
+assert T * 2**maxz == 2**25
+crs84 = lambda z: 1 if z == 0 else 4**z // 2
+merc = lambda z: 4**z
+tot = {n: sum(f(z) for z in range(maxz + 1)) for n, f in (("crs84", crs84), ("merc", merc))}
+has(f"**{tot['crs84']}**", "WorldCRS84Quad tiles")
+has(f"**{tot['merc']}**", "WebMercatorQuad tiles")
+for L in (7, 8, 9):
+    per = (4**(maxz + 1 - L) - 1) // 3
+    for n, f in (("crs84", crs84), ("merc", merc)):
+        assert f(L) * per + sum(f(z) for z in range(L)) == tot[n]
+    row = re.search(rf"^\| \**{L}\** \| \**{crs84(L)} / {merc(L)}\** \| {per} \| {T * 2**(maxz - L)} \|", doc, re.M)
+    if not row:
+        errors.append(f"shard table row L={L}: {crs84(L)} / {merc(L)} shards, {per} tiles, {T * 2**(maxz - L)} wide")
+has(f"32768 × 349525 + {sum(crs84(z) for z in range(8))} = {tot['crs84']}", "the L = 8 check")
+rate = 5e9 / 63.54
+has("7.87·10^7 texels/s", "throughput")
+bc1 = (94.9 / 102326 * 1e3 - 0.553 + 1.066) / (94.9 / 102326 * 1e3)
+has(f"**{bc1:.2f}×**", "bc1 factor")
+for texels, cell in ((2**25 * 2**24, "**7.8 h**"), (2**50, "15.5 h")):
+    has(cell, f"lossless hours {texels / (256 * rate) / 3600:.1f}")
+    if cell.strip("*") != f"{texels / (256 * rate) / 3600:.1f} h":
+        errors.append(f"{cell} is not {texels / (256 * rate) / 3600:.1f} h")
+has(f"**{2**25 * 2**24 / (256 * rate) / 3600 * bc1:.1f} h**", "bc1 hours, plate carrée")
+has(f"{tot['crs84'] * 12302 / 2**40:.0f} TiB", "bc1 bytes")
+for e in errors:
+    print("PLANET.md: " + e, file=sys.stderr)
+sys.exit(1 if errors else 0)
+PYTHON
+
 # ---- schema validation ------------------------------------------------------------------------------
 require_tool "$NODE"
 for pkg in kubernetes-models yaml; do
