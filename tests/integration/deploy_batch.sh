@@ -13,7 +13,7 @@
 #   - once `vts plan` exists: the runner, the sbatch scripts (with SLURM_ARRAY_TASK_ID set by
 #     hand) and the Job's command vectors run for real on a small synthetic plan, each merged
 #     archive byte-identical (sha256) to a single-machine `vts build`; a deleted part is the only
-#     shard rebuilt on the next run.
+#     shard rebuilt on the next run; a runner killed (SIGKILL) mid-way resumes to the same bytes.
 # shellcheck source=lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 PY=${PYTHON3:-python3}
@@ -423,6 +423,25 @@ for p in "${!mtime[@]}"; do
   [[ $p == "$victim_part" || $(stat -c %Y.%y "$p") == "${mtime[$p]}" ]] || fail "$p was rewritten"
 done
 [[ $(sha256sum <"$R/merged.pmtiles") == "$want" ]] || fail "the resumed archive differs"
+
+note "the runner killed (SIGKILL, its whole process group) once a part exists, then run again"
+rm -rf "$R/kparts" "$R/klogs"
+setsid bash "$RUNNER" --vts "$VTS" --jobs 1 --parts "$R/kparts" --logs "$R/klogs" --out "$R/killed.pmtiles" \
+  "$R/plan.json" >"$LOGS/killed.out" 2>&1 </dev/null &
+killed_pid=$!
+for ((i = 0; i < 600; i++)); do
+  compgen -G "$R/kparts/shard-*.part" >/dev/null && break
+  kill -0 "$killed_pid" 2>/dev/null || break
+  sleep 0.05
+done
+kill -KILL -- "-$killed_pid" 2>/dev/null || true
+wait "$killed_pid" 2>/dev/null || true
+have=$(compgen -G "$R/kparts/shard-*.part" | wc -l)
+((have >= 1)) || { cat "$LOGS/killed.out" >&2; fail "no part appeared before the runner ended"; }
+if ((have == n)); then note "(every shard was done before the kill: the resume below only merges)"; fi
+expect_ok bash "$RUNNER" --vts "$VTS" --jobs 2 --parts "$R/kparts" --logs "$R/klogs" --out "$R/killed.pmtiles" "$R/plan.json"
+grep -q "^run-shards: $n shards, $have with a part already" "$OUT" || { show_output; fail "resume after the kill"; }
+[[ $(sha256sum <"$R/killed.pmtiles") == "$want" ]] || fail "the archive after a killed run differs"
 
 note "build.sbatch per array task (SLURM_ARRAY_TASK_ID), then finish.sbatch"
 mkdir -p "$R/sparts"
