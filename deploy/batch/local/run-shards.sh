@@ -1,0 +1,111 @@
+#!/usr/bin/env bash
+# run-shards.sh: a planned build (`vts plan`) on one machine — every shard, then the apex, then
+# the merge — with the per-index command of the Kubernetes Job and the Slurm array:
+#
+#   JOB_COMPLETION_INDEX=I vts build --plan PLAN --out-dir PARTS
+#
+# for each shard index I whose part (PARTS/shard-IIIIII.part) does not exist yet, JOBS at a time
+# (xargs -P). A part only exists complete (vts writes it to a temporary name, fsyncs and renames
+# it), so the runner is resumable: run it again after a failure, a kill or a reboot and it builds
+# only the shards without a part, then the apex and the merge again.
+#
+# usage: run-shards.sh [--jobs J] [--parts DIR] [--logs DIR] [--vts PATH] --out OUT.pmtiles PLAN
+#   --jobs J      shards at once (default: the number of CPUs / 2, at least 1; each shard uses ~2)
+#   --parts DIR   the parts (default: PLAN's directory/parts)
+#   --logs DIR    one log per shard, shard-IIIIII.log, and the joblog: a line per shard run,
+#                 "index exit_status seconds" (default: PLAN's directory/logs)
+#   --out FILE    the merged archive
+#   --vts PATH    the vts executable (default: vts on PATH, or $VTS)
+# Exit status: 0 when the archive is written; 1 when shards failed (named, with their logs; the
+# apex and merge are not run); 2 on bad usage; otherwise the failing apex's or merge's status.
+set -euo pipefail
+
+die() {
+  printf 'run-shards: %s\n' "$*" >&2
+  exit 2
+}
+
+# Internal: one shard, run by xargs as `run-shards.sh --run-one I` with the settings in the
+# environment. Appends "I status seconds" to the joblog; a failed shard leaves no part.
+if [[ ${1:-} == --run-one ]]; then
+  i=$2
+  log=$(printf '%s/shard-%06d.log' "$RUNNER_LOGS" "$i")
+  t0=$(date +%s)
+  rc=0
+  JOB_COMPLETION_INDEX=$i "$RUNNER_VTS" build --plan "$RUNNER_PLAN" --out-dir "$RUNNER_PARTS" \
+    >"$log" 2>&1 </dev/null || rc=$?
+  printf '%s %s %s\n' "$i" "$rc" "$(($(date +%s) - t0))" >>"$RUNNER_LOGS/joblog"
+  if ((rc == 0)); then
+    printf 'run-shards: shard %s built\n' "$i"
+  else
+    printf 'run-shards: shard %s failed (exit %s): %s\n' "$i" "$rc" "$log" >&2
+  fi
+  exit 0 # failures are counted from the parts, so xargs goes on with the other shards
+fi
+
+ncpu=$(nproc 2>/dev/null || echo 2)
+jobs=$((ncpu / 2 > 0 ? ncpu / 2 : 1))
+parts="" logs="" out="" plan=""
+vts=${VTS:-vts}
+while (($#)); do
+  case $1 in
+    --jobs) jobs=${2:?--jobs needs a number}; shift 2 ;;
+    --parts) parts=${2:?--parts needs a directory}; shift 2 ;;
+    --logs) logs=${2:?--logs needs a directory}; shift 2 ;;
+    --out) out=${2:?--out needs a file}; shift 2 ;;
+    --vts) vts=${2:?--vts needs a path}; shift 2 ;;
+    -h | --help) sed -n '2,/^set -euo/{/^set -euo/d;s/^# \{0,1\}//;p}' "$0"; exit 0 ;;
+    -*) die "unknown option $1 (see --help)" ;;
+    *) [[ -z $plan ]] || die "one plan only (got $plan and $1)"; plan=$1; shift ;;
+  esac
+done
+[[ -n $plan ]] || die "no plan given (see --help)"
+[[ -n $out ]] || die "--out OUT.pmtiles is required"
+[[ $jobs =~ ^[1-9][0-9]*$ ]] || die "--jobs must be a positive integer, not '$jobs'"
+[[ -r $plan ]] || die "cannot read the plan $plan"
+command -v "$vts" >/dev/null 2>&1 || die "no vts executable '$vts' (--vts PATH)"
+dir=$(dirname "$plan")
+parts=${parts:-$dir/parts}
+logs=${logs:-$dir/logs}
+mkdir -p "$parts" "$logs"
+
+# The shard count: the length of the plan's "shards" array.
+n=$(python3 -c '
+import json, sys
+try:
+    shards = json.load(open(sys.argv[1]))["shards"]
+except (OSError, ValueError, KeyError, TypeError) as e:
+    sys.exit(f"run-shards: {sys.argv[1]} is not a plan with a \"shards\" array ({e!r})")
+if not isinstance(shards, list) or not shards:
+    sys.exit(f"run-shards: {sys.argv[1]}: \"shards\" is not a non-empty array")
+print(len(shards))' "$plan") || exit 2
+
+todo=()
+for ((i = 0; i < n; i++)); do
+  [[ -e $(printf '%s/shard-%06d.part' "$parts" "$i") ]] || todo+=("$i")
+done
+printf 'run-shards: %d shards, %d with a part already, %d to build, %d at a time\n' \
+  "$n" "$((n - ${#todo[@]}))" "${#todo[@]}" "$jobs"
+if ((${#todo[@]})); then
+  export RUNNER_VTS=$vts RUNNER_PLAN=$plan RUNNER_PARTS=$parts RUNNER_LOGS=$logs
+  printf '%s\n' "${todo[@]}" | xargs -P "$jobs" -n 1 "$BASH" "$0" --run-one
+fi
+
+failed=()
+for ((i = 0; i < n; i++)); do
+  [[ -e $(printf '%s/shard-%06d.part' "$parts" "$i") ]] || failed+=("$i")
+done
+if ((${#failed[@]})); then
+  printf 'run-shards: %d shard(s) failed: %s (logs in %s; run again to retry them)\n' \
+    "${#failed[@]}" "${failed[*]}" "$logs" >&2
+  exit 1
+fi
+
+# The apex depends on every shard's part: rebuilt whenever a shard was, or when it is missing.
+if ((${#todo[@]})) || [[ ! -e $parts/apex.part ]]; then
+  printf 'run-shards: apex\n'
+  "$vts" build --plan "$plan" --apex --out-dir "$parts"
+fi
+printf 'run-shards: merge into %s\n' "$out"
+"$vts" merge --plan "$plan" "$parts" -o "$out"
+printf 'run-shards: done: %s\n' "$out"
