@@ -364,7 +364,8 @@ class DataLayout {
 // kLeafEntries entries per directory level.
 class DirectoryBuilder {
  public:
-  static Result<DirectoryBuilder> create(const std::filesystem::path& archive, Compression c);
+  static Result<DirectoryBuilder> create(const std::filesystem::path& archive, Compression c,
+                                         std::size_t leaf_entries);
   // Tile entries in tile-id order; consecutive tiles with the same offset extend a run.
   Status add(std::uint64_t tile_id, std::uint64_t offset, std::uint32_t length);
   // Ends the stream: the compressed root directory (leaves_bytes() of leaves are in leaves_fd()).
@@ -376,14 +377,18 @@ class DirectoryBuilder {
   const std::filesystem::path& leaves_path() const { return path_; }
 
  private:
-  DirectoryBuilder(Fd file, std::filesystem::path path, Compression c)
-      : file_(std::move(file)), path_(std::move(path)), compression_(c) {}
+  DirectoryBuilder(Fd file, std::filesystem::path path, Compression c, std::size_t leaf_entries)
+      : file_(std::move(file)),
+        path_(std::move(path)),
+        compression_(c),
+        leaf_entries_(leaf_entries) {}
   Status push(std::size_t level, const Entry& e);
   Status flush(std::size_t level);
 
   Fd file_;
   std::filesystem::path path_;
   Compression compression_;
+  std::size_t leaf_entries_;
   std::vector<std::vector<Entry>> levels_;  // [0]: tile entries; [k]: pointers to level k - 1
   std::vector<bool> flushed_;               // level k has written a leaf already
   bool has_entry_ = false;

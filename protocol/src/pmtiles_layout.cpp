@@ -7,7 +7,10 @@
 namespace vts::pmtiles::detail {
 
 Result<DirectoryBuilder> DirectoryBuilder::create(const std::filesystem::path& archive,
-                                                  Compression c) {
+                                                  Compression c, std::size_t leaf_entries) {
+  if (leaf_entries < 2 || leaf_entries > kLeafEntries)
+    return make_error(ErrorCode::invalid_argument,
+                      "leaf directories hold 2 to " + std::to_string(kLeafEntries) + " entries");
   const std::filesystem::path dir =
       archive.has_parent_path() ? archive.parent_path() : std::filesystem::path(".");
   Result<std::pair<Fd, std::filesystem::path>> tmp =
@@ -15,7 +18,7 @@ Result<DirectoryBuilder> DirectoryBuilder::create(const std::filesystem::path& a
   if (!tmp) return std::move(tmp).error();
   // Unlinked at once: no crash can leave it behind.
   if (::unlink(tmp->second.c_str()) != 0) return io_error("cannot unlink", tmp->second, errno);
-  return DirectoryBuilder(std::move(tmp->first), std::move(tmp->second), c);
+  return DirectoryBuilder(std::move(tmp->first), std::move(tmp->second), c, leaf_entries);
 }
 
 Status DirectoryBuilder::add(std::uint64_t tile_id, std::uint64_t offset, std::uint32_t length) {
@@ -39,7 +42,7 @@ Status DirectoryBuilder::push(std::size_t level, const Entry& e) {
     flushed_.resize(level + 1, false);
   }
   if (level == 0) ++entries_;
-  if (levels_[level].size() == kLeafEntries) {
+  if (levels_[level].size() == leaf_entries_) {
     if (Status s = flush(level); !s) return s;
   }
   levels_[level].push_back(e);

@@ -231,10 +231,10 @@ Result<PartLayout> scan_part(int fd, const std::filesystem::path& path, bool kee
   // Each term is checked against what is left, so no sum can overflow.
   std::uint64_t left = limit;
   for (const auto& [count, unit] : {std::pair{l.info.data_bytes, std::uint64_t{1}},
-                                   {l.records, std::uint64_t{kRecordBytes}},
-                                   {segments, std::uint64_t{kSegmentBytes}},
-                                   {att, std::uint64_t{1}},
-                                   {man, std::uint64_t{1}}}) {
+                                    {l.records, std::uint64_t{kRecordBytes}},
+                                    {segments, std::uint64_t{kSegmentBytes}},
+                                    {att, std::uint64_t{1}},
+                                    {man, std::uint64_t{1}}}) {
     if (count > left / unit) return corrupt(path, "its sections do not fit its size");
     left -= count * unit;
   }
@@ -486,8 +486,8 @@ class Merger {
 
   Result<WriterStats> run() {
     if (Status s = scan(); !s) return s.error();
-    Result<DirectoryBuilder> dirs =
-        DirectoryBuilder::create(o_.archive.path, o_.archive.internal_compression);
+    Result<DirectoryBuilder> dirs = DirectoryBuilder::create(
+        o_.archive.path, o_.archive.internal_compression, o_.archive.leaf_entries);
     if (!dirs) return std::move(dirs).error();
     Result<BitSpool> bits = BitSpool::create(o_.archive.path);
     if (!bits) return std::move(bits).error();

@@ -61,8 +61,8 @@ class WriterImpl final : public Writer {
     }
     // The layout rule (pmtiles_part.hpp), which merge_parts() follows too. Blobs are distinct
     // payloads already (equal bytes were stored once), so two blobs are equal when they are one.
-    Result<DirectoryBuilder> dirs =
-        DirectoryBuilder::create(options_.path, options_.internal_compression);
+    Result<DirectoryBuilder> dirs = DirectoryBuilder::create(
+        options_.path, options_.internal_compression, options_.leaf_entries);
     if (!dirs) return std::move(dirs).error();
     std::vector<std::uint64_t> order;  // blobs in data order (a blob may be stored twice)
     WriterStats stats;

@@ -284,3 +284,33 @@ TEST(Merge, NamesAMissingADamagedOrAnOverlappingPartAndWritesNothing) {
 
 }  // namespace
 }  // namespace vts::pmtiles
+
+namespace vts::pmtiles {
+namespace {
+
+TEST(Merge, NestsLeavesOfLeavesWhenTheRootCannotHoldEveryLeafAndReadersWalkThem) {
+  TempDir dir;
+  std::map<std::uint64_t, Bytes> tiles;
+  const std::uint64_t first = zxy_to_tile_id(6, 0, 0);
+  for (std::uint64_t i = 0; i < 3000; ++i)
+    tiles[first + i] = Bytes(1 + i % 7, static_cast<std::uint8_t>(i));
+  WriterOptions o = archive_options(dir.path() / "nested.pmtiles", 6);
+  o.leaf_entries = 16;  // 3000 entries: 188 leaves, 12 leaves of pointers, a root of 12
+  auto w = Writer::create(o).value();
+  for (const auto& [id, b] : tiles) ASSERT_TRUE(w->add_tile(tile_id_to_zxy(id).value(), b));
+  ASSERT_TRUE(w->finish("{}"));
+  auto r = Reader::open(o.path).value();
+  EXPECT_EQ(r->leaf_directory_count().value(), 188u + 12u);
+  for (const auto& [id, b] : tiles) ASSERT_EQ(r->get_by_tile_id(id).value(), b) << id;
+  const auto parts = write_parts(dir.path(), tiles, 6, 1);
+  MergeOptions m;
+  m.parts = parts;
+  m.archive = o;
+  m.archive.path = dir.path() / "merged.pmtiles";
+  m.metadata_json = "{}";
+  ASSERT_TRUE(merge_parts(m));
+  EXPECT_TRUE(read_all(m.archive.path) == read_all(o.path));
+}
+
+}  // namespace
+}  // namespace vts::pmtiles

@@ -96,6 +96,9 @@ struct WriterOptions {
   TileType tile_type = TileType::unknown;
   std::uint8_t min_zoom = 0, max_zoom = 0;
   Header bounds;  // only the lon/lat/center fields are used (georeferenced_bounds())
+  // Entries per leaf directory (pmtiles_part.hpp's layout: 4096). Smaller values make nested
+  // leaves from few tiles, for tests of readers; 2 to 4096.
+  std::size_t leaf_entries = 4096;
 };
 
 // The header's lon/lat fields for a georeferenced tileset: min/max lon/lat rounded outwards to the
