@@ -129,8 +129,6 @@ struct WebAsset {
 };
 std::span<const WebAsset> web_assets();
 
-// Text for HTML content and quoted attribute values: & < > " ' as character references.
-std::string html_escape(std::string_view s);
 // A URL path segment: every byte but RFC 3986's unreserved ones percent-encoded.
 std::string url_segment(std::string_view s);
 
