@@ -30,13 +30,9 @@ TOOLS="vts,dzsave-png,dzsave-jpeg,maketx"
 KEEP=0
 while (($#)); do
   case "$1" in
-    --out) OUT_FILE=$2; shift 2 ;;
-    --vts) VTS_ARG=$2; shift 2 ;;
-    --input) INPUT=$2; shift 2 ;;
     --tools) TOOLS=$2; shift 2 ;;
     --keep) KEEP=1; shift ;;
-    -h | --help) sed -n '2,/^# shellcheck/p' "$0" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
-    *) die "unknown argument '$1' (see --help)" ;;
+    *) bench_option "$@"; shift "$OPT_SHIFT" ;;
   esac
 done
 
@@ -46,15 +42,7 @@ VTS=""
 [[ ,$TOOLS, == *,vts,* ]] && VTS=$(find_vts "$VTS_ARG")
 mkdir -p "$CACHE"
 
-if [[ -z $INPUT ]]; then
-  INPUT="$CACHE/earth_16384x8192.tif"
-  if [[ ! -s $INPUT ]]; then
-    echo "[bench] making $INPUT (once): $EARTH upscaled 8x, Lanczos-3" >&2
-    oiiotool "$EARTH" --resize:filter=lanczos3 16384x8192 -d uint8 --compression none \
-      -o "$INPUT.tmp.tif"
-    mv "$INPUT.tmp.tif" "$INPUT"
-  fi
-fi
+[[ -n $INPUT ]] || INPUT=$(earth_16k_tif)
 [[ -r $INPUT ]] || die "cannot read input $INPUT"
 read -r IN_W IN_H IN_C < <(oiiotool --info "$INPUT" |
   sed -nE 's/.*: *([0-9]+) x *([0-9]+), ([0-9]+) channel.*/\1 \2 \3/p')

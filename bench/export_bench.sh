@@ -22,31 +22,19 @@ source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 OUT_FILE="" VTS_ARG="" QUALITY=90 RUNS=3 THREADS=0
 while (($#)); do
   case "$1" in
-    --out) OUT_FILE=$2; shift 2 ;;
-    --vts) VTS_ARG=$2; shift 2 ;;
     --quality) QUALITY=$2; shift 2 ;;
     --runs) RUNS=$2; shift 2 ;;
     --threads) THREADS=$2; shift 2 ;;
-    -h | --help) sed -n '2,/^# shellcheck/p' "$0" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
-    *) die "unknown argument '$1' (see --help)" ;;
+    *) bench_option "$@"; shift "$OPT_SHIFT" ;;
   esac
 done
 need oiiotool vips node
 [[ -x $TIME_BIN ]] || die "missing $TIME_BIN (Debian package 'time')"
 VTS=$(find_vts "$VTS_ARG")
 mkdir -p "$CACHE"
-INPUT="$CACHE/earth_16384x8192.tif"
-if [[ ! -s $INPUT ]]; then
-  echo "[bench] making $INPUT (once): $EARTH upscaled 8x, Lanczos-3" >&2
-  oiiotool "$EARTH" --resize:filter=lanczos3 16384x8192 -d uint8 --compression none \
-    -o "$INPUT.tmp.tif"
-  mv "$INPUT.tmp.tif" "$INPUT"
-fi
+INPUT=$(earth_16k_tif)
 ARCHIVE="$CACHE/earth_16384x8192.pmtiles"
-if [[ ! -s $ARCHIVE || $INPUT -nt $ARCHIVE ]]; then
-  echo "[bench] building $ARCHIVE (once, not timed)" >&2
-  "$VTS" build "$INPUT" -o "$ARCHIVE" -q || die "vts build failed"
-fi
+build_once "$INPUT" "$ARCHIVE" -q
 cat "$INPUT" "$ARCHIVE" >/dev/null # into the page cache
 
 OUTDIR="$CACHE/export_out"

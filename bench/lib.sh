@@ -19,6 +19,31 @@ need() {
   done
 }
 
+# bench_option ARGS...: the options every benchmark script takes, read off the front of ARGS
+# (the script's own options are matched before it): --vts PATH sets VTS_ARG, --out FILE sets
+# OUT_FILE, --input IMAGE sets INPUT (only where the script set INPUT before, so it takes one),
+# -h/--help prints the script's header comment and exits; anything else dies naming it. Sets
+# OPT_SHIFT to the number of words used, for the caller's `shift "$OPT_SHIFT"`.
+bench_option() {
+  OPT_SHIFT=2
+  case $1 in
+    --vts | --out | --input) (($# >= 2)) || die "$1 needs a value" ;;
+  esac
+  case $1 in
+    --vts) VTS_ARG=$2 ;;
+    --out) OUT_FILE=$2 ;;
+    --input)
+      [[ -n ${INPUT+set} ]] || die "unknown argument '$1' (see --help)"
+      INPUT=$2
+      ;;
+    -h | --help)
+      sed -n '2,/^# shellcheck/p' "$0" | sed '$d; s/^# \{0,1\}//'
+      exit 0
+      ;;
+    *) die "unknown argument '$1' (see --help)" ;;
+  esac
+}
+
 # find_vts [PATH]: prints the vts executable to benchmark (default build/cli/vts from run.sh).
 find_vts() {
   local vts=${1:-$ROOT/build/cli/vts}
@@ -63,38 +88,83 @@ ratio() { # A B: A/B to 2 decimals, or "-" when B is 0/empty
 }
 mb() { awk -v b="$1" 'BEGIN { printf "%.1f", b / 1048576 }'; }
 
-# earth_archive NAME [WxH [BUILD ARGS...]]: the Earth resized to WxH (default 8192x4096) as a TIFF
-# in $CACHE, and its archive $CACHE/NAME.pmtiles built by $VTS (with BUILD ARGS, e.g. --codec bc1:
-# give each set of arguments its own NAME); both reused while current. Prints the archive.
-earth_archive() {
-  local name=$1 size=${2:-8192x4096} input archive
-  shift $(($# < 2 ? $# : 2))
+# earth_tif [WxH]: the Earth resized to WxH (default 8192x4096) as a TIFF in $CACHE, made once.
+# Prints its path.
+earth_tif() {
+  local size=${1:-8192x4096} input
   mkdir -p "$CACHE"
   input=$CACHE/earth_$size.tif
   if [[ ! -r $input ]]; then
     need oiiotool
-    oiiotool "$EARTH" --resize:filter=lanczos3 "$size" -d uint8 -o "$input" || die "resize failed"
+    oiiotool "$EARTH" --resize:filter=lanczos3 "$size" -d uint8 -o "$input" >&2 || die "resize failed"
   fi
-  archive=$CACHE/$name.pmtiles
-  if [[ ! -s $archive || $input -nt $archive ]]; then
-    "$VTS" build "$input" -o "$archive" "$@" >/dev/null || die "vts build $input failed"
-  fi
-  echo "$archive"
+  echo "$input"
 }
 
-# start_vts_serve ARCHIVE DIR [THREADS]: `$VTS serve` on a free loopback port, logs in DIR; sets
-# VTS_PID and PORT (the caller's EXIT trap stops VTS_PID).
+# earth_16k_tif: $CACHE/earth_16384x8192.tif, made once: the Earth upscaled 8x with a Lanczos-3
+# filter, stored as an uncompressed 8-bit RGB TIFF (so decoding it costs next to nothing). Prints
+# its path.
+earth_16k_tif() {
+  local input=$CACHE/earth_16384x8192.tif
+  mkdir -p "$CACHE"
+  if [[ ! -s $input ]]; then
+    echo "[bench] making $input (once): $EARTH upscaled 8x, Lanczos-3" >&2
+    oiiotool "$EARTH" --resize:filter=lanczos3 16384x8192 -d uint8 --compression none \
+      -o "$input.tmp.tif" >&2 || die "resize failed"
+    mv "$input.tmp.tif" "$input"
+  fi
+  echo "$input"
+}
+
+# serve_input: the image the serving benchmarks build their archive from: earth_16k_tif's image
+# when it is there, else earth_tif 8192x4096. Prints its path.
+serve_input() {
+  if [[ -r $CACHE/earth_16384x8192.tif ]]; then
+    echo "$CACHE/earth_16384x8192.tif"
+  else
+    earth_tif 8192x4096
+  fi
+}
+
+# build_once INPUT ARCHIVE [BUILD ARGS...]: `$VTS build INPUT -o ARCHIVE` unless ARCHIVE exists
+# and is newer than INPUT.
+build_once() {
+  local input=$1 archive=$2
+  shift 2
+  mkdir -p "$(dirname "$archive")"
+  if [[ ! -s $archive || $input -nt $archive ]]; then
+    echo "[bench] building $archive from $input (once, not timed)" >&2
+    "$VTS" build "$input" -o "$archive" "$@" >/dev/null || die "vts build $input failed"
+  fi
+}
+
+# earth_archive NAME [WxH [BUILD ARGS...]]: earth_tif WxH, and its archive $CACHE/NAME.pmtiles
+# built by $VTS (with BUILD ARGS, e.g. --codec bc1: give each set of arguments its own NAME); both
+# reused while current. Prints the archive.
+earth_archive() {
+  local name=$1 size=${2:-8192x4096} input
+  shift $(($# < 2 ? $# : 2))
+  input=$(earth_tif "$size")
+  build_once "$input" "$CACHE/$name.pmtiles" "$@"
+  echo "$CACHE/$name.pmtiles"
+}
+
+# start_vts_serve ARCHIVE DIR [THREADS [SERVE ARGS...]]: `$VTS serve` on a free loopback port
+# (no admin listener; SERVE ARGS added, e.g. --config FILE), logs in DIR; sets VTS_PID and PORT
+# (the caller's EXIT trap stops VTS_PID).
 start_vts_serve() {
-  "$VTS" serve "$1" --listen 127.0.0.1:0 --no-admin --threads "${3:-2}" >"$2/vts.out" \
-    2>"$2/vts.err" &
+  local archive=$1 dir=$2 threads=${3:-2}
+  shift $(($# < 3 ? $# : 3))
+  "$VTS" serve "$archive" --listen 127.0.0.1:0 --no-admin --threads "$threads" "$@" \
+    >"$dir/vts.out" 2>"$dir/vts.err" &
   VTS_PID=$!
   local i
   for ((i = 0; i < 100; i++)); do
-    grep -q 'listening on' "$2/vts.out" 2>/dev/null && break
+    grep -q 'listening on' "$dir/vts.out" 2>/dev/null && break
     sleep 0.05
   done
-  PORT=$(sed -nE 's|.*listening on http://[^ ]*:([0-9]+)[ ,].*|\1|p' "$2/vts.out")
-  [[ -n $PORT ]] || die "vts serve did not start: $(cat "$2/vts.err")"
+  PORT=$(sed -nE 's|.*listening on http://[^ ]*:([0-9]+)[ ,].*|\1|p' "$dir/vts.out")
+  [[ -n $PORT ]] || die "vts serve did not start: $(cat "$dir/vts.err")"
 }
 
 # free_port: a TCP port nobody listens on now on this machine.

@@ -25,12 +25,9 @@ INPUT=""
 OUT_FILE=""
 while (($#)); do
   case $1 in
-    --vts) VTS_ARG=$2; shift 2 ;;
     --duration) DURATION=$2; shift 2 ;;
     --workers) WORKERS=$2; shift 2 ;;
-    --input) INPUT=$2; shift 2 ;;
-    --out) OUT_FILE=$2; shift 2 ;;
-    *) die "unknown argument '$1'" ;;
+    *) bench_option "$@"; shift "$OPT_SHIFT" ;;
   esac
 done
 [[ $WORKERS =~ ^[1-9][0-9]*$ ]] || die "--workers must be a positive integer, not '$WORKERS'"
@@ -39,22 +36,9 @@ VTS=$(find_vts "$VTS_ARG")
 DUMP=${PMTILES_DUMP:-$(dirname "$VTS")/../tests/integration/pmtiles_dump}
 [[ -x $DUMP ]] || die "no pmtiles_dump at $DUMP (build the tests, or set PMTILES_DUMP)"
 
-mkdir -p "$CACHE"
-if [[ -z $INPUT ]]; then
-  INPUT=$CACHE/earth_16384x8192.tif
-  if [[ ! -r $INPUT ]]; then
-    INPUT=$CACHE/earth_8192x4096.tif
-    if [[ ! -r $INPUT ]]; then
-      need oiiotool
-      oiiotool "$EARTH" --resize:filter=lanczos3 8192x4096 -d uint8 -o "$INPUT"
-    fi
-  fi
-fi
+[[ -n $INPUT ]] || INPUT=$(serve_input)
 ARCHIVE=$CACHE/serve_$(basename "${INPUT%.*}").pmtiles
-if [[ ! -s $ARCHIVE || $INPUT -nt $ARCHIVE ]]; then
-  echo "building $ARCHIVE from $INPUT" >&2
-  "$VTS" build "$INPUT" -o "$ARCHIVE" >/dev/null
-fi
+build_once "$INPUT" "$ARCHIVE"
 
 T=$(mktemp -d "${TMPDIR:-/tmp}/vts-serve-bench.XXXXXX")
 NGINX_PID=""

@@ -22,32 +22,16 @@ INPUT=""
 OUT_FILE=""
 while (($#)); do
   case $1 in
-    --vts) VTS_ARG=$2; shift 2 ;;
     --duration) DURATION=$2; shift 2 ;;
-    --input) INPUT=$2; shift 2 ;;
-    --out) OUT_FILE=$2; shift 2 ;;
-    *) die "unknown argument '$1'" ;;
+    *) bench_option "$@"; shift "$OPT_SHIFT" ;;
   esac
 done
 need wrk nginx curl
 VTS=$(find_vts "$VTS_ARG")
 
-mkdir -p "$CACHE"
-if [[ -z $INPUT ]]; then
-  INPUT=$CACHE/earth_16384x8192.tif
-  if [[ ! -r $INPUT ]]; then
-    INPUT=$CACHE/earth_8192x4096.tif
-    if [[ ! -r $INPUT ]]; then
-      need oiiotool
-      oiiotool "$EARTH" --resize:filter=lanczos3 8192x4096 -d uint8 -o "$INPUT"
-    fi
-  fi
-fi
+[[ -n $INPUT ]] || INPUT=$(serve_input)
 ARCHIVE=$CACHE/web_$(basename "${INPUT%.*}").pmtiles
-if [[ ! -s $ARCHIVE || $INPUT -nt $ARCHIVE ]]; then
-  echo "building $ARCHIVE from $INPUT" >&2
-  "$VTS" build "$INPUT" -o "$ARCHIVE" >/dev/null
-fi
+build_once "$INPUT" "$ARCHIVE"
 NAME=$(basename "${ARCHIVE%.pmtiles}")
 
 T=$(mktemp -d "${TMPDIR:-/tmp}/vts-web-bench.XXXXXX")
@@ -80,16 +64,8 @@ start_nginx_static "$T/static" "$T" 1
 # start_web CACHE_MIB: vts serve --threads 1 with the web tile cache at CACHE_MIB.
 start_web() {
   echo "{\"web\": {\"cache_mib\": $1}}" >"$T/config.json"
-  "$VTS" serve "$ARCHIVE" --listen 127.0.0.1:0 --no-admin --threads 1 --config "$T/config.json" \
-    >"$T/vts.out" 2>"$T/vts.err" &
-  VTS_PID=$!
-  local i
-  for ((i = 0; i < 100; i++)); do
-    grep -q 'listening on' "$T/vts.out" 2>/dev/null && break
-    sleep 0.05
-  done
-  VTS_PORT=$(sed -nE 's|.*listening on http://[^ ]*:([0-9]+)[ ,].*|\1|p' "$T/vts.out")
-  [[ -n $VTS_PORT ]] || die "vts serve did not start: $(cat "$T/vts.err")"
+  start_vts_serve "$ARCHIVE" "$T" 1 --config "$T/config.json"
+  VTS_PORT=$PORT
 }
 
 to_ms() {

@@ -2,6 +2,8 @@
 
 #include <cstdio>
 
+#include "vts/protocol/file_io.hpp"
+
 namespace vts::client::svg {
 namespace {
 
@@ -73,31 +75,7 @@ std::string valid_utf8(std::string_view s, bool control_to_replacement) {
 
 // Text for HTML element content and attribute values (double- or single-quoted).
 std::string html_escape(std::string_view s) {
-  const std::string clean = valid_utf8(s, true);
-  std::string out;
-  out.reserve(clean.size());
-  for (char c : clean) {
-    switch (c) {
-      case '&':
-        out += "&amp;";
-        break;
-      case '<':
-        out += "&lt;";
-        break;
-      case '>':
-        out += "&gt;";
-        break;
-      case '"':
-        out += "&quot;";
-        break;
-      case '\'':
-        out += "&#39;";
-        break;
-      default:
-        out += c;
-    }
-  }
-  return out;
+  return vts::html_escape(valid_utf8(s, true));
 }
 
 std::size_t display_width(std::string_view s) {

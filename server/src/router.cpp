@@ -551,18 +551,14 @@ HttpResponse provided_web(const HttpRequest& request, std::shared_ptr<const Prov
                                "\" is served from a cache: WebMercatorQuad tiles are served by "
                                "vts serve only");
   }
-  const auto zxy = a.zxy();
   if (!a.version.empty() && (t->version.empty() || a.version != t->version)) {
     return not_current(a.version, t->name, t->version.empty() ? "unknown" : t->version);
   }
-  const std::uint32_t z = *parse_u32(zxy[0]), x = *parse_u32(zxy[1]), y = *parse_u32(zxy[2]);
   const Geometry& g = t->info.geometry;
-  if (z > static_cast<std::uint32_t>(g.max_zoom())) return outside_pyramid(z, x, y, t->name);
-  const TileId id{static_cast<std::uint8_t>(z), x, y};
-  const std::uint32_t side = std::uint32_t(1) << z;
-  if (x >= std::max(side, g.tiles_x(id.z)) || y >= std::max(side, g.tiles_y(id.z))) {
-    return outside_pyramid(z, x, y, t->name);
-  }
+  std::optional<HttpResponse> rejection;
+  const auto tile = web_tile_id(a.zxy(), g, t->name, rejection);
+  if (!tile) return std::move(*rejection);
+  const TileId id = *tile;
   if (config.web.cache) {
     config.web.cache->requests_by_format[static_cast<std::size_t>(*a.web)].fetch_add(
         1, std::memory_order_relaxed);

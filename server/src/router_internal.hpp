@@ -90,6 +90,13 @@ std::optional<HttpResponse> check_access(const TilesetAccess& access, const Http
 
 // ---- web images of tiles (router_web.cpp)
 
+// The tile a web tile route addresses, from `zxy` (validated decimals): z at most the pyramid's
+// max zoom, x and y within level z's XYZ grid (at least 2^z x 2^z, as web maps address it; the
+// pyramid's own grid where that is wider). Otherwise nullopt, with `rejection` set to the 404 of
+// outside_pyramid naming tileset `name`. Shared by archives' and provided tilesets' web tiles.
+std::optional<TileId> web_tile_id(std::span<const std::string_view> zxy, const Geometry& g,
+                                  const std::string& name, std::optional<HttpResponse>& rejection);
+
 // GET /{ts}[@{version}]/{z}/{x}/{y}.{ext}: the tile's content as a PNG / WebP / JPEG image, from
 // the web tile cache (single flight) or encoded now. `zxy` are validated decimals.
 HttpResponse web_tile_route(const HttpRequest& request, std::shared_ptr<const Tileset> t,
@@ -129,8 +136,6 @@ struct WebAsset {
 };
 std::span<const WebAsset> web_assets();
 
-// Text for HTML content and quoted attribute values: & < > " ' as character references.
-std::string html_escape(std::string_view s);
 // A URL path segment: every byte but RFC 3986's unreserved ones percent-encoded.
 std::string url_segment(std::string_view s);
 

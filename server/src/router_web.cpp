@@ -161,19 +161,31 @@ HttpResponse web_filler(std::uint32_t size, WebFormat f, const RouterConfig& con
                  web_format_content_type(as).data(), std::move(encode), if_none_match, cc);
 }
 
+std::optional<TileId> web_tile_id(std::span<const std::string_view> zxy, const Geometry& g,
+                                  const std::string& name, std::optional<HttpResponse>& rejection) {
+  const std::uint32_t z = *parse_u32(zxy[0]), x = *parse_u32(zxy[1]), y = *parse_u32(zxy[2]);
+  if (z > static_cast<std::uint32_t>(g.max_zoom())) {
+    rejection = outside_pyramid(z, x, y, name);
+    return std::nullopt;
+  }
+  const TileId id{static_cast<std::uint8_t>(z), x, y};
+  const std::uint32_t side = std::uint32_t(1) << z;
+  if (x >= std::max(side, g.tiles_x(id.z)) || y >= std::max(side, g.tiles_y(id.z))) {
+    rejection = outside_pyramid(z, x, y, name);
+    return std::nullopt;
+  }
+  return id;
+}
+
 HttpResponse web_tile_route(const HttpRequest& request, std::shared_ptr<const Tileset> t,
                             std::string_view version, std::span<const std::string_view> zxy,
                             WebFormat format, const RouterConfig& config, bool priv) {
   if (!version.empty() && version != t->version) return not_current(version, t->name, t->version);
-  const std::uint32_t z = *parse_u32(zxy[0]), x = *parse_u32(zxy[1]), y = *parse_u32(zxy[2]);
   const Geometry& g = t->info.geometry;
-  if (z > static_cast<std::uint32_t>(g.max_zoom())) return outside_pyramid(z, x, y, t->name);
-  const TileId id{static_cast<std::uint8_t>(z), x, y};
-  // The XYZ grid of level z (at least 2^z x 2^z, as web maps address it): beyond it, 404.
-  const std::uint32_t side = std::uint32_t(1) << z;
-  if (x >= std::max(side, g.tiles_x(id.z)) || y >= std::max(side, g.tiles_y(id.z))) {
-    return outside_pyramid(z, x, y, t->name);
-  }
+  std::optional<HttpResponse> rejection;
+  const auto tile = web_tile_id(zxy, g, t->name, rejection);
+  if (!tile) return std::move(*rejection);
+  const TileId id = *tile;
   if (config.web.cache) {
     config.web.cache->requests_by_format[static_cast<std::size_t>(format)].fetch_add(
         1, std::memory_order_relaxed);

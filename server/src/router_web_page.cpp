@@ -8,6 +8,7 @@
 #include <map>
 
 #include "router_internal.hpp"
+#include "vts/protocol/file_io.hpp"
 #include "vts/protocol/tileset.hpp"
 
 namespace vts::router_detail {
@@ -121,33 +122,6 @@ bool is_protected(const RouterConfig& config, std::string_view name) {
 }
 
 }  // namespace
-
-std::string html_escape(std::string_view s) {
-  std::string out;
-  out.reserve(s.size());
-  for (const char c : s) {
-    switch (c) {
-      case '&':
-        out += "&amp;";
-        break;
-      case '<':
-        out += "&lt;";
-        break;
-      case '>':
-        out += "&gt;";
-        break;
-      case '"':
-        out += "&quot;";
-        break;
-      case '\'':
-        out += "&#39;";
-        break;
-      default:
-        out.push_back(c);
-    }
-  }
-  return out;
-}
 
 std::string url_segment(std::string_view s) {
   std::string out;

@@ -40,12 +40,7 @@ R1="http://127.0.0.1:${REPLICA_PORTS[1]}"
 R2="http://127.0.0.1:${REPLICA_PORTS[2]}"
 
 note "nginx front from deploy/nginx (replicas :${REPLICA_PORTS[1]} and :${REPLICA_PORTS[2]})"
-HTTP_PORT=$(free_port)
-HTTPS_PORT=$(free_port)
-while [[ $HTTPS_PORT == "$HTTP_PORT" ]]; do HTTPS_PORT=$(free_port); done
-N="$WORK/nginx"
-mkdir -p "$N/conf.d"
-make_cert "$N/tls"
+nginx_prepare "$WORK/nginx"
 export VTS_CACHE_DIR="$N/cache" VTS_CACHE_SIZE=1g VTS_SERVER_NAME=localhost \
   VTS_FRONT_HTTP_LISTEN="127.0.0.1:$HTTP_PORT" VTS_FRONT_HTTPS_LISTEN="127.0.0.1:$HTTPS_PORT" \
   VTS_TLS_CERT="$N/tls/cert.pem" VTS_TLS_KEY="$N/tls/key.pem"

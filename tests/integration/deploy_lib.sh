@@ -105,6 +105,33 @@ CONF
   NGINX_PID=$!
 }
 
+# nginx_prepare DIR: two distinct free ports, HTTP_PORT and HTTPS_PORT, for a front's listeners;
+# N=DIR, with DIR/conf.d for the rendered templates and a throw-away certificate for 127.0.0.1 in
+# DIR/tls (cert.pem, key.pem).
+nginx_prepare() {
+  HTTP_PORT=$(free_port)
+  HTTPS_PORT=$(free_port)
+  while [[ $HTTPS_PORT == "$HTTP_PORT" ]]; do HTTPS_PORT=$(free_port); done
+  N=$1
+  mkdir -p "$N/conf.d"
+  make_cert "$N/tls"
+}
+
+# start_static_nginx SRV: nginx from deploy/nginx/vts-static.conf.template, as checked in, serving
+# the archives in folder SRV on HTTP_PORT and HTTPS_PORT (nginx_prepare "$WORK/nginx", then
+# start_nginx). Sets S, the http:// base URL; the caller waits for it with wait_http.
+start_static_nginx() {
+  nginx_prepare "$WORK/nginx"
+  export VTS_ARCHIVE_DIR="$1" VTS_SERVER_NAME=localhost \
+    VTS_STATIC_HTTP_LISTEN="127.0.0.1:$HTTP_PORT" VTS_STATIC_HTTPS_LISTEN="127.0.0.1:$HTTPS_PORT" \
+    VTS_TLS_CERT="$N/tls/cert.pem" VTS_TLS_KEY="$N/tls/key.pem"
+  render "$DEPLOY/nginx/vts-static.conf.template" "$N/conf.d/vts-static.conf" VTS_ARCHIVE_DIR \
+    VTS_SERVER_NAME VTS_STATIC_HTTP_LISTEN VTS_STATIC_HTTPS_LISTEN VTS_TLS_CERT VTS_TLS_KEY
+  if ((EUID == 0)); then chmod -R a+rX "$1"; fi
+  start_nginx "$N"
+  S="http://127.0.0.1:$HTTP_PORT"
+}
+
 # wait_http URL [SECONDS]: until URL answers anything (nginx has no "listening" line to wait for).
 wait_http() {
   local i n=$((${2:-10} * 20))

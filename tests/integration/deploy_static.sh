@@ -28,20 +28,7 @@ expect_ok "$VTS" build --synthetic 16384x8192 -o "$WORK/srv/synth.pmtiles"
 echo "not an archive" >"$WORK/srv/notes.txt"
 
 note "nginx from deploy/nginx/vts-static.conf.template"
-HTTP_PORT=$(free_port)
-HTTPS_PORT=$(free_port)
-while [[ $HTTPS_PORT == "$HTTP_PORT" ]]; do HTTPS_PORT=$(free_port); done
-N="$WORK/nginx"
-mkdir -p "$N/conf.d"
-make_cert "$N/tls"
-export VTS_ARCHIVE_DIR="$WORK/srv" VTS_SERVER_NAME=localhost \
-  VTS_STATIC_HTTP_LISTEN="127.0.0.1:$HTTP_PORT" VTS_STATIC_HTTPS_LISTEN="127.0.0.1:$HTTPS_PORT" \
-  VTS_TLS_CERT="$N/tls/cert.pem" VTS_TLS_KEY="$N/tls/key.pem"
-render "$DEPLOY/nginx/vts-static.conf.template" "$N/conf.d/vts-static.conf" VTS_ARCHIVE_DIR \
-  VTS_SERVER_NAME VTS_STATIC_HTTP_LISTEN VTS_STATIC_HTTPS_LISTEN VTS_TLS_CERT VTS_TLS_KEY
-((EUID == 0)) && chmod -R a+rX "$WORK/srv"
-start_nginx "$N"
-S="http://127.0.0.1:$HTTP_PORT"
+start_static_nginx "$WORK/srv"
 wait_http "$S/earth.pmtiles"
 
 note "Range, ETag, CORS; only archives are served"

@@ -199,6 +199,8 @@ curl -sf "$D/earth/3/2/6.png" -o "$WORK/d_outside.png" || fail "daemon filler"
 "$OIIOTOOL" "$WORK/d_outside.png" --ch R,G,B,A -d uint8 -o "$WORK/d_outside4.png"
 expect_same_pixels "$WORK/d_outside4.png" "$WORK/clear256.png"
 expect_status 400 "$D/earth/3/1/0.gif"
+expect_status 404 "$D/earth/3/8/0.png"  # beyond the XYZ grid, as on vts serve
+expect_status 404 "$D/earth/3/0/8.png"
 expect_status 404 "$D/earth/4/0/0.png"
 curl -sf "$D/earth.json?format=png" -o "$WORK/d_web.json" || fail "daemon web TileJSON"
 json_check "$WORK/d_web.json" "j.tiles[0] === '$D/earth/{z}/{x}/{y}.png' && j.tileSize === 256"

@@ -9,35 +9,9 @@
 // (root and leaves, run lengths expanded) and, when the pyramid is small enough, by asking getZxy()
 // for every slot of every level. Both must agree; each tile's bytes come from getZxy().
 // Exit status: 0 on success, 1 on any error or disagreement (message on stderr), 2 on bad usage.
-import { open } from "node:fs/promises";
 import { gunzipSync } from "node:zlib";
-import { Compression, PMTiles, SharedPromiseCache, tileIdToZxy, zxyToTileId } from "pmtiles";
-
-// Source over a local file (the library ships only browser File and fetch sources).
-class NodeFileSource {
-  constructor(path) {
-    this.path = path;
-    this.handle = null;
-  }
-  getKey() {
-    return this.path;
-  }
-  async getBytes(offset, length) {
-    this.handle ??= await open(this.path, "r");
-    const buf = Buffer.alloc(length);
-    let done = 0;
-    while (done < length) {
-      const { bytesRead } = await this.handle.read(buf, done, length - done, offset + done);
-      if (bytesRead === 0) break; // end of file: return what exists, as an HTTP range would
-      done += bytesRead;
-    }
-    return { data: buf.buffer.slice(buf.byteOffset, buf.byteOffset + done) };
-  }
-  async close() {
-    await this.handle?.close();
-    this.handle = null;
-  }
-}
+import { Compression, PMTiles, SharedPromiseCache, tileIdToZxy } from "pmtiles";
+import { NodeFileSource, probeAllSlots, runMain, walkDirectories } from "./archive.mjs";
 
 const toArrayBuffer = (b) => b.buffer.slice(b.byteOffset, b.byteOffset + b.byteLength);
 
@@ -69,48 +43,12 @@ function fnv1a64(bytes) {
   return hi.toString(16).padStart(8, "0") + lo.toString(16).padStart(8, "0");
 }
 
-async function walkDirectories(pm, header) {
-  const ids = [];
-  const visit = async (offset, length, depth) => {
-    if (depth > 4) throw new Error("directory nesting deeper than 4");
-    const entries = await pm.cache.getDirectory(pm.source, offset, length, header);
-    for (const e of entries) {
-      if (e.runLength === 0) {
-        await visit(header.leafDirectoryOffset + e.offset, e.length, depth + 1);
-      } else {
-        for (let i = 0; i < e.runLength; i++) ids.push(e.tileId + i);
-      }
-    }
-  };
-  await visit(header.rootDirectoryOffset, header.rootDirectoryLength, 0);
-  for (let i = 1; i < ids.length; i++) {
-    if (ids[i] <= ids[i - 1]) throw new Error(`tile ids not increasing at ${ids[i]}`);
-  }
-  return ids;
-}
-
 const kMaxProbedSlots = 1 << 20;
-
-async function probeAllSlots(pm, header) {
-  let slots = 0;
-  for (let z = header.minZoom; z <= header.maxZoom; z++) slots += 4 ** z;
-  if (slots > kMaxProbedSlots) return null; // too many to ask one by one; the walk still counts
-  const found = [];
-  for (let z = header.minZoom; z <= header.maxZoom; z++) {
-    const n = 2 ** z;
-    for (let y = 0; y < n; y++) {
-      for (let x = 0; x < n; x++) {
-        if ((await pm.getZxy(z, x, y)) !== undefined) found.push(zxyToTileId(z, x, y));
-      }
-    }
-  }
-  return found.sort((a, b) => a - b);
-}
 
 async function dumpTiles(pm) {
   const header = await pm.getHeader();
   const ids = await walkDirectories(pm, header);
-  const probed = await probeAllSlots(pm, header);
+  const probed = await probeAllSlots(pm, header, kMaxProbedSlots);
   if (probed !== null) {
     const a = new Set(ids);
     const b = new Set(probed);
@@ -189,12 +127,4 @@ async function main(argv) {
   }
 }
 
-main(process.argv.slice(2)).then(
-  (code) => {
-    process.exitCode = code;
-  },
-  (err) => {
-    process.stderr.write(`dump.mjs: ${err?.stack ?? err}\n`);
-    process.exitCode = 1;
-  },
-);
+runMain("dump.mjs", main);

@@ -7,59 +7,9 @@
 // walking the directories with the library's parser and, when the pyramid is small enough, by
 // asking getZxy() for every slot of every level; both must agree.
 // Exit status: 0 on success, 1 on any error or disagreement (message on stderr), 2 on bad usage.
-import { mkdir, open, writeFile } from "node:fs/promises";
-import { PMTiles, TileType, tileIdToZxy, zxyToTileId } from "pmtiles";
-
-class NodeFileSource {
-  constructor(path) {
-    this.path = path;
-    this.handle = null;
-  }
-  getKey() {
-    return this.path;
-  }
-  async getBytes(offset, length) {
-    this.handle ??= await open(this.path, "r");
-    const buf = Buffer.alloc(length);
-    let done = 0;
-    while (done < length) {
-      const { bytesRead } = await this.handle.read(buf, done, length - done, offset + done);
-      if (bytesRead === 0) break;
-      done += bytesRead;
-    }
-    return { data: buf.buffer.slice(buf.byteOffset, buf.byteOffset + done) };
-  }
-  async close() {
-    await this.handle?.close();
-    this.handle = null;
-  }
-}
-
-async function walkDirectories(pm, header) {
-  const ids = [];
-  const visit = async (offset, length, depth) => {
-    if (depth > 4) throw new Error("directory nesting deeper than 4");
-    const entries = await pm.cache.getDirectory(pm.source, offset, length, header);
-    for (const e of entries) {
-      if (e.runLength === 0) await visit(header.leafDirectoryOffset + e.offset, e.length, depth + 1);
-      else for (let i = 0; i < e.runLength; i++) ids.push(e.tileId + i);
-    }
-  };
-  await visit(header.rootDirectoryOffset, header.rootDirectoryLength, 0);
-  return ids;
-}
-
-async function probeAllSlots(pm, header) {
-  let slots = 0;
-  for (let z = header.minZoom; z <= header.maxZoom; z++) slots += 4 ** z;
-  if (slots > 1 << 18) return null;
-  const found = [];
-  for (let z = header.minZoom; z <= header.maxZoom; z++)
-    for (let y = 0; y < 2 ** z; y++)
-      for (let x = 0; x < 2 ** z; x++)
-        if ((await pm.getZxy(z, x, y)) !== undefined) found.push(zxyToTileId(z, x, y));
-  return found;
-}
+import { mkdir, writeFile } from "node:fs/promises";
+import { PMTiles, TileType, tileIdToZxy } from "pmtiles";
+import { NodeFileSource, probeAllSlots, runMain, walkDirectories } from "./archive.mjs";
 
 const kExtension = { [TileType.Png]: "png", [TileType.Jpeg]: "jpg", [TileType.Webp]: "webp" };
 
@@ -77,7 +27,7 @@ async function main(argv) {
     const ext = kExtension[header.tileType];
     if (ext === undefined) throw new Error(`tile type ${header.tileType} is not a web image`);
     const ids = await walkDirectories(pm, header);
-    const probed = await probeAllSlots(pm, header);
+    const probed = await probeAllSlots(pm, header, 1 << 18);
     if (probed !== null) {
       const a = [...ids].sort((x, y) => x - y).join(",");
       const b = [...probed].sort((x, y) => x - y).join(",");
@@ -98,12 +48,4 @@ async function main(argv) {
   }
 }
 
-main(process.argv.slice(2)).then(
-  (code) => {
-    process.exitCode = code;
-  },
-  (err) => {
-    process.stderr.write(`read_export.mjs: ${err?.stack ?? err}\n`);
-    process.exitCode = 1;
-  },
-);
+runMain("read_export.mjs", main);

@@ -96,4 +96,16 @@ TEST(FileIo, AFifoADeviceOrAFolderIsRefusedAtOnceNamingTheFileAndItsKind) {
   }
 }
 
+// The five markup characters become character references, wherever they stand; every other
+// byte (text, UTF-8, even bytes that are not UTF-8) passes as it is.
+TEST(HtmlEscape, TheFiveMarkupCharactersBecomeReferencesAndNothingElseChanges) {
+  EXPECT_EQ(vts::html_escape(""), "");
+  EXPECT_EQ(vts::html_escape("plain text 123"), "plain text 123");
+  EXPECT_EQ(vts::html_escape("a<b>&\"c'd"), "a&lt;b&gt;&amp;&quot;c&#39;d");
+  EXPECT_EQ(vts::html_escape("&amp;"), "&amp;amp;");  // escaped text is escaped again
+  EXPECT_EQ(vts::html_escape("<<>>"), "&lt;&lt;&gt;&gt;");
+  EXPECT_EQ(vts::html_escape("caf\xC3\xA9 \xE2\x80\x94 \xFF"), "caf\xC3\xA9 \xE2\x80\x94 \xFF");
+  EXPECT_EQ(vts::html_escape(std::string_view("a\0b", 3)), std::string("a\0b", 3));
+}
+
 }  // namespace

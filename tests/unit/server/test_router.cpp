@@ -14,6 +14,7 @@
 #include "tile_tag_memo.hpp"
 #include "vts/builder/builder.hpp"
 #include "vts/protocol/codec.hpp"
+#include "vts/protocol/file_io.hpp"
 #include "vts/protocol/pmtiles.hpp"
 #include "vts/test/temp_dir.hpp"
 
@@ -630,7 +631,7 @@ TEST_F(Router, ViewerPageOfATilesetLinksItsTileJsonAndTheEmbeddedAssets) {
 
 // Tileset names are [A-Za-z0-9._-] today; the pages escape them all the same.
 TEST(ViewerPage, NamesAreEscapedForHtmlAndUrls) {
-  EXPECT_EQ(vts::router_detail::html_escape("a<b>&\"c'd"), "a&lt;b&gt;&amp;&quot;c&#39;d");
+  EXPECT_EQ(vts::html_escape("a<b>&\"c'd"), "a&lt;b&gt;&amp;&quot;c&#39;d");
   EXPECT_EQ(vts::router_detail::url_segment("a b/c%d.e-f_g~h\xff"), "a%20b%2Fc%25d.e-f_g~h%FF");
 }
 

@@ -1,5 +1,5 @@
 // Whole small files in and out (configs, camera paths, reports), and text helpers for the
-// protocols' case-insensitive tokens. Not for archives or tiles: those stream.
+// protocols' case-insensitive tokens and for HTML. Not for archives or tiles: those stream.
 #pragma once
 
 #include <filesystem>
@@ -48,5 +48,10 @@ Result<std::string> read_file(const std::filesystem::path& path);
 std::string_view trim(std::string_view s) noexcept;
 bool iequals(std::string_view a, std::string_view b) noexcept;
 bool istarts_with(std::string_view s, std::string_view prefix) noexcept;
+
+// Text for HTML (and SVG) element content and quoted attribute values (double or single quotes):
+// & < > " ' as character references (&amp; &lt; &gt; &quot; &#39;); every other byte as it is,
+// so UTF-8 is not checked here (a caller that takes untrusted bytes cleans them first).
+std::string html_escape(std::string_view s);
 
 }  // namespace vts
