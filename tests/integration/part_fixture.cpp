@@ -1,0 +1,154 @@
+// Parts of many tiny tiles, for tests of the merge at a scale no build here reaches quickly
+// (merge_scale.sh): the first N tile ids of a pyramid with 8-byte payloads — half distinct, a
+// quarter one of 1000 uniform values, a quarter equal to the tile before (runs) — cut into the
+// sub-pyramids under every tile of a split level, plus the apex.
+//
+//   part_fixture parts DIR N SPLIT [LEAF]    writes DIR/apex.part and DIR/shard-*.part
+//   part_fixture single OUT N [LEAF]         the same tiles through pmtiles::Writer
+//   part_fixture merge DIR OUT [LEAF]        merge_parts() of DIR/*.part in a child process;
+//                                            prints {"seconds":…, "max_rss_kib":…, "tiles":…}
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "vts/protocol/pmtiles.hpp"
+#include "vts/protocol/pmtiles_part.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using namespace vts;
+
+std::uint64_t mix(std::uint64_t x) {
+  x ^= x >> 30;
+  x *= 0xbf58476d1ce4e5b9ULL;
+  x ^= x >> 27;
+  x *= 0x94d049bb133111ebULL;
+  return x ^ (x >> 31);
+}
+
+// The payload of tile `id` (runs repeat the payload of the first tile of the run).
+std::uint64_t payload_of(std::uint64_t id) {
+  while (id > 0 && mix(id) % 4 == 3) --id;  // the same as the tile before
+  const std::uint64_t h = mix(id);
+  return h % 4 == 2 ? 1 + h % 1000 : h | 0x8000000000000000ULL;
+}
+
+[[noreturn]] void die(const std::string& what) {
+  std::fprintf(stderr, "part_fixture: %s\n", what.c_str());
+  std::exit(1);
+}
+
+void check(const Status& s) {
+  if (!s) die(s.error().message);
+}
+
+pmtiles::WriterOptions archive(const fs::path& out, std::uint64_t n, std::size_t leaf) {
+  pmtiles::WriterOptions o;
+  o.path = out;
+  o.max_zoom = pmtiles::tile_id_to_zxy(n - 1).value().z;
+  o.leaf_entries = leaf;
+  return o;
+}
+
+void add(pmtiles::TileSink& sink, std::uint64_t id) {
+  const std::uint64_t v = payload_of(id);
+  std::uint8_t b[8];
+  std::memcpy(b, &v, 8);
+  check(sink.add_tile(pmtiles::tile_id_to_zxy(id).value(), b));
+}
+
+void write_parts(const fs::path& dir, std::uint64_t n, int split) {
+  fs::create_directories(dir);
+  const auto finish = [](pmtiles::PartWriter& w) {
+    auto r = w.finish({}, "{}");
+    if (!r) die(r.error().message);
+  };
+  const pmtiles::TileIdRange apex_range{
+      0, pmtiles::subtree_tile_ids({0, 0, 0}, static_cast<std::uint8_t>(split)).first - 1};
+  if (split > 0) {
+    auto w = pmtiles::PartWriter::create(dir / "apex.part").value();
+    for (std::uint64_t id = 0; id <= apex_range.last && id < n; ++id) add(*w, id);
+    finish(*w);
+  }
+  const std::uint32_t side = 1u << split;
+  const int max_z = pmtiles::tile_id_to_zxy(n - 1).value().z;
+  for (std::uint32_t y = 0; y < side; ++y)
+    for (std::uint32_t x = 0; x < side; ++x) {
+      auto w = pmtiles::PartWriter::create(
+                   dir / ("shard-" + std::to_string(x) + "-" + std::to_string(y) + ".part"))
+                   .value();
+      for (int z = split; z <= max_z; ++z) {
+        const auto r = pmtiles::subtree_tile_ids({static_cast<std::uint8_t>(split), x, y},
+                                                 static_cast<std::uint8_t>(z));
+        for (std::uint64_t id = r.first; id <= r.last && id < n; ++id) add(*w, id);
+      }
+      finish(*w);
+    }
+}
+
+int merge(const fs::path& dir, const fs::path& out, std::size_t leaf) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const pid_t pid = ::fork();
+  if (pid < 0) die("fork failed");
+  if (pid == 0) {
+    pmtiles::MergeOptions m;
+    for (const auto& e : fs::directory_iterator(dir))
+      if (e.path().extension() == ".part") m.parts.push_back(e.path());
+    std::uint64_t tiles = 0;
+    for (const auto& p : m.parts) tiles += pmtiles::read_part_info(p).value().tiles;
+    m.archive = archive(out, tiles, leaf);
+    m.metadata_json = "{}";
+    auto r = pmtiles::merge_parts(m);
+    if (!r) {
+      std::fprintf(stderr, "part_fixture: %s\n", r.error().message.c_str());
+      ::_exit(1);
+    }
+    ::_exit(0);
+  }
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  struct rusage ru {};
+  ::getrusage(RUSAGE_CHILDREN, &ru);
+  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) return 1;
+  auto reader = pmtiles::Reader::open(out).value();
+  std::printf("{\"seconds\":%.3f,\"max_rss_kib\":%ld,\"tiles\":%llu,\"leaves\":%llu}\n", s,
+              ru.ru_maxrss, static_cast<unsigned long long>(reader->header().addressed_tiles),
+              static_cast<unsigned long long>(reader->leaf_directory_count().value()));
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const std::vector<std::string> a(argv + 1, argv + argc);
+  const auto leaf = [&](std::size_t i) {
+    return a.size() > i ? std::stoul(a[i]) : pmtiles::kLeafEntries;
+  };
+  if (a.size() >= 4 && a[0] == "parts") {
+    write_parts(a[1], std::stoull(a[2]), std::stoi(a[3]));
+    return 0;
+  }
+  if (a.size() >= 3 && a[0] == "single") {
+    const std::uint64_t n = std::stoull(a[2]);
+    auto w = pmtiles::Writer::create(archive(a[1], n, leaf(3))).value();
+    for (std::uint64_t id = 0; id < n; ++id) add(*w, id);
+    auto r = w->finish("{}");
+    if (!r) die(r.error().message);
+    return 0;
+  }
+  if (a.size() >= 3 && a[0] == "merge") return merge(a[1], a[2], leaf(3));
+  std::fprintf(
+      stderr,
+      "usage: part_fixture parts DIR N SPLIT | single OUT N [LEAF] | merge DIR OUT [LEAF]\n");
+  return 2;
+}
