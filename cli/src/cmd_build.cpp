@@ -2,6 +2,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <string_view>
 
 #include "build_args.hpp"
@@ -60,8 +61,25 @@ void print_text(const BuildArgs& a, const BuildReport& r) {
     std::printf("value range: --range %s\n", range_argument(r.value_ranges).c_str());
 }
 
-int run_build(const BuildArgs& a, const PlanBuildArgs& plan_args) {
-  if (!plan_args.plan.empty()) return run_plan_build(plan_args, a);
+// A plan fixes the build: of the options given, only those of running it may come with --plan.
+Status check_plan_options(const CLI::App& c) {
+  static const std::set<std::string> kAllowed = {"plan",    "shard", "apex",  "out-dir",
+                                                 "threads", "json",  "quiet", "help"};
+  for (const CLI::Option* opt : c.get_options()) {
+    if (opt->count() == 0) continue;
+    const auto& names = opt->get_lnames();
+    if (!names.empty() && kAllowed.count(names.front())) continue;
+    return make_error(ErrorCode::invalid_argument,
+                      opt->get_name() + " does not go with --plan: the plan fixes the build");
+  }
+  return {};
+}
+
+int run_build(const CLI::App& c, const BuildArgs& a, const PlanBuildArgs& plan_args) {
+  if (!plan_args.plan.empty()) {
+    if (Status st = check_plan_options(c); !st) return report_error(st.error());
+    return run_plan_build(plan_args, a);
+  }
   if (plan_args.apex || plan_args.shard || !plan_args.out_dir.empty())
     return report_error(make_error(ErrorCode::invalid_argument,
                                    "--shard, --apex and --out-dir need --plan PLAN.json"));
@@ -104,7 +122,7 @@ Runner add_build(CLI::App& app) {
   add_plan_build_options(c, *p);
   c->add_flag("--json", a->json, "Print the result as JSON");
   c->add_flag("-q,--quiet", a->quiet, "No progress bar or summary");
-  return [a, p] { return run_build(*a, *p); };
+  return [a, p, c] { return run_build(*c, *a, *p); };
 }
 
 }  // namespace vts::cli

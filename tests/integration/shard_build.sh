@@ -97,6 +97,12 @@ for v in JOB_COMPLETION_INDEX SLURM_ARRAY_TASK_ID AWS_BATCH_JOB_ARRAY_INDEX; do
   grep -q "$v" "$ERR" || fail "the error without a shard index does not name \$$v"
 done
 
+note "build options beside --plan are refused: the plan fixes them"
+expect_clean_failure "$VTS" build --plan "$plan" --shard 0 --out-dir "$WORK/env" --codec bc1
+grep -q -- "--codec" "$ERR" || fail "the error does not name --codec"
+expect_clean_failure "$VTS" build "$EARTH" --plan "$plan" --shard 0 --out-dir "$WORK/env"
+[[ ! -e "$WORK/env/shard-000000.part" ]] || fail "a refused shard wrote a part"
+
 note "a shard index out of range"
 expect_clean_failure "$VTS" build --plan "$plan" --shard 8 --out-dir "$WORK/env"
 grep -q "out of range" "$ERR" && grep -q "8 shards" "$ERR" || fail "unclear out-of-range error"
