@@ -19,14 +19,15 @@ std::uint64_t rect_tiles(const std::vector<TileRect>& emit, int from, int to) {
   return n;
 }
 
-Status plan_window(const Geometry& g, DownsampleFilter filter, int finest, const TexelRect& window,
-                   int source, const std::vector<TileRect>& emit, std::uint64_t max_width,
-                   BuildPlan& plan) {
-  if (window.width() <= max_width || finest == 0) {
-    Pass p{finest, 0, window, source,
-           -1,     0, 0,      std::vector<TileRect>(emit.begin(), emit.begin() + finest + 1)};
+Status plan_window(const Geometry& g, DownsampleFilter filter, int finest, int coarsest,
+                   const TexelRect& window, int source, const std::vector<TileRect>& emit,
+                   std::uint64_t max_width, BuildPlan& plan) {
+  if (window.width() <= max_width || finest == coarsest) {
+    Pass p{
+        finest, coarsest, window, source,
+        -1,     0,        0,      std::vector<TileRect>(emit.begin(), emit.begin() + finest + 1)};
     plan.rows += window.height();
-    plan.tiles += rect_tiles(p.emit, 0, finest);
+    plan.tiles += rect_tiles(p.emit, coarsest, finest);
     plan.widest = std::max(plan.widest, window.width());
     plan.passes.push_back(std::move(p));
     return {};
@@ -34,7 +35,8 @@ Status plan_window(const Geometry& g, DownsampleFilter filter, int finest, const
   // The most levels a stripe can take: 2^s tiles and their halo within the limit.
   const std::uint64_t T = g.tile_size();
   int s = 0;
-  while (s < finest && (T << (s + 1)) + 2 * stripe_halo(g, s + 1, filter) <= max_width) ++s;
+  while (s < finest - coarsest && (T << (s + 1)) + 2 * stripe_halo(g, s + 1, filter) <= max_width)
+    ++s;
   if (s == 0)
     return make_error(ErrorCode::invalid_argument,
                       "a window of " + std::to_string(max_width) +
@@ -71,16 +73,17 @@ Status plan_window(const Geometry& g, DownsampleFilter filter, int finest, const
     plan.widest = std::max(plan.widest, p.window.width());
     plan.passes.push_back(std::move(p));
   }
-  return plan_window(g, filter, coarse, cw, scratch, emit, max_width, plan);
+  return plan_window(g, filter, coarse, coarsest, cw, scratch, emit, max_width, plan);
 }
 
 }  // namespace
 
 Result<BuildPlan> make_build_plan(const Geometry& g, DownsampleFilter filter,
                                   const TexelRect& window, const std::vector<TileRect>& emit,
-                                  std::uint64_t max_width) {
+                                  std::uint64_t max_width, int coarsest) {
   BuildPlan plan;
-  if (Status st = plan_window(g, filter, g.max_zoom(), window, -1, emit, max_width, plan); !st)
+  if (Status st = plan_window(g, filter, g.max_zoom(), coarsest, window, -1, emit, max_width, plan);
+      !st)
     return st.error();
   return plan;
 }

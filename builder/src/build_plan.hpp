@@ -42,9 +42,11 @@ struct BuildPlan {
 
 // `window`: the finest level's texels that may be non-transparent (all of the image, or a
 // footprint); `emit[z]`: the tiles of level z to write. `max_width`: the widest pass allowed.
+// `coarsest`: the last level the passes make (0 for a whole build; a shard of a sharded build
+// stops at its split level, whose rows the apex's build reads instead).
 Result<BuildPlan> make_build_plan(const Geometry& g, DownsampleFilter filter,
                                   const TexelRect& window, const std::vector<TileRect>& emit,
-                                  std::uint64_t max_width);
+                                  std::uint64_t max_width, int coarsest = 0);
 
 // The windows of levels pass.finest down to pass.coarsest (index z).
 std::vector<TexelRect> pass_windows(const Geometry& g, DownsampleFilter filter, const Pass& pass);

@@ -13,6 +13,7 @@
 
 #include <xxhash.h>
 
+#include "build_core.hpp"
 #include "build_plan.hpp"
 #include "cascade.hpp"
 #include "gdal_source.hpp"
@@ -39,7 +40,11 @@ double seconds_since(Clock::time_point t0) {
 struct Shared {
   const Codec* codec = nullptr;
   EncodeOptions encode;
-  pmtiles::Writer* writer = nullptr;
+  pmtiles::TileSink* sink = nullptr;
+  // A sharded build's split-level tile, kept lossless for the apex (shard.hpp).
+  std::optional<TileId> keep;
+  std::mutex kept_mutex;
+  std::vector<std::uint8_t> kept;
   const std::atomic<bool>* cancel = nullptr;
   std::atomic<std::uint64_t> tiles_done{0};
   std::atomic<std::uint64_t> bytes{0};
@@ -65,7 +70,13 @@ struct Shared {
     if (failed) return;
     auto payload = codec->encode(img, encode);
     if (!payload) return fail(std::move(payload).error());
-    if (auto st = writer->add_tile(id, *payload); !st) return fail(st.error());
+    if (auto st = sink->add_tile(id, *payload); !st) return fail(st.error());
+    if (keep && id == *keep) {
+      auto exact = find_codec(CodecId::lossless)->encode(img, EncodeOptions{});
+      if (!exact) return fail(std::move(exact).error());
+      std::lock_guard lock(kept_mutex);
+      kept = std::move(exact).value();
+    }
     if (auto header = parse_tile_header(*payload)) {
       const std::uint64_t key[2] = {pmtiles::zxy_to_tile_id(id.z, id.x, id.y), header->checksum};
       content_sum += XXH3_64bits(key, sizeof key);
@@ -180,45 +191,10 @@ class ProgressTicker {
   BuildProgress p_;
 };
 
-unsigned worker_count(unsigned requested) {
-  if (requested) return requested;
-  return std::max(1u, std::thread::hardware_concurrency());
-}
-
-// Tiles of level z that a synthetic build writes: all of them, or only those over the region.
-struct TileRange {
-  std::uint32_t x0 = 0, y0 = 0, x1 = 0, y1 = 0;
-  std::uint64_t count() const { return std::uint64_t(x1 - x0) * (y1 - y0); }
-};
-
-TileRange synthetic_range(const Geometry& g, const SyntheticSpec& spec, int z) {
-  TileRange r{0, 0, g.tiles_x(z), g.tiles_y(z)};
-  if (!spec.region || z < spec.region_level) return r;
-  const TexelRect level = g.map_rect(g.max_zoom(), *spec.region, z);
-  const std::uint32_t T = g.tile_size();
-  r.x0 = static_cast<std::uint32_t>(level.x0 / T);
-  r.y0 = static_cast<std::uint32_t>(level.y0 / T);
-  r.x1 = std::max(r.x0, static_cast<std::uint32_t>((level.x1 + T - 1) / T));
-  r.y1 = std::max(r.y0, static_cast<std::uint32_t>((level.y1 + T - 1) / T));
-  return r;
-}
-
 // Strips start at multiples of this row (GdalSource's warped VRTs are made of blocks this high).
 constexpr std::uint32_t kStripAlign = detail::kWarpBlockRows;
 
-// Reads columns [x0, x1) of rows [y, y + count) of a pass's finest level as RGBA8; each pass
-// reads its rows in increasing order.
-using WindowReader = std::function<Status(std::uint64_t x0, std::uint64_t x1, std::uint64_t y,
-                                          std::uint32_t count, std::uint8_t* out)>;
-
-// The tiles of every level a build writes: the footprint's (a sparse georeferenced build) or all.
-std::vector<TileRect> emit_rects(const std::optional<Georeference>& geo, const Geometry& g) {
-  std::vector<TileRect> rects;
-  for (int z = 0; z <= g.max_zoom(); ++z)
-    rects.push_back(geo ? footprint_tiles(geo->tiling, g, z, geo->bounds)
-                        : TileRect{0, 0, g.tiles_x(z), g.tiles_y(z)});
-  return rects;
-}
+using detail::WindowReader;
 
 // Everything the passes of one build share.
 struct PassContext {
@@ -305,12 +281,12 @@ void run_pass(PassContext& c, const detail::Pass& pass, const std::vector<Window
 }
 
 // Runs the plan's passes in order: stripes fill their scratch rasters, which later passes read.
-void build_from_source(const BuildOptions& o, const std::vector<WindowReader>& read_input,
-                       const detail::BuildPlan& plan, const Geometry& g, Shared& shared,
-                       unsigned threads) {
+void build_from_source(const BuildOptions& o, const std::filesystem::path& scratch_dir,
+                       const std::vector<WindowReader>& read_input, const detail::BuildPlan& plan,
+                       const Geometry& g, Shared& shared, unsigned threads) {
   std::vector<detail::ScratchRaster> scratch;
   for (const detail::ScratchPlan& sp : plan.scratch) {
-    auto r = detail::ScratchRaster::create(o.output.parent_path(), sp.window);
+    auto r = detail::ScratchRaster::create(scratch_dir, sp.window);
     if (!r) return shared.fail(std::move(r).error());
     scratch.push_back(std::move(r).value());
   }
@@ -332,14 +308,14 @@ void build_from_source(const BuildOptions& o, const std::vector<WindowReader>& r
   ticker.tick(c.rows, true);
 }
 
-void build_synthetic(const BuildOptions& o, const SyntheticSpec& spec, const Geometry& g,
+void build_synthetic(const BuildOptions& o, const std::vector<TileRect>& levels, const Geometry& g,
                      Shared& shared, unsigned threads) {
   std::uint64_t total = 0;
-  for (int z = 0; z <= g.max_zoom(); ++z) total += synthetic_range(g, spec, z).count();
+  for (const TileRect& r : levels) total += r.count();
   ProgressTicker ticker(o, shared, total, 0);
   WorkQueue queue(threads, std::size_t{threads} * 4);
-  for (int z = 0; z <= g.max_zoom() && !shared.stopping(); ++z) {
-    const TileRange r = synthetic_range(g, spec, z);
+  for (int z = 0; z < static_cast<int>(levels.size()) && !shared.stopping(); ++z) {
+    const TileRect r = levels[static_cast<std::size_t>(z)];
     for (std::uint32_t y = r.y0; y < r.y1 && !shared.stopping(); ++y) {
       for (std::uint32_t x = r.x0; x < r.x1; ++x) {
         const TileId id{static_cast<std::uint8_t>(z), x, y};
@@ -417,55 +393,186 @@ Result<std::unique_ptr<GdalSource>> open_gdal(const BuildOptions& o) {
 
 }  // namespace
 
-Result<BuildReport> build_pyramid(const BuildOptions& o) {
-  const auto t0 = Clock::now();
-  if (o.output.empty()) return make_error(ErrorCode::invalid_argument, "no output file given");
-  const Codec* codec = find_codec(o.codec);
-  if (!codec)
+namespace detail {
+
+unsigned worker_count(unsigned requested) {
+  if (requested) return requested;
+  return std::max(1u, std::thread::hardware_concurrency());
+}
+
+TileRect synthetic_tiles(const Geometry& g, const SyntheticSpec& spec, int z) {
+  TileRect r{0, 0, g.tiles_x(z), g.tiles_y(z)};
+  if (!spec.region || z < spec.region_level) return r;
+  const TexelRect level = g.map_rect(g.max_zoom(), *spec.region, z);
+  const std::uint32_t T = g.tile_size();
+  r.x0 = static_cast<std::uint32_t>(level.x0 / T);
+  r.y0 = static_cast<std::uint32_t>(level.y0 / T);
+  r.x1 = std::max(r.x0, static_cast<std::uint32_t>((level.x1 + T - 1) / T));
+  r.y1 = std::max(r.y0, static_cast<std::uint32_t>((level.y1 + T - 1) / T));
+  return r;
+}
+
+std::vector<TileRect> build_emit_rects(const PreparedBuild& p) {
+  const Geometry& g = *p.geometry;
+  std::vector<TileRect> rects;
+  for (int z = 0; z <= g.max_zoom(); ++z) {
+    if (p.synthetic)
+      rects.push_back(synthetic_tiles(g, *p.synthetic, z));
+    else if (p.gdal)
+      rects.push_back(footprint_tiles(p.tiling, g, z, p.georeference->bounds));
+    else
+      rects.push_back(TileRect{0, 0, g.tiles_x(z), g.tiles_y(z)});
+  }
+  return rects;
+}
+
+std::string content_hash_text(std::uint64_t content_sum) {
+  char hash[17];
+  std::snprintf(hash, sizeof hash, "%016llx", static_cast<unsigned long long>(content_sum));
+  return hash;
+}
+
+TilesetInfo build_tileset_info(const BuildOptions& o, const PreparedBuild& p,
+                               const std::filesystem::path& output, std::uint64_t content_sum) {
+  TilesetInfo info;
+  info.geometry = *p.geometry;
+  info.codec = o.codec;
+  info.name = o.name.empty() ? output.stem().string() : o.name;
+  info.description = o.description.empty() ? p.input_description : o.description;
+  info.downsample = o.synthetic ? "synthetic-per-level" : downsample_method(o.downsample);
+  info.sparse = (p.synthetic && p.synthetic->region.has_value()) || p.gdal != nullptr;
+  info.georeference = p.georeference;
+  info.content_hash = content_hash_text(content_sum);
+  return info;
+}
+
+pmtiles::WriterOptions build_writer_options(const PreparedBuild& p,
+                                            const std::filesystem::path& output) {
+  pmtiles::WriterOptions wo;
+  if (p.georeference)
+    wo.bounds = pmtiles::georeferenced_bounds(p.georeference->bounds, p.georeference->center);
+  wo.path = output;
+  wo.min_zoom = 0;
+  wo.max_zoom = static_cast<std::uint8_t>(p.geometry->max_zoom());
+  return wo;
+}
+
+std::vector<WindowReader> source_readers(PreparedBuild& p, unsigned threads) {
+  std::vector<WindowReader> readers;
+  if (p.gdal) {
+    // The warp is most of the work: one reader per thread, each with its own GDAL datasets.
+    for (GdalSource* r : p.gdal->split(threads))
+      readers.push_back([r](std::uint64_t x0, std::uint64_t x1, std::uint64_t y, std::uint32_t n,
+                            std::uint8_t* out) { return r->read_window(x0, x1, y, n, out); });
+    return readers;
+  }
+  // Whole rows of the image; a narrower window (a shard) keeps its columns of them.
+  ImageSource* src = p.source.get();
+  const std::uint64_t width = p.geometry->width();
+  readers.push_back([src, width, rows = std::vector<std::uint8_t>()](
+                        std::uint64_t x0, std::uint64_t x1, std::uint64_t y, std::uint32_t n,
+                        std::uint8_t* out) mutable -> Status {
+    if (x0 == 0 && x1 == width) return src->read_rows(y, n, out);
+    rows.resize(std::size_t{n} * width * 4);
+    if (Status st = src->read_rows(y, n, rows.data()); !st) return st;
+    for (std::uint32_t r = 0; r < n; ++r)
+      std::memcpy(out + std::size_t{r} * (x1 - x0) * 4, rows.data() + (r * width + x0) * 4,
+                  (x1 - x0) * 4);
+    return {};
+  });
+  return readers;
+}
+
+Result<BuildRunResult> run_build(const BuildRun& run) {
+  Shared shared;
+  shared.codec = run.codec;
+  shared.encode = run.options->encode;
+  shared.sink = run.sink;
+  shared.cancel = run.options->cancel;
+  shared.keep = run.keep;
+  const unsigned threads = worker_count(run.threads);
+  if (run.plan)
+    build_from_source(*run.options, run.scratch_dir, run.readers, *run.plan, *run.geometry, shared,
+                      threads);
+  else
+    build_synthetic(*run.options, run.synthetic, *run.geometry, shared, threads);
+  if (shared.failed) return *shared.error;
+  if (run.options->cancel && run.options->cancel->load())
+    return make_error(ErrorCode::cancelled, "build cancelled");
+  BuildRunResult r;
+  r.tiles = shared.tiles_done;
+  r.bytes = shared.bytes;
+  r.content_sum = shared.content_sum;
+  r.kept = std::move(shared.kept);
+  return r;
+}
+
+namespace {
+
+Status check_synthetic_region(const SyntheticSpec& s, std::uint64_t width, std::uint64_t height) {
+  if (!s.region) return {};
+  const TexelRect& r = *s.region;
+  if (r.empty() || r.x1 > width || r.y1 > height)
+    return make_error(ErrorCode::invalid_argument,
+                      "region " + std::to_string(r.x0) + "," + std::to_string(r.y0) + "," +
+                          std::to_string(r.x1) + "," + std::to_string(r.y1) +
+                          " is empty or outside the " + std::to_string(width) + "x" +
+                          std::to_string(height) + " image");
+  if (s.region_level < 0)
+    return make_error(ErrorCode::invalid_argument, "region level must be >= 0");
+  return {};
+}
+
+// Opens the source of a build's inputs (not synthetic).
+Status open_source(const BuildOptions& o, PreparedBuild& p) {
+  if (o.tiling != Tiling::none || detail::gdal_is_georeferenced(o.inputs.front())) {
+    auto src = open_gdal(o);
+    if (!src) return std::move(src).error();
+    p.gdal = std::move(src).value();
+    p.input_description = p.gdal->description();
+    if (p.tiling == Tiling::none) p.tiling = Tiling::world_crs84_quad;
+    return {};
+  }
+  if (o.max_level || o.value_range || !o.band_ranges.empty() || o.auto_range || !o.bands.empty())
+    return make_error(ErrorCode::invalid_argument,
+                      "a maximum level, bands and a value range apply to georeferenced inputs "
+                      "only "
+                      "(" +
+                          o.inputs.front().string() + " has no georeference)");
+  auto src = ImageSource::open(o.inputs, o.grid_columns, o.grid_rows);
+  if (!src) return std::move(src).error();
+  p.source = std::move(src).value();
+  p.input_description = p.source->description();
+  return {};
+}
+
+}  // namespace
+
+Result<PreparedBuild> prepare_build(const BuildOptions& o) {
+  PreparedBuild p;
+  p.codec = find_codec(o.codec);
+  if (!p.codec)
     return make_error(ErrorCode::unsupported,
                       std::string("codec '") + codec_name(o.codec) + "' is not available yet");
   if (o.synthetic && !o.inputs.empty())
     return make_error(ErrorCode::invalid_argument, "give either input images or --synthetic");
   if (!o.synthetic && o.inputs.empty())
     return make_error(ErrorCode::invalid_argument, "no input image given");
-  if (Status s = check_output_is_not_an_input(o.output, o.inputs); !s) return s.error();
-
-  std::unique_ptr<ImageSource> source;
-  std::unique_ptr<GdalSource> gdal;
-  Tiling tiling = o.tiling;
-  std::optional<LonLatBounds> data_bounds;
+  p.tiling = o.tiling;
   std::uint64_t width = 0, height = 0;
-  std::string input_desc;
   if (o.synthetic) {
     width = o.synthetic->width;
     height = o.synthetic->height;
-    input_desc = "synthetic " + std::to_string(width) + "x" + std::to_string(height);
-  } else if (o.tiling != Tiling::none || detail::gdal_is_georeferenced(o.inputs.front())) {
-    auto src = open_gdal(o);
-    if (!src) return std::move(src).error();
-    gdal = std::move(src).value();
-    width = gdal->width();
-    height = gdal->height();
-    input_desc = gdal->description();
-    if (tiling == Tiling::none) tiling = Tiling::world_crs84_quad;
-    data_bounds = gdal->bounds();
+    p.input_description = "synthetic " + std::to_string(width) + "x" + std::to_string(height);
   } else {
-    if (o.max_level || o.value_range || !o.band_ranges.empty() || o.auto_range || !o.bands.empty())
-      return make_error(ErrorCode::invalid_argument,
-                        "a maximum level, bands and a value range apply to georeferenced inputs "
-                        "only "
-                        "(" +
-                            o.inputs.front().string() + " has no georeference)");
-    auto src = ImageSource::open(o.inputs, o.grid_columns, o.grid_rows);
-    if (!src) return std::move(src).error();
-    source = std::move(src).value();
-    width = source->width();
-    height = source->height();
-    input_desc = source->description();
+    if (Status st = open_source(o, p); !st) return st.error();
+    width = p.gdal ? p.gdal->width() : p.source->width();
+    height = p.gdal ? p.gdal->height() : p.source->height();
   }
   auto geometry = Geometry::create(width, height, o.tile_size, o.border);
   if (!geometry) return std::move(geometry).error();
   const Geometry& g = *geometry;
+  p.geometry = g;
   // A bc1 tile is whole 4x4 blocks, and the renderer places tiles in its compressed atlas at
   // block-aligned slots: the stored size T + 2B must be a multiple of 4 (T is a power of two >= 4,
   // so B must be even).
@@ -476,114 +583,87 @@ Result<BuildReport> build_pyramid(const BuildOptions& o) {
                           std::to_string(g.tile_size()) + " + 2 x border " +
                           std::to_string(g.border()) + " = " + std::to_string(g.stored_size()) +
                           "): use an even border");
-  if (o.synthetic && o.synthetic->region) {
-    const TexelRect& r = *o.synthetic->region;
-    if (r.empty() || r.x1 > width || r.y1 > height)
-      return make_error(ErrorCode::invalid_argument,
-                        "region " + std::to_string(r.x0) + "," + std::to_string(r.y0) + "," +
-                            std::to_string(r.x1) + "," + std::to_string(r.y1) +
-                            " is empty or outside the " + std::to_string(width) + "x" +
-                            std::to_string(height) + " image");
-    if (o.synthetic->region_level < 0)
-      return make_error(ErrorCode::invalid_argument, "region level must be >= 0");
-  }
-
-  std::optional<SyntheticSpec> synthetic = o.synthetic;
-  auto georeference = make_georeference(o, tiling, data_bounds, g, synthetic);
+  if (o.synthetic)
+    if (Status st = check_synthetic_region(*o.synthetic, width, height); !st) return st.error();
+  p.synthetic = o.synthetic;
+  std::optional<LonLatBounds> data_bounds;
+  if (p.gdal) data_bounds = p.gdal->bounds();
+  auto georeference = make_georeference(o, p.tiling, data_bounds, g, p.synthetic);
   if (!georeference) return std::move(georeference).error();
+  p.georeference = *georeference;
+  return p;
+}
+
+}  // namespace detail
+
+Result<BuildReport> build_pyramid(const BuildOptions& o) {
+  const auto t0 = Clock::now();
+  if (o.output.empty()) return make_error(ErrorCode::invalid_argument, "no output file given");
+  if (Status s = check_output_is_not_an_input(o.output, o.inputs); !s) return s.error();
+  auto prepared = detail::prepare_build(o);
+  if (!prepared) return std::move(prepared).error();
+  detail::PreparedBuild& p = *prepared;
+  const Geometry& g = *p.geometry;
+  const std::vector<TileRect> emit = detail::build_emit_rects(p);
 
   // Plain images are read whole rows at a time, once: one pass. Georeferenced ones are read in
   // windows of their footprint, in stripes when it is wider than the window limit.
   std::optional<detail::BuildPlan> plan;
-  if (!synthetic) {
-    const TexelRect window = gdal ? footprint_texels(tiling, g, (*georeference)->bounds)
-                                  : TexelRect{0, 0, width, height};
+  if (!p.synthetic) {
+    const TexelRect window = p.gdal ? footprint_texels(p.tiling, g, p.georeference->bounds)
+                                    : TexelRect{0, 0, g.width(), g.height()};
     const std::uint64_t max_width =
-        !gdal ? UINT64_MAX : (o.max_window_width ? o.max_window_width : kDefaultWindowWidth);
-    auto p =
-        detail::make_build_plan(g, o.downsample, window, emit_rects(*georeference, g), max_width);
-    if (!p) return std::move(p).error();
-    plan = std::move(p).value();
+        !p.gdal ? UINT64_MAX : (o.max_window_width ? o.max_window_width : kDefaultWindowWidth);
+    auto bp = detail::make_build_plan(g, o.downsample, window, emit, max_width);
+    if (!bp) return std::move(bp).error();
+    plan = std::move(bp).value();
   }
 
-  pmtiles::WriterOptions wo;
-  if (*georeference)
-    wo.bounds = pmtiles::georeferenced_bounds((*georeference)->bounds, (*georeference)->center);
-  wo.path = o.output;
-  wo.min_zoom = 0;
-  wo.max_zoom = static_cast<std::uint8_t>(g.max_zoom());
-  auto writer = pmtiles::Writer::create(wo);
+  auto writer = pmtiles::Writer::create(detail::build_writer_options(p, o.output));
   if (!writer) return std::move(writer).error();
-
-  Shared shared;
-  shared.codec = codec;
-  shared.encode = o.encode;
-  shared.writer = writer->get();
-  shared.cancel = o.cancel;
-  const unsigned threads = worker_count(o.threads);
-  if (synthetic)
-    build_synthetic(o, *synthetic, g, shared, threads);
-  else if (gdal) {
-    // The warp is most of the work: one reader per thread, each with its own GDAL datasets.
-    std::vector<WindowReader> readers;
-    for (GdalSource* r : gdal->split(threads))
-      readers.push_back([r](std::uint64_t x0, std::uint64_t x1, std::uint64_t y, std::uint32_t n,
-                            std::uint8_t* out) { return r->read_window(x0, x1, y, n, out); });
-    build_from_source(o, readers, *plan, g, shared, threads);
+  detail::BuildRun run;
+  run.options = &o;
+  run.scratch_dir = o.output.parent_path();
+  run.geometry = &g;
+  run.codec = p.codec;
+  run.sink = writer->get();
+  run.threads = o.threads;
+  if (plan) {
+    run.plan = &*plan;
+    run.readers = detail::source_readers(p, detail::worker_count(o.threads));
   } else {
-    build_from_source(o,
-                      {[&](std::uint64_t, std::uint64_t, std::uint64_t y, std::uint32_t n,
-                           std::uint8_t* out) { return source->read_rows(y, n, out); }},
-                      *plan, g, shared, threads);
+    run.synthetic = emit;
   }
-  if (shared.failed) {
+  auto result = detail::run_build(run);
+  if (!result) {
     (*writer)->abort();
-    return *shared.error;
+    return std::move(result).error();
   }
 
   BuildReport report;
-  report.input_description = input_desc;
+  report.input_description = p.input_description;
   if (plan) {
     report.passes = plan->passes.size();
     report.window_width = plan->widest;
   }
-  if (gdal) {
-    report.warnings = gdal->warnings();
-    report.value_ranges = gdal->value_ranges();
+  if (p.gdal) {
+    report.warnings = p.gdal->warnings();
+    report.value_ranges = p.gdal->value_ranges();
   }
-  TilesetInfo& info = report.info;
-  info.geometry = g;
-  info.codec = o.codec;
-  info.name = o.name.empty() ? o.output.stem().string() : o.name;
-  info.description = o.description.empty() ? input_desc : o.description;
-  info.downsample = o.synthetic ? "synthetic-per-level" : downsample_method(o.downsample);
-  info.sparse = (synthetic && synthetic->region.has_value()) || gdal != nullptr;
-  info.georeference = *georeference;
-  char hash[17];
-  std::snprintf(hash, sizeof hash, "%016llx",
-                static_cast<unsigned long long>(shared.content_sum.load()));
-  info.content_hash = hash;
-  for (int z = 0; z <= g.max_zoom(); ++z) {
-    std::uint64_t n = g.tile_count(z);
-    if (synthetic)
-      n = synthetic_range(g, *synthetic, z).count();
-    else if (gdal)
-      n = footprint_tiles(tiling, g, z, (*georeference)->bounds).count();
-    report.levels.push_back({z, g.level_width(z), g.level_height(z), n});
-  }
-  if (o.cancel && o.cancel->load()) {
-    (*writer)->abort();
-    return make_error(ErrorCode::cancelled, "build cancelled");
-  }
+  report.info = detail::build_tileset_info(o, p, o.output, result->content_sum);
+  for (int z = 0; z <= g.max_zoom(); ++z)
+    report.levels.push_back(
+        {z, g.level_width(z), g.level_height(z),
+         p.synthetic || p.gdal ? emit[static_cast<std::size_t>(z)].count() : g.tile_count(z)});
   if (o.on_progress) {
-    BuildProgress p;
-    p.tiles_done = p.tiles_total = shared.tiles_done;
-    p.bytes_written = shared.bytes;
-    p.seconds = seconds_since(t0);
-    p.finishing = true;
-    o.on_progress(p);
+    BuildProgress bp;
+    bp.tiles_done = bp.tiles_total = result->tiles;
+    bp.bytes_written = result->bytes;
+    bp.seconds = seconds_since(t0);
+    bp.finishing = true;
+    o.on_progress(bp);
   }
-  auto stats = (*writer)->finish(info.to_json());
+  auto stats = (*writer)->finish(report.info.to_json());
   if (!stats) return std::move(stats).error();
   report.stats = *stats;
   report.seconds = seconds_since(t0);

@@ -17,6 +17,8 @@ using Runner = std::function<int()>;
 
 #ifdef VTS_HAVE_BUILDER
 Runner add_build(CLI::App& app);
+Runner add_plan(CLI::App& app);   // vts plan (cmd_plan.cpp)
+Runner add_merge(CLI::App& app);  // vts merge (cmd_merge.cpp)
 #endif
 Runner add_info(CLI::App& app);
 Runner add_verify(CLI::App& app);

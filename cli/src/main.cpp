@@ -54,6 +54,8 @@ int main(int argc, char** argv) {
   };
 #ifdef VTS_HAVE_BUILDER
   add(&vts::cli::add_build);
+  add(&vts::cli::add_plan);
+  add(&vts::cli::add_merge);
 #endif
   add(&vts::cli::add_info);
   add(&vts::cli::add_verify);

@@ -1,0 +1,107 @@
+// Sharded builds (`vts plan`, `vts build --plan`, `vts merge`; docs/PLANET.md, "Plans, shards and
+// parts"): a plan fixes a whole build once (options, inputs with their fingerprints, geometry) and
+// cuts its pyramid at a split level L: the sub-pyramid under each level-L tile that has tiles to
+// build is a shard (one contiguous tile-id range per level, pmtiles::subtree_tile_ids), and the
+// levels above L are the apex. Each shard writes its tiles to one part (pmtiles::PartWriter) and
+// keeps its level-L tile lossless as the part's attachment; the apex is built from those, so it
+// equals a whole build's levels < L for every codec; merge_parts() then writes the archive a
+// single `vts build` of the same options writes, byte for byte.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "vts/builder/builder.hpp"
+#include "vts/protocol/pmtiles_part.hpp"
+
+namespace vts {
+
+inline constexpr int kPlanVersion = 1;
+
+struct PlanInput {
+  std::filesystem::path path;
+  std::uint64_t size = 0;
+  // XXH3-64 of the size and of the file's first and last MiB and 64 KiB at each 1/64 of it
+  // (input_fingerprint): stable across copies, cheap on terabytes, changes when pixels change
+  // in all but contrived cases.
+  std::string fingerprint;
+};
+
+struct ShardPlan {
+  // The build: BuildOptions' inputs, grid, synthetic spec, tile size, border, codec, encode
+  // options, downsample filter, name and description (output, threads and callbacks are not part
+  // of a plan).
+  BuildOptions options;
+  std::vector<PlanInput> inputs;
+  std::string input_description;  // as `vts build` describes them ("earth.jpg 2048x1024 ...")
+  std::uint64_t width = 0, height = 0;
+  int max_zoom = 0;
+  int split_level = 0;
+  std::vector<TileId> shards;  // level-L tiles, in Hilbert tile-id order; shard I is shards[I]
+  std::string hash;            // 16 hex digits: XXH3-64 of to_json() without the hash
+};
+
+// The fingerprint of PlanInput (16 hex digits).
+Result<std::string> input_fingerprint(const std::filesystem::path& path);
+
+// Resolves the geometry from the options' inputs and picks the split level: `split_level` when
+// set, else the smallest level with at least `min_shards` shards (capped at the max zoom).
+// Georeferenced inputs are not supported yet (invalid_argument saying so).
+Result<ShardPlan> make_shard_plan(const BuildOptions& options, std::optional<int> split_level,
+                                  std::uint64_t min_shards);
+
+// The canonical JSON (keys sorted, hash included) and back; plan_from_json checks the version
+// and the hash.
+std::string plan_to_json(const ShardPlan& plan);
+Result<ShardPlan> plan_from_json(const std::string& json);
+Result<ShardPlan> load_plan(const std::filesystem::path& path);
+Status save_plan(const ShardPlan& plan, const std::filesystem::path& path);
+
+// "shard-000012.part", "apex.part".
+std::string shard_part_name(std::size_t index);
+inline constexpr const char* kApexPartName = "apex.part";
+
+struct ShardBuildOptions {
+  std::filesystem::path out_dir;
+  unsigned threads = 0;
+  std::function<void(const BuildProgress&)> on_progress;
+  const std::atomic<bool>* cancel = nullptr;
+};
+
+struct ShardReport {
+  std::filesystem::path part;
+  std::optional<TileId> root;  // nullopt for the apex
+  std::uint64_t tiles = 0;
+  // Finest-level texels the shard read (its window: core plus halo) and its own (core) texels.
+  std::uint64_t texels_read = 0, core_texels = 0;
+  std::uint64_t content_sum = 0;
+  pmtiles::PartStats stats;
+  double seconds = 0;
+};
+
+// Builds shard `index` of the plan into out_dir/shard_part_name(index).
+Result<ShardReport> build_shard(const ShardPlan& plan, std::size_t index,
+                                const ShardBuildOptions& options);
+// Builds the levels above the split level into out_dir/apex.part from the shards' parts there.
+// split_level 0 has no apex: failed_precondition.
+Result<ShardReport> build_apex(const ShardPlan& plan, const ShardBuildOptions& options);
+
+struct MergeReport {
+  TilesetInfo info;
+  pmtiles::WriterStats stats;
+  std::size_t parts = 0;
+  double seconds = 0;
+};
+
+// Merges the plan's parts in `parts_dir` into `output`: the archive `vts build` writes.
+Result<MergeReport> merge_plan(const ShardPlan& plan, const std::filesystem::path& parts_dir,
+                               const std::filesystem::path& output,
+                               const std::function<void(const pmtiles::MergeProgress&)>& progress,
+                               const std::atomic<bool>* cancel);
+
+}  // namespace vts

@@ -1,0 +1,80 @@
+// What a whole build (build_pyramid) and a sharded one (shard.cpp: one shard's sub-pyramid, the
+// apex above the split level) share: the options resolved into a source and a geometry, the
+// tileset's metadata, and running passes (build_plan.hpp) or synthetic tiles into a TileSink.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "build_plan.hpp"
+#include "gdal_source.hpp"
+#include "image_source.hpp"
+#include "vts/builder/builder.hpp"
+
+namespace vts::detail {
+
+// A build's options resolved: its source opened, its geometry and georeference.
+struct PreparedBuild {
+  const Codec* codec = nullptr;
+  std::unique_ptr<ImageSource> source;  // plain images and grids
+  std::unique_ptr<GdalSource> gdal;     // georeferenced inputs
+  std::optional<SyntheticSpec> synthetic;
+  Tiling tiling = Tiling::none;
+  std::optional<Geometry> geometry;
+  std::optional<Georeference> georeference;
+  std::string input_description;
+};
+
+// Checks the options (not the output) and opens the source.
+Result<PreparedBuild> prepare_build(const BuildOptions& o);
+
+// The tiles of every level a whole build writes (index z).
+std::vector<TileRect> build_emit_rects(const PreparedBuild& p);
+
+// The metadata and header options the archive at `output` gets.
+TilesetInfo build_tileset_info(const BuildOptions& o, const PreparedBuild& p,
+                               const std::filesystem::path& output, std::uint64_t content_sum);
+pmtiles::WriterOptions build_writer_options(const PreparedBuild& p,
+                                            const std::filesystem::path& output);
+std::string content_hash_text(std::uint64_t content_sum);
+
+// Reads columns [x0, x1) of rows [y, y + count) of a pass's finest level as RGBA8; each pass
+// reads its rows in increasing order.
+using WindowReader = std::function<Status(std::uint64_t x0, std::uint64_t x1, std::uint64_t y,
+                                          std::uint32_t count, std::uint8_t* out)>;
+
+// What to build into a sink: the passes of a plan over readers, or (synthetic) the tiles of each
+// level generated directly.
+struct BuildRun {
+  const BuildOptions* options = nullptr;  // downsample, on_progress, cancel
+  std::filesystem::path scratch_dir;
+  const Geometry* geometry = nullptr;
+  const Codec* codec = nullptr;
+  pmtiles::TileSink* sink = nullptr;
+  unsigned threads = 0;
+  const BuildPlan* plan = nullptr;
+  std::vector<WindowReader> readers;
+  std::vector<TileRect> synthetic;  // when no plan: tiles of each level (index z)
+  std::optional<TileId> keep;       // this tile is also encoded lossless into kept
+};
+
+struct BuildRunResult {
+  std::uint64_t tiles = 0, bytes = 0, content_sum = 0;
+  std::vector<std::uint8_t> kept;
+};
+
+Result<BuildRunResult> run_build(const BuildRun& run);
+
+// The readers of a prepared source (one per thread for GDAL).
+std::vector<WindowReader> source_readers(PreparedBuild& p, unsigned threads);
+
+unsigned worker_count(unsigned requested);
+
+// Synthetic builds: the tiles of level z (all, or those over the region).
+TileRect synthetic_tiles(const Geometry& g, const SyntheticSpec& spec, int z);
+
+}  // namespace vts::detail

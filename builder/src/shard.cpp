@@ -1,0 +1,317 @@
+// Plans of sharded builds and the JSON they are kept in (vts/builder/shard.hpp).
+#include <algorithm>
+#include <cstdio>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include <xxhash.h>
+
+#include "build_core.hpp"
+#include "shard_internal.hpp"
+#include "vts/builder/shard.hpp"
+#include "vts/protocol/file_io.hpp"
+
+namespace vts {
+
+namespace {
+
+using nlohmann::json;
+
+const char* filter_choice_name(FilterChoice f) {
+  switch (f) {
+    case FilterChoice::none:
+      return "none";
+    case FilterChoice::gradient:
+      return "gradient";
+    default:
+      return "auto";
+  }
+}
+
+Result<FilterChoice> parse_filter_choice(const std::string& s) {
+  if (s == "auto") return FilterChoice::automatic;
+  if (s == "none") return FilterChoice::none;
+  if (s == "gradient") return FilterChoice::gradient;
+  return make_error(ErrorCode::invalid_argument, "unknown filter '" + s + "'");
+}
+
+json options_json(const BuildOptions& o) {
+  json j;
+  j["tile_size"] = o.tile_size;
+  j["border"] = o.border;
+  j["codec"] = codec_name(o.codec);
+  j["zstd_level"] = o.encode.zstd_level;
+  j["filter"] = filter_choice_name(o.encode.filter);
+  j["bc1_quality"] = bc1_quality_name(o.encode.bc1);
+  j["downsample"] = downsample_filter_name(o.downsample);
+  j["grid"] = {o.grid_columns, o.grid_rows};
+  j["name"] = o.name;
+  j["description"] = o.description;
+  if (o.synthetic) {
+    const SyntheticSpec& s = *o.synthetic;
+    j["synthetic"] = {{"width", s.width}, {"height", s.height}, {"region_level", s.region_level}};
+    if (s.region)
+      j["synthetic"]["region"] = {s.region->x0, s.region->y0, s.region->x1, s.region->y1};
+  }
+  return j;
+}
+
+Result<BuildOptions> options_from_json(const json& j) {
+  BuildOptions o;
+  o.tile_size = j.at("tile_size").get<std::uint32_t>();
+  o.border = j.at("border").get<std::uint32_t>();
+  auto codec = parse_codec_name(j.at("codec").get<std::string>());
+  if (!codec) return codec.error();
+  o.codec = *codec;
+  o.encode.zstd_level = j.at("zstd_level").get<int>();
+  auto filter = parse_filter_choice(j.at("filter").get<std::string>());
+  if (!filter) return filter.error();
+  o.encode.filter = *filter;
+  auto bc1 = parse_bc1_quality(j.at("bc1_quality").get<std::string>());
+  if (!bc1) return bc1.error();
+  o.encode.bc1 = *bc1;
+  auto down = parse_downsample_filter(j.at("downsample").get<std::string>());
+  if (!down) return make_error(ErrorCode::invalid_argument, "unknown downsample filter");
+  o.downsample = *down;
+  o.grid_columns = j.at("grid").at(0).get<std::uint32_t>();
+  o.grid_rows = j.at("grid").at(1).get<std::uint32_t>();
+  o.name = j.at("name").get<std::string>();
+  o.description = j.at("description").get<std::string>();
+  if (j.contains("synthetic")) {
+    const json& s = j["synthetic"];
+    SyntheticSpec spec;
+    spec.width = s.at("width").get<std::uint64_t>();
+    spec.height = s.at("height").get<std::uint64_t>();
+    spec.region_level = s.at("region_level").get<int>();
+    if (s.contains("region")) {
+      const json& r = s["region"];
+      spec.region = TexelRect{r.at(0).get<std::uint64_t>(), r.at(1).get<std::uint64_t>(),
+                              r.at(2).get<std::uint64_t>(), r.at(3).get<std::uint64_t>()};
+    }
+    o.synthetic = spec;
+  }
+  return o;
+}
+
+// The plan's JSON without its hash.
+json plan_body(const ShardPlan& p) {
+  json j;
+  j["version"] = kPlanVersion;
+  j["options"] = options_json(p.options);
+  j["inputs"] = json::array();
+  for (const PlanInput& in : p.inputs)
+    j["inputs"].push_back(
+        {{"path", in.path.string()}, {"size", in.size}, {"fingerprint", in.fingerprint}});
+  j["input_description"] = p.input_description;
+  j["geometry"] = {{"width", p.width}, {"height", p.height}, {"max_zoom", p.max_zoom}};
+  j["split_level"] = p.split_level;
+  json shards = json::array();
+  for (const TileId& t : p.shards) shards.push_back({t.x, t.y});
+  j["shards"] = std::move(shards);
+  return j;
+}
+
+std::string hash_hex(std::uint64_t h) {
+  char text[17];
+  std::snprintf(text, sizeof text, "%016llx", static_cast<unsigned long long>(h));
+  return text;
+}
+
+std::string body_hash(const json& body) {
+  const std::string text = body.dump();
+  return hash_hex(XXH3_64bits(text.data(), text.size()));
+}
+
+// The tiles of level z under `root` (a level-L tile) that a build writes.
+TileRect subtree_rect(const TileRect& level, TileId root, int z) {
+  const int d = z - root.z;
+  TileRect r{root.x << d, root.y << d, (root.x + 1) << d, (root.y + 1) << d};
+  r.x0 = std::max(r.x0, level.x0);
+  r.y0 = std::max(r.y0, level.y0);
+  r.x1 = std::max(r.x0, std::min(r.x1, level.x1));
+  r.y1 = std::max(r.y0, std::min(r.y1, level.y1));
+  return r;
+}
+
+// The level-L tiles whose sub-pyramid has tiles to build, in tile-id order.
+std::vector<TileId> select_shards(const std::vector<TileRect>& emit, int L) {
+  std::vector<TileId> shards;
+  const TileRect& top = emit[static_cast<std::size_t>(L)];
+  for (std::uint32_t y = top.y0; y < top.y1; ++y)
+    for (std::uint32_t x = top.x0; x < top.x1; ++x) {
+      const TileId root{static_cast<std::uint8_t>(L), x, y};
+      for (std::size_t z = static_cast<std::size_t>(L); z < emit.size(); ++z)
+        if (subtree_rect(emit[z], root, static_cast<int>(z)).count() > 0) {
+          shards.push_back(root);
+          break;
+        }
+    }
+  std::sort(shards.begin(), shards.end(), [](TileId a, TileId b) {
+    return pmtiles::zxy_to_tile_id(a.z, a.x, a.y) < pmtiles::zxy_to_tile_id(b.z, b.x, b.y);
+  });
+  return shards;
+}
+
+}  // namespace
+
+namespace detail {
+
+TileRect shard_rect(const TileRect& level, TileId root, int z) {
+  return subtree_rect(level, root, z);
+}
+
+std::vector<TileRect> plan_emit_rects(const ShardPlan& plan, const Geometry& g) {
+  std::vector<TileRect> rects;
+  for (int z = 0; z <= g.max_zoom(); ++z)
+    rects.push_back(plan.options.synthetic ? synthetic_tiles(g, *plan.options.synthetic, z)
+                                           : TileRect{0, 0, g.tiles_x(z), g.tiles_y(z)});
+  return rects;
+}
+
+Result<Geometry> plan_geometry(const ShardPlan& plan) {
+  return Geometry::create(plan.width, plan.height, plan.options.tile_size, plan.options.border);
+}
+
+}  // namespace detail
+
+Result<std::string> input_fingerprint(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::error_code ec;
+  const std::uint64_t size = std::filesystem::file_size(path, ec);
+  if (!in || ec) return make_error(ErrorCode::io, "cannot read input " + path.string());
+  XXH3_state_t* state = XXH3_createState();
+  XXH3_64bits_reset(state);
+  XXH3_64bits_update(state, &size, sizeof size);
+  std::vector<char> buf;
+  auto sample = [&](std::uint64_t at, std::uint64_t n) {
+    n = std::min(n, size - std::min(at, size));
+    buf.resize(n);
+    in.seekg(static_cast<std::streamoff>(at));
+    in.read(buf.data(), static_cast<std::streamsize>(n));
+    XXH3_64bits_update(state, buf.data(), static_cast<std::size_t>(in.gcount()));
+  };
+  constexpr std::uint64_t kMiB = std::uint64_t{1} << 20;
+  sample(0, kMiB);
+  sample(size > kMiB ? size - kMiB : 0, kMiB);
+  for (std::uint64_t k = 0; k < 64; ++k) sample(size / 64 * k, 64 * 1024);
+  const std::uint64_t h = XXH3_64bits_digest(state);
+  XXH3_freeState(state);
+  if (in.bad()) return make_error(ErrorCode::io, "cannot read input " + path.string());
+  return hash_hex(h);
+}
+
+Result<ShardPlan> make_shard_plan(const BuildOptions& o, std::optional<int> split_level,
+                                  std::uint64_t min_shards) {
+  if (o.tiling != Tiling::none || o.bounds)
+    return make_error(
+        ErrorCode::invalid_argument,
+        "georeferenced builds (--tiling, --bounds) are not yet supported by vts plan");
+  auto prepared = detail::prepare_build(o);
+  if (!prepared) return std::move(prepared).error();
+  if (prepared->gdal)
+    return make_error(ErrorCode::invalid_argument, "georeferenced inputs (" +
+                                                       o.inputs.front().string() +
+                                                       ") are not yet supported by vts plan");
+  const Geometry& g = *prepared->geometry;
+  ShardPlan plan;
+  plan.options = o;
+  plan.options.output.clear();
+  plan.options.threads = 0;
+  plan.options.on_progress = nullptr;
+  plan.options.on_warning = nullptr;
+  plan.options.cancel = nullptr;
+  for (const auto& path : o.inputs) {
+    PlanInput in{path, 0, {}};
+    std::error_code ec;
+    in.size = std::filesystem::file_size(path, ec);
+    auto fp = input_fingerprint(path);
+    if (!fp) return fp.error();
+    in.fingerprint = *fp;
+    plan.inputs.push_back(std::move(in));
+  }
+  plan.input_description = prepared->input_description;
+  plan.width = g.width();
+  plan.height = g.height();
+  plan.max_zoom = g.max_zoom();
+  const std::vector<TileRect> emit = detail::build_emit_rects(*prepared);
+  if (split_level) {
+    if (*split_level < 0 || *split_level > g.max_zoom())
+      return make_error(ErrorCode::invalid_argument,
+                        "--split-level " + std::to_string(*split_level) + " is outside 0.." +
+                            std::to_string(g.max_zoom()) + " (the max zoom of this build)");
+    plan.split_level = *split_level;
+    plan.shards = select_shards(emit, plan.split_level);
+  } else {
+    for (int L = 0; L <= g.max_zoom(); ++L) {
+      plan.split_level = L;
+      plan.shards = select_shards(emit, L);
+      if (plan.shards.size() >= min_shards) break;
+    }
+  }
+  plan.hash = body_hash(plan_body(plan));
+  return plan;
+}
+
+std::string plan_to_json(const ShardPlan& plan) {
+  json j = plan_body(plan);
+  j["hash"] = body_hash(j);
+  return j.dump(1) + "\n";
+}
+
+Result<ShardPlan> plan_from_json(const std::string& text) {
+  try {
+    json j = json::parse(text);
+    if (j.at("version").get<int>() != kPlanVersion)
+      return make_error(ErrorCode::invalid_argument, "plan version " + j.at("version").dump() +
+                                                         " is not " + std::to_string(kPlanVersion));
+    const std::string hash = j.at("hash").get<std::string>();
+    j.erase("hash");
+    if (body_hash(j) != hash)
+      return make_error(ErrorCode::corrupt, "plan hash " + hash + " does not match its content");
+    ShardPlan p;
+    auto o = options_from_json(j.at("options"));
+    if (!o) return o.error();
+    p.options = std::move(o).value();
+    for (const json& in : j.at("inputs")) {
+      p.inputs.push_back({in.at("path").get<std::string>(), in.at("size").get<std::uint64_t>(),
+                          in.at("fingerprint").get<std::string>()});
+      p.options.inputs.push_back(p.inputs.back().path);
+    }
+    p.input_description = j.at("input_description").get<std::string>();
+    p.width = j.at("geometry").at("width").get<std::uint64_t>();
+    p.height = j.at("geometry").at("height").get<std::uint64_t>();
+    p.max_zoom = j.at("geometry").at("max_zoom").get<int>();
+    p.split_level = j.at("split_level").get<int>();
+    if (p.split_level < 0 || p.split_level > p.max_zoom || p.max_zoom > Geometry::kMaxZoom)
+      return make_error(ErrorCode::invalid_argument, "plan split level is outside its levels");
+    for (const json& s : j.at("shards"))
+      p.shards.push_back({static_cast<std::uint8_t>(p.split_level), s.at(0).get<std::uint32_t>(),
+                          s.at(1).get<std::uint32_t>()});
+    p.hash = hash;
+    return p;
+  } catch (const json::exception& e) {
+    return make_error(ErrorCode::invalid_argument, std::string("not a vts plan: ") + e.what());
+  }
+}
+
+Result<ShardPlan> load_plan(const std::filesystem::path& path) {
+  auto text = read_file(path);
+  if (!text)
+    return make_error(text.error().code,
+                      "cannot read plan " + path.string() + ": " + text.error().message);
+  auto plan = plan_from_json(*text);
+  if (!plan) return make_error(plan.error().code, path.string() + ": " + plan.error().message);
+  return plan;
+}
+
+Status save_plan(const ShardPlan& plan, const std::filesystem::path& path) {
+  return write_file_atomically(path, plan_to_json(plan));
+}
+
+std::string shard_part_name(std::size_t index) {
+  char name[32];
+  std::snprintf(name, sizeof name, "shard-%06zu.part", index);
+  return name;
+}
+
+}  // namespace vts

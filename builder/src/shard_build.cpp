@@ -1,0 +1,332 @@
+// One shard of a plan, its apex, and the merge of their parts (vts/builder/shard.hpp).
+#include <algorithm>
+#include <chrono>
+#include <cstring>
+#include <map>
+#include <nlohmann/json.hpp>
+
+#include "build_core.hpp"
+#include "cascade.hpp"
+#include "shard_internal.hpp"
+#include "vts/builder/shard.hpp"
+
+namespace vts {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using nlohmann::json;
+
+std::string tile_text(TileId t) {
+  return std::to_string(t.z) + "/" + std::to_string(t.x) + "/" + std::to_string(t.y);
+}
+
+std::string manifest(const ShardPlan& plan, std::optional<std::size_t> index,
+                     std::optional<TileId> root, std::uint64_t tiles, std::uint64_t content_sum) {
+  json j;
+  j["plan_hash"] = plan.hash;
+  j["part"] = index ? "shard" : "apex";
+  if (index) j["shard"] = *index;
+  if (root) j["root"] = tile_text(*root);
+  j["tiles"] = tiles;
+  j["content_sum"] = detail::content_hash_text(content_sum);
+  return j.dump();
+}
+
+// The part's manifest, checked against the plan: its content sum.
+Result<std::uint64_t> check_manifest(const ShardPlan& plan, const pmtiles::PartInfo& info) {
+  try {
+    const json j = json::parse(info.manifest_json);
+    if (j.at("plan_hash").get<std::string>() != plan.hash)
+      return make_error(ErrorCode::invalid_argument, "part " + info.path.string() +
+                                                         " belongs to plan " +
+                                                         j.at("plan_hash").get<std::string>() +
+                                                         ", not to this plan (" + plan.hash + ")");
+    return std::stoull(j.at("content_sum").get<std::string>(), nullptr, 16);
+  } catch (const std::exception& e) {
+    return make_error(ErrorCode::corrupt,
+                      "part " + info.path.string() + " has no valid manifest: " + e.what());
+  }
+}
+
+Result<pmtiles::PartInfo> open_part(const ShardPlan& plan, const std::filesystem::path& path,
+                                    std::uint64_t* content_sum) {
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec))
+    return make_error(ErrorCode::not_found, "missing part " + path.string());
+  auto info = pmtiles::read_part_info(path);
+  if (!info)
+    return make_error(info.error().code, "part " + path.string() + ": " + info.error().message);
+  auto sum = check_manifest(plan, *info);
+  if (!sum) return sum.error();
+  if (content_sum) *content_sum = *sum;
+  return info;
+}
+
+// The options a shard or the apex builds with: the plan's, with the caller's threads and callbacks.
+BuildOptions run_options(const ShardPlan& plan, const ShardBuildOptions& so) {
+  BuildOptions o = plan.options;
+  o.threads = so.threads;
+  o.on_progress = so.on_progress;
+  o.cancel = so.cancel;
+  return o;
+}
+
+Status check_inputs(const ShardPlan& plan) {
+  for (const PlanInput& in : plan.inputs) {
+    auto fp = input_fingerprint(in.path);
+    if (!fp) return fp.error();
+    std::error_code ec;
+    const std::uint64_t size = std::filesystem::file_size(in.path, ec);
+    if (size != in.size || *fp != in.fingerprint)
+      return make_error(ErrorCode::invalid_argument,
+                        "input " + in.path.string() +
+                            " changed since the plan was made (size or fingerprint differs)");
+  }
+  return {};
+}
+
+// Runs `run` into a new part at `path` and finishes it.
+Result<ShardReport> write_part(const ShardPlan& plan, detail::BuildRun& run,
+                               const std::filesystem::path& path, std::optional<std::size_t> index,
+                               std::optional<TileId> root) {
+  const auto t0 = Clock::now();
+  std::error_code ec;
+  std::filesystem::create_directories(path.parent_path(), ec);
+  auto part = pmtiles::PartWriter::create(path);
+  if (!part) return std::move(part).error();
+  run.sink = part->get();
+  auto result = detail::run_build(run);
+  if (!result) {
+    (*part)->abort();
+    return std::move(result).error();
+  }
+  auto stats = (*part)->finish(result->kept,
+                               manifest(plan, index, root, result->tiles, result->content_sum));
+  if (!stats) return std::move(stats).error();
+  ShardReport r;
+  r.part = path;
+  r.root = root;
+  r.tiles = result->tiles;
+  r.content_sum = result->content_sum;
+  r.stats = *stats;
+  r.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+  return r;
+}
+
+TexelRect clip(std::uint64_t x0, std::uint64_t y0, std::uint64_t x1, std::uint64_t y1,
+               const Geometry& g) {
+  return TexelRect{x0, y0, std::min(x1, g.width()), std::min(y1, g.height())};
+}
+
+}  // namespace
+
+Result<ShardReport> build_shard(const ShardPlan& plan, std::size_t index,
+                                const ShardBuildOptions& so) {
+  if (index >= plan.shards.size())
+    return make_error(ErrorCode::invalid_argument,
+                      "shard " + std::to_string(index) + " is out of range: the plan has " +
+                          std::to_string(plan.shards.size()) + " shards (0.." +
+                          std::to_string(plan.shards.size() - 1) + ")");
+  if (Status st = check_inputs(plan); !st) return st.error();
+  const BuildOptions o = run_options(plan, so);
+  auto prepared = detail::prepare_build(o);
+  if (!prepared) return std::move(prepared).error();
+  const Geometry& g = *prepared->geometry;
+  if (g.width() != plan.width || g.height() != plan.height || g.max_zoom() != plan.max_zoom)
+    return make_error(ErrorCode::invalid_argument, "the inputs' geometry is not the plan's");
+  const TileId root = plan.shards[index];
+  const int L = plan.split_level, d = g.max_zoom() - L;
+  std::vector<TileRect> emit = detail::build_emit_rects(*prepared);
+  for (int z = 0; z <= g.max_zoom(); ++z) {
+    TileRect& e = emit[static_cast<std::size_t>(z)];
+    e = z < L ? TileRect{} : detail::shard_rect(e, root, z);
+  }
+  detail::BuildRun run;
+  run.options = &o;
+  run.scratch_dir = so.out_dir;
+  run.geometry = &g;
+  run.codec = prepared->codec;
+  run.threads = so.threads;
+  std::optional<detail::BuildPlan> bp;
+  std::uint64_t texels_read = 0, core_texels = 0;
+  if (prepared->synthetic) {
+    run.synthetic = emit;  // generated directly: nothing read
+  } else {
+    // The core: the finest texels under the root; the window adds the halo its tiles' borders
+    // and the filter need at every level down to L, level L's tile included, borders and all
+    // (cascade.hpp, stripe_halo: exact out to B around the core at levels finest .. L is its
+    // margin for d + 1 levels, as if level L - 1 were made too).
+    const std::uint64_t side = std::uint64_t{g.tile_size()} << d;
+    const TexelRect core =
+        clip(root.x * side, root.y * side, (root.x + 1) * side, (root.y + 1) * side, g);
+    const std::uint64_t halo = detail::stripe_halo(g, d + 1, o.downsample);
+    const TexelRect window =
+        clip(core.x0 > halo ? core.x0 - halo : 0, core.y0 > halo ? core.y0 - halo : 0,
+             core.x1 + halo, core.y1 + halo, g);
+    auto p = detail::make_build_plan(g, o.downsample, window, emit, UINT64_MAX, L);
+    if (!p) return std::move(p).error();
+    bp = std::move(p).value();
+    run.plan = &*bp;
+    run.readers = detail::source_readers(*prepared, detail::worker_count(so.threads));
+    run.keep = root;
+    texels_read = window.width() * window.height();
+    core_texels = core.width() * core.height();
+  }
+  auto r = write_part(plan, run, so.out_dir / shard_part_name(index), index, root);
+  if (!r) return r;
+  r->texels_read = texels_read;
+  r->core_texels = core_texels;
+  return r;
+}
+
+namespace {
+
+// Rows of the split level, assembled from the shards' lossless level-L tiles (their parts'
+// attachments), one tile row of them decoded at a time.
+class SplitLevelRows {
+ public:
+  SplitLevelRows(const ShardPlan& plan, const Geometry& g, std::filesystem::path dir)
+      : plan_(plan), g_(g), dir_(std::move(dir)) {
+    for (std::size_t i = 0; i < plan.shards.size(); ++i)
+      index_[{plan.shards[i].x, plan.shards[i].y}] = i;
+  }
+  Status read(std::uint64_t x0, std::uint64_t x1, std::uint64_t y, std::uint32_t n,
+              std::uint8_t* out) {
+    const std::uint64_t T = g_.tile_size(), B = g_.border(), S = g_.stored_size();
+    std::memset(out, 0, (x1 - x0) * n * 4);
+    for (std::uint32_t r = 0; r < n; ++r) {
+      const std::uint64_t yy = y + r;
+      if (Status st = load_row(static_cast<std::uint32_t>(yy / T)); !st) return st;
+      for (std::uint64_t x = x0; x < x1;) {
+        const auto tx = static_cast<std::uint32_t>(x / T);
+        const std::uint64_t end = std::min(x1, (tx + 1) * T);
+        auto it = tiles_.find(tx);
+        if (it != tiles_.end()) {
+          const std::uint8_t* src =
+              it->second.pixels.data() + ((yy % T + B) * S + (x - tx * T + B)) * 4;
+          std::memcpy(out + (std::size_t{r} * (x1 - x0) + (x - x0)) * 4, src, (end - x) * 4);
+        }
+        x = end;
+      }
+    }
+    return {};
+  }
+
+ private:
+  Status load_row(std::uint32_t ty) {
+    if (ty == row_) return {};
+    tiles_.clear();
+    row_ = ty;
+    for (std::uint32_t tx = 0; tx < g_.tiles_x(plan_.split_level); ++tx) {
+      auto it = index_.find({tx, ty});
+      if (it == index_.end()) continue;  // no shard: nothing there
+      auto info = open_part(plan_, dir_ / shard_part_name(it->second), nullptr);
+      if (!info) return info.error();
+      auto img = find_codec(CodecId::lossless)->decode(info->attachment);
+      if (!img || img->width != g_.stored_size() || img->height != g_.stored_size())
+        return make_error(ErrorCode::corrupt, "part " + info->path.string() +
+                                                  " has no valid level-" +
+                                                  std::to_string(plan_.split_level) + " tile");
+      tiles_.emplace(tx, std::move(img).value());
+    }
+    return {};
+  }
+
+  const ShardPlan& plan_;
+  const Geometry& g_;
+  std::filesystem::path dir_;
+  std::map<std::pair<std::uint32_t, std::uint32_t>, std::size_t> index_;
+  std::uint32_t row_ = UINT32_MAX;
+  std::map<std::uint32_t, TileImage> tiles_;
+};
+
+}  // namespace
+
+Result<ShardReport> build_apex(const ShardPlan& plan, const ShardBuildOptions& so) {
+  const int L = plan.split_level;
+  if (L == 0)
+    return make_error(ErrorCode::invalid_argument,
+                      "the plan splits at level 0: it has no apex (merge the shards alone)");
+  auto geometry = detail::plan_geometry(plan);
+  if (!geometry) return std::move(geometry).error();
+  const Geometry& g = *geometry;
+  const BuildOptions o = run_options(plan, so);
+  std::vector<TileRect> emit = detail::plan_emit_rects(plan, g);
+  for (std::size_t z = static_cast<std::size_t>(L); z < emit.size(); ++z) emit[z] = TileRect{};
+  // Every shard's part must be there before any tile is built.
+  for (std::size_t i = 0; i < plan.shards.size() && !o.synthetic; ++i) {
+    const auto path = so.out_dir / shard_part_name(i);
+    std::error_code ec;
+    if (!std::filesystem::exists(path, ec))
+      return make_error(ErrorCode::not_found, "missing part " + path.string());
+  }
+  detail::BuildRun run;
+  run.options = &o;
+  run.scratch_dir = so.out_dir;
+  run.geometry = &g;
+  run.codec = find_codec(o.codec);
+  run.threads = so.threads;
+  detail::BuildPlan bp;
+  SplitLevelRows rows(plan, g, so.out_dir);
+  if (o.synthetic) {
+    run.synthetic = emit;
+  } else {
+    // The whole build's level-L window, then a pass from it down to level 0.
+    auto whole = detail::make_build_plan(g, o.downsample, TexelRect{0, 0, g.width(), g.height()},
+                                         emit, UINT64_MAX);
+    if (!whole) return std::move(whole).error();
+    const TexelRect window =
+        detail::pass_windows(g, o.downsample, whole->passes.front())[static_cast<std::size_t>(L)];
+    detail::Pass pass{L,  0, window, -1,
+                      -1, 0, 0,      std::vector<TileRect>(emit.begin(), emit.begin() + L + 1)};
+    bp.rows = window.height();
+    for (int z = 0; z < L; ++z) bp.tiles += emit[static_cast<std::size_t>(z)].count();
+    bp.widest = window.width();
+    bp.passes.push_back(std::move(pass));
+    run.plan = &bp;
+    run.readers.push_back([&rows](std::uint64_t x0, std::uint64_t x1, std::uint64_t y,
+                                  std::uint32_t n,
+                                  std::uint8_t* out) { return rows.read(x0, x1, y, n, out); });
+  }
+  return write_part(plan, run, so.out_dir / kApexPartName, std::nullopt, std::nullopt);
+}
+
+Result<MergeReport> merge_plan(const ShardPlan& plan, const std::filesystem::path& parts_dir,
+                               const std::filesystem::path& output,
+                               const std::function<void(const pmtiles::MergeProgress&)>& progress,
+                               const std::atomic<bool>* cancel) {
+  const auto t0 = Clock::now();
+  auto geometry = detail::plan_geometry(plan);
+  if (!geometry) return std::move(geometry).error();
+  pmtiles::MergeOptions mo;
+  if (plan.split_level > 0) mo.parts.push_back(parts_dir / kApexPartName);
+  for (std::size_t i = 0; i < plan.shards.size(); ++i)
+    mo.parts.push_back(parts_dir / shard_part_name(i));
+  std::uint64_t content_sum = 0;
+  for (const auto& path : mo.parts) {
+    std::uint64_t sum = 0;
+    auto info = open_part(plan, path, &sum);
+    if (!info) return info.error();
+    content_sum += sum;
+  }
+  // The metadata and header a single `vts build` of the plan's options writes.
+  detail::PreparedBuild p;
+  p.geometry = *geometry;
+  p.synthetic = plan.options.synthetic;
+  p.input_description = plan.input_description;
+  MergeReport report;
+  report.info = detail::build_tileset_info(plan.options, p, output, content_sum);
+  mo.archive = detail::build_writer_options(p, output);
+  mo.metadata_json = report.info.to_json();
+  mo.on_progress = progress;
+  mo.cancel = cancel;
+  auto stats = pmtiles::merge_parts(mo);
+  if (!stats) return std::move(stats).error();
+  report.stats = *stats;
+  report.parts = mo.parts.size();
+  report.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+  return report;
+}
+
+}  // namespace vts

@@ -1,0 +1,186 @@
+// Plans of sharded builds (vts/builder/shard.hpp): the JSON round trip and its hash, the shards a
+// plan picks (in Hilbert order, only sub-pyramids with tiles, the smallest level giving N), input
+// fingerprints, and the halo a shard reads.
+#include "vts/builder/shard.hpp"
+
+#include <OpenImageIO/imageio.h>
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "cascade.hpp"
+#include "vts/protocol/pmtiles.hpp"
+#include "vts/test/temp_dir.hpp"
+
+namespace vts {
+namespace {
+
+namespace fs = std::filesystem;
+namespace OIIO = OIIO_NAMESPACE;
+
+BuildOptions synthetic(std::uint64_t w, std::uint64_t h) {
+  BuildOptions o;
+  o.synthetic = SyntheticSpec{w, h, std::nullopt, 6};
+  return o;
+}
+
+TEST(ShardPlan, JsonRoundTripsAndItsHashCoversEveryField) {
+  BuildOptions o = synthetic(3000, 1700);
+  o.codec = CodecId::bc1;
+  o.encode.bc1 = Bc1Quality::high;
+  o.downsample = DownsampleFilter::lanczos3;
+  o.synthetic->region = TexelRect{100, 200, 900, 1000};
+  o.synthetic->region_level = 2;
+  o.name = "planet";
+  auto plan = make_shard_plan(o, 3, 0);
+  ASSERT_TRUE(plan) << plan.error().to_string();
+  const std::string text = plan_to_json(*plan);
+  auto back = plan_from_json(text);
+  ASSERT_TRUE(back) << back.error().to_string();
+  EXPECT_EQ(plan_to_json(*back), text);
+  EXPECT_EQ(back->hash, plan->hash);
+  EXPECT_EQ(back->split_level, 3);
+  EXPECT_EQ(back->options.codec, CodecId::bc1);
+  EXPECT_EQ(back->options.encode.bc1, Bc1Quality::high);
+  EXPECT_EQ(back->options.downsample, DownsampleFilter::lanczos3);
+  ASSERT_TRUE(back->options.synthetic && back->options.synthetic->region);
+  EXPECT_EQ(*back->options.synthetic->region, (TexelRect{100, 200, 900, 1000}));
+  EXPECT_EQ(back->options.name, "planet");
+  EXPECT_EQ(back->shards.size(), plan->shards.size());
+  // Any change to the content without a new hash is refused.
+  std::string tampered = text;
+  tampered.replace(tampered.find("\"planet\""), 8, "\"planes\"");
+  auto bad = plan_from_json(tampered);
+  ASSERT_FALSE(bad);
+  EXPECT_NE(bad.error().message.find("hash"), std::string::npos);
+  EXPECT_FALSE(plan_from_json("{}"));
+  EXPECT_FALSE(plan_from_json("not json"));
+}
+
+TEST(ShardPlan, ShardsAreTheSplitLevelTilesInHilbertOrder) {
+  // 3000x1700 at T = 256: levels 0..4, level 3 is 6x4 tiles.
+  auto plan = make_shard_plan(synthetic(3000, 1700), 3, 0);
+  ASSERT_TRUE(plan);
+  ASSERT_EQ(plan->shards.size(), 24u);
+  for (std::size_t i = 1; i < plan->shards.size(); ++i) {
+    const TileId a = plan->shards[i - 1], b = plan->shards[i];
+    EXPECT_LT(pmtiles::zxy_to_tile_id(a.z, a.x, a.y), pmtiles::zxy_to_tile_id(b.z, b.x, b.y));
+  }
+  // Not row-major: the Hilbert curve starts down the first column.
+  EXPECT_EQ(plan->shards[1].x, 0u);
+  EXPECT_EQ(plan->shards[1].y, 1u);
+}
+
+TEST(ShardPlan, ShardCountPicksTheSmallestLevelGivingThem) {
+  const BuildOptions o = synthetic(3000, 1700);  // levels: 1, 2, 6, 24, 84 tiles
+  struct Case {
+    std::uint64_t n;
+    int level;
+    std::size_t shards;
+  };
+  for (const Case c : {Case{1, 0, 1}, Case{2, 1, 2}, Case{4, 2, 6}, Case{7, 3, 24}, Case{25, 4, 84},
+                       Case{1000000, 4, 84}}) {
+    auto plan = make_shard_plan(o, std::nullopt, c.n);
+    ASSERT_TRUE(plan);
+    EXPECT_EQ(plan->split_level, c.level) << c.n;
+    EXPECT_EQ(plan->shards.size(), c.shards) << c.n;
+  }
+  EXPECT_FALSE(make_shard_plan(o, 5, 0));  // beyond the finest level
+}
+
+TEST(ShardPlan, SparseRegionKeepsOnlyShardsWithTiles) {
+  BuildOptions o = synthetic(40000, 20000);  // levels 0..8
+  o.synthetic->region = TexelRect{1000, 1000, 3000, 2500};
+  o.synthetic->region_level = 2;
+  auto plan = make_shard_plan(o, 4, 0);
+  ASSERT_TRUE(plan);
+  // Level 4 tiles cover 4096 finest texels: the region lies in tile (0, 0) only.
+  ASSERT_EQ(plan->shards.size(), 1u);
+  EXPECT_EQ(plan->shards[0], (TileId{4, 0, 0}));
+  // Above the region level every tile has tiles below it.
+  auto coarse = make_shard_plan(o, 1, 0);
+  ASSERT_TRUE(coarse);
+  EXPECT_EQ(coarse->shards.size(), 2u);
+}
+
+TEST(ShardPlan, GeoreferencedBuildsAreNotYetSupported) {
+  BuildOptions o = synthetic(4096, 2048);
+  o.tiling = Tiling::world_crs84_quad;
+  auto plan = make_shard_plan(o, 1, 0);
+  ASSERT_FALSE(plan);
+  EXPECT_NE(plan.error().message.find("not yet supported"), std::string::npos);
+}
+
+TEST(ShardPlan, FingerprintFollowsContentNotTheFile) {
+  test::TempDir dir;
+  const fs::path a = dir.path() / "a.bin", b = dir.path() / "b.bin";
+  std::string bytes(5 << 20, 'x');
+  for (std::size_t i = 0; i < bytes.size(); i += 4097) bytes[i] = static_cast<char>(i);
+  std::ofstream(a, std::ios::binary) << bytes;
+  fs::copy_file(a, b);
+  auto fa = input_fingerprint(a), fb = input_fingerprint(b);
+  ASSERT_TRUE(fa && fb);
+  EXPECT_EQ(*fa, *fb);  // a copy (another mtime) has the same fingerprint
+  // One sample at 1/64 of the way in the middle of the file, beyond the first and last MiB.
+  bytes[(bytes.size() / 64) * 30 + 10] ^= 1;
+  std::ofstream(b, std::ios::binary | std::ios::trunc) << bytes;
+  auto fc = input_fingerprint(b);
+  ASSERT_TRUE(fc);
+  EXPECT_NE(*fa, *fc);
+  EXPECT_FALSE(input_fingerprint(dir.path() / "missing.bin"));
+}
+
+TEST(ShardPlan, ShardReadsItsCorePlusTheHaloOfItsLevels) {
+  test::TempDir dir;
+  // A synthetic plan reads nothing; an image's shard reads its core plus the halo.
+  const fs::path img = dir.path() / "img.png";
+  {
+    auto plan = make_shard_plan(synthetic(2048, 1024), 1, 0);
+    ASSERT_TRUE(plan);
+    ShardBuildOptions so;
+    so.out_dir = dir.path() / "parts";
+    so.threads = 1;
+    auto r = build_shard(*plan, 0, so);
+    ASSERT_TRUE(r) << r.error().to_string();
+    EXPECT_EQ(r->texels_read, 0u);
+    EXPECT_TRUE(fs::exists(so.out_dir / "shard-000000.part"));
+    auto out = build_shard(*plan, 2, so);
+    ASSERT_FALSE(out);
+    EXPECT_NE(out.error().message.find("out of range"), std::string::npos);
+  }
+  const std::uint64_t W = 2048, H = 1024;
+  {
+    std::vector<std::uint8_t> px(W * H * 3, 128);
+    auto o = OIIO::ImageOutput::create(img.string());
+    ASSERT_TRUE(o);
+    OIIO::ImageSpec spec(int(W), int(H), 3, OIIO::TypeDesc::UINT8);
+    ASSERT_TRUE(o->open(img.string(), spec));
+    ASSERT_TRUE(o->write_image(OIIO::TypeDesc::UINT8, px.data()));
+    o->close();
+  }
+  for (DownsampleFilter f : {DownsampleFilter::box, DownsampleFilter::lanczos3}) {
+    BuildOptions o;
+    o.inputs = {img};
+    o.downsample = f;
+    auto plan = make_shard_plan(o, 1, 0);  // 2 shards of 1024 x 1024 finest texels
+    ASSERT_TRUE(plan);
+    ASSERT_EQ(plan->shards.size(), 2u);
+    ShardBuildOptions so;
+    so.out_dir = dir.path() / "img_parts";
+    so.threads = 1;
+    auto r = build_shard(*plan, 0, so);
+    ASSERT_TRUE(r) << r.error().to_string();
+    auto g = Geometry::create(W, H);
+    ASSERT_TRUE(g);
+    // Levels 3 and 2 down to level 1, whose tile (borders too) is kept: as if level 0 were made.
+    const std::uint64_t halo = detail::stripe_halo(*g, 3, f);
+    EXPECT_GE(halo, 4u);
+    // Shard 0 is the left half: its window reaches `halo` texels into the right half only.
+    EXPECT_EQ(r->core_texels, 1024u * 1024u);
+    EXPECT_EQ(r->texels_read, (1024u + halo) * 1024u);
+  }
+}
+
+}  // namespace
+}  // namespace vts
