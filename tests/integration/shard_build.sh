@@ -115,10 +115,19 @@ expect_ok "$VTS" build --plan "$big" --shard 0 --out-dir "$WORK/big_ref" --threa
 mkdir -p "$WORK/big"
 "$VTS" build --plan "$big" --shard 0 --out-dir "$WORK/big" --threads 1 -q &
 pid=$!
-# Mid-way: once it has spooled tiles beside the part, before the part exists.
+# Mid-way: once it has spooled tiles (an unlinked file beside the part, seen through /proc),
+# before the part exists.
+spooled() {
+  local fd
+  for fd in /proc/"$pid"/fd/*; do
+    [[ $(readlink "$fd" 2>/dev/null) == *.spool-* ]] || continue
+    (($(stat -L -c %s "$fd" 2>/dev/null || echo 0) > 0)) && return 0
+  done
+  return 1
+}
 deadline=$((SECONDS + 60))
-until [[ -n $(find "$WORK/big" -type f -size +0 2>/dev/null) ]]; do
-  ((SECONDS < deadline)) || fail "the shard wrote nothing within 60 s"
+until spooled; do
+  ((SECONDS < deadline)) || fail "the shard spooled nothing within 60 s"
   kill -0 "$pid" 2>/dev/null || break
   sleep 0.01
 done

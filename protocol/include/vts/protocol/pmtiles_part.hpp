@@ -83,8 +83,9 @@ struct PartInfo {
     std::uint64_t first_record = 0, records = 0;
   };
   std::vector<Segment> segments;  // in tile-id order
-  // Sum (mod 2^64) over the part's tiles of XXH3-64 of {tile id, XXH3-64 of the payload}: parts'
-  // sums add up to the whole archive's (TilesetInfo::content_hash uses this).
+  // Sum (mod 2^64) over the part's tiles of XXH3-64 of {tile id, the checksum in the payload's
+  // tile header (codec.hpp)}; tiles without a tile header add nothing. What build_pyramid sums
+  // for TilesetInfo::content_hash, so parts' sums add up to the whole archive's.
   std::uint64_t content_sum = 0;
   std::string manifest_json;
   std::vector<std::uint8_t> attachment;
