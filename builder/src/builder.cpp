@@ -466,20 +466,10 @@ std::vector<WindowReader> source_readers(PreparedBuild& p, unsigned threads) {
                             std::uint8_t* out) { return r->read_window(x0, x1, y, n, out); });
     return readers;
   }
-  // Whole rows of the image; a narrower window (a shard) keeps its columns of them.
+  // A narrower window than the image (a shard) reads only its columns.
   ImageSource* src = p.source.get();
-  const std::uint64_t width = p.geometry->width();
-  readers.push_back([src, width, rows = std::vector<std::uint8_t>()](
-                        std::uint64_t x0, std::uint64_t x1, std::uint64_t y, std::uint32_t n,
-                        std::uint8_t* out) mutable -> Status {
-    if (x0 == 0 && x1 == width) return src->read_rows(y, n, out);
-    rows.resize(std::size_t{n} * width * 4);
-    if (Status st = src->read_rows(y, n, rows.data()); !st) return st;
-    for (std::uint32_t r = 0; r < n; ++r)
-      std::memcpy(out + std::size_t{r} * (x1 - x0) * 4, rows.data() + (r * width + x0) * 4,
-                  (x1 - x0) * 4);
-    return {};
-  });
+  readers.push_back([src](std::uint64_t x0, std::uint64_t x1, std::uint64_t y, std::uint32_t n,
+                          std::uint8_t* out) { return src->read_window(x0, x1, y, n, out); });
   return readers;
 }
 

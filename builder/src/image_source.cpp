@@ -27,45 +27,65 @@ struct ImageSource::Piece {
   int tile_width = 0, tile_height = 0;
   std::vector<std::uint8_t> band;
   std::int64_t band_y0 = -1;
+  std::uint64_t band_x0 = 0, band_x1 = 0;
 
-  // Reads rows [y, y + n) of channels [0, nch) as `type` into out (tightly packed); an error
-  // when the reader fails or reports damage (check_read()).
-  Status read(std::uint64_t y, std::uint32_t n, int nch, OIIO::TypeDesc type, void* out) {
+  // Reads columns [x0, x1) of rows [y, y + n) of channels [0, nch) as `type` into out (tightly
+  // packed); an error when the reader fails or reports damage (check_read()). A tiled file
+  // decodes only the tiles over those columns; a scanline file decodes whole rows.
+  Status read(std::uint64_t x0, std::uint64_t x1, std::uint64_t y, std::uint32_t n, int nch,
+              OIIO::TypeDesc type, void* out) {
     const std::string what = "reading rows " + std::to_string(y) + ".." + std::to_string(y + n);
-    if (tile_height <= 0) {
-      const bool ok = in->read_scanlines(0, 0, static_cast<int>(y), static_cast<int>(y + n), 0, 0,
-                                         nch, type, out);
-      return check_read(path, what, ok, in->geterror());
-    }
-    const std::size_t row_bytes = width * nch * type.size();
+    const std::size_t px = nch * type.size();
+    const std::size_t out_row = (x1 - x0) * px;
     auto* dst = static_cast<std::uint8_t*>(out);
+    if (tile_height <= 0) {
+      const bool whole = x0 == 0 && x1 == width;
+      if (!whole) band.resize(std::size_t{n} * width * px);
+      const bool ok = in->read_scanlines(0, 0, static_cast<int>(y), static_cast<int>(y + n), 0, 0,
+                                         nch, type, whole ? out : band.data());
+      band_y0 = -1;
+      if (Status st = check_read(path, what, ok, in->geterror()); !st) return st;
+      if (!whole)
+        for (std::uint32_t r = 0; r < n; ++r)
+          std::memcpy(dst + r * out_row, band.data() + (r * width + x0) * px, out_row);
+      return {};
+    }
+    // The band holds tile columns [t0, t1) of one row of tiles.
+    const std::uint64_t t0 = x0 / tile_width * tile_width;
+    const std::uint64_t t1 = std::min<std::uint64_t>(
+        width, (x1 + tile_width - 1) / static_cast<std::uint64_t>(tile_width) * tile_width);
+    const std::size_t band_row = (t1 - t0) * px;
     for (std::uint64_t row = y; row < y + n;) {
       const auto b0 = static_cast<std::int64_t>(row / tile_height * tile_height);
       const auto b1 = std::min<std::int64_t>(b0 + tile_height, static_cast<std::int64_t>(height));
-      if (b0 != band_y0) {
-        band.resize(static_cast<std::size_t>(b1 - b0) * row_bytes);
+      if (b0 != band_y0 || t0 != band_x0 || t1 != band_x1) {
+        band.resize(static_cast<std::size_t>(b1 - b0) * band_row);
         // A few tiles at a time: OpenImageIO stages a read_tiles() region in a buffer of its own,
         // which for a whole band would double the band's memory.
         const std::uint64_t chunk = std::uint64_t(tile_width) * 8;
-        for (std::uint64_t x0 = 0; x0 < width; x0 += chunk) {
-          const std::uint64_t x1 = std::min(width, x0 + chunk);
-          const std::size_t px = nch * type.size();
+        for (std::uint64_t c0 = t0; c0 < t1; c0 += chunk) {
+          const std::uint64_t c1 = std::min(t1, c0 + chunk);
           const bool ok = in->read_tiles(
-              0, 0, static_cast<int>(x0), static_cast<int>(x1), static_cast<int>(b0),
-              static_cast<int>(b1), 0, 1, 0, nch, type, band.data() + x0 * px,
-              static_cast<OIIO::stride_t>(px), static_cast<OIIO::stride_t>(row_bytes));
+              0, 0, static_cast<int>(c0), static_cast<int>(c1), static_cast<int>(b0),
+              static_cast<int>(b1), 0, 1, 0, nch, type, band.data() + (c0 - t0) * px,
+              static_cast<OIIO::stride_t>(px), static_cast<OIIO::stride_t>(band_row));
           if (Status st = check_read(path, what, ok, in->geterror()); !st) {
             band_y0 = -1;  // the band is partly filled
             return st;
           }
         }
         band_y0 = b0;
+        band_x0 = t0;
+        band_x1 = t1;
       }
       const std::uint64_t take =
           std::min<std::uint64_t>(y + n, static_cast<std::uint64_t>(b1)) - row;
-      std::memcpy(dst, band.data() + (row - static_cast<std::uint64_t>(b0)) * row_bytes,
-                  take * row_bytes);
-      dst += take * row_bytes;
+      for (std::uint64_t r = 0; r < take; ++r)
+        std::memcpy(
+            dst + r * out_row,
+            band.data() + (row + r - static_cast<std::uint64_t>(b0)) * band_row + (x0 - t0) * px,
+            out_row);
+      dst += take * out_row;
       row += take;
     }
     return {};
@@ -245,6 +265,13 @@ Status ImageSource::open_row(std::uint32_t grid_row) {
 }
 
 Status ImageSource::read_rows(std::uint64_t y, std::uint32_t count, std::uint8_t* out) {
+  return read_window(0, width_, y, count, out);
+}
+
+Status ImageSource::read_window(std::uint64_t x0, std::uint64_t x1, std::uint64_t y,
+                                std::uint32_t count, std::uint8_t* out) {
+  if (x0 >= x1 || x1 > width_) return make_error(ErrorCode::internal, "columns past the mosaic");
+  const std::size_t dst_stride = (x1 - x0) * 4;
   // Split the request at grid-row boundaries.
   while (count > 0) {
     std::uint32_t r = 0;
@@ -259,17 +286,22 @@ Status ImageSource::read_rows(std::uint64_t y, std::uint32_t count, std::uint8_t
         static_cast<std::uint32_t>(std::min<std::uint64_t>(count, row_heights_[r] - local_y));
     std::uint64_t x_offset = 0;
     for (auto& piece : pieces_) {
+      // The piece's columns within the window: pieces beside it are not decoded at all.
+      const std::uint64_t left = x_offset;
+      x_offset += piece->width;
+      const std::uint64_t c0 = std::max(x0, left), c1 = std::min(x1, left + piece->width);
+      if (c0 >= c1) continue;
+      const std::uint64_t p0 = c0 - left, w = c1 - c0;
       const int ch = piece->channels;
       const int read_ch = std::min(ch, 4);
-      const std::size_t texels = piece->width * n;
-      std::uint8_t* dst_base = out + x_offset * 4;
-      const std::size_t dst_stride = width_ * 4;
+      const std::size_t texels = w * n;
+      std::uint8_t* dst_base = out + (c0 - x0) * 4;
       auto expand = [&](auto get) {
         // get(i, c) returns channel c of texel i as 8-bit sRGB.
         for (std::uint32_t row = 0; row < n; ++row) {
           std::uint8_t* dst = dst_base + row * dst_stride;
-          const std::size_t base = std::size_t{row} * piece->width;
-          for (std::uint64_t x = 0; x < piece->width; ++x, dst += 4) {
+          const std::size_t base = std::size_t{row} * w;
+          for (std::uint64_t x = 0; x < w; ++x, dst += 4) {
             const std::size_t i = base + x;
             if (read_ch >= 3) {
               dst[0] = get(i, 0);
@@ -286,7 +318,8 @@ Status ImageSource::read_rows(std::uint64_t y, std::uint32_t count, std::uint8_t
       Status ok;
       if (piece->is_float) {
         scratch_float_.resize(texels * read_ch);
-        ok = piece->read(local_y, n, read_ch, OIIO::TypeDesc::FLOAT, scratch_float_.data());
+        ok = piece->read(p0, p0 + w, local_y, n, read_ch, OIIO::TypeDesc::FLOAT,
+                         scratch_float_.data());
         const bool srgb = piece->float_is_srgb;
         const float* f = scratch_float_.data();
         if (ok)
@@ -300,14 +333,13 @@ Status ImageSource::read_rows(std::uint64_t y, std::uint32_t count, std::uint8_t
           });
       } else {
         scratch_.resize(texels * read_ch);
-        ok = piece->read(local_y, n, read_ch, OIIO::TypeDesc::UINT8, scratch_.data());
+        ok = piece->read(p0, p0 + w, local_y, n, read_ch, OIIO::TypeDesc::UINT8, scratch_.data());
         const std::uint8_t* b = scratch_.data();
         if (ok) expand([&](std::size_t i, int c) { return b[i * read_ch + c]; });
       }
       if (!ok) return ok;
-      x_offset += piece->width;
     }
-    out += std::size_t{n} * width_ * 4;
+    out += std::size_t{n} * dst_stride;
     y += n;
     count -= n;
   }

@@ -41,6 +41,10 @@ class ImageSource {
   // read in increasing order. Damaged pixel data is an error (see check_read()), never rows of
   // whatever the decoder filled in.
   Status read_rows(std::uint64_t y, std::uint32_t count, std::uint8_t* out);
+  // Columns [x0, x1) of those rows ((x1 - x0) * 4 bytes per row): mosaic pieces beside the
+  // columns are not read, and a tiled file decodes only the tiles over them (a shard's window).
+  Status read_window(std::uint64_t x0, std::uint64_t x1, std::uint64_t y, std::uint32_t count,
+                     std::uint8_t* out);
 
  private:
   struct Piece;

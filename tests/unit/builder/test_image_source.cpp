@@ -6,11 +6,13 @@
 #include <OpenImageIO/imageio.h>
 #include <gtest/gtest.h>
 
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
 #include <random>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "vts/builder/image_io.hpp"
@@ -204,6 +206,45 @@ TEST(ImageSource, ReadRgba8RefusesATruncatedJpeg) {
   ASSERT_FALSE(img.ok()) << "a truncated JPEG read as an image";
   EXPECT_EQ(img.error().code, ErrorCode::truncated) << img.error().message;
   EXPECT_TRUE(read_rgba8(dir / "a.jpg").ok());
+}
+
+}  // namespace
+}  // namespace vts
+
+namespace vts {
+namespace {
+
+// A window of columns reads exactly those columns of the whole rows, for scanline and tiled files
+// and across the pieces of a mosaic (a shard reads only its window).
+TEST(ImageSource, AWindowOfColumnsIsThoseColumnsOfTheWholeRows) {
+  TempDir dir;
+  write_image(dir / "a.png");
+  write_image(dir / "t.tif", "tiled");
+  for (const std::vector<fs::path>& inputs :
+       {std::vector<fs::path>{dir / "a.png"}, std::vector<fs::path>{dir / "t.tif"},
+        std::vector<fs::path>{dir / "a.png", dir / "t.tif", dir / "a.png"}}) {
+    auto whole = ImageSource::open(inputs, static_cast<std::uint32_t>(inputs.size()), 1).value();
+    auto part = ImageSource::open(inputs, static_cast<std::uint32_t>(inputs.size()), 1).value();
+    const std::uint64_t W = whole->width();
+    std::vector<std::uint8_t> rows(W * 4 * 40), window;
+    // Windows inside one tile, across tile edges, and across pieces; rows across tile rows.
+    for (auto [x0, x1, y] : {std::tuple<std::uint64_t, std::uint64_t, std::uint64_t>{3, 50, 0},
+                             {60, 200, 50},
+                             {500, 530, 100},
+                             {0, W, 300},
+                             {W - 70, W, 460}}) {
+      SCOPED_TRACE(inputs.size());
+      x1 = std::min(x1, W);  // 500..530 crosses pieces in the mosaic
+      ASSERT_TRUE(whole->read_rows(y, 40, rows.data()));
+      window.assign((x1 - x0) * 4 * 40, 0);
+      const Status st = part->read_window(x0, x1, y, 40, window.data());
+      ASSERT_TRUE(st) << st.error().message << " columns " << x0 << ".." << x1;
+      for (std::uint64_t r = 0; r < 40; ++r)
+        ASSERT_EQ(0, std::memcmp(window.data() + r * (x1 - x0) * 4, rows.data() + (r * W + x0) * 4,
+                                 (x1 - x0) * 4))
+            << "row " << y + r << " columns " << x0 << ".." << x1;
+    }
+  }
 }
 
 }  // namespace
