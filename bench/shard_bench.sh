@@ -114,7 +114,6 @@ S_SHA=$(sha "$WORK/single/earth.pmtiles")
 S_BYTES=$(bytes_of "$WORK/single/earth.pmtiles")
 IN_W=$(jget "$WORK/single.json" width)
 IN_H=$(jget "$WORK/single.json" height)
-cleanup_out "$WORK/single"
 
 # run_shard DIR I: one shard under /usr/bin/time; "rc wall cpu rss" to DIR/logs/shard-I.time.
 run_shard() {
@@ -226,7 +225,7 @@ report() {
   echo
   printf '%s\n' "${BARS[@]}"
   if ((${#MISMATCH[@]})); then
-    echo "- MERGED ARCHIVE DIFFERS from the single build for N = ${MISMATCH[*]} (kept in $WORK)"
+    echo "- MERGED ARCHIVE DIFFERS from the single build for N = ${MISMATCH[*]} (both kept in $WORK)"
   else
     echo "- every merged archive is the single build's, byte for byte (sha256 $S_SHA)."
   fi
@@ -248,3 +247,4 @@ else
   report
 fi
 ((${#MISMATCH[@]} == 0)) || die "merged archive differs from the single build for N = ${MISMATCH[*]}"
+cleanup_out "$WORK/single"
