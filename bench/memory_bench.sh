@@ -63,22 +63,9 @@ run_case synthetic 100000x50000 5.0e9 --synthetic 100000x50000
 
 if ((REAL)); then
   need oiiotool vips
-  f="$CACHE/earth_16384x8192.tif"
-  if [[ ! -s $f ]]; then
-    echo "[bench] making $f (once)" >&2
-    oiiotool "$EARTH" --resize:filter=lanczos3 16384x8192 -d uint8 --compression none -o "$f.tmp.tif"
-    mv "$f.tmp.tif" "$f"
-  fi
-  # The size: 100000x50000 RGB. Stored as a tiled (256x256), JPEG-compressed BigTIFF made by
-  # vips (streaming, ~300 MB on disk), the way large rasters ship; this also exercises the
-  # tiled-input path. Takes about a minute to make, once.
-  big="$CACHE/earth_100000x50000.tif"
-  if [[ ! -s $big ]]; then
-    echo "[bench] making $big (once)" >&2
-    vips resize "$EARTH" "$big.tmp.tif[tile,tile-width=256,tile-height=256,compression=jpeg,Q=92,bigtiff]" \
-      48.828125 --kernel linear
-    mv "$big.tmp.tif" "$big"
-  fi
+  f=$(earth_16k_tif)
+  # The size: 100000x50000 RGB, a tiled JPEG-compressed BigTIFF (lib.sh: earth_100k_tif).
+  big=$(earth_100k_tif)
   run_case real 16384x8192 1.3e8 "$f"
   run_case real 100000x50000 5.0e9 "$big"
 fi
