@@ -36,6 +36,8 @@ class ImageSource {
   std::uint64_t width() const { return width_; }
   std::uint64_t height() const { return height_; }
   std::string description() const { return description_; }
+  const std::vector<std::uint64_t>& column_widths() const { return column_widths_; }
+  const std::vector<std::uint64_t>& row_heights() const { return row_heights_; }
 
   // Reads mosaic rows [y, y + count) as RGBA8 into out (width() * 4 bytes per row). Rows must be
   // read in increasing order. Damaged pixel data is an error (see check_read()), never rows of

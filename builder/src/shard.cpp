@@ -104,10 +104,15 @@ json plan_body(const ShardPlan& p) {
         {{"path", in.path.string()}, {"size", in.size}, {"fingerprint", in.fingerprint}});
   j["input_description"] = p.input_description;
   j["geometry"] = {{"width", p.width}, {"height", p.height}, {"max_zoom", p.max_zoom}};
+  if (!p.column_widths.empty()) {
+    j["geometry"]["columns"] = p.column_widths;
+    j["geometry"]["rows"] = p.row_heights;
+  }
   j["split_level"] = p.split_level;
   json shards = json::array();
   for (const TileId& t : p.shards) shards.push_back({t.x, t.y});
   j["shards"] = std::move(shards);
+  j["build_hash"] = detail::build_hash(j);
   return j;
 }
 
@@ -233,6 +238,10 @@ Result<ShardPlan> make_shard_plan(const BuildOptions& o, std::optional<int> spli
   plan.width = g.width();
   plan.height = g.height();
   plan.max_zoom = g.max_zoom();
+  if (prepared->source) {
+    plan.column_widths = prepared->source->column_widths();
+    plan.row_heights = prepared->source->row_heights();
+  }
   const std::vector<TileRect> emit = detail::build_emit_rects(*prepared);
   if (split_level) {
     if (*split_level < 0 || *split_level > g.max_zoom())
@@ -248,7 +257,9 @@ Result<ShardPlan> make_shard_plan(const BuildOptions& o, std::optional<int> spli
       if (plan.shards.size() >= min_shards) break;
     }
   }
-  plan.hash = body_hash(plan_body(plan));
+  const json body = plan_body(plan);
+  plan.build_hash = body.at("build_hash").get<std::string>();
+  plan.hash = body_hash(body);
   return plan;
 }
 
@@ -281,12 +292,20 @@ Result<ShardPlan> plan_from_json(const std::string& text) {
     p.width = j.at("geometry").at("width").get<std::uint64_t>();
     p.height = j.at("geometry").at("height").get<std::uint64_t>();
     p.max_zoom = j.at("geometry").at("max_zoom").get<int>();
+    if (j.at("geometry").contains("columns")) {
+      p.column_widths = j["geometry"].at("columns").get<std::vector<std::uint64_t>>();
+      p.row_heights = j["geometry"].at("rows").get<std::vector<std::uint64_t>>();
+    }
     p.split_level = j.at("split_level").get<int>();
     if (p.split_level < 0 || p.split_level > p.max_zoom || p.max_zoom > Geometry::kMaxZoom)
       return make_error(ErrorCode::invalid_argument, "plan split level is outside its levels");
     for (const json& s : j.at("shards"))
       p.shards.push_back({static_cast<std::uint8_t>(p.split_level), s.at(0).get<std::uint32_t>(),
                           s.at(1).get<std::uint32_t>()});
+    p.build_hash = j.at("build_hash").get<std::string>();
+    if (p.build_hash != detail::build_hash(j))
+      return make_error(ErrorCode::corrupt,
+                        "plan build hash " + p.build_hash + " does not match its content");
     p.hash = hash;
     return p;
   } catch (const json::exception& e) {

@@ -21,8 +21,8 @@ std::string tile_text(TileId t) {
   return std::to_string(t.z) + "/" + std::to_string(t.x) + "/" + std::to_string(t.y);
 }
 
-std::string manifest(const ShardPlan& plan, std::optional<std::size_t> index,
-                     std::optional<TileId> root, std::uint64_t tiles, std::uint64_t content_sum) {
+json manifest(const ShardPlan& plan, std::optional<std::size_t> index, std::optional<TileId> root,
+              std::uint64_t tiles, std::uint64_t content_sum) {
   json j;
   j["plan_hash"] = plan.hash;
   j["part"] = index ? "shard" : "apex";
@@ -30,18 +30,15 @@ std::string manifest(const ShardPlan& plan, std::optional<std::size_t> index,
   if (root) j["root"] = tile_text(*root);
   j["tiles"] = tiles;
   j["content_sum"] = detail::content_hash_text(content_sum);
-  return j.dump();
+  detail::describe_part_build(plan, index, j);
+  return j;
 }
 
-// The part's manifest, checked against the plan: its content sum.
+// The part's manifest, checked against the plan (its build, the inputs it read): its content sum.
 Result<std::uint64_t> check_manifest(const ShardPlan& plan, const pmtiles::PartInfo& info) {
   try {
     const json j = json::parse(info.manifest_json);
-    if (j.at("plan_hash").get<std::string>() != plan.hash)
-      return make_error(ErrorCode::invalid_argument, "part " + info.path.string() +
-                                                         " belongs to plan " +
-                                                         j.at("plan_hash").get<std::string>() +
-                                                         ", not to this plan (" + plan.hash + ")");
+    if (Status st = detail::check_part_build(plan, j, info.path); !st) return st.error();
     return std::stoull(j.at("content_sum").get<std::string>(), nullptr, 16);
   } catch (const std::exception& e) {
     return make_error(ErrorCode::corrupt,
@@ -87,9 +84,11 @@ Status check_inputs(const ShardPlan& plan) {
 }
 
 // Runs `run` into a new part at `path` and finishes it.
+// `extend` adds to the manifest once the tiles are built.
 Result<ShardReport> write_part(const ShardPlan& plan, detail::BuildRun& run,
                                const std::filesystem::path& path, std::optional<std::size_t> index,
-                               std::optional<TileId> root) {
+                               std::optional<TileId> root,
+                               const std::function<void(json&)>& extend = {}) {
   const auto t0 = Clock::now();
   std::error_code ec;
   std::filesystem::create_directories(path.parent_path(), ec);
@@ -101,8 +100,9 @@ Result<ShardReport> write_part(const ShardPlan& plan, detail::BuildRun& run,
     (*part)->abort();
     return std::move(result).error();
   }
-  auto stats = (*part)->finish(result->kept,
-                               manifest(plan, index, root, result->tiles, result->content_sum));
+  json m = manifest(plan, index, root, result->tiles, result->content_sum);
+  if (extend) extend(m);
+  auto stats = (*part)->finish(result->kept, m.dump());
   if (!stats) return std::move(stats).error();
   ShardReport r;
   r.part = path;
@@ -112,11 +112,6 @@ Result<ShardReport> write_part(const ShardPlan& plan, detail::BuildRun& run,
   r.stats = *stats;
   r.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
   return r;
-}
-
-TexelRect clip(std::uint64_t x0, std::uint64_t y0, std::uint64_t x1, std::uint64_t y1,
-               const Geometry& g) {
-  return TexelRect{x0, y0, std::min(x1, g.width()), std::min(y1, g.height())};
 }
 
 }  // namespace
@@ -136,7 +131,7 @@ Result<ShardReport> build_shard(const ShardPlan& plan, std::size_t index,
   if (g.width() != plan.width || g.height() != plan.height || g.max_zoom() != plan.max_zoom)
     return make_error(ErrorCode::invalid_argument, "the inputs' geometry is not the plan's");
   const TileId root = plan.shards[index];
-  const int L = plan.split_level, d = g.max_zoom() - L;
+  const int L = plan.split_level;
   std::vector<TileRect> emit = detail::build_emit_rects(*prepared);
   for (int z = 0; z <= g.max_zoom(); ++z) {
     TileRect& e = emit[static_cast<std::size_t>(z)];
@@ -153,17 +148,10 @@ Result<ShardReport> build_shard(const ShardPlan& plan, std::size_t index,
   if (prepared->synthetic) {
     run.synthetic = emit;  // generated directly: nothing read
   } else {
-    // The core: the finest texels under the root; the window adds the halo its tiles' borders
-    // and the filter need at every level down to L, level L's tile included, borders and all
-    // (cascade.hpp, stripe_halo: exact out to B around the core at levels finest .. L is its
-    // margin for d + 1 levels, as if level L - 1 were made too).
-    const std::uint64_t side = std::uint64_t{g.tile_size()} << d;
-    const TexelRect core =
-        clip(root.x * side, root.y * side, (root.x + 1) * side, (root.y + 1) * side, g);
-    const std::uint64_t halo = detail::stripe_halo(g, d + 1, o.downsample);
-    const TexelRect window =
-        clip(core.x0 > halo ? core.x0 - halo : 0, core.y0 > halo ? core.y0 - halo : 0,
-             core.x1 + halo, core.y1 + halo, g);
+    // The core: the finest texels under the root; the window adds the halo (shard_window).
+    auto sw = shard_window(plan, index);
+    if (!sw) return std::move(sw).error();
+    const TexelRect core = sw->core, window = sw->window;
     auto p = detail::make_build_plan(g, o.downsample, window, emit, UINT64_MAX, L);
     if (!p) return std::move(p).error();
     bp = std::move(p).value();
@@ -190,7 +178,10 @@ class SplitLevelRows {
       : plan_(plan), g_(g), dir_(std::move(dir)) {
     for (std::size_t i = 0; i < plan.shards.size(); ++i)
       index_[{plan.shards[i].x, plan.shards[i].y}] = i;
+    hashes_.assign(plan.shards.size(), 0);
   }
+  // The attachment hash of each shard's part read (index: shard).
+  const std::vector<std::uint64_t>& hashes() const { return hashes_; }
   Status read(std::uint64_t x0, std::uint64_t x1, std::uint64_t y, std::uint32_t n,
               std::uint8_t* out) {
     const std::uint64_t T = g_.tile_size(), B = g_.border(), S = g_.stored_size();
@@ -223,6 +214,7 @@ class SplitLevelRows {
       if (it == index_.end()) continue;  // no shard: nothing there
       auto info = open_part(plan_, dir_ / shard_part_name(it->second), nullptr);
       if (!info) return info.error();
+      hashes_[it->second] = detail::attachment_hash(info->attachment);
       auto img = find_codec(CodecId::lossless)->decode(info->attachment);
       if (!img || img->width != g_.stored_size() || img->height != g_.stored_size())
         return make_error(ErrorCode::corrupt, "part " + info->path.string() +
@@ -239,6 +231,7 @@ class SplitLevelRows {
   std::map<std::pair<std::uint32_t, std::uint32_t>, std::size_t> index_;
   std::uint32_t row_ = UINT32_MAX;
   std::map<std::uint32_t, TileImage> tiles_;
+  std::vector<std::uint64_t> hashes_;
 };
 
 }  // namespace
@@ -289,7 +282,10 @@ Result<ShardReport> build_apex(const ShardPlan& plan, const ShardBuildOptions& s
                                   std::uint32_t n,
                                   std::uint8_t* out) { return rows.read(x0, x1, y, n, out); });
   }
-  return write_part(plan, run, so.out_dir / kApexPartName, std::nullopt, std::nullopt);
+  return write_part(plan, run, so.out_dir / kApexPartName, std::nullopt, std::nullopt,
+                    [&](json& m) {
+                      if (!o.synthetic) m["shard_tiles"] = detail::shard_tiles_hash(rows.hashes());
+                    });
 }
 
 Result<MergeReport> merge_plan(const ShardPlan& plan, const std::filesystem::path& parts_dir,
@@ -304,12 +300,21 @@ Result<MergeReport> merge_plan(const ShardPlan& plan, const std::filesystem::pat
   for (std::size_t i = 0; i < plan.shards.size(); ++i)
     mo.parts.push_back(parts_dir / shard_part_name(i));
   std::uint64_t content_sum = 0;
+  std::vector<std::uint64_t> attachments;  // each shard's, for the apex
+  std::optional<json> apex;
   for (const auto& path : mo.parts) {
     std::uint64_t sum = 0;
     auto info = open_part(plan, path, &sum);
     if (!info) return info.error();
     content_sum += sum;
+    if (path.filename() == kApexPartName)
+      apex = json::parse(info->manifest_json);
+    else
+      attachments.push_back(detail::attachment_hash(info->attachment));
   }
+  if (apex)
+    if (Status st = detail::check_apex_shards(plan, *apex, mo.parts.front(), attachments); !st)
+      return st.error();
   // The metadata and header a single `vts build` of the plan's options writes.
   detail::PreparedBuild p;
   p.geometry = *geometry;

@@ -1,7 +1,12 @@
 // What shard.cpp (plans) gives shard_build.cpp (shards, apex, merge).
 #pragma once
 
+#include <cstdint>
+#include <nlohmann/json.hpp>
+#include <string>
 #include <vector>
+
+#include "vts/protocol/pmtiles_part.hpp"
 
 #include "vts/builder/shard.hpp"
 
@@ -12,5 +17,25 @@ TileRect shard_rect(const TileRect& level, TileId root, int z);
 // The tiles a whole build of the plan writes at each level (index z).
 std::vector<TileRect> plan_emit_rects(const ShardPlan& plan, const Geometry& g);
 Result<Geometry> plan_geometry(const ShardPlan& plan);
+
+// shard_update.cpp: what parts record of the build they belong to and how they are checked.
+// The build hash of a plan's JSON body (plan_body without build_hash and hash).
+std::string build_hash(const nlohmann::json& body);
+// What a part's manifest adds: the build hash, and for a shard the inputs it read ({index, path,
+// fingerprint}).
+void describe_part_build(const ShardPlan& plan, std::optional<std::size_t> shard,
+                         nlohmann::json& manifest);
+// A part's manifest against the plan: another build, or an input changed since the part was
+// built (stale: naming the input and the shard to rebuild), is an error naming the part.
+Status check_part_build(const ShardPlan& plan, const nlohmann::json& manifest,
+                        const std::filesystem::path& part);
+// The apex records the shards' level-L tiles it was built from: XXH3-64 of each part's
+// attachment (index: shard), folded in shard order into 16 hex digits.
+std::uint64_t attachment_hash(const std::vector<std::uint8_t>& attachment);
+std::string shard_tiles_hash(const std::vector<std::uint64_t>& attachment_hashes);
+// The apex part against the shards' parts there now (their attachment hashes).
+Status check_apex_shards(const ShardPlan& plan, const nlohmann::json& apex_manifest,
+                         const std::filesystem::path& apex,
+                         const std::vector<std::uint64_t>& attachment_hashes);
 
 }  // namespace vts::detail

@@ -1,8 +1,10 @@
 // vts plan: fixes a sharded build once (vts/builder/shard.hpp) in a JSON plan.
 #include <cstdio>
 #include <nlohmann/json.hpp>
+#include <set>
 
 #include "build_args.hpp"
+#include "build_inputs.hpp"
 #include "commands.hpp"
 #include "vts/builder/shard.hpp"
 
@@ -14,9 +16,66 @@ struct PlanArgs {
   BuildArgs build;
   std::uint64_t shards = 0;
   int split_level = -1;
+  std::string update;  // --update OLD-PLAN
 };
 
-int run_plan(const PlanArgs& a) {
+// An update keeps the old plan's build: of the options given, only the inputs and -o may come.
+Status check_update_options(const CLI::App& c) {
+  static const std::set<std::string> kAllowed = {"update", "output", "input-list",
+                                                 "json",   "quiet",  "help"};
+  for (const CLI::Option* opt : c.get_options()) {
+    if (opt->count() == 0 || opt->get_name() == "inputs") continue;
+    const auto& names = opt->get_lnames();
+    if (!names.empty() && kAllowed.count(names.front())) continue;
+    return make_error(ErrorCode::invalid_argument,
+                      opt->get_name() + " does not go with --update: the old plan fixes the build");
+  }
+  return {};
+}
+
+void print_update(const PlanArgs& a, const PlanUpdate& u) {
+  const ShardPlan& p = u.plan;
+  const double fraction =
+      p.shards.empty() ? 0.0 : double(u.shards.size()) / double(p.shards.size());
+  if (a.build.json) {
+    nlohmann::json j;
+    j["plan"] = a.build.output;
+    j["hash"] = p.hash;
+    j["build_hash"] = p.build_hash;
+    j["changed_inputs"] = nlohmann::json::array();
+    for (std::size_t i : u.changed_inputs) j["changed_inputs"].push_back(p.inputs[i].path.string());
+    j["shards"] = p.shards.size();
+    j["rebuild"] = u.shards;
+    j["rebuild_fraction"] = fraction;
+    j["apex"] = u.apex;
+    std::printf("%s\n", j.dump(2).c_str());
+    return;
+  }
+  if (a.build.quiet) return;
+  std::printf("updated %s from %s: %zu of %zu inputs changed", a.build.output.c_str(),
+              a.update.c_str(), u.changed_inputs.size(), p.inputs.size());
+  for (std::size_t i : u.changed_inputs) std::printf(" %s", p.inputs[i].path.c_str());
+  std::printf("\nrebuild %zu of %zu shards (%.1f%%):", u.shards.size(), p.shards.size(),
+              fraction * 100);
+  for (std::size_t s : u.shards) std::printf(" %zu", s);
+  std::printf("%s\n", u.apex ? "\nthe apex must be rebuilt too (a shard is)" : "");
+}
+
+int run_update(const CLI::App& c, const PlanArgs& a) {
+  if (Status st = check_update_options(c); !st) return report_error(st.error());
+  auto old = load_plan(a.update);
+  if (!old) return report_error(old.error());
+  auto inputs = expand_inputs(a.build.inputs, a.build.input_list);
+  if (!inputs) return report_error(inputs.error());
+  auto u = update_shard_plan(*old, *inputs);
+  if (!u) return report_error(u.error());
+  if (Status st = save_plan(u->plan, a.build.output); !st) return report_error(st.error());
+  print_update(a, *u);
+  return 0;
+}
+
+int run_plan(const CLI::App& c, const PlanArgs& a) {
+  if (!a.update.empty()) return run_update(c, a);
   if ((a.shards == 0) == (a.split_level < 0))
     return report_error(make_error(ErrorCode::invalid_argument,
                                    "give one of --shards N (N >= 1) or --split-level L"));
@@ -31,6 +90,7 @@ int run_plan(const PlanArgs& a) {
     nlohmann::json j;
     j["plan"] = a.build.output;
     j["hash"] = plan->hash;
+    j["build_hash"] = plan->build_hash;
     j["width"] = plan->width;
     j["height"] = plan->height;
     j["max_zoom"] = plan->max_zoom;
@@ -61,9 +121,12 @@ Runner add_plan(CLI::App& app) {
   c->add_option("--split-level", a->split_level,
                 "Split at this level: a shard per tile of it with tiles to build")
       ->check(CLI::Range(0, int(Geometry::kMaxZoom)));
+  c->add_option("--update", a->update,
+                "Update this plan with new inputs (given, or its own read again): the same build, "
+                "listing the shards to rebuild");
   c->add_flag("--json", a->build.json, "Print the result as JSON");
   c->add_flag("-q,--quiet", a->build.quiet, "No summary");
-  return [a] { return run_plan(*a); };
+  return [a, c] { return run_plan(*c, *a); };
 }
 
 }  // namespace vts::cli

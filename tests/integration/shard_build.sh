@@ -171,7 +171,7 @@ python3 - "$parts/shard-000003.part" <<'EOF'
 import sys
 p = sys.argv[1]
 d = bytearray(open(p, 'rb').read())
-m = d.rfind(b'{"content_sum"')
+m = d.rfind(b'{"build_hash"')
 assert m > 0, "no manifest found"
 d[m - 3] ^= 0x40
 open(p, 'wb').write(bytes(d))

@@ -1,6 +1,7 @@
 // Plans of sharded builds (vts/builder/shard.hpp): the JSON round trip and its hash, the shards a
 // plan picks (in Hilbert order, only sub-pyramids with tiles, the smallest level giving N), input
-// fingerprints, and the halo a shard reads.
+// fingerprints, the halo a shard reads, and incremental updates (the inputs a shard reads, the
+// shards a changed input reaches, stale parts refused).
 #include "vts/builder/shard.hpp"
 
 #include <OpenImageIO/imageio.h>
@@ -180,6 +181,147 @@ TEST(ShardPlan, ShardReadsItsCorePlusTheHaloOfItsLevels) {
     EXPECT_EQ(r->core_texels, 1024u * 1024u);
     EXPECT_EQ(r->texels_read, (1024u + halo) * 1024u);
   }
+}
+
+void write_png(const fs::path& path, int w, int h, std::uint8_t value) {
+  std::vector<std::uint8_t> px(std::size_t(w) * std::size_t(h) * 3, value);
+  for (std::size_t i = 0; i < px.size(); i += 7) px[i] = static_cast<std::uint8_t>(i / 7);
+  auto o = OIIO::ImageOutput::create(path.string());
+  ASSERT_TRUE(o);
+  OIIO::ImageSpec spec(w, h, 3, OIIO::TypeDesc::UINT8);
+  ASSERT_TRUE(o->open(path.string(), spec));
+  ASSERT_TRUE(o->write_image(OIIO::TypeDesc::UINT8, px.data()));
+  o->close();
+}
+
+// A 2x2 --grid of 512 x 512 cells (a 1024 x 1024 image), split at level 2: 16 shards of 256².
+struct GridPlan {
+  test::TempDir dir;
+  BuildOptions options;
+  GridPlan() {
+    for (int i = 0; i < 4; ++i) {
+      const fs::path p = dir.path() / ("cell" + std::to_string(i) + ".png");
+      write_png(p, 512, 512, static_cast<std::uint8_t>(40 * i));
+      options.inputs.push_back(p);
+    }
+    options.grid_columns = options.grid_rows = 2;
+  }
+};
+
+TEST(ShardUpdate, InputsAreTheGridCellsAShardsWindowMeets) {
+  GridPlan grid;
+  auto plan = make_shard_plan(grid.options, 2, 0);
+  ASSERT_TRUE(plan) << plan.error().to_string();
+  ASSERT_EQ(plan->shards.size(), 16u);
+  EXPECT_EQ(plan->column_widths, (std::vector<std::uint64_t>{512, 512}));
+  EXPECT_EQ(input_rect(*plan, 3), (TexelRect{512, 512, 1024, 1024}));
+  auto back = plan_from_json(plan_to_json(*plan));
+  ASSERT_TRUE(back);
+  EXPECT_EQ(back->row_heights, plan->row_heights);
+  EXPECT_EQ(back->build_hash, plan->build_hash);
+  for (std::size_t s = 0; s < plan->shards.size(); ++s) {
+    const TileId t = plan->shards[s];
+    // A shard's window reaches its core's neighbours by the halo (< 256): a shard at tile column
+    // 1 or 2 meets both columns of cells, at 0 or 3 one.
+    std::vector<std::size_t> want;
+    for (std::size_t r = 0; r < 2; ++r)
+      for (std::size_t c = 0; c < 2; ++c) {
+        const bool col = c == 0 ? t.x <= 2 : t.x >= 1, row = r == 0 ? t.y <= 2 : t.y >= 1;
+        if (col && row) want.push_back(r * 2 + c);
+      }
+    EXPECT_EQ(shard_inputs(*plan, s), want) << int(t.x) << "," << int(t.y);
+  }
+  // Cell 0 (top left) reaches the 3 x 3 shards at tile columns and rows 0..2: not all 16.
+  const std::vector<std::size_t> hit = affected_shards(*plan, {0});
+  ASSERT_EQ(hit.size(), 9u);
+  for (std::size_t s : hit) EXPECT_TRUE(plan->shards[s].x <= 2 && plan->shards[s].y <= 2);
+  EXPECT_TRUE(affected_shards(*plan, {}).empty());
+}
+
+TEST(ShardUpdate, APlainImageReachesEveryShardAndSyntheticNone) {
+  GridPlan grid;
+  BuildOptions o;
+  o.inputs = {grid.options.inputs[0]};
+  auto plan = make_shard_plan(o, 1, 0);  // 512 x 512: 4 shards
+  ASSERT_TRUE(plan);
+  EXPECT_EQ(affected_shards(*plan, {0}).size(), plan->shards.size());
+  auto synth = make_shard_plan(synthetic(2048, 1024), 2, 0);
+  ASSERT_TRUE(synth);
+  EXPECT_TRUE(shard_inputs(*synth, 0).empty());
+  auto u = update_shard_plan(*synth, {});
+  ASSERT_TRUE(u);
+  EXPECT_TRUE(u->shards.empty());
+  EXPECT_FALSE(u->apex);
+  EXPECT_FALSE(update_shard_plan(*synth, {grid.options.inputs[0]}));
+}
+
+TEST(ShardUpdate, UpdateListsTheShardsOfTheChangedInputAndRefusesAnotherBuild) {
+  GridPlan grid;
+  auto plan = make_shard_plan(grid.options, 2, 0);
+  ASSERT_TRUE(plan);
+  auto same = update_shard_plan(*plan, {});
+  ASSERT_TRUE(same) << same.error().to_string();
+  EXPECT_TRUE(same->changed_inputs.empty() && same->shards.empty() && !same->apex);
+  EXPECT_EQ(same->plan.hash, plan->hash);
+  write_png(grid.options.inputs[3], 512, 512, 250);  // the bottom right cell changes
+  auto u = update_shard_plan(*plan, {});
+  ASSERT_TRUE(u) << u.error().to_string();
+  EXPECT_EQ(u->changed_inputs, (std::vector<std::size_t>{3}));
+  EXPECT_EQ(u->shards, affected_shards(*plan, {3}));
+  EXPECT_EQ(u->shards.size(), 9u);
+  EXPECT_TRUE(u->apex);
+  EXPECT_EQ(u->plan.build_hash, plan->build_hash);
+  EXPECT_NE(u->plan.hash, plan->hash);
+  EXPECT_EQ(u->plan.shards, plan->shards);
+  // Another count of inputs, or a cell of another size, is refused naming it.
+  auto few = update_shard_plan(*plan, {grid.options.inputs[0]});
+  ASSERT_FALSE(few);
+  EXPECT_NE(few.error().message.find("1 inputs given, the plan has 4"), std::string::npos);
+  for (int i = 0; i < 2; ++i)  // the whole left column narrower: another image width
+    write_png(grid.options.inputs[std::size_t(i) * 2], 500, 512, 1);
+  auto narrow = update_shard_plan(*plan, {});
+  ASSERT_FALSE(narrow);
+  EXPECT_NE(narrow.error().message.find("1012x1024"), std::string::npos) << narrow.error().message;
+}
+
+TEST(ShardUpdate, PartsOfChangedInputsAreStaleForTheApexAndTheMerge) {
+  GridPlan grid;
+  auto plan = make_shard_plan(grid.options, 2, 0);
+  ASSERT_TRUE(plan);
+  ShardBuildOptions so;
+  so.out_dir = grid.dir.path() / "parts";
+  so.threads = 1;
+  for (std::size_t s = 0; s < plan->shards.size(); ++s) ASSERT_TRUE(build_shard(*plan, s, so));
+  ASSERT_TRUE(build_apex(*plan, so));
+  const fs::path out = grid.dir.path() / "out.pmtiles";
+  ASSERT_TRUE(merge_plan(*plan, so.out_dir, out, nullptr, nullptr));
+  write_png(grid.options.inputs[0], 512, 512, 7);
+  auto u = update_shard_plan(*plan, {});
+  ASSERT_TRUE(u);
+  ASSERT_FALSE(u->shards.empty());
+  const std::size_t first = u->shards.front();
+  auto apex = build_apex(u->plan, so);
+  ASSERT_FALSE(apex);
+  EXPECT_NE(apex.error().message.find("stale"), std::string::npos) << apex.error().message;
+  for (std::size_t s : u->shards)
+    if (s != first) {
+      ASSERT_TRUE(build_shard(u->plan, s, so));
+    }
+  auto merged = merge_plan(u->plan, so.out_dir, out, nullptr, nullptr);
+  ASSERT_FALSE(merged);
+  EXPECT_NE(merged.error().message.find(
+                shard_part_name(first) + " is stale: input " + grid.options.inputs[0].string() +
+                " changed since it was built; rebuild shard " + std::to_string(first)),
+            std::string::npos)
+      << merged.error().message;
+  ASSERT_TRUE(build_shard(u->plan, first, so));
+  // Every shard is fresh; the apex is not.
+  merged = merge_plan(u->plan, so.out_dir, out, nullptr, nullptr);
+  ASSERT_FALSE(merged);
+  EXPECT_NE(merged.error().message.find("apex.part is stale"), std::string::npos)
+      << merged.error().message;
+  ASSERT_TRUE(build_apex(u->plan, so));
+  EXPECT_TRUE(merge_plan(u->plan, so.out_dir, out, nullptr, nullptr));
 }
 
 }  // namespace

@@ -21,7 +21,7 @@
 
 namespace vts {
 
-inline constexpr int kPlanVersion = 1;
+inline constexpr int kPlanVersion = 2;
 
 struct PlanInput {
   std::filesystem::path path;
@@ -40,10 +40,18 @@ struct ShardPlan {
   std::vector<PlanInput> inputs;
   std::string input_description;  // as `vts build` describes them ("earth.jpg 2048x1024 ...")
   std::uint64_t width = 0, height = 0;
+  // The widths of the --grid's columns and heights of its rows, in texels (one each for a plain
+  // image; none for a synthetic source): where each input lies in the image.
+  std::vector<std::uint64_t> column_widths, row_heights;
   int max_zoom = 0;
   int split_level = 0;
   std::vector<TileId> shards;  // level-L tiles, in Hilbert tile-id order; shard I is shards[I]
-  std::string hash;            // 16 hex digits: XXH3-64 of to_json() without the hash
+  // 16 hex digits: XXH3-64 of the plan without its inputs (paths, sizes, fingerprints; their
+  // count is kept), input description and hashes: what every part must have been built with.
+  // Parts record it and the fingerprints of the inputs they read (shard_update.cpp), so a plan
+  // updated with new inputs (update_shard_plan) keeps the parts of unchanged shards.
+  std::string build_hash;
+  std::string hash;  // 16 hex digits: XXH3-64 of to_json() without the hash
 };
 
 // The fingerprint of PlanInput (16 hex digits).
@@ -90,6 +98,36 @@ Result<ShardReport> build_shard(const ShardPlan& plan, std::size_t index,
 // Builds the levels above the split level into out_dir/apex.part from the shards' parts there.
 // split_level 0 has no apex: failed_precondition.
 Result<ShardReport> build_apex(const ShardPlan& plan, const ShardBuildOptions& options);
+
+// The finest-level texels shard `index` owns (its core) and those it reads (its window: the core
+// widened by the halo its borders and downsampling filter reach, clipped to the image).
+struct ShardWindow {
+  TexelRect core, window;
+};
+Result<ShardWindow> shard_window(const ShardPlan& plan, std::size_t index);
+
+// Where input `input` lies in the image (finest-level texels): its cell of the grid.
+TexelRect input_rect(const ShardPlan& plan, std::size_t input);
+
+// The inputs whose cell meets shard `index`'s window (none for a synthetic plan), ascending.
+std::vector<std::size_t> shard_inputs(const ShardPlan& plan, std::size_t index);
+
+// The shards whose window meets any of the inputs `changed` (indexes into plan.inputs), ascending.
+std::vector<std::size_t> affected_shards(const ShardPlan& plan,
+                                         const std::vector<std::size_t>& changed);
+
+struct PlanUpdate {
+  ShardPlan plan;                           // the new plan: the old one with the new inputs
+  std::vector<std::size_t> changed_inputs;  // whose size or fingerprint differ, ascending
+  std::vector<std::size_t> shards;          // to rebuild (affected_shards), ascending
+  bool apex = false;                        // the apex must be rebuilt (some shard is)
+};
+
+// `vts plan --update`: the old plan with `inputs` (empty: its own paths, read again), keeping its
+// options, geometry, grid, split level and shards; a change to any of these (an input of another
+// size, another count of inputs) is invalid_argument naming it.
+Result<PlanUpdate> update_shard_plan(const ShardPlan& old,
+                                     const std::vector<std::filesystem::path>& inputs);
 
 struct MergeReport {
   TilesetInfo info;
