@@ -291,7 +291,7 @@ Result<ShardReport> build_apex(const ShardPlan& plan, const ShardBuildOptions& s
 Result<MergeReport> merge_plan(const ShardPlan& plan, const std::filesystem::path& parts_dir,
                                const std::filesystem::path& output,
                                const std::function<void(const pmtiles::MergeProgress&)>& progress,
-                               const std::atomic<bool>* cancel) {
+                               const std::atomic<bool>* cancel, bool verify) {
   const auto t0 = Clock::now();
   auto geometry = detail::plan_geometry(plan);
   if (!geometry) return std::move(geometry).error();
@@ -326,6 +326,7 @@ Result<MergeReport> merge_plan(const ShardPlan& plan, const std::filesystem::pat
   mo.metadata_json = report.info.to_json();
   mo.on_progress = progress;
   mo.cancel = cancel;
+  mo.verify = verify;
   auto stats = pmtiles::merge_parts(mo);
   if (!stats) return std::move(stats).error();
   report.stats = *stats;

@@ -12,7 +12,7 @@ namespace {
 
 struct MergeArgs {
   std::string plan, parts, output;
-  bool json = false, quiet = false;
+  bool json = false, quiet = false, no_verify = false;
 };
 
 void print_report(const MergeArgs& a, const MergeReport& r) {
@@ -46,7 +46,8 @@ int run_merge(const MergeArgs& a) {
     else
       bar.update(p.tiles_done, p.tiles_total, "reading indexes");
   };
-  auto report = merge_plan(*plan, a.parts, a.output, progress, &install_stop_signals());
+  auto report =
+      merge_plan(*plan, a.parts, a.output, progress, &install_stop_signals(), !a.no_verify);
   bar.finish();
   if (!report) return report_error(report.error());
   print_report(a, *report);
@@ -63,6 +64,9 @@ Runner add_merge(CLI::App& app) {
   c->add_option("parts", a->parts, "The directory of the parts (shard-*.part, apex.part)")
       ->required();
   c->add_option("-o,--output", a->output, "Output archive (.pmtiles)")->required();
+  c->add_flag("--no-verify", a->no_verify,
+              "Copy payloads in the kernel (copy_file_range: shared extents on XFS/Btrfs with "
+              "reflink) without checking each against its checksum; indexes are still checked");
   c->add_flag("--json", a->json, "Print the result as JSON");
   c->add_flag("-q,--quiet", a->quiet, "No progress bar or summary");
   return [a] { return run_merge(*a); };

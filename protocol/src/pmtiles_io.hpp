@@ -143,6 +143,28 @@ class BufferedOut {
     }
     return {};
   }
+  // Copies `size` bytes at `offset` of file `src` into the output in the kernel
+  // (copy_file_range: no trip through user space, and shared extents on file systems with reflink
+  // such as XFS and Btrfs), falling back to copy_from() where the kernel cannot.
+  Status clone_from(int src, const std::filesystem::path& src_path, std::uint64_t offset,
+                    std::uint64_t size) {
+    if (Status s = flush(); !s) return s;
+    auto in = static_cast<loff_t>(offset);
+    auto out = static_cast<loff_t>(flushed_);
+    while (size > 0) {
+      const ssize_t n = ::copy_file_range(src, &in, fd_, &out, size, 0);
+      if (n < 0 && errno == EINTR) continue;
+      if (n < 0 && (errno == EXDEV || errno == EINVAL || errno == ENOSYS || errno == EOPNOTSUPP)) {
+        flushed_ = static_cast<std::uint64_t>(out);
+        return copy_from(src, src_path, static_cast<std::uint64_t>(in), size);
+      }
+      if (n < 0) return io_error("cannot copy from", src_path, errno);
+      if (n == 0) return make_error(ErrorCode::io, "unexpected end of " + src_path.string());
+      size -= static_cast<std::uint64_t>(n);
+    }
+    flushed_ = static_cast<std::uint64_t>(out);
+    return {};
+  }
   // Copies `size` bytes at `offset` of file `src` into the output.
   Status copy_from(int src, const std::filesystem::path& src_path, std::uint64_t offset,
                    std::uint64_t size) {

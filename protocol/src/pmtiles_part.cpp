@@ -621,7 +621,37 @@ class Merger {
     return bits.flush();
   }
 
+  // Without verification: runs of fresh payloads contiguous in one part, copied in the kernel.
+  Status clone(BufferedOut& w, BitSpool& bits) {
+    std::uint32_t part = 0;
+    std::uint64_t begin = 0, end = 0;
+    const auto flush = [&]() -> Status {
+      if (end == begin) return {};
+      Result<int> fd = files_.fd(part);
+      if (!fd) return fd.error();
+      progress_.bytes_copied += end - begin;
+      return w.clone_from(*fd, files_.path(part), begin, end - begin);
+    };
+    Status st = for_each_tile([&](std::uint32_t p, const PartRecord& r) -> Status {
+      Result<bool> fresh = bits.get();
+      if (!fresh) return fresh.error();
+      if (!*fresh) return {};
+      if (p == part && r.offset == end) {
+        end += r.length;
+        return {};
+      }
+      if (Status s = flush(); !s) return s;
+      part = p;
+      begin = r.offset;
+      end = r.offset + r.length;
+      return {};
+    });
+    if (!st) return st;
+    return flush();
+  }
+
   Status copy(BufferedOut& w, BitSpool& bits) {
+    if (!o_.verify) return clone(w, bits);
     PayloadWindow window;
     const std::uint64_t start = w.position();
     return for_each_tile([&](std::uint32_t part, const PartRecord& r) -> Status {

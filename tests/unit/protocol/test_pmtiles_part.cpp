@@ -314,3 +314,32 @@ TEST(Merge, NestsLeavesOfLeavesWhenTheRootCannotHoldEveryLeafAndReadersWalkThem)
 
 }  // namespace
 }  // namespace vts::pmtiles
+
+namespace vts::pmtiles {
+namespace {
+
+TEST(Merge, CopiesInTheKernelWithoutVerifyingToTheSameBytes) {
+  TempDir dir;
+  const auto tiles = make_tiles(5, 17);
+  const Bytes single = read_all(write_single(dir.path(), tiles, 5));
+  const auto parts = write_parts(dir.path(), tiles, 5, 2);
+  MergeOptions m;
+  m.parts = parts;
+  m.archive = archive_options(dir.path() / "cloned.pmtiles", 5);
+  m.metadata_json = "{\"name\":\"t\"}";
+  m.verify = false;
+  ASSERT_TRUE(merge_parts(m));
+  EXPECT_TRUE(read_all(m.archive.path) == single);
+  // A damaged payload gets through without verification (the index is still checked), and is
+  // caught with it.
+  flip_byte(parts[3], 5);
+  fs::remove(m.archive.path);
+  EXPECT_TRUE(merge_parts(m));
+  m.verify = true;
+  auto r = merge_parts(m);
+  ASSERT_FALSE(r);
+  EXPECT_NE(r.error().message.find("checksum"), std::string::npos) << r.error().message;
+}
+
+}  // namespace
+}  // namespace vts::pmtiles

@@ -137,9 +137,10 @@ struct MergeReport {
 };
 
 // Merges the plan's parts in `parts_dir` into `output`: the archive `vts build` writes.
+// verify: pmtiles::MergeOptions::verify (check every payload, or copy in the kernel).
 Result<MergeReport> merge_plan(const ShardPlan& plan, const std::filesystem::path& parts_dir,
                                const std::filesystem::path& output,
                                const std::function<void(const pmtiles::MergeProgress&)>& progress,
-                               const std::atomic<bool>* cancel);
+                               const std::atomic<bool>* cancel, bool verify = true);
 
 }  // namespace vts

@@ -116,6 +116,10 @@ struct MergeOptions {
   std::vector<std::filesystem::path> parts;  // any order; their tiles must not overlap
   WriterOptions archive;                     // as for Writer (path, compression, zooms, bounds)
   std::string metadata_json;
+  // Check each copied payload against its XXH3-128 (reading it through memory). Off: payloads are
+  // copied in the kernel (copy_file_range; extents shared on XFS/Btrfs with reflink), and only
+  // the parts' indexes and manifests are checked.
+  bool verify = true;
   std::function<void(const MergeProgress&)> on_progress;  // about ten times a second
   const std::atomic<bool>* cancel = nullptr;
 };
