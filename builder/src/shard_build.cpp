@@ -7,6 +7,7 @@
 
 #include "build_core.hpp"
 #include "cascade.hpp"
+#include "shard_geo.hpp"
 #include "shard_internal.hpp"
 #include "vts/builder/shard.hpp"
 
@@ -72,8 +73,10 @@ BuildOptions run_options(const ShardPlan& plan, const ShardBuildOptions& so) {
   return o;
 }
 
-Status check_inputs(const ShardPlan& plan) {
-  for (const PlanInput& in : plan.inputs) {
+// The inputs a shard opens (`chosen`) are the plan's.
+Status check_inputs(const ShardPlan& plan, const std::vector<std::size_t>& chosen) {
+  for (std::size_t i : chosen) {
+    const PlanInput& in = plan.inputs[i];
     auto fp = input_fingerprint(in.path);
     if (!fp) return fp.error();
     std::error_code ec;
@@ -128,15 +131,33 @@ Result<ShardReport> build_shard(const ShardPlan& plan, std::size_t index,
                       "shard " + std::to_string(index) + " is out of range: the plan has " +
                           std::to_string(plan.shards.size()) + " shards (0.." +
                           std::to_string(plan.shards.size() - 1) + ")");
-  if (Status st = check_inputs(plan); !st) return st.error();
   const BuildOptions o = run_options(plan, so);
-  auto prepared = detail::prepare_build(o);
+  auto geometry = detail::plan_geometry(plan);
+  if (!geometry) return std::move(geometry).error();
+  const TileId root = plan.shards[index];
+  const int L = plan.split_level, d = geometry->max_zoom() - L;
+  // The core: the finest texels under the root; the window adds the halo its tiles' borders
+  // and the filter need at every level down to L, level L's tile included, borders and all
+  // (cascade.hpp, stripe_halo: exact out to B around the core at levels finest .. L is its
+  // margin for d + 1 levels, as if level L - 1 were made too), within what the whole build reads
+  // (the footprint of georeferenced inputs).
+  const Geometry& pg = *geometry;
+  const std::uint64_t side = std::uint64_t{pg.tile_size()} << d;
+  const TexelRect core =
+      clip(root.x * side, root.y * side, (root.x + 1) * side, (root.y + 1) * side, pg);
+  const std::uint64_t halo = detail::stripe_halo(pg, d + 1, o.downsample);
+  const TexelRect whole = detail::plan_window(plan, pg);
+  const TexelRect window =
+      clip(std::max(whole.x0, core.x0 > halo ? core.x0 - halo : 0),
+           std::max(whole.y0, core.y0 > halo ? core.y0 - halo : 0),
+           std::min(whole.x1, core.x1 + halo), std::min(whole.y1, core.y1 + halo), pg);
+  const std::vector<std::size_t> chosen = detail::plan_inputs_meeting(plan, pg, window);
+  if (Status st = check_inputs(plan, chosen); !st) return st.error();
+  auto prepared = detail::prepare_shard_build(plan, o, chosen);
   if (!prepared) return std::move(prepared).error();
   const Geometry& g = *prepared->geometry;
   if (g.width() != plan.width || g.height() != plan.height || g.max_zoom() != plan.max_zoom)
     return make_error(ErrorCode::invalid_argument, "the inputs' geometry is not the plan's");
-  const TileId root = plan.shards[index];
-  const int L = plan.split_level, d = g.max_zoom() - L;
   std::vector<TileRect> emit = detail::build_emit_rects(*prepared);
   for (int z = 0; z <= g.max_zoom(); ++z) {
     TileRect& e = emit[static_cast<std::size_t>(z)];
@@ -153,18 +174,8 @@ Result<ShardReport> build_shard(const ShardPlan& plan, std::size_t index,
   if (prepared->synthetic) {
     run.synthetic = emit;  // generated directly: nothing read
   } else {
-    // The core: the finest texels under the root; the window adds the halo its tiles' borders
-    // and the filter need at every level down to L, level L's tile included, borders and all
-    // (cascade.hpp, stripe_halo: exact out to B around the core at levels finest .. L is its
-    // margin for d + 1 levels, as if level L - 1 were made too).
-    const std::uint64_t side = std::uint64_t{g.tile_size()} << d;
-    const TexelRect core =
-        clip(root.x * side, root.y * side, (root.x + 1) * side, (root.y + 1) * side, g);
-    const std::uint64_t halo = detail::stripe_halo(g, d + 1, o.downsample);
-    const TexelRect window =
-        clip(core.x0 > halo ? core.x0 - halo : 0, core.y0 > halo ? core.y0 - halo : 0,
-             core.x1 + halo, core.y1 + halo, g);
-    auto p = detail::make_build_plan(g, o.downsample, window, emit, UINT64_MAX, L);
+    auto p =
+        detail::make_build_plan(g, o.downsample, window, emit, detail::plan_max_width(plan), L);
     if (!p) return std::move(p).error();
     bp = std::move(p).value();
     run.plan = &*bp;
@@ -177,6 +188,7 @@ Result<ShardReport> build_shard(const ShardPlan& plan, std::size_t index,
   if (!r) return r;
   r->texels_read = texels_read;
   r->core_texels = core_texels;
+  r->inputs_opened = chosen.size();
   return r;
 }
 
@@ -273,8 +285,8 @@ Result<ShardReport> build_apex(const ShardPlan& plan, const ShardBuildOptions& s
     run.synthetic = emit;
   } else {
     // The whole build's level-L window, then a pass from it down to level 0.
-    auto whole = detail::make_build_plan(g, o.downsample, TexelRect{0, 0, g.width(), g.height()},
-                                         emit, UINT64_MAX);
+    auto whole =
+        detail::make_build_plan(g, o.downsample, detail::plan_window(plan, g), emit, UINT64_MAX);
     if (!whole) return std::move(whole).error();
     const TexelRect window =
         detail::pass_windows(g, o.downsample, whole->passes.front())[static_cast<std::size_t>(L)];
@@ -311,13 +323,11 @@ Result<MergeReport> merge_plan(const ShardPlan& plan, const std::filesystem::pat
     content_sum += sum;
   }
   // The metadata and header a single `vts build` of the plan's options writes.
-  detail::PreparedBuild p;
-  p.geometry = *geometry;
-  p.synthetic = plan.options.synthetic;
-  p.input_description = plan.input_description;
+  auto p = detail::plan_prepared(plan);
+  if (!p) return std::move(p).error();
   MergeReport report;
-  report.info = detail::build_tileset_info(plan.options, p, output, content_sum);
-  mo.archive = detail::build_writer_options(p, output);
+  report.info = detail::build_tileset_info(plan.options, *p, output, content_sum);
+  mo.archive = detail::build_writer_options(*p, output);
   mo.metadata_json = report.info.to_json();
   mo.on_progress = progress;
   mo.cancel = cancel;
