@@ -71,7 +71,7 @@ json_check "$WORK/geo_auto.plan.json" "j.georeference.value_ranges.length === 3 
   "the plan records the percentiles --range auto chose"
 
 note "a shard opens only the inputs meeting its window"
-same_as_build geo_sparse 16 a.tif b.tif utm.tif --split-level 3
+same_as_build geo_sparse 4 a.tif b.tif utm.tif
 S="$WORK/geo_sparse.shards.json"
 python3 - "$S" <<'PY' || fail "inputs_opened: $(cat "$S")"
 import json, sys
