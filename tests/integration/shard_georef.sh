@@ -101,7 +101,7 @@ mv utm.moved utm.tif
 
 note "synthetic --tiling --bbox plans; a sparse planet 2^25 texels wide"
 same_as_build syn_geo 4 --synthetic 16384x8192 --tiling WorldCRS84Quad --bbox=-10.5,35.25,30.125,60.1
-same_as_build syn_web 16 --synthetic 16384x16384 --tiling WebMercatorQuad --bbox=2.2,48.8,2.5,48.95
+same_as_build syn_web 2 --synthetic 16384x16384 --tiling WebMercatorQuad --bbox=2.2,48.8,2.5,48.95
 same_as_build syn_planet 4 --synthetic 33554432x16777216 --tiling WorldCRS84Quad \
   --bbox=2.30,48.84,2.36,48.88 --codec bc1
 json_check "$WORK/syn_planet.plan.json" "j.geometry.width === 33554432" "a 2^25-wide plan"
