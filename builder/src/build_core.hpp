@@ -22,6 +22,8 @@ struct PreparedBuild {
   const Codec* codec = nullptr;
   std::unique_ptr<ImageSource> source;  // plain images and grids
   std::unique_ptr<GdalSource> gdal;     // georeferenced inputs
+  // Georeferenced inputs (gdal, or a plan's record of them): the build writes their footprint.
+  bool gdal_inputs = false;
   std::optional<SyntheticSpec> synthetic;
   Tiling tiling = Tiling::none;
   std::optional<Geometry> geometry;
@@ -31,6 +33,9 @@ struct PreparedBuild {
 
 // Checks the options (not the output) and opens the source.
 Result<PreparedBuild> prepare_build(const BuildOptions& o);
+
+// The GdalSource options BuildOptions asks for (what probing resolves left unpinned).
+GdalSourceOptions gdal_source_options(const BuildOptions& o);
 
 // The tiles of every level a whole build writes (index z).
 std::vector<TileRect> build_emit_rects(const PreparedBuild& p);

@@ -364,13 +364,7 @@ Result<std::unique_ptr<GdalSource>> open_gdal(const BuildOptions& o) {
     return make_error(ErrorCode::invalid_argument,
                       "a mosaic grid does not apply to georeferenced inputs (each is placed by its "
                       "georeference)");
-  detail::GdalSourceOptions go;
-  go.tiling = o.tiling == Tiling::none ? Tiling::world_crs84_quad : o.tiling;
-  go.tile_size = o.tile_size;
-  go.border = o.border;
-  go.max_level = o.max_level;
-  go.resampling = o.resampling;
-  go.warp_error = o.warp_error;
+  detail::GdalSourceOptions go = detail::gdal_source_options(o);
   if (o.on_progress)
     go.on_probe = [&o, last = Clock::time_point{}](std::size_t done, std::size_t total) mutable {
       const auto now = Clock::now();
@@ -381,10 +375,6 @@ Result<std::unique_ptr<GdalSource>> open_gdal(const BuildOptions& o) {
       p.inputs_total = total;
       o.on_progress(p);
     };
-  go.bands = o.bands;
-  go.value_ranges = o.band_ranges;
-  if (o.value_range) go.value_ranges = {*o.value_range};
-  go.auto_range = o.auto_range;
   auto s = GdalSource::open(o.inputs, go);
   if (s && o.on_warning)
     for (const std::string& w : (*s)->warnings()) o.on_warning(w);
@@ -394,6 +384,21 @@ Result<std::unique_ptr<GdalSource>> open_gdal(const BuildOptions& o) {
 }  // namespace
 
 namespace detail {
+
+GdalSourceOptions gdal_source_options(const BuildOptions& o) {
+  GdalSourceOptions go;
+  go.tiling = o.tiling == Tiling::none ? Tiling::world_crs84_quad : o.tiling;
+  go.tile_size = o.tile_size;
+  go.border = o.border;
+  go.max_level = o.max_level;
+  go.resampling = o.resampling;
+  go.warp_error = o.warp_error;
+  go.bands = o.bands;
+  go.value_ranges = o.band_ranges;
+  if (o.value_range) go.value_ranges = {*o.value_range};
+  go.auto_range = o.auto_range;
+  return go;
+}
 
 unsigned worker_count(unsigned requested) {
   if (requested) return requested;
@@ -418,7 +423,7 @@ std::vector<TileRect> build_emit_rects(const PreparedBuild& p) {
   for (int z = 0; z <= g.max_zoom(); ++z) {
     if (p.synthetic)
       rects.push_back(synthetic_tiles(g, *p.synthetic, z));
-    else if (p.gdal)
+    else if (p.gdal_inputs)
       rects.push_back(footprint_tiles(p.tiling, g, z, p.georeference->bounds));
     else
       rects.push_back(TileRect{0, 0, g.tiles_x(z), g.tiles_y(z)});
@@ -440,7 +445,7 @@ TilesetInfo build_tileset_info(const BuildOptions& o, const PreparedBuild& p,
   info.name = o.name.empty() ? output.stem().string() : o.name;
   info.description = o.description.empty() ? p.input_description : o.description;
   info.downsample = o.synthetic ? "synthetic-per-level" : downsample_method(o.downsample);
-  info.sparse = (p.synthetic && p.synthetic->region.has_value()) || p.gdal != nullptr;
+  info.sparse = (p.synthetic && p.synthetic->region.has_value()) || p.gdal_inputs;
   info.georeference = p.georeference;
   info.content_hash = content_hash_text(content_sum);
   return info;
@@ -519,6 +524,7 @@ Status open_source(const BuildOptions& o, PreparedBuild& p) {
     auto src = open_gdal(o);
     if (!src) return std::move(src).error();
     p.gdal = std::move(src).value();
+    p.gdal_inputs = true;
     p.input_description = p.gdal->description();
     if (p.tiling == Tiling::none) p.tiling = Tiling::world_crs84_quad;
     return {};

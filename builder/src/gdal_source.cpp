@@ -305,7 +305,7 @@ Status probe_input(GdalSource::Input& in, const GdalSourceOptions& o, const SrsP
   const int w = GDALGetRasterXSize(ds.get()), h = GDALGetRasterYSize(ds.get());
   in.pixels = std::uint64_t(w) * std::uint64_t(h);
   observe_values(in, ds.get());
-  if (o.value_ranges.empty() && !o.auto_range)
+  if (o.value_ranges.empty() && !o.auto_range && !o.ranges)
     if (Status st = check_unmapped(in, type); !st) return st;
   // The extent in its own CRS (the corners, for a rotated geotransform too), then in degrees.
   double min_x = INFINITY, min_y = INFINITY, max_x = -INFINITY, max_y = -INFINITY;
@@ -550,7 +550,8 @@ Result<std::unique_ptr<GdalSource>> GdalSource::open(
     first = false;
     s->inputs_.push_back(std::move(in));
   }
-  if (options.value_ranges.empty() && !options.auto_range)
+  if (options.bounds) s->bounds_ = *options.bounds;
+  if (options.value_ranges.empty() && !options.auto_range && !options.ranges)
     s->warnings_ = narrow_values_warnings(s->inputs_);
   auto level = pick_level(options, finest);
   if (!level) return level.error();
@@ -568,7 +569,9 @@ Result<std::unique_ptr<GdalSource>> GdalSource::open(
   if (!g) return g.error();
   s->width_ = g->width();
   s->height_ = g->height();
-  if (options.auto_range) {
+  if (options.ranges) {
+    s->ranges_ = *options.ranges;
+  } else if (options.auto_range) {
     if (Status st = s->choose_auto_ranges(); !st) return st.error();
   } else {
     s->ranges_ = options.value_ranges;
@@ -676,6 +679,12 @@ Status GdalSource::acquire(Input& in) {
 }
 
 GdalSource::~GdalSource() = default;
+
+std::vector<LonLatBounds> GdalSource::input_bounds() const {
+  std::vector<LonLatBounds> out;
+  for (const auto& in : inputs_) out.push_back(in->bounds);
+  return out;
+}
 
 std::vector<GdalSource*> GdalSource::split(unsigned n) {
   n = std::max(1u, std::min<unsigned>(n, unsigned(options_.max_open)));

@@ -51,6 +51,13 @@ struct GdalSourceOptions {
   bool auto_range = false;
   // The most inputs kept open at once (each: its file and its warped VRT); at least 1.
   std::size_t max_open = 32;
+  // Pinned by a plan (vts/builder/shard.hpp), so that a shard opening only the inputs that meet
+  // its window builds the grid the whole build does: `bounds` is what bounds() returns (the union
+  // of all the inputs' extents, or --bounds) and `ranges` the value mapping the whole build chose
+  // (value_ranges() returns it; nothing is checked against it, chosen or warned about). With
+  // max_level set too, any subset of the inputs, none included, gives the same grid.
+  std::optional<LonLatBounds> bounds;
+  std::optional<std::vector<std::pair<double, double>>> ranges;
 };
 
 // The percentiles --range auto clips at (QGIS's default cumulative count cut for imagery).
@@ -83,6 +90,8 @@ class GdalSource {
   static constexpr std::size_t kMaxWarnings = 10;
   // The value mapping in use, one MIN,MAX per data band (1 or 3), or empty (values as they are).
   const std::vector<std::pair<double, double>>& value_ranges() const { return ranges_; }
+  // Each input's extent in degrees, clipped to the scheme's extent (the inputs' order).
+  std::vector<LonLatBounds> input_bounds() const;
   // The most inputs that were open at once so far.
   std::size_t peak_open() const { return peak_open_; }
   // `n` readers of the same grid for n threads (GDAL datasets are not shared between threads):

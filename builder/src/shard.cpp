@@ -7,6 +7,7 @@
 #include <xxhash.h>
 
 #include "build_core.hpp"
+#include "shard_geo.hpp"
 #include "shard_internal.hpp"
 #include "vts/builder/shard.hpp"
 #include "vts/protocol/file_io.hpp"
@@ -53,6 +54,7 @@ json options_json(const BuildOptions& o) {
     if (s.region)
       j["synthetic"]["region"] = {s.region->x0, s.region->y0, s.region->x1, s.region->y1};
   }
+  detail::geo_options_to_json(o, j);
   return j;
 }
 
@@ -90,6 +92,7 @@ Result<BuildOptions> options_from_json(const json& j) {
     }
     o.synthetic = spec;
   }
+  if (Status st = detail::geo_options_from_json(j, o); !st) return st.error();
   return o;
 }
 
@@ -109,6 +112,7 @@ json plan_body(const ShardPlan& p) {
     j["geometry"]["rows"] = p.row_heights;
   }
   j["split_level"] = p.split_level;
+  if (p.geo) j["georeference"] = detail::geo_plan_to_json(*p.geo);
   json shards = json::array();
   for (const TileId& t : p.shards) shards.push_back({t.x, t.y});
   j["shards"] = std::move(shards);
@@ -166,11 +170,9 @@ TileRect shard_rect(const TileRect& level, TileId root, int z) {
 }
 
 std::vector<TileRect> plan_emit_rects(const ShardPlan& plan, const Geometry& g) {
-  std::vector<TileRect> rects;
-  for (int z = 0; z <= g.max_zoom(); ++z)
-    rects.push_back(plan.options.synthetic ? synthetic_tiles(g, *plan.options.synthetic, z)
-                                           : TileRect{0, 0, g.tiles_x(z), g.tiles_y(z)});
-  return rects;
+  auto p = plan_prepared(plan);
+  if (!p) return std::vector<TileRect>(static_cast<std::size_t>(g.max_zoom()) + 1);
+  return build_emit_rects(*p);
 }
 
 Result<Geometry> plan_geometry(const ShardPlan& plan) {
@@ -207,16 +209,8 @@ Result<std::string> input_fingerprint(const std::filesystem::path& path) {
 
 Result<ShardPlan> make_shard_plan(const BuildOptions& o, std::optional<int> split_level,
                                   std::uint64_t min_shards) {
-  if (o.tiling != Tiling::none || o.bounds)
-    return make_error(
-        ErrorCode::invalid_argument,
-        "georeferenced builds (--tiling, --bounds) are not yet supported by vts plan");
   auto prepared = detail::prepare_build(o);
   if (!prepared) return std::move(prepared).error();
-  if (prepared->gdal)
-    return make_error(ErrorCode::invalid_argument, "georeferenced inputs (" +
-                                                       o.inputs.front().string() +
-                                                       ") are not yet supported by vts plan");
   const Geometry& g = *prepared->geometry;
   ShardPlan plan;
   plan.options = o;
@@ -235,6 +229,7 @@ Result<ShardPlan> make_shard_plan(const BuildOptions& o, std::optional<int> spli
     plan.inputs.push_back(std::move(in));
   }
   plan.input_description = prepared->input_description;
+  plan.geo = detail::pin_geo_plan(*prepared);
   plan.width = g.width();
   plan.height = g.height();
   plan.max_zoom = g.max_zoom();
@@ -297,6 +292,11 @@ Result<ShardPlan> plan_from_json(const std::string& text) {
       p.row_heights = j["geometry"].at("rows").get<std::vector<std::uint64_t>>();
     }
     p.split_level = j.at("split_level").get<int>();
+    if (j.contains("georeference")) {
+      auto geo = detail::geo_plan_from_json(j["georeference"]);
+      if (!geo) return geo.error();
+      p.geo = std::move(geo).value();
+    }
     if (p.split_level < 0 || p.split_level > p.max_zoom || p.max_zoom > Geometry::kMaxZoom)
       return make_error(ErrorCode::invalid_argument, "plan split level is outside its levels");
     for (const json& s : j.at("shards"))

@@ -7,6 +7,7 @@
 
 #include "build_core.hpp"
 #include "cascade.hpp"
+#include "shard_geo.hpp"
 #include "shard_internal.hpp"
 #include "vts/builder/shard.hpp"
 
@@ -69,8 +70,10 @@ BuildOptions run_options(const ShardPlan& plan, const ShardBuildOptions& so) {
   return o;
 }
 
-Status check_inputs(const ShardPlan& plan) {
-  for (const PlanInput& in : plan.inputs) {
+// The inputs a shard opens (`chosen`) are the plan's.
+Status check_inputs(const ShardPlan& plan, const std::vector<std::size_t>& chosen) {
+  for (std::size_t i : chosen) {
+    const PlanInput& in = plan.inputs[i];
     auto fp = input_fingerprint(in.path);
     if (!fp) return fp.error();
     std::error_code ec;
@@ -123,15 +126,24 @@ Result<ShardReport> build_shard(const ShardPlan& plan, std::size_t index,
                       "shard " + std::to_string(index) + " is out of range: the plan has " +
                           std::to_string(plan.shards.size()) + " shards (0.." +
                           std::to_string(plan.shards.size() - 1) + ")");
-  if (Status st = check_inputs(plan); !st) return st.error();
   const BuildOptions o = run_options(plan, so);
-  auto prepared = detail::prepare_build(o);
+  auto geometry = detail::plan_geometry(plan);
+  if (!geometry) return std::move(geometry).error();
+  const TileId root = plan.shards[index];
+  const int L = plan.split_level;
+  const Geometry& pg = *geometry;
+  // The core: the finest texels under the root; the window adds the halo (shard_window), within
+  // what the whole build reads (the footprint of georeferenced inputs).
+  auto sw = shard_window(plan, index);
+  if (!sw) return std::move(sw).error();
+  const TexelRect core = sw->core, window = sw->window;
+  const std::vector<std::size_t> chosen = detail::plan_inputs_meeting(plan, pg, window);
+  if (Status st = check_inputs(plan, chosen); !st) return st.error();
+  auto prepared = detail::prepare_shard_build(plan, o, chosen);
   if (!prepared) return std::move(prepared).error();
   const Geometry& g = *prepared->geometry;
   if (g.width() != plan.width || g.height() != plan.height || g.max_zoom() != plan.max_zoom)
     return make_error(ErrorCode::invalid_argument, "the inputs' geometry is not the plan's");
-  const TileId root = plan.shards[index];
-  const int L = plan.split_level;
   std::vector<TileRect> emit = detail::build_emit_rects(*prepared);
   for (int z = 0; z <= g.max_zoom(); ++z) {
     TileRect& e = emit[static_cast<std::size_t>(z)];
@@ -148,11 +160,8 @@ Result<ShardReport> build_shard(const ShardPlan& plan, std::size_t index,
   if (prepared->synthetic) {
     run.synthetic = emit;  // generated directly: nothing read
   } else {
-    // The core: the finest texels under the root; the window adds the halo (shard_window).
-    auto sw = shard_window(plan, index);
-    if (!sw) return std::move(sw).error();
-    const TexelRect core = sw->core, window = sw->window;
-    auto p = detail::make_build_plan(g, o.downsample, window, emit, UINT64_MAX, L);
+    auto p =
+        detail::make_build_plan(g, o.downsample, window, emit, detail::plan_max_width(plan), L);
     if (!p) return std::move(p).error();
     bp = std::move(p).value();
     run.plan = &*bp;
@@ -165,6 +174,7 @@ Result<ShardReport> build_shard(const ShardPlan& plan, std::size_t index,
   if (!r) return r;
   r->texels_read = texels_read;
   r->core_texels = core_texels;
+  r->inputs_opened = chosen.size();
   return r;
 }
 
@@ -266,8 +276,8 @@ Result<ShardReport> build_apex(const ShardPlan& plan, const ShardBuildOptions& s
     run.synthetic = emit;
   } else {
     // The whole build's level-L window, then a pass from it down to level 0.
-    auto whole = detail::make_build_plan(g, o.downsample, TexelRect{0, 0, g.width(), g.height()},
-                                         emit, UINT64_MAX);
+    auto whole =
+        detail::make_build_plan(g, o.downsample, detail::plan_window(plan, g), emit, UINT64_MAX);
     if (!whole) return std::move(whole).error();
     const TexelRect window =
         detail::pass_windows(g, o.downsample, whole->passes.front())[static_cast<std::size_t>(L)];
@@ -316,13 +326,11 @@ Result<MergeReport> merge_plan(const ShardPlan& plan, const std::filesystem::pat
     if (Status st = detail::check_apex_shards(plan, *apex, mo.parts.front(), attachments); !st)
       return st.error();
   // The metadata and header a single `vts build` of the plan's options writes.
-  detail::PreparedBuild p;
-  p.geometry = *geometry;
-  p.synthetic = plan.options.synthetic;
-  p.input_description = plan.input_description;
+  auto p = detail::plan_prepared(plan);
+  if (!p) return std::move(p).error();
   MergeReport report;
-  report.info = detail::build_tileset_info(plan.options, p, output, content_sum);
-  mo.archive = detail::build_writer_options(p, output);
+  report.info = detail::build_tileset_info(plan.options, *p, output, content_sum);
+  mo.archive = detail::build_writer_options(*p, output);
   mo.metadata_json = report.info.to_json();
   mo.on_progress = progress;
   mo.cancel = cancel;

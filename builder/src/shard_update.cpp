@@ -8,6 +8,7 @@
 #include <xxhash.h>
 
 #include "cascade.hpp"
+#include "shard_geo.hpp"
 #include "shard_internal.hpp"
 #include "vts/builder/shard.hpp"
 
@@ -150,12 +151,20 @@ Result<ShardWindow> shard_window(const ShardPlan& plan, std::size_t index) {
   ShardWindow w;
   w.core = clip(root.x * side, root.y * side, (root.x + 1) * side, (root.y + 1) * side);
   const std::uint64_t halo = detail::stripe_halo(g, d + 1, plan.options.downsample);
-  w.window = clip(w.core.x0 > halo ? w.core.x0 - halo : 0, w.core.y0 > halo ? w.core.y0 - halo : 0,
-                  w.core.x1 + halo, w.core.y1 + halo);
+  // Within what the whole build reads (the footprint of georeferenced inputs).
+  const TexelRect whole = detail::plan_window(plan, g);
+  w.window = clip(std::max(whole.x0, w.core.x0 > halo ? w.core.x0 - halo : 0),
+                  std::max(whole.y0, w.core.y0 > halo ? w.core.y0 - halo : 0),
+                  std::min(whole.x1, w.core.x1 + halo), std::min(whole.y1, w.core.y1 + halo));
   return w;
 }
 
 TexelRect input_rect(const ShardPlan& plan, std::size_t input) {
+  if (plan.geo && plan.geo->inputs && input < plan.geo->input_bounds.size()) {
+    auto g = detail::plan_geometry(plan);
+    if (g)
+      return footprint_texels(plan.geo->georeference.tiling, *g, plan.geo->input_bounds[input]);
+  }
   const std::size_t columns = plan.column_widths.size();
   if (columns == 0 || plan.row_heights.empty()) return TexelRect{0, 0, plan.width, plan.height};
   const std::size_t c = input % columns, r = input / columns;

@@ -57,6 +57,7 @@ void print_report(const BuildArgs& a, const ShardPlan& plan, std::optional<std::
     j["texels_read"] = r.texels_read;
     j["core_texels"] = r.core_texels;
     j["halo_overhead"] = overhead(r);
+    if (r.root) j["inputs_opened"] = r.inputs_opened;
     j["seconds"] = r.seconds;
     std::printf("%s\n", j.dump(2).c_str());
     return;

@@ -11,6 +11,7 @@
 #include <fstream>
 
 #include "cascade.hpp"
+#include "shard_geo.hpp"
 #include "vts/protocol/pmtiles.hpp"
 #include "vts/test/temp_dir.hpp"
 
@@ -103,14 +104,6 @@ TEST(ShardPlan, SparseRegionKeepsOnlyShardsWithTiles) {
   auto coarse = make_shard_plan(o, 1, 0);
   ASSERT_TRUE(coarse);
   EXPECT_EQ(coarse->shards.size(), 2u);
-}
-
-TEST(ShardPlan, GeoreferencedBuildsAreNotYetSupported) {
-  BuildOptions o = synthetic(4096, 2048);
-  o.tiling = Tiling::world_crs84_quad;
-  auto plan = make_shard_plan(o, 1, 0);
-  ASSERT_FALSE(plan);
-  EXPECT_NE(plan.error().message.find("not yet supported"), std::string::npos);
 }
 
 TEST(ShardPlan, FingerprintFollowsContentNotTheFile) {
@@ -322,6 +315,65 @@ TEST(ShardUpdate, PartsOfChangedInputsAreStaleForTheApexAndTheMerge) {
       << merged.error().message;
   ASSERT_TRUE(build_apex(u->plan, so));
   EXPECT_TRUE(merge_plan(u->plan, so.out_dir, out, nullptr, nullptr));
+}
+
+// A georeferenced plan: 4096 x 2048 WorldCRS84Quad texels (0.087890625 degrees each) and the
+// inputs' extents in degrees.
+ShardPlan geo_plan(std::vector<LonLatBounds> extents) {
+  ShardPlan p;
+  p.width = 4096;
+  p.height = 2048;
+  p.max_zoom = 4;
+  GeoPlan g;
+  g.georeference.tiling = Tiling::world_crs84_quad;
+  g.georeference.bounds = {-180, -90, 180, 90};
+  g.inputs = true;
+  g.input_bounds = std::move(extents);
+  for (std::size_t i = 0; i < g.input_bounds.size(); ++i)
+    p.inputs.push_back({"in" + std::to_string(i) + ".tif", 1, "0"});
+  p.geo = g;
+  return p;
+}
+
+TEST(ShardGeo, AShardOpensOnlyTheInputsWhoseExtentMeetsItsWindowInTheirOrder) {
+  // Texels (rounded out): lon 0..40 is x 2048..2504, lat 40..10 is y 568..911; the second
+  // is the south-west corner, x 0..114, y 1934..2048.
+  const ShardPlan plan = geo_plan({{0, 10, 40, 40}, {-180, -90, -170, -80}, {30, 0, 50, 20}});
+  auto g = Geometry::create(4096, 2048, 256, 4);
+  ASSERT_TRUE(g);
+  using V = std::vector<std::size_t>;
+  EXPECT_EQ(detail::plan_inputs_meeting(plan, *g, {0, 0, 4096, 2048}), (V{0, 1, 2}));
+  EXPECT_EQ(detail::plan_inputs_meeting(plan, *g, {2000, 500, 2100, 600}), (V{0}));
+  EXPECT_EQ(detail::plan_inputs_meeting(plan, *g, {0, 1900, 200, 2048}), (V{1}));
+  // Where the first and the third overlap: both, the first first (later ones composite over it).
+  EXPECT_EQ(detail::plan_inputs_meeting(plan, *g, {2400, 850, 2450, 900}), (V{0, 2}));
+  // Windows that only touch an extent's edge do not meet it; none at all.
+  EXPECT_EQ(detail::plan_inputs_meeting(plan, *g, {2000, 500, 2048, 569}), V{});
+  EXPECT_EQ(detail::plan_inputs_meeting(plan, *g, {100, 100, 400, 400}), V{});
+  // A plan of plain images opens all of them.
+  ShardPlan plain = plan;
+  plain.geo.reset();
+  EXPECT_EQ(detail::plan_inputs_meeting(plain, *g, {100, 100, 400, 400}), (V{0, 1, 2}));
+}
+
+TEST(ShardGeo, TheGeoreferenceRoundTripsThroughThePlanJson) {
+  BuildOptions o;
+  o.synthetic = SyntheticSpec{16384, 8192, std::nullopt, 0};
+  o.tiling = Tiling::world_crs84_quad;
+  o.bounds = LonLatBounds{-10.5, 35.25, 30.125, 60.1};
+  auto plan = make_shard_plan(o, 2, 0);
+  ASSERT_TRUE(plan) << plan.error().to_string();
+  ASSERT_TRUE(plan->geo);
+  EXPECT_EQ(plan->geo->georeference.bounds, *o.bounds);
+  EXPECT_FALSE(plan->geo->inputs);
+  auto back = plan_from_json(plan_to_json(*plan));
+  ASSERT_TRUE(back) << back.error().to_string();
+  ASSERT_TRUE(back->geo);
+  EXPECT_EQ(back->geo->georeference.bounds, plan->geo->georeference.bounds);
+  EXPECT_EQ(back->geo->georeference.center, plan->geo->georeference.center);
+  EXPECT_EQ(back->options.tiling, Tiling::world_crs84_quad);
+  EXPECT_EQ(back->options.bounds, o.bounds);
+  EXPECT_EQ(back->shards, plan->shards);
 }
 
 }  // namespace

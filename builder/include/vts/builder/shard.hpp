@@ -32,6 +32,21 @@ struct PlanInput {
   std::string fingerprint;
 };
 
+// A georeferenced build's choices (georeferenced inputs, or --synthetic with --tiling/--bounds):
+// what a whole build resolves from all its inputs, pinned so that a shard opening only the inputs
+// that meet its window builds the very same grid (shard_geo.cpp).
+struct GeoPlan {
+  Georeference
+      georeference;  // tiling, bounds (the union of the inputs' extents, or --bounds), center
+  // Georeferenced inputs only: the finest level, the value mapping (--range auto's percentiles
+  // included; empty: values as they are), and each input's extent in degrees (clipped to the
+  // scheme), in the inputs' order.
+  bool inputs = false;
+  int max_level = 0;
+  std::vector<std::pair<double, double>> value_ranges;
+  std::vector<LonLatBounds> input_bounds;
+};
+
 struct ShardPlan {
   // The build: BuildOptions' inputs, grid, synthetic spec, tile size, border, codec, encode
   // options, downsample filter, name and description (output, threads and callbacks are not part
@@ -45,6 +60,7 @@ struct ShardPlan {
   std::vector<std::uint64_t> column_widths, row_heights;
   int max_zoom = 0;
   int split_level = 0;
+  std::optional<GeoPlan> geo;
   std::vector<TileId> shards;  // level-L tiles, in Hilbert tile-id order; shard I is shards[I]
   // 16 hex digits: XXH3-64 of the plan without its inputs (paths, sizes, fingerprints; their
   // count is kept), input description and hashes: what every part must have been built with.
@@ -59,7 +75,6 @@ Result<std::string> input_fingerprint(const std::filesystem::path& path);
 
 // Resolves the geometry from the options' inputs and picks the split level: `split_level` when
 // set, else the smallest level with at least `min_shards` shards (capped at the max zoom).
-// Georeferenced inputs are not supported yet (invalid_argument saying so).
 Result<ShardPlan> make_shard_plan(const BuildOptions& options, std::optional<int> split_level,
                                   std::uint64_t min_shards);
 
@@ -88,6 +103,8 @@ struct ShardReport {
   // Finest-level texels the shard read (its window: core plus halo) and its own (core) texels.
   std::uint64_t texels_read = 0, core_texels = 0;
   std::uint64_t content_sum = 0;
+  // The inputs the shard opened: those whose extent meets its window (all, for plain images).
+  std::size_t inputs_opened = 0;
   pmtiles::PartStats stats;
   double seconds = 0;
 };
