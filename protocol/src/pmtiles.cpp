@@ -15,35 +15,22 @@
 #include <memory>
 #include <string>
 
+#include "pmtiles_io.hpp"
 #include "vts/protocol/pmtiles.hpp"
 
 namespace vts::pmtiles {
 namespace {
+
+using detail::get_u32;
+using detail::get_u64;
+using detail::put_u32;
+using detail::put_u64;
 
 constexpr int kMaxZ = 31;  // ids of z = 32 would no longer fit the uint32 x / y of TileId
 
 // Number of tiles on all levels coarser than z: sum_{i<z} 4^i = (4^z - 1) / 3. Exact for z <= 31.
 constexpr std::uint64_t tiles_before_level(int z) {
   return ((std::uint64_t{1} << (2 * z)) - 1) / 3;
-}
-
-// ---- little-endian helpers ----------------------------------------------------------------------
-
-void put_u64(std::uint8_t* p, std::uint64_t v) {
-  for (int i = 0; i < 8; ++i) p[i] = static_cast<std::uint8_t>(v >> (8 * i));
-}
-void put_u32(std::uint8_t* p, std::uint32_t v) {
-  for (int i = 0; i < 4; ++i) p[i] = static_cast<std::uint8_t>(v >> (8 * i));
-}
-std::uint64_t get_u64(const std::uint8_t* p) {
-  std::uint64_t v = 0;
-  for (int i = 7; i >= 0; --i) v = (v << 8) | p[i];
-  return v;
-}
-std::uint32_t get_u32(const std::uint8_t* p) {
-  std::uint32_t v = 0;
-  for (int i = 3; i >= 0; --i) v = (v << 8) | p[i];
-  return v;
 }
 
 // ---- varints (unsigned LEB128, at most 10 bytes for 64 bits) ------------------------------------

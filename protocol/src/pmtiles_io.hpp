@@ -28,6 +28,26 @@
 
 namespace vts::pmtiles::detail {
 
+// ---- little-endian fields
+// ------------------------------------------------------------------------
+
+inline void put_u64(std::uint8_t* p, std::uint64_t v) {
+  for (int i = 0; i < 8; ++i) p[i] = static_cast<std::uint8_t>(v >> (8 * i));
+}
+inline void put_u32(std::uint8_t* p, std::uint32_t v) {
+  for (int i = 0; i < 4; ++i) p[i] = static_cast<std::uint8_t>(v >> (8 * i));
+}
+inline std::uint64_t get_u64(const std::uint8_t* p) {
+  std::uint64_t v = 0;
+  for (int i = 7; i >= 0; --i) v = (v << 8) | p[i];
+  return v;
+}
+inline std::uint32_t get_u32(const std::uint8_t* p) {
+  std::uint32_t v = 0;
+  for (int i = 3; i >= 0; --i) v = (v << 8) | p[i];
+  return v;
+}
+
 inline std::string tile_name(TileId id) {
   return std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
 }
@@ -418,14 +438,17 @@ class DirectoryBuilder {
   std::uint64_t entries_ = 0, leaf_count_ = 0, leaves_size_ = 0;
 };
 
-// Writes an archive: `h` with the section offsets filled in here, the root, the metadata, the
-// leaves copied from `dirs`, then `write_data` (which must write h.tile_data_length bytes), under
-// a temporary name, fsynced and renamed over options.path (then the directory fsynced).
-Status write_archive(const WriterOptions& options, Header h, std::span<const std::uint8_t> root,
-                     std::span<const std::uint8_t> metadata, const DirectoryBuilder& dirs,
-                     const std::function<Status(BufferedOut&)>& write_data);
+// Writes `path` through `write` under a temporary name beside it, fsyncs it, renames it into
+// place and fsyncs the directory; on any failure the temporary file is removed and `path` is
+// untouched. Returns the file's size.
+Result<std::uint64_t> write_file_atomically(const std::filesystem::path& path,
+                                            const std::function<Status(BufferedOut&)>& write);
 
-// The header fields WriterOptions fixes.
-Header header_from(const WriterOptions& o);
+// Writes an archive (write_file_atomically): the header (from `options` and `stats`: tiles,
+// entries, contents, tile_bytes), the root, the gzip/zstd metadata, the leaves from `dirs`, then
+// `write_data`, which must write stats.tile_bytes bytes. Sets stats.file_bytes.
+Status write_archive(const WriterOptions& options, const std::string& metadata_json,
+                     std::span<const std::uint8_t> root, const DirectoryBuilder& dirs,
+                     WriterStats& stats, const std::function<Status(BufferedOut&)>& write_data);
 
 }  // namespace vts::pmtiles::detail

@@ -85,68 +85,86 @@ Result<std::vector<std::uint8_t>> DirectoryBuilder::finish() {
   }
 }
 
-Header header_from(const WriterOptions& o) {
-  Header h = o.bounds;
-  h.clustered = true;
-  h.internal_compression = o.internal_compression;
-  h.tile_compression = o.tile_compression;
-  h.tile_type = o.tile_type;
-  h.min_zoom = o.min_zoom;
-  h.max_zoom = o.max_zoom;
-  return h;
-}
-
-Status write_archive(const WriterOptions& options, Header h, std::span<const std::uint8_t> root,
-                     std::span<const std::uint8_t> metadata, const DirectoryBuilder& dirs,
-                     const std::function<Status(BufferedOut&)>& write_data) {
-  h.root_dir_offset = kHeaderSize;
-  h.root_dir_length = root.size();
-  h.metadata_offset = h.root_dir_offset + h.root_dir_length;
-  h.metadata_length = metadata.size();
-  h.leaf_dirs_offset = h.metadata_offset + h.metadata_length;
-  h.leaf_dirs_length = dirs.leaves_bytes();
-  h.tile_data_offset = h.leaf_dirs_offset + h.leaf_dirs_length;
-  const std::uint64_t file_bytes = h.tile_data_offset + h.tile_data_length;
-
+Result<std::uint64_t> write_file_atomically(const std::filesystem::path& path,
+                                            const std::function<Status(BufferedOut&)>& write) {
   const std::filesystem::path dir =
-      options.path.has_parent_path() ? options.path.parent_path() : std::filesystem::path(".");
+      path.has_parent_path() ? path.parent_path() : std::filesystem::path(".");
   Result<std::pair<Fd, std::filesystem::path>> tmp =
-      create_unique(dir, "." + options.path.filename().string() + ".tmp-", 0666);
+      create_unique(dir, "." + path.filename().string() + ".tmp-", 0666);
   if (!tmp) return std::move(tmp).error();
   Fd out = std::move(tmp->first);
   const std::filesystem::path tmp_path = tmp->second;
+  std::uint64_t size = 0;
   Status st = [&]() -> Status {
     BufferedOut w(out.get(), tmp_path);
-    const auto header_bytes = serialize_header(h);
-    for (std::span<const std::uint8_t> part :
-         {std::span<const std::uint8_t>(header_bytes), root, metadata}) {
-      if (Status s = w.write(part); !s) return s;
-    }
-    if (Status s = w.copy_from(dirs.leaves_fd(), dirs.leaves_path(), 0, dirs.leaves_bytes()); !s)
-      return s;
-    assert(w.position() == h.tile_data_offset);
-    if (Status s = write_data(w); !s) return s;
+    if (Status s = write(w); !s) return s;
     if (Status s = w.flush(); !s) return s;
-    if (w.position() != file_bytes)
-      return make_error(ErrorCode::internal, "archive data section has the wrong size");
+    size = w.position();
     if (::fsync(out.get()) != 0) return io_error("cannot fsync", tmp_path, errno);
     if (const int err = out.close_checked(); err != 0)
       return io_error("cannot close", tmp_path, err);
-    if (::rename(tmp_path.c_str(), options.path.c_str()) != 0)
-      return io_error("cannot rename " + tmp_path.string() + " to", options.path, errno);
+    if (::rename(tmp_path.c_str(), path.c_str()) != 0)
+      return io_error("cannot rename " + tmp_path.string() + " to", path, errno);
     return {};
   }();
   if (!st) {
     out.reset();
     std::error_code ignored;
     std::filesystem::remove(tmp_path, ignored);
-    return st;
+    return st.error();
   }
-  // Make the rename itself durable. The archive is complete either way, so a failure here is
-  // still reported: the caller asked for a durable file.
+  // Make the rename itself durable. The file is complete either way, so a failure here is still
+  // reported: the caller asked for a durable file.
   Fd dfd(::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC));
   if (dfd.get() < 0 || ::fsync(dfd.get()) != 0)
     return io_error("cannot fsync directory", dir, errno);
+  return size;
+}
+
+Status write_archive(const WriterOptions& options, const std::string& metadata_json,
+                     std::span<const std::uint8_t> root, const DirectoryBuilder& dirs,
+                     WriterStats& stats, const std::function<Status(BufferedOut&)>& write_data) {
+  const std::span<const std::uint8_t> meta_raw(
+      reinterpret_cast<const std::uint8_t*>(metadata_json.data()), metadata_json.size());
+  Result<std::vector<std::uint8_t>> metadata = compress(meta_raw, options.internal_compression);
+  if (!metadata) return std::move(metadata).error();
+  Header h = options.bounds;
+  h.clustered = true;
+  h.internal_compression = options.internal_compression;
+  h.tile_compression = options.tile_compression;
+  h.tile_type = options.tile_type;
+  h.min_zoom = options.min_zoom;
+  h.max_zoom = options.max_zoom;
+  h.addressed_tiles = stats.addressed_tiles;
+  h.tile_entries = stats.tile_entries;
+  h.tile_contents = stats.tile_contents;
+  h.root_dir_offset = kHeaderSize;
+  h.root_dir_length = root.size();
+  h.metadata_offset = h.root_dir_offset + h.root_dir_length;
+  h.metadata_length = metadata->size();
+  h.leaf_dirs_offset = h.metadata_offset + h.metadata_length;
+  h.leaf_dirs_length = dirs.leaves_bytes();
+  h.tile_data_offset = h.leaf_dirs_offset + h.leaf_dirs_length;
+  h.tile_data_length = stats.tile_bytes;
+  stats.file_bytes = h.tile_data_offset + h.tile_data_length;
+  Result<std::uint64_t> written =
+      write_file_atomically(options.path, [&](BufferedOut& w) -> Status {
+        const auto header_bytes = serialize_header(h);
+        for (std::span<const std::uint8_t> part :
+             {std::span<const std::uint8_t>(header_bytes), root,
+              std::span<const std::uint8_t>(*metadata)}) {
+          if (Status s = w.write(part); !s) return s;
+        }
+        if (Status s = w.copy_from(dirs.leaves_fd(), dirs.leaves_path(), 0, dirs.leaves_bytes());
+            !s)
+          return s;
+        assert(w.position() == h.tile_data_offset);
+        if (Status s = write_data(w); !s) return s;
+        if (w.position() != stats.file_bytes)
+          return make_error(ErrorCode::internal, "archive data section has the wrong size");
+        return Status{};
+      });
+  if (!written) return written.error();
   return {};
 }
 

@@ -27,25 +27,8 @@ constexpr char kMagic[8] = {'V', 'T', 'S', 'P', 'A', 'R', 'T', '1'};
 constexpr std::size_t kRecordBytes = 36, kSegmentBytes = 40, kFooterBytes = 64;
 constexpr std::uint64_t kUnset = std::numeric_limits<std::uint64_t>::max();
 
-void put64(std::uint8_t* p, std::uint64_t v) {
-  for (int i = 0; i < 8; ++i) p[i] = static_cast<std::uint8_t>(v >> (8 * i));
-}
-void put32(std::uint8_t* p, std::uint32_t v) {
-  for (int i = 0; i < 4; ++i) p[i] = static_cast<std::uint8_t>(v >> (8 * i));
-}
-std::uint64_t get64(const std::uint8_t* p) {
-  std::uint64_t v = 0;
-  for (int i = 7; i >= 0; --i) v = (v << 8) | p[i];
-  return v;
-}
-std::uint32_t get32(const std::uint8_t* p) {
-  std::uint32_t v = 0;
-  for (int i = 3; i >= 0; --i) v = (v << 8) | p[i];
-  return v;
-}
-
 PartRecord decode_record(const std::uint8_t* p) {
-  return PartRecord{get64(p), get64(p + 8), get32(p + 16), get64(p + 20), get64(p + 28)};
+  return PartRecord{get_u64(p), get_u64(p + 8), get_u32(p + 16), get_u64(p + 20), get_u64(p + 28)};
 }
 
 Error corrupt(const std::filesystem::path& path, const std::string& what) {
@@ -109,17 +92,7 @@ class PartWriterImpl final : public PartWriter {
     PartStats stats;
     stats.tiles = records.size();
     stats.content_sum = content_sum_;
-    WriterOptions where;
-    where.path = path_;
-    const std::filesystem::path dir =
-        path_.has_parent_path() ? path_.parent_path() : std::filesystem::path(".");
-    Result<std::pair<Fd, std::filesystem::path>> tmp =
-        create_unique(dir, "." + path_.filename().string() + ".tmp-", 0666);
-    if (!tmp) return std::move(tmp).error();
-    Fd out = std::move(tmp->first);
-    const std::filesystem::path tmp_path = tmp->second;
-    Status st = [&]() -> Status {
-      BufferedOut w(out.get(), tmp_path);
+    Result<std::uint64_t> size = write_file_atomically(path_, [&](BufferedOut& w) -> Status {
       // Payloads: each distinct one at its first appearance in tile-id order.
       std::unordered_map<std::uint64_t, std::uint64_t> offset_of;
       std::vector<std::uint64_t> offsets(records.size());
@@ -140,24 +113,24 @@ class PartWriterImpl final : public PartWriter {
       for (std::size_t i = 0; i < records.size(); ++i) {
         const TileSpool::Blob& b = spool_->blob(records[i].blob);
         std::uint8_t rec[kRecordBytes];
-        put64(rec, records[i].tile_id);
-        put64(rec + 8, offsets[i]);
-        put32(rec + 16, b.length);
-        put64(rec + 20, b.hash_low);
-        put64(rec + 28, b.hash_high);
+        put_u64(rec, records[i].tile_id);
+        put_u64(rec + 8, offsets[i]);
+        put_u32(rec + 16, b.length);
+        put_u64(rec + 20, b.hash_low);
+        put_u64(rec + 28, b.hash_high);
         if (Status s = h.write(rec); !s) return s;
         const std::uint8_t z = level_of(records[i].tile_id);
         if (i == 0 || z != seg_bytes[seg_bytes.size() - kSegmentBytes]) {
           seg_bytes.resize(seg_bytes.size() + kSegmentBytes);
           std::uint8_t* sp = seg_bytes.data() + seg_bytes.size() - kSegmentBytes;
-          put64(sp, z);
-          put64(sp + 8, records[i].tile_id);
-          put64(sp + 24, i);
+          put_u64(sp, z);
+          put_u64(sp + 8, records[i].tile_id);
+          put_u64(sp + 24, i);
           ++segments;
         }
         std::uint8_t* sp = seg_bytes.data() + seg_bytes.size() - kSegmentBytes;
-        put64(sp + 16, records[i].tile_id);
-        put64(sp + 32, get64(sp + 32) + 1);
+        put_u64(sp + 16, records[i].tile_id);
+        put_u64(sp + 32, get_u64(sp + 32) + 1);
       }
       const std::span<const std::uint8_t> manifest(
           reinterpret_cast<const std::uint8_t*>(manifest_json.data()), manifest_json.size());
@@ -167,33 +140,19 @@ class PartWriterImpl final : public PartWriter {
       }
       std::uint8_t footer[kFooterBytes];
       std::memcpy(footer, kMagic, 8);
-      put64(footer + 8, stats.data_bytes);
-      put64(footer + 16, records.size());
-      put64(footer + 24, segments);
-      put64(footer + 32, attachment.size());
-      put64(footer + 40, manifest.size());
-      put64(footer + 48, content_sum_);
+      put_u64(footer + 8, stats.data_bytes);
+      put_u64(footer + 16, records.size());
+      put_u64(footer + 24, segments);
+      put_u64(footer + 32, attachment.size());
+      put_u64(footer + 40, manifest.size());
+      put_u64(footer + 48, content_sum_);
       if (Status s = h.write(std::span(footer, 56)); !s) return s;
-      put64(footer + 56, h.digest());
+      put_u64(footer + 56, h.digest());
       if (Status s = w.write(std::span(footer + 56, 8)); !s) return s;
-      if (Status s = w.flush(); !s) return s;
-      stats.file_bytes = w.position();
-      if (::fsync(out.get()) != 0) return io_error("cannot fsync", tmp_path, errno);
-      if (const int err = out.close_checked(); err != 0)
-        return io_error("cannot close", tmp_path, err);
-      if (::rename(tmp_path.c_str(), path_.c_str()) != 0)
-        return io_error("cannot rename " + tmp_path.string() + " to", path_, errno);
       return {};
-    }();
-    if (!st) {
-      out.reset();
-      std::error_code ignored;
-      std::filesystem::remove(tmp_path, ignored);
-      return st.error();
-    }
-    Fd dfd(::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC));
-    if (dfd.get() < 0 || ::fsync(dfd.get()) != 0)
-      return io_error("cannot fsync directory", dir, errno);
+    });
+    if (!size) return size.error();
+    stats.file_bytes = *size;
     return stats;
   }
 
@@ -222,11 +181,11 @@ Result<PartLayout> scan_part(int fd, const std::filesystem::path& path, bool kee
   if (std::memcmp(footer, kMagic, 8) != 0) return corrupt(path, "no part footer at its end");
   PartLayout l;
   l.info.path = path;
-  l.info.data_bytes = get64(footer + 8);
-  l.records = get64(footer + 16);
-  const std::uint64_t segments = get64(footer + 24), att = get64(footer + 32),
-                      man = get64(footer + 40);
-  l.info.content_sum = get64(footer + 48);
+  l.info.data_bytes = get_u64(footer + 8);
+  l.records = get_u64(footer + 16);
+  const std::uint64_t segments = get_u64(footer + 24), att = get_u64(footer + 32),
+                      man = get_u64(footer + 40);
+  l.info.content_sum = get_u64(footer + 48);
   const std::uint64_t limit = size - kFooterBytes;
   // Each term is checked against what is left, so no sum can overflow.
   std::uint64_t left = limit;
@@ -276,13 +235,13 @@ Result<PartLayout> scan_part(int fd, const std::filesystem::path& path, bool kee
     at += n;
   }
   XXH3_64bits_update(state, footer, 56);
-  if (XXH3_64bits_digest(state) != get64(footer + 56))
+  if (XXH3_64bits_digest(state) != get_u64(footer + 56))
     return corrupt(path, "the checksum of its index and manifest does not match");
   std::uint64_t expect_record = 0;
   for (std::uint64_t i = 0; i < segments; ++i) {
     const std::uint8_t* p = tail.data() + i * kSegmentBytes;
-    PartInfo::Segment s{static_cast<std::uint8_t>(get64(p)), get64(p + 8), get64(p + 16),
-                        get64(p + 24), get64(p + 32)};
+    PartInfo::Segment s{static_cast<std::uint8_t>(get_u64(p)), get_u64(p + 8), get_u64(p + 16),
+                        get_u64(p + 24), get_u64(p + 32)};
     if (s.first_record != expect_record || s.records == 0 || s.records > l.records - expect_record)
       return corrupt(path, "its segment table does not match its index");
     expect_record += s.records;
@@ -496,20 +455,9 @@ class Merger {
     Result<std::vector<std::uint8_t>> root = dirs->finish();
     if (!root) return std::move(root).error();
     stats.tile_entries = dirs->entries();
-    const std::span<const std::uint8_t> meta_raw(
-        reinterpret_cast<const std::uint8_t*>(o_.metadata_json.data()), o_.metadata_json.size());
-    Result<std::vector<std::uint8_t>> meta = compress(meta_raw, o_.archive.internal_compression);
-    if (!meta) return std::move(meta).error();
-    Header h = header_from(o_.archive);
-    h.tile_data_length = stats.tile_bytes;
-    h.addressed_tiles = stats.addressed_tiles;
-    h.tile_entries = stats.tile_entries;
-    h.tile_contents = stats.tile_contents;
-    stats.file_bytes =
-        kHeaderSize + root->size() + meta->size() + dirs->leaves_bytes() + stats.tile_bytes;
     progress_.copying = true;
     progress_.bytes_total = stats.tile_bytes;
-    Status written = write_archive(o_.archive, h, *root, *meta, *dirs,
+    Status written = write_archive(o_.archive, o_.metadata_json, *root, *dirs, stats,
                                    [&](BufferedOut& w) { return copy(w, *bits); });
     if (!written) return written.error();
     tick(true);

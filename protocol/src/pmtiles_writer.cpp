@@ -84,26 +84,15 @@ class WriterImpl final : public Writer {
     stats.tile_contents = order.size();
     stats.tile_entries = dirs->entries();
 
-    const std::span<const std::uint8_t> meta_raw(
-        reinterpret_cast<const std::uint8_t*>(metadata_json.data()), metadata_json.size());
-    Result<std::vector<std::uint8_t>> meta = compress(meta_raw, options_.internal_compression);
-    if (!meta) return std::move(meta).error();
-
-    Header h = header_from(options_);
-    h.tile_data_length = stats.tile_bytes;
-    h.addressed_tiles = stats.addressed_tiles;
-    h.tile_entries = stats.tile_entries;
-    h.tile_contents = stats.tile_contents;
-    stats.file_bytes =
-        kHeaderSize + root->size() + meta->size() + dirs->leaves_bytes() + stats.tile_bytes;
-    Status written = write_archive(options_, h, *root, *meta, *dirs, [&](BufferedOut& w) {
-      for (std::uint64_t blob : order) {
-        const TileSpool::Blob& b = spool_->blob(blob);
-        if (Status s = w.copy_from(spool_->fd(), spool_->path(), b.spool_offset, b.length); !s)
-          return s;
-      }
-      return Status{};
-    });
+    Status written =
+        write_archive(options_, metadata_json, *root, *dirs, stats, [&](BufferedOut& w) {
+          for (std::uint64_t blob : order) {
+            const TileSpool::Blob& b = spool_->blob(blob);
+            if (Status s = w.copy_from(spool_->fd(), spool_->path(), b.spool_offset, b.length); !s)
+              return s;
+          }
+          return Status{};
+        });
     if (!written) return written.error();
     return stats;
   }
