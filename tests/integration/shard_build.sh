@@ -102,7 +102,7 @@ plan0="$WORK/earth_k0_4.plan.json"
 expect_ok "$VTS" plan "$EARTH" -o "$plan0" --shards 4 --apex-levels 0 -q
 expect_ok "$VTS" build --plan "$plan0" --shard 2 --out-dir "$WORK/again_k0" --json
 json_check "$OUT" "j.root === '2/1/1' && j.texels_read === 528 * 520" \
-  "with --apex-levels 0, shard 2 reads 528 x 520 texels""
+  "with --apex-levels 0, shard 2 reads 528 x 520 texels"
 cmp "$WORK/again/shard-000000.part" "$WORK/earth_lossless_4.parts/shard-000000.part" ||
   fail "building the same shard again gave different bytes"
 
