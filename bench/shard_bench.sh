@@ -12,7 +12,7 @@
 #   --input     another image (default: the 100000x50000 tiled JPEG BigTIFF of memory_bench.sh,
 #               bench/.cache/earth_100000x50000.tif, made once by vips)
 #   --shards    the N to plan for (`vts plan --shards N`: at least N shards, so the plan may have
-#               more: the smallest split level L giving N; N = 1 is one shard and no apex)
+#               more: the smallest split level L giving N; apex level min(L + 2, finest))
 #   --jobs      shards run at once (default 2, the setting on this 2-core machine; each
 #               shard uses the machine's default thread count, like the single build)
 #   --codec     passed to `vts build` and `vts plan` (default: vts build's, lossless)
@@ -135,15 +135,16 @@ halo() {
 
 ROWS=() BARS=() JSON_RUNS=() MISMATCH=()
 run_n() { # N
-  local n=$1 dir="$WORK/n$1" count level i t0 t1 rc cpu rss failed=0
+  local n=$1 dir="$WORK/n$1" count level apex_level i t0 t1 rc cpu rss failed=0
   mkdir -p "$dir/parts" "$dir/logs"
   step "plan --shards $n" "$dir/plan.out.json" "$dir/logs/plan.log" \
     "$VTS" plan "$INPUT" -o "$dir/plan.json" --shards "$n" "${BUILD_ARGS[@]}" --json
   local plan_cpu=$M_CPU2 plan_wall=$M_WALL
   count=$(jget "$dir/plan.out.json" shards)
   level=$(jget "$dir/plan.out.json" split_level)
+  apex_level=$(jget "$dir/plan.out.json" apex_level)
 
-  echo "[bench] $count shards (split level $level), $JOBS at a time ..." >&2
+  echo "[bench] $count shards (split level $level, apex level $apex_level), $JOBS at a time ..." >&2
   t0=$(now)
   for ((i = 0; i < count; i++)); do
     while (($(jobs -rp | wc -l) >= JOBS)); do wait -n || true; done
@@ -165,7 +166,7 @@ run_n() { # N
   ((failed == 0)) || die "shards failed for N = $n (logs in $dir/logs)"
 
   local apex_cpu=0 apex_wall=0
-  if ((level > 0)); then
+  if ((apex_level > 0)); then
     step "apex" "$dir/logs/apex.json" "$dir/logs/apex.log" \
       "$VTS" build --plan "$dir/plan.json" --apex --out-dir "$dir/parts" --json
     apex_cpu=$M_CPU2 apex_wall=$M_WALL

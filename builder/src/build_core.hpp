@@ -5,6 +5,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -64,12 +65,18 @@ struct BuildRun {
   const BuildPlan* plan = nullptr;
   std::vector<WindowReader> readers;
   std::vector<TileRect> synthetic;  // when no plan: tiles of each level (index z)
-  std::optional<TileId> keep;       // this tile is also encoded lossless into kept
+  // A shard's tiles of level `z` in `rect` (its level-A tiles) are also encoded lossless into kept.
+  struct Keep {
+    int z = 0;
+    TileRect rect;
+  };
+  std::optional<Keep> keep;
 };
 
 struct BuildRunResult {
   std::uint64_t tiles = 0, bytes = 0, content_sum = 0;
-  std::vector<std::uint8_t> kept;
+  // The kept tiles' lossless payloads, by (y, x).
+  std::map<std::pair<std::uint32_t, std::uint32_t>, std::vector<std::uint8_t>> kept;
 };
 
 Result<BuildRunResult> run_build(const BuildRun& run);

@@ -41,10 +41,10 @@ struct Shared {
   const Codec* codec = nullptr;
   EncodeOptions encode;
   pmtiles::TileSink* sink = nullptr;
-  // A sharded build's split-level tile, kept lossless for the apex (shard.hpp).
-  std::optional<TileId> keep;
+  // A shard's level-A tiles, kept lossless for the apex (shard.hpp).
+  std::optional<detail::BuildRun::Keep> keep;
   std::mutex kept_mutex;
-  std::vector<std::uint8_t> kept;
+  std::map<std::pair<std::uint32_t, std::uint32_t>, std::vector<std::uint8_t>> kept;
   const std::atomic<bool>* cancel = nullptr;
   std::atomic<std::uint64_t> tiles_done{0};
   std::atomic<std::uint64_t> bytes{0};
@@ -71,11 +71,12 @@ struct Shared {
     auto payload = codec->encode(img, encode);
     if (!payload) return fail(std::move(payload).error());
     if (auto st = sink->add_tile(id, *payload); !st) return fail(st.error());
-    if (keep && id == *keep) {
+    if (keep && id.z == keep->z && id.x >= keep->rect.x0 && id.x < keep->rect.x1 &&
+        id.y >= keep->rect.y0 && id.y < keep->rect.y1) {
       auto exact = find_codec(CodecId::lossless)->encode(img, EncodeOptions{});
       if (!exact) return fail(std::move(exact).error());
       std::lock_guard lock(kept_mutex);
-      kept = std::move(exact).value();
+      kept[{id.y, id.x}] = std::move(exact).value();
     }
     if (auto header = parse_tile_header(*payload)) {
       const std::uint64_t key[2] = {pmtiles::zxy_to_tile_id(id.z, id.x, id.y), header->checksum};

@@ -112,6 +112,7 @@ json plan_body(const ShardPlan& p) {
     j["geometry"]["rows"] = p.row_heights;
   }
   j["split_level"] = p.split_level;
+  j["apex_level"] = p.apex_level;
   if (p.geo) j["georeference"] = detail::geo_plan_to_json(*p.geo);
   json shards = json::array();
   for (const TileId& t : p.shards) shards.push_back({t.x, t.y});
@@ -208,7 +209,10 @@ Result<std::string> input_fingerprint(const std::filesystem::path& path) {
 }
 
 Result<ShardPlan> make_shard_plan(const BuildOptions& o, std::optional<int> split_level,
-                                  std::uint64_t min_shards) {
+                                  std::uint64_t min_shards, int apex_levels) {
+  if (apex_levels < 0)
+    return make_error(ErrorCode::invalid_argument,
+                      "--apex-levels " + std::to_string(apex_levels) + " is negative");
   auto prepared = detail::prepare_build(o);
   if (!prepared) return std::move(prepared).error();
   const Geometry& g = *prepared->geometry;
@@ -252,6 +256,8 @@ Result<ShardPlan> make_shard_plan(const BuildOptions& o, std::optional<int> spli
       if (plan.shards.size() >= min_shards) break;
     }
   }
+  plan.apex_level =
+      std::min(plan.split_level + std::min(apex_levels, Geometry::kMaxZoom), plan.max_zoom);
   const json body = plan_body(plan);
   plan.build_hash = body.at("build_hash").get<std::string>();
   plan.hash = body_hash(body);
@@ -292,6 +298,7 @@ Result<ShardPlan> plan_from_json(const std::string& text) {
       p.row_heights = j["geometry"].at("rows").get<std::vector<std::uint64_t>>();
     }
     p.split_level = j.at("split_level").get<int>();
+    p.apex_level = j.at("apex_level").get<int>();
     if (j.contains("georeference")) {
       auto geo = detail::geo_plan_from_json(j["georeference"]);
       if (!geo) return geo.error();
@@ -299,6 +306,10 @@ Result<ShardPlan> plan_from_json(const std::string& text) {
     }
     if (p.split_level < 0 || p.split_level > p.max_zoom || p.max_zoom > Geometry::kMaxZoom)
       return make_error(ErrorCode::invalid_argument, "plan split level is outside its levels");
+    if (p.apex_level < p.split_level || p.apex_level > p.max_zoom)
+      return make_error(ErrorCode::invalid_argument,
+                        "plan apex level " + std::to_string(p.apex_level) + " is outside " +
+                            std::to_string(p.split_level) + ".." + std::to_string(p.max_zoom));
     for (const json& s : j.at("shards"))
       p.shards.push_back({static_cast<std::uint8_t>(p.split_level), s.at(0).get<std::uint32_t>(),
                           s.at(1).get<std::uint32_t>()});
@@ -325,6 +336,57 @@ Result<ShardPlan> load_plan(const std::filesystem::path& path) {
 
 Status save_plan(const ShardPlan& plan, const std::filesystem::path& path) {
   return write_file_atomically(path, plan_to_json(plan));
+}
+
+namespace {
+
+void put_le(std::vector<std::uint8_t>& out, std::uint64_t v, int bytes) {
+  for (int i = 0; i < bytes; ++i) out.push_back(static_cast<std::uint8_t>(v >> (8 * i)));
+}
+
+std::uint64_t get_le(const std::uint8_t* p, int bytes) {
+  std::uint64_t v = 0;
+  for (int i = 0; i < bytes; ++i) v |= std::uint64_t{p[i]} << (8 * i);
+  return v;
+}
+
+}  // namespace
+
+std::vector<std::uint8_t> encode_apex_tiles(const std::vector<ApexTile>& tiles) {
+  std::vector<std::uint8_t> out;
+  put_le(out, tiles.size(), 4);
+  for (const ApexTile& t : tiles) {
+    put_le(out, t.x, 4);
+    put_le(out, t.y, 4);
+    put_le(out, t.payload.size(), 8);
+    out.insert(out.end(), t.payload.begin(), t.payload.end());
+  }
+  return out;
+}
+
+Result<std::vector<ApexTile>> decode_apex_tiles(const std::vector<std::uint8_t>& a) {
+  auto bad = [](const std::string& why) {
+    return make_error(ErrorCode::corrupt, "invalid level-A tiles attachment: " + why);
+  };
+  if (a.size() < 4) return bad("shorter than its count");
+  const std::uint64_t count = get_le(a.data(), 4);
+  std::vector<ApexTile> tiles;
+  std::size_t at = 4;
+  for (std::uint64_t i = 0; i < count; ++i) {
+    if (a.size() - at < 16) return bad("tile " + std::to_string(i) + "'s header is cut short");
+    ApexTile t;
+    t.x = static_cast<std::uint32_t>(get_le(a.data() + at, 4));
+    t.y = static_cast<std::uint32_t>(get_le(a.data() + at + 4, 4));
+    const std::uint64_t n = get_le(a.data() + at + 8, 8);
+    at += 16;
+    if (n > a.size() - at) return bad("tile " + std::to_string(i) + "'s payload is cut short");
+    t.payload.assign(a.begin() + static_cast<std::ptrdiff_t>(at),
+                     a.begin() + static_cast<std::ptrdiff_t>(at + n));
+    at += n;
+    tiles.push_back(std::move(t));
+  }
+  if (at != a.size()) return bad(std::to_string(a.size() - at) + " bytes after its last tile");
+  return tiles;
 }
 
 std::string shard_part_name(std::size_t index) {

@@ -91,7 +91,7 @@ Status check_inputs(const ShardPlan& plan, const std::vector<std::size_t>& chose
 Result<ShardReport> write_part(const ShardPlan& plan, detail::BuildRun& run,
                                const std::filesystem::path& path, std::optional<std::size_t> index,
                                std::optional<TileId> root,
-                               const std::function<void(json&)>& extend = {}) {
+                               const std::function<Status(json&)>& extend = {}) {
   const auto t0 = Clock::now();
   std::error_code ec;
   std::filesystem::create_directories(path.parent_path(), ec);
@@ -104,8 +104,18 @@ Result<ShardReport> write_part(const ShardPlan& plan, detail::BuildRun& run,
     return std::move(result).error();
   }
   json m = manifest(plan, index, root, result->tiles, result->content_sum);
-  if (extend) extend(m);
-  auto stats = (*part)->finish(result->kept, m.dump());
+  if (extend)
+    if (Status st = extend(m); !st) {
+      (*part)->abort();
+      return st.error();
+    }
+  std::vector<std::uint8_t> attachment;
+  if (index && !plan.options.synthetic) {
+    std::vector<ApexTile> kept;
+    for (auto& [yx, payload] : result->kept) kept.push_back({yx.second, yx.first, payload});
+    attachment = encode_apex_tiles(kept);
+  }
+  auto stats = (*part)->finish(attachment, m.dump());
   if (!stats) return std::move(stats).error();
   ShardReport r;
   r.part = path;
@@ -130,7 +140,6 @@ Result<ShardReport> build_shard(const ShardPlan& plan, std::size_t index,
   auto geometry = detail::plan_geometry(plan);
   if (!geometry) return std::move(geometry).error();
   const TileId root = plan.shards[index];
-  const int L = plan.split_level;
   const Geometry& pg = *geometry;
   // The core: the finest texels under the root; the window adds the halo (shard_window), within
   // what the whole build reads (the footprint of georeferenced inputs).
@@ -145,9 +154,11 @@ Result<ShardReport> build_shard(const ShardPlan& plan, std::size_t index,
   if (g.width() != plan.width || g.height() != plan.height || g.max_zoom() != plan.max_zoom)
     return make_error(ErrorCode::invalid_argument, "the inputs' geometry is not the plan's");
   std::vector<TileRect> emit = detail::build_emit_rects(*prepared);
+  // Levels >= A of the sub-pyramid under the root; levels L .. A - 1 are the apex's.
+  const int A = plan.apex_level;
   for (int z = 0; z <= g.max_zoom(); ++z) {
     TileRect& e = emit[static_cast<std::size_t>(z)];
-    e = z < L ? TileRect{} : detail::shard_rect(e, root, z);
+    e = z < A ? TileRect{} : detail::shard_rect(e, root, z);
   }
   detail::BuildRun run;
   run.options = &o;
@@ -161,12 +172,12 @@ Result<ShardReport> build_shard(const ShardPlan& plan, std::size_t index,
     run.synthetic = emit;  // generated directly: nothing read
   } else {
     auto p =
-        detail::make_build_plan(g, o.downsample, window, emit, detail::plan_max_width(plan), L);
+        detail::make_build_plan(g, o.downsample, window, emit, detail::plan_max_width(plan), A);
     if (!p) return std::move(p).error();
     bp = std::move(p).value();
     run.plan = &*bp;
     run.readers = detail::source_readers(*prepared, detail::worker_count(so.threads));
-    run.keep = root;
+    run.keep = detail::BuildRun::Keep{A, emit[static_cast<std::size_t>(A)]};
     texels_read = window.width() * window.height();
     core_texels = core.width() * core.height();
   }
@@ -180,18 +191,27 @@ Result<ShardReport> build_shard(const ShardPlan& plan, std::size_t index,
 
 namespace {
 
-// Rows of the split level, assembled from the shards' lossless level-L tiles (their parts'
-// attachments), one tile row of them decoded at a time.
-class SplitLevelRows {
+// Rows of the apex level A, assembled from the shards' lossless level-A tiles (their parts'
+// attachments, encode_apex_tiles): the attachments of one row of shards held at a time, one tile
+// row of them decoded at a time.
+class ApexLevelRows {
  public:
-  SplitLevelRows(const ShardPlan& plan, const Geometry& g, std::filesystem::path dir)
-      : plan_(plan), g_(g), dir_(std::move(dir)) {
-    for (std::size_t i = 0; i < plan.shards.size(); ++i)
-      index_[{plan.shards[i].x, plan.shards[i].y}] = i;
+  ApexLevelRows(const ShardPlan& plan, const Geometry& g, std::filesystem::path dir)
+      : plan_(plan), g_(g), dir_(std::move(dir)), k_(plan.apex_level - plan.split_level) {
     hashes_.assign(plan.shards.size(), 0);
+    hashed_.assign(plan.shards.size(), false);
   }
-  // The attachment hash of each shard's part read (index: shard).
-  const std::vector<std::uint64_t>& hashes() const { return hashes_; }
+  // The attachment hash of each shard's part (index: shard), all of them read.
+  Result<std::vector<std::uint64_t>> hashes() {
+    for (std::size_t i = 0; i < plan_.shards.size(); ++i)
+      if (!hashed_[i]) {
+        auto info = open_part(plan_, dir_ / shard_part_name(i), nullptr);
+        if (!info) return info.error();
+        hashes_[i] = detail::attachment_hash(info->attachment);
+        hashed_[i] = true;
+      }
+    return hashes_;
+  }
   Status read(std::uint64_t x0, std::uint64_t x1, std::uint64_t y, std::uint32_t n,
               std::uint8_t* out) {
     const std::uint64_t T = g_.tile_size(), B = g_.border(), S = g_.stored_size();
@@ -215,22 +235,47 @@ class SplitLevelRows {
   }
 
  private:
+  // The level-A tiles of the shards of row `sy` (level L), their payloads by (x, y).
+  Status load_shards(std::uint32_t sy) {
+    if (sy == shard_row_) return {};
+    payloads_.clear();
+    shard_row_ = sy;
+    for (std::size_t i = 0; i < plan_.shards.size(); ++i) {
+      const TileId root = plan_.shards[i];
+      if (root.y != sy) continue;
+      auto info = open_part(plan_, dir_ / shard_part_name(i), nullptr);
+      if (!info) return info.error();
+      hashes_[i] = detail::attachment_hash(info->attachment);
+      hashed_[i] = true;
+      auto tiles = decode_apex_tiles(info->attachment);
+      if (!tiles)
+        return make_error(ErrorCode::corrupt,
+                          "part " + info->path.string() + ": " + tiles.error().message);
+      for (ApexTile& t : *tiles) {
+        if (t.x >> k_ != root.x || t.y >> k_ != root.y)
+          return make_error(ErrorCode::corrupt, "part " + info->path.string() + " has a level-" +
+                                                    std::to_string(plan_.apex_level) + " tile " +
+                                                    std::to_string(t.x) + "/" +
+                                                    std::to_string(t.y) + " outside its shard");
+        payloads_[{t.x, t.y}] = {i, std::move(t.payload)};
+      }
+    }
+    return {};
+  }
   Status load_row(std::uint32_t ty) {
     if (ty == row_) return {};
     tiles_.clear();
     row_ = ty;
-    for (std::uint32_t tx = 0; tx < g_.tiles_x(plan_.split_level); ++tx) {
-      auto it = index_.find({tx, ty});
-      if (it == index_.end()) continue;  // no shard: nothing there
-      auto info = open_part(plan_, dir_ / shard_part_name(it->second), nullptr);
-      if (!info) return info.error();
-      hashes_[it->second] = detail::attachment_hash(info->attachment);
-      auto img = find_codec(CodecId::lossless)->decode(info->attachment);
+    if (Status st = load_shards(ty >> k_); !st) return st;
+    for (auto& [xy, entry] : payloads_) {
+      if (xy.second != ty) continue;
+      auto img = find_codec(CodecId::lossless)->decode(entry.second);
       if (!img || img->width != g_.stored_size() || img->height != g_.stored_size())
-        return make_error(ErrorCode::corrupt, "part " + info->path.string() +
-                                                  " has no valid level-" +
-                                                  std::to_string(plan_.split_level) + " tile");
-      tiles_.emplace(tx, std::move(img).value());
+        return make_error(ErrorCode::corrupt,
+                          "part " + (dir_ / shard_part_name(entry.first)).string() +
+                              " has no valid level-" + std::to_string(plan_.apex_level) + " tile " +
+                              std::to_string(xy.first) + "/" + std::to_string(ty));
+      tiles_.emplace(xy.first, std::move(img).value());
     }
     return {};
   }
@@ -238,25 +283,30 @@ class SplitLevelRows {
   const ShardPlan& plan_;
   const Geometry& g_;
   std::filesystem::path dir_;
-  std::map<std::pair<std::uint32_t, std::uint32_t>, std::size_t> index_;
-  std::uint32_t row_ = UINT32_MAX;
+  int k_;
+  std::uint32_t shard_row_ = UINT32_MAX, row_ = UINT32_MAX;
+  std::map<std::pair<std::uint32_t, std::uint32_t>,
+           std::pair<std::size_t, std::vector<std::uint8_t>>>
+      payloads_;
   std::map<std::uint32_t, TileImage> tiles_;
   std::vector<std::uint64_t> hashes_;
+  std::vector<bool> hashed_;
 };
 
 }  // namespace
 
 Result<ShardReport> build_apex(const ShardPlan& plan, const ShardBuildOptions& so) {
-  const int L = plan.split_level;
-  if (L == 0)
+  const int A = plan.apex_level;
+  if (A == 0)
     return make_error(ErrorCode::invalid_argument,
-                      "the plan splits at level 0: it has no apex (merge the shards alone)");
+                      "the plan's shards make every level down to 0: it has no apex (merge the "
+                      "shards alone)");
   auto geometry = detail::plan_geometry(plan);
   if (!geometry) return std::move(geometry).error();
   const Geometry& g = *geometry;
   const BuildOptions o = run_options(plan, so);
   std::vector<TileRect> emit = detail::plan_emit_rects(plan, g);
-  for (std::size_t z = static_cast<std::size_t>(L); z < emit.size(); ++z) emit[z] = TileRect{};
+  for (std::size_t z = static_cast<std::size_t>(A); z < emit.size(); ++z) emit[z] = TileRect{};
   // Every shard's part must be there before any tile is built.
   for (std::size_t i = 0; i < plan.shards.size() && !o.synthetic; ++i) {
     const auto path = so.out_dir / shard_part_name(i);
@@ -271,20 +321,20 @@ Result<ShardReport> build_apex(const ShardPlan& plan, const ShardBuildOptions& s
   run.codec = find_codec(o.codec);
   run.threads = so.threads;
   detail::BuildPlan bp;
-  SplitLevelRows rows(plan, g, so.out_dir);
+  ApexLevelRows rows(plan, g, so.out_dir);
   if (o.synthetic) {
     run.synthetic = emit;
   } else {
-    // The whole build's level-L window, then a pass from it down to level 0.
+    // The whole build's level-A window, then a pass from it down to level 0.
     auto whole =
         detail::make_build_plan(g, o.downsample, detail::plan_window(plan, g), emit, UINT64_MAX);
     if (!whole) return std::move(whole).error();
     const TexelRect window =
-        detail::pass_windows(g, o.downsample, whole->passes.front())[static_cast<std::size_t>(L)];
-    detail::Pass pass{L,  0, window, -1,
-                      -1, 0, 0,      std::vector<TileRect>(emit.begin(), emit.begin() + L + 1)};
+        detail::pass_windows(g, o.downsample, whole->passes.front())[static_cast<std::size_t>(A)];
+    detail::Pass pass{A,  0, window, -1,
+                      -1, 0, 0,      std::vector<TileRect>(emit.begin(), emit.begin() + A + 1)};
     bp.rows = window.height();
-    for (int z = 0; z < L; ++z) bp.tiles += emit[static_cast<std::size_t>(z)].count();
+    for (int z = 0; z < A; ++z) bp.tiles += emit[static_cast<std::size_t>(z)].count();
     bp.widest = window.width();
     bp.passes.push_back(std::move(pass));
     run.plan = &bp;
@@ -293,8 +343,12 @@ Result<ShardReport> build_apex(const ShardPlan& plan, const ShardBuildOptions& s
                                   std::uint8_t* out) { return rows.read(x0, x1, y, n, out); });
   }
   return write_part(plan, run, so.out_dir / kApexPartName, std::nullopt, std::nullopt,
-                    [&](json& m) {
-                      if (!o.synthetic) m["shard_tiles"] = detail::shard_tiles_hash(rows.hashes());
+                    [&](json& m) -> Status {
+                      if (o.synthetic) return {};
+                      auto h = rows.hashes();
+                      if (!h) return h.error();
+                      m["shard_tiles"] = detail::shard_tiles_hash(*h);
+                      return {};
                     });
 }
 
@@ -306,7 +360,7 @@ Result<MergeReport> merge_plan(const ShardPlan& plan, const std::filesystem::pat
   auto geometry = detail::plan_geometry(plan);
   if (!geometry) return std::move(geometry).error();
   pmtiles::MergeOptions mo;
-  if (plan.split_level > 0) mo.parts.push_back(parts_dir / kApexPartName);
+  if (plan.apex_level > 0) mo.parts.push_back(parts_dir / kApexPartName);
   for (std::size_t i = 0; i < plan.shards.size(); ++i)
     mo.parts.push_back(parts_dir / shard_part_name(i));
   std::uint64_t content_sum = 0;

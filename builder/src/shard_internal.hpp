@@ -29,7 +29,7 @@ void describe_part_build(const ShardPlan& plan, std::optional<std::size_t> shard
 // built (stale: naming the input and the shard to rebuild), is an error naming the part.
 Status check_part_build(const ShardPlan& plan, const nlohmann::json& manifest,
                         const std::filesystem::path& part);
-// The apex records the shards' level-L tiles it was built from: XXH3-64 of each part's
+// The apex records the shards' level-A tiles it was built from: XXH3-64 of each part's
 // attachment (index: shard), folded in shard order into 16 hex digits.
 std::uint64_t attachment_hash(const std::vector<std::uint8_t>& attachment);
 std::string shard_tiles_hash(const std::vector<std::uint64_t>& attachment_hashes);

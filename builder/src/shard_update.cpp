@@ -123,7 +123,7 @@ Status check_apex_shards(const ShardPlan& plan, const json& apex, const std::fil
   if (built != shard_tiles_hash(hashes))
     return make_error(ErrorCode::invalid_argument,
                       "part " + path.string() + " is stale: the shards' level-" +
-                          std::to_string(plan.split_level) +
+                          std::to_string(plan.apex_level) +
                           " tiles changed since it was built (a shard was rebuilt); rebuild the "
                           "apex");
   return {};
@@ -141,16 +141,19 @@ Result<ShardWindow> shard_window(const ShardPlan& plan, std::size_t index) {
   const Geometry& g = *geometry;
   const TileId root = plan.shards[index];
   const int d = plan.max_zoom - plan.split_level;
+  const int levels = plan.max_zoom - plan.apex_level;  // the cascade's, finest .. A
   auto clip = [&](std::uint64_t x0, std::uint64_t y0, std::uint64_t x1, std::uint64_t y1) {
     return TexelRect{x0, y0, std::min(x1, g.width()), std::min(y1, g.height())};
   };
-  // The window adds the halo its tiles' borders and the filter need at every level down to L,
-  // level L's tile included, borders and all (cascade.hpp, stripe_halo: exact out to B around
-  // the core at levels finest .. L is its margin for d + 1 levels, as if level L - 1 were made).
+  // The window adds the halo its tiles' borders and the filter need at every level down to the
+  // apex level A, level A's tiles included, borders and all (cascade.hpp, stripe_halo: exact out
+  // to B around the core at levels finest .. A is its margin for max_zoom - A + 1 levels, as if
+  // level A - 1 were made). B texels at level A are B * 2^(max_zoom - A) finest texels around a
+  // core of T * 2^d: the halo's share falls by 2^(A - L) against stopping at L.
   const std::uint64_t side = std::uint64_t{g.tile_size()} << d;
   ShardWindow w;
   w.core = clip(root.x * side, root.y * side, (root.x + 1) * side, (root.y + 1) * side);
-  const std::uint64_t halo = detail::stripe_halo(g, d + 1, plan.options.downsample);
+  const std::uint64_t halo = detail::stripe_halo(g, levels + 1, plan.options.downsample);
   // Within what the whole build reads (the footprint of georeferenced inputs).
   const TexelRect whole = detail::plan_window(plan, g);
   w.window = clip(std::max(whole.x0, w.core.x0 > halo ? w.core.x0 - halo : 0),
@@ -219,7 +222,7 @@ Result<PlanUpdate> update_shard_plan(const ShardPlan& old,
                           ": an update takes one for each of the plan's, in its order");
   BuildOptions o = old.options;
   o.inputs = paths;
-  auto plan = make_shard_plan(o, old.split_level, 0);
+  auto plan = make_shard_plan(o, old.split_level, 0, old.apex_level - old.split_level);
   if (!plan) return std::move(plan).error();
   if (Status st = check_same_build(old, *plan); !st) return st.error();
   PlanUpdate u;
@@ -228,7 +231,7 @@ Result<PlanUpdate> update_shard_plan(const ShardPlan& old,
         plan->inputs[i].fingerprint != old.inputs[i].fingerprint)
       u.changed_inputs.push_back(i);
   u.shards = affected_shards(*plan, u.changed_inputs);
-  u.apex = !u.shards.empty() && plan->split_level > 0;
+  u.apex = !u.shards.empty() && plan->apex_level > 0;
   u.plan = std::move(plan).value();
   return u;
 }

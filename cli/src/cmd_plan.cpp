@@ -16,6 +16,7 @@ struct PlanArgs {
   BuildArgs build;
   std::uint64_t shards = 0;
   int split_level = -1;
+  int apex_levels = kDefaultApexLevels;
   std::string update;  // --update OLD-PLAN
 };
 
@@ -83,7 +84,7 @@ int run_plan(const CLI::App& c, const PlanArgs& a) {
   if (!o) return report_error(o.error());
   std::optional<int> level;
   if (a.split_level >= 0) level = a.split_level;
-  auto plan = make_shard_plan(*o, level, a.shards);
+  auto plan = make_shard_plan(*o, level, a.shards, a.apex_levels);
   if (!plan) return report_error(plan.error());
   if (Status st = save_plan(*plan, a.build.output); !st) return report_error(st.error());
   if (a.build.json) {
@@ -95,14 +96,15 @@ int run_plan(const CLI::App& c, const PlanArgs& a) {
     j["height"] = plan->height;
     j["max_zoom"] = plan->max_zoom;
     j["split_level"] = plan->split_level;
+    j["apex_level"] = plan->apex_level;
     j["shards"] = plan->shards.size();
-    j["apex"] = plan->split_level > 0;
+    j["apex"] = plan->apex_level > 0;
     std::printf("%s\n", j.dump(2).c_str());
   } else if (!a.build.quiet) {
-    std::printf("planned %s: %llu shards at split level %d of 0..%d%s, plan %s\n",
+    std::printf("planned %s: %llu shards at split level %d of 0..%d, apex level %d%s, plan %s\n",
                 a.build.output.c_str(), (unsigned long long)plan->shards.size(), plan->split_level,
-                plan->max_zoom, plan->split_level > 0 ? " plus the apex" : " (no apex)",
-                plan->hash.c_str());
+                plan->max_zoom, plan->apex_level,
+                plan->apex_level > 0 ? " plus the apex" : " (no apex)", plan->hash.c_str());
   }
   return 0;
 }
@@ -120,6 +122,10 @@ Runner add_plan(CLI::App& app) {
                 "finest level)");
   c->add_option("--split-level", a->split_level,
                 "Split at this level: a shard per tile of it with tiles to build")
+      ->check(CLI::Range(0, int(Geometry::kMaxZoom)));
+  c->add_option("--apex-levels", a->apex_levels,
+                "Shards stop this many levels above the split level, the apex makes the rest "
+                "(0: shards make their split-level tile; default 2)")
       ->check(CLI::Range(0, int(Geometry::kMaxZoom)));
   c->add_option("--update", a->update,
                 "Update this plan with new inputs (given, or its own read again): the same build, "

@@ -50,6 +50,7 @@ void print_report(const BuildArgs& a, const ShardPlan& plan, std::optional<std::
     j["plan_hash"] = plan.hash;
     j["shards"] = plan.shards.size();
     j["split_level"] = plan.split_level;
+    j["apex_level"] = plan.apex_level;
     if (index) j["shard"] = *index;
     j["root"] = root_text(r.root);
     j["tiles"] = r.tiles;
@@ -82,7 +83,7 @@ void add_plan_build_options(CLI::App* c, PlanBuildArgs& p) {
                 "With --plan: the shard to build (default: $JOB_COMPLETION_INDEX, "
                 "$SLURM_ARRAY_TASK_ID or $AWS_BATCH_JOB_ARRAY_INDEX)");
   c->add_flag("--apex", p.apex,
-              "With --plan: build the levels above the split level from the shards' parts");
+              "With --plan: build the levels above the apex level from the shards' parts");
   c->add_option("--out-dir", p.out_dir, "With --plan: the directory of the parts");
 }
 
@@ -99,8 +100,8 @@ int run_plan_build(const PlanBuildArgs& p, const BuildArgs& a) {
         make_error(ErrorCode::invalid_argument, "give --shard or --apex, not both"));
   auto plan = load_plan(p.plan);
   if (!plan) return report_error(plan.error());
-  if (p.apex && plan->split_level == 0) {
-    if (!a.quiet) std::printf("the plan splits at level 0: no apex to build\n");
+  if (p.apex && plan->apex_level == 0) {
+    if (!a.quiet) std::printf("the plan's shards make level 0: no apex to build\n");
     return 0;
   }
   std::optional<std::uint64_t> index;

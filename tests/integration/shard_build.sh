@@ -18,7 +18,9 @@ sharded() {
   local name=$1 shards=$2
   shift 2
   local plan="$WORK/$name.plan.json" parts="$WORK/$name.parts"
-  expect_ok "$VTS" plan "$@" -o "$plan" --shards "$shards" --json
+  # APEX_LEVELS: the plan's --apex-levels (unset: the default, 2).
+  expect_ok "$VTS" plan "$@" -o "$plan" --shards "$shards" ${APEX_LEVELS:+--apex-levels "$APEX_LEVELS"} \
+    --json
   local n
   n=$(json_get "$OUT" "j.shards")
   ((n >= shards)) || fail "$name: asked for $shards shards, the plan has $n"
@@ -66,6 +68,18 @@ done
 same_as_build grid 4 "$WORK/piece_00.png" "$WORK/piece_01.png" "$WORK/piece_10.png" \
   "$WORK/piece_11.png" --grid 2x2 --downsample lanczos3 --name grid --border 2
 
+note "the apex levels: shards stopping at their split level (0), one level (1) or two above it"
+for k in 0 1; do
+  APEX_LEVELS=$k same_as_build "grid_k$k" 4 "$WORK/piece_00.png" "$WORK/piece_01.png" \
+    "$WORK/piece_10.png" "$WORK/piece_11.png" --grid 2x2 --downsample lanczos3 --name grid \
+    --border 2
+  json_get "$WORK/grid_k$k.plan.json" "j.apex_level === j.split_level + $k" | grep -q true ||
+    fail "--apex-levels $k: the plan's apex level is not its split level + $k"
+  APEX_LEVELS=$k same_as_build "earth_k$k" 16 "$EARTH" --codec bc1
+done
+json_get "$WORK/grid.plan.json" "j.apex_level === Math.min(j.split_level + 2, j.geometry.max_zoom)" |
+  grep -q true || fail "the default apex level is not min(split level + 2, max zoom)"
+
 note "synthetic, dense and sparse (a region at levels >= 2), 16 shards"
 same_as_build synth 16 --synthetic 3000x1700
 same_as_build sparse 16 --synthetic 40000x20000 --region 1000,1000,3000,2500 --region-level 2 \
@@ -76,10 +90,19 @@ plan="$WORK/earth_lossless_4.plan.json"
 expect_ok "$VTS" build --plan "$plan" --shard 0 --out-dir "$WORK/again" --json
 json_check "$OUT" "j.texels_read > j.core_texels && j.halo_overhead > 1 && j.halo_overhead < 1.5" \
   "a shard reads its core plus a halo"
-# Shard 2 is level-2 tile (1, 1): core 512..1024 x 512..1024, halo 8 (box, B = 4), clipped below.
+# Shard 2 is level-2 tile (1, 1): core 512..1024 x 512..1024 of the 2048 x 1024 image (max zoom
+# 3). Its apex level is min(2 + 2, 3) = 3, the finest: its tiles' borders, B = 4 finest texels,
+# are its whole halo (box), clipped below: 520 x 516 texels. Stopping at the split level 2
+# (--apex-levels 0) it needed B texels at level 2 plus the box filter's reach below them, 8
+# finest texels: 528 x 520.
 expect_ok "$VTS" build --plan "$plan" --shard 2 --out-dir "$WORK/again" --json
-json_check "$OUT" "j.root === '2/1/1' && j.core_texels === 512 * 512 && j.texels_read === 528 * 520" \
-  "shard 2 reads 528 x 520 texels"
+json_check "$OUT" "j.root === '2/1/1' && j.core_texels === 512 * 512 && j.texels_read === 520 * 516" \
+  "shard 2 reads 520 x 516 texels"
+plan0="$WORK/earth_k0_4.plan.json"
+expect_ok "$VTS" plan "$EARTH" -o "$plan0" --shards 4 --apex-levels 0 -q
+expect_ok "$VTS" build --plan "$plan0" --shard 2 --out-dir "$WORK/again_k0" --json
+json_check "$OUT" "j.root === '2/1/1' && j.texels_read === 528 * 520" \
+  "with --apex-levels 0, shard 2 reads 528 x 520 texels"
 cmp "$WORK/again/shard-000000.part" "$WORK/earth_lossless_4.parts/shard-000000.part" ||
   fail "building the same shard again gave different bytes"
 
@@ -187,6 +210,7 @@ expect_clean_failure "$VTS" merge --plan "$splan" "$parts" -o "$WORK/other.pmtil
 grep -q "shard-000000.part" "$ERR" && grep -q "plan" "$ERR" || fail "a foreign part is not named"
 [[ ! -e "$WORK/other.pmtiles" ]] || fail "merge with a foreign part wrote an output"
 
-note "split level 0: no apex"
-expect_ok "$VTS" build --plan "$WORK/earth_lossless_1.plan.json" --apex --out-dir "$WORK/l0"
-grep -q "no apex" "$OUT" || fail "--apex at split level 0 does not say there is none"
+note "split level 0 and no apex levels: no apex"
+expect_ok "$VTS" plan "$EARTH" -o "$WORK/l0.plan.json" --split-level 0 --apex-levels 0 -q
+expect_ok "$VTS" build --plan "$WORK/l0.plan.json" --apex --out-dir "$WORK/l0"
+grep -q "no apex" "$OUT" || fail "--apex at apex level 0 does not say there is none"

@@ -43,6 +43,14 @@ TEST(ShardPlan, JsonRoundTripsAndItsHashCoversEveryField) {
   EXPECT_EQ(plan_to_json(*back), text);
   EXPECT_EQ(back->hash, plan->hash);
   EXPECT_EQ(back->split_level, 3);
+  EXPECT_EQ(back->apex_level, std::min(3 + kDefaultApexLevels, plan->max_zoom));
+  EXPECT_EQ(back->apex_level, plan->apex_level);
+  // The apex level is part of the build: another one is another build hash.
+  auto other = make_shard_plan(o, 3, 0, 0);
+  ASSERT_TRUE(other);
+  EXPECT_EQ(other->apex_level, 3);
+  EXPECT_NE(other->build_hash, plan->build_hash);
+  EXPECT_FALSE(make_shard_plan(o, 3, 0, -1));
   EXPECT_EQ(back->options.codec, CodecId::bc1);
   EXPECT_EQ(back->options.encode.bc1, Bc1Quality::high);
   EXPECT_EQ(back->options.downsample, DownsampleFilter::lanczos3);
@@ -153,27 +161,71 @@ TEST(ShardPlan, ShardReadsItsCorePlusTheHaloOfItsLevels) {
     ASSERT_TRUE(o->write_image(OIIO::TypeDesc::UINT8, px.data()));
     o->close();
   }
-  for (DownsampleFilter f : {DownsampleFilter::box, DownsampleFilter::lanczos3}) {
-    BuildOptions o;
-    o.inputs = {img};
-    o.downsample = f;
-    auto plan = make_shard_plan(o, 1, 0);  // 2 shards of 1024 x 1024 finest texels
-    ASSERT_TRUE(plan);
-    ASSERT_EQ(plan->shards.size(), 2u);
-    ShardBuildOptions so;
-    so.out_dir = dir.path() / "img_parts";
-    so.threads = 1;
-    auto r = build_shard(*plan, 0, so);
-    ASSERT_TRUE(r) << r.error().to_string();
-    auto g = Geometry::create(W, H);
-    ASSERT_TRUE(g);
-    // Levels 3 and 2 down to level 1, whose tile (borders too) is kept: as if level 0 were made.
-    const std::uint64_t halo = detail::stripe_halo(*g, 3, f);
-    EXPECT_GE(halo, 4u);
-    // Shard 0 is the left half: its window reaches `halo` texels into the right half only.
-    EXPECT_EQ(r->core_texels, 1024u * 1024u);
-    EXPECT_EQ(r->texels_read, (1024u + halo) * 1024u);
+  for (DownsampleFilter f : {DownsampleFilter::box, DownsampleFilter::lanczos3})
+    for (int k : {0, 1, 2}) {
+      BuildOptions o;
+      o.inputs = {img};
+      o.downsample = f;
+      auto plan = make_shard_plan(o, 1, 0, k);  // 2 shards of 1024 x 1024 finest texels
+      ASSERT_TRUE(plan);
+      ASSERT_EQ(plan->shards.size(), 2u);
+      ASSERT_EQ(plan->max_zoom, 3);
+      EXPECT_EQ(plan->apex_level, std::min(1 + k, 3));
+      ShardBuildOptions so;
+      so.out_dir = dir.path() / ("img_parts" + std::to_string(k));
+      so.threads = 1;
+      auto r = build_shard(*plan, 0, so);
+      ASSERT_TRUE(r) << r.error().to_string();
+      auto g = Geometry::create(W, H);
+      ASSERT_TRUE(g);
+      // Levels 3 down to the apex level A, whose tiles (borders too) are kept: as if level A - 1
+      // were made. k = 0: A = 1, 3 levels; k = 1: A = 2, 2; k = 2: A = 3 (the max zoom), 1.
+      const std::uint64_t halo = detail::stripe_halo(*g, 3 - plan->apex_level + 1, f);
+      EXPECT_GE(halo, 4u);
+      if (k > 0) {
+        EXPECT_LT(halo, detail::stripe_halo(*g, 3, f));
+      }
+      // Shard 0 is the left half: its window reaches `halo` texels into the right half only.
+      EXPECT_EQ(r->core_texels, 1024u * 1024u);
+      EXPECT_EQ(r->texels_read, (1024u + halo) * 1024u);
+      // Its attachment: its level-A tiles, 4^(A - 1) of them (2^(A - 1) square, the left half).
+      auto info = pmtiles::read_part_info(r->part);
+      ASSERT_TRUE(info) << info.error().to_string();
+      auto tiles = decode_apex_tiles(info->attachment);
+      ASSERT_TRUE(tiles) << tiles.error().to_string();
+      const std::uint32_t side = 1u << (plan->apex_level - 1);
+      ASSERT_EQ(tiles->size(), std::size_t{side} * side);
+      for (std::uint32_t i = 0; i < tiles->size(); ++i) {
+        EXPECT_EQ((*tiles)[i].x, i % side);
+        EXPECT_EQ((*tiles)[i].y, i / side);
+      }
+    }
+}
+
+TEST(ShardPlan, ApexTilesRoundTripAndBadAttachmentsAreCorrupt) {
+  std::vector<ApexTile> tiles = {{3, 1, {1, 2, 3}}, {4, 1, {}}, {3, 2, {9}}};
+  const std::vector<std::uint8_t> a = encode_apex_tiles(tiles);
+  // u32 count, then per tile u32 x, u32 y, u64 length and the payload.
+  ASSERT_EQ(a.size(), 4u + 3 * 16u + 4u);
+  EXPECT_EQ(a[0], 3u);
+  auto back = decode_apex_tiles(a);
+  ASSERT_TRUE(back) << back.error().to_string();
+  ASSERT_EQ(back->size(), 3u);
+  EXPECT_EQ((*back)[0].x, 3u);
+  EXPECT_EQ((*back)[2].y, 2u);
+  EXPECT_EQ((*back)[0].payload, (std::vector<std::uint8_t>{1, 2, 3}));
+  EXPECT_TRUE((*back)[1].payload.empty());
+  EXPECT_TRUE(decode_apex_tiles(encode_apex_tiles({})));
+  for (std::size_t cut : {std::size_t{0}, std::size_t{3}, std::size_t{10}, a.size() - 1}) {
+    auto bad = decode_apex_tiles(std::vector<std::uint8_t>(a.begin(), a.begin() + cut));
+    ASSERT_FALSE(bad) << cut;
+    EXPECT_EQ(bad.error().code, ErrorCode::corrupt);
   }
+  std::vector<std::uint8_t> more = a;
+  more.push_back(0);
+  auto extra = decode_apex_tiles(more);
+  ASSERT_FALSE(extra);
+  EXPECT_NE(extra.error().message.find("after its last tile"), std::string::npos);
 }
 
 void write_png(const fs::path& path, int w, int h, std::uint8_t value) {

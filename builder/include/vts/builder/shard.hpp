@@ -1,11 +1,12 @@
 // Sharded builds (`vts plan`, `vts build --plan`, `vts merge`; docs/PLANET.md, "Plans, shards and
 // parts"): a plan fixes a whole build once (options, inputs with their fingerprints, geometry) and
 // cuts its pyramid at a split level L: the sub-pyramid under each level-L tile that has tiles to
-// build is a shard (one contiguous tile-id range per level, pmtiles::subtree_tile_ids), and the
-// levels above L are the apex. Each shard writes its tiles to one part (pmtiles::PartWriter) and
-// keeps its level-L tile lossless as the part's attachment; the apex is built from those, so it
-// equals a whole build's levels < L for every codec; merge_parts() then writes the archive a
-// single `vts build` of the same options writes, byte for byte.
+// build is a shard (one contiguous tile-id range per level, pmtiles::subtree_tile_ids). A shard
+// stops at the apex level A = min(L + k, max zoom) (k: the apex levels, 2 by default): it writes
+// its levels >= A to one part (pmtiles::PartWriter) and keeps its level-A tiles lossless as the
+// part's attachment (encode_apex_tiles); the apex builds the levels < A from those, so it equals a
+// whole build's levels < A for every codec; merge_parts() then writes the archive a single
+// `vts build` of the same options writes, byte for byte.
 #pragma once
 
 #include <atomic>
@@ -21,7 +22,10 @@
 
 namespace vts {
 
-inline constexpr int kPlanVersion = 2;
+inline constexpr int kPlanVersion = 3;
+
+// The apex levels k a plan takes by default (shards stop at level min(L + k, max zoom)).
+inline constexpr int kDefaultApexLevels = 2;
 
 struct PlanInput {
   std::filesystem::path path;
@@ -60,6 +64,8 @@ struct ShardPlan {
   std::vector<std::uint64_t> column_widths, row_heights;
   int max_zoom = 0;
   int split_level = 0;
+  // A = min(L + k, max_zoom): shards write levels >= A, the apex levels < A (none when A = 0).
+  int apex_level = 0;
   std::optional<GeoPlan> geo;
   std::vector<TileId> shards;  // level-L tiles, in Hilbert tile-id order; shard I is shards[I]
   // 16 hex digits: XXH3-64 of the plan without its inputs (paths, sizes, fingerprints; their
@@ -74,9 +80,21 @@ struct ShardPlan {
 Result<std::string> input_fingerprint(const std::filesystem::path& path);
 
 // Resolves the geometry from the options' inputs and picks the split level: `split_level` when
-// set, else the smallest level with at least `min_shards` shards (capped at the max zoom).
+// set, else the smallest level with at least `min_shards` shards (capped at the max zoom); the
+// apex level is min(L + apex_levels, max zoom) (apex_levels >= 0; 0: shards stop at L).
 Result<ShardPlan> make_shard_plan(const BuildOptions& options, std::optional<int> split_level,
-                                  std::uint64_t min_shards);
+                                  std::uint64_t min_shards, int apex_levels = kDefaultApexLevels);
+
+// A shard part's attachment: its level-A tiles, lossless (docs/PLANET.md). Little-endian: a u32
+// count, then per tile u32 x, u32 y, u64 length and `length` bytes of the lossless payload
+// (the stored tile, borders included), in increasing (y, x).
+struct ApexTile {
+  std::uint32_t x = 0, y = 0;
+  std::vector<std::uint8_t> payload;
+};
+std::vector<std::uint8_t> encode_apex_tiles(const std::vector<ApexTile>& tiles);
+// invalid data (truncated, lengths past the end, bytes left over): corrupt.
+Result<std::vector<ApexTile>> decode_apex_tiles(const std::vector<std::uint8_t>& attachment);
 
 // The canonical JSON (keys sorted, hash included) and back; plan_from_json checks the version
 // and the hash.
@@ -112,8 +130,8 @@ struct ShardReport {
 // Builds shard `index` of the plan into out_dir/shard_part_name(index).
 Result<ShardReport> build_shard(const ShardPlan& plan, std::size_t index,
                                 const ShardBuildOptions& options);
-// Builds the levels above the split level into out_dir/apex.part from the shards' parts there.
-// split_level 0 has no apex: failed_precondition.
+// Builds the levels above the apex level into out_dir/apex.part from the shards' parts there.
+// apex_level 0 has no apex: invalid_argument.
 Result<ShardReport> build_apex(const ShardPlan& plan, const ShardBuildOptions& options);
 
 // The finest-level texels shard `index` owns (its core) and those it reads (its window: the core
@@ -141,8 +159,8 @@ struct PlanUpdate {
 };
 
 // `vts plan --update`: the old plan with `inputs` (empty: its own paths, read again), keeping its
-// options, geometry, grid, split level and shards; a change to any of these (an input of another
-// size, another count of inputs) is invalid_argument naming it.
+// options, geometry, grid, split and apex levels and shards; a change to any of these (an input of
+// another size, another count of inputs) is invalid_argument naming it.
 Result<PlanUpdate> update_shard_plan(const ShardPlan& old,
                                      const std::vector<std::filesystem::path>& inputs);
 
