@@ -363,29 +363,33 @@ Result<MergeReport> merge_plan(const ShardPlan& plan, const std::filesystem::pat
   if (plan.apex_level > 0) mo.parts.push_back(parts_dir / kApexPartName);
   for (std::size_t i = 0; i < plan.shards.size(); ++i)
     mo.parts.push_back(parts_dir / shard_part_name(i));
+  auto p = detail::plan_prepared(plan);
+  if (!p) return std::move(p).error();
+  // Each part's manifest is checked against the plan while the merge reads the part's index (one
+  // read of every index); the metadata a single `vts build` writes needs their content sums.
   std::uint64_t content_sum = 0;
   std::vector<std::uint64_t> attachments;  // each shard's, for the apex
   std::optional<json> apex;
-  for (const auto& path : mo.parts) {
-    std::uint64_t sum = 0;
-    auto info = open_part(plan, path, &sum);
-    if (!info) return info.error();
-    content_sum += sum;
-    if (path.filename() == kApexPartName)
-      apex = json::parse(info->manifest_json);
+  mo.check_part = [&](const pmtiles::PartInfo& info) -> Status {
+    auto sum = check_manifest(plan, info);
+    if (!sum) return sum.error();
+    content_sum += *sum;
+    if (info.path.filename() == kApexPartName)
+      apex = json::parse(info.manifest_json);
     else
-      attachments.push_back(detail::attachment_hash(info->attachment));
-  }
-  if (apex)
-    if (Status st = detail::check_apex_shards(plan, *apex, mo.parts.front(), attachments); !st)
-      return st.error();
-  // The metadata and header a single `vts build` of the plan's options writes.
-  auto p = detail::plan_prepared(plan);
-  if (!p) return std::move(p).error();
+      attachments.push_back(detail::attachment_hash(info.attachment));
+    return {};
+  };
   MergeReport report;
-  report.info = detail::build_tileset_info(plan.options, *p, output, content_sum);
+  mo.check_parts = [&](std::string& metadata_json) -> Status {
+    if (apex)
+      if (Status st = detail::check_apex_shards(plan, *apex, mo.parts.front(), attachments); !st)
+        return st;
+    report.info = detail::build_tileset_info(plan.options, *p, output, content_sum);
+    metadata_json = report.info.to_json();
+    return {};
+  };
   mo.archive = detail::build_writer_options(*p, output);
-  mo.metadata_json = report.info.to_json();
   mo.on_progress = progress;
   mo.cancel = cancel;
   mo.verify = verify;

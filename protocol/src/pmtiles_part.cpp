@@ -14,6 +14,7 @@
 #include <chrono>
 #include <list>
 #include <unordered_map>
+#include <utility>
 
 #include "pmtiles_io.hpp"
 #include "vts/protocol/codec.hpp"
@@ -316,33 +317,50 @@ class PartReaderImpl final : public PartReader {
 // ---- merge
 // ---------------------------------------------------------------------------------------
 
+// What the merge keeps of each part once it is checked: a planet has ~10^5 parts, so no more
+// (a std::filesystem::path with its parsed components is ~10 times the size of its text).
+struct MergePart {
+  std::string path;
+  std::uint64_t index_offset = 0;
+};
+
 // Descriptors of the parts the merge reads, opened on demand and kept in a small LRU (a planet
-// has far more parts than a process may open).
+// has far more parts than a process may open), each with its path for reads and messages.
 class PartFiles {
  public:
-  explicit PartFiles(const std::vector<PartLayout>& parts) : parts_(parts) {}
-  Result<int> fd(std::uint32_t part) {
+  struct Open {
+    int fd = -1;
+    const std::filesystem::path* path = nullptr;  // valid until the next open()
+  };
+  explicit PartFiles(const std::vector<MergePart>& parts) : parts_(parts) {}
+  Result<Open> open(std::uint32_t part) {
     if (auto it = open_.find(part); it != open_.end()) {
-      lru_.splice(lru_.begin(), lru_, it->second.second);
-      return it->second.first.get();
+      lru_.splice(lru_.begin(), lru_, it->second.lru);
+      return Open{it->second.fd.get(), &it->second.path};
     }
     if (open_.size() >= kMaxOpen) {
       open_.erase(lru_.back());
       lru_.pop_back();
     }
-    Result<Fd> f = open_part(parts_[part].info.path);
+    std::filesystem::path path = parts_[part].path;
+    Result<Fd> f = open_part(path);
     if (!f) return std::move(f).error();
     lru_.push_front(part);
-    auto [it, _] = open_.emplace(part, std::pair{std::move(*f), lru_.begin()});
-    return it->second.first.get();
+    auto [it, _] = open_.emplace(part, Entry{std::move(*f), std::move(path), lru_.begin()});
+    return Open{it->second.fd.get(), &it->second.path};
   }
-  const std::filesystem::path& path(std::uint32_t part) const { return parts_[part].info.path; }
+  const std::string& name(std::uint32_t part) const { return parts_[part].path; }
 
  private:
+  struct Entry {
+    Fd fd;
+    std::filesystem::path path;
+    std::list<std::uint32_t>::iterator lru;
+  };
   static constexpr std::size_t kMaxOpen = 64;
-  const std::vector<PartLayout>& parts_;
+  const std::vector<MergePart>& parts_;
   std::list<std::uint32_t> lru_;
-  std::unordered_map<std::uint32_t, std::pair<Fd, std::list<std::uint32_t>::iterator>> open_;
+  std::unordered_map<std::uint32_t, Entry> open_;
 };
 
 struct PayloadRef {
@@ -441,7 +459,8 @@ class PayloadWindow {
 
 class Merger {
  public:
-  explicit Merger(const MergeOptions& o) : o_(o), files_(parts_), t0_(Clock::now()) {}
+  explicit Merger(const MergeOptions& o)
+      : o_(o), metadata_json_(o.metadata_json), files_(parts_), t0_(Clock::now()) {}
 
   Result<WriterStats> run() {
     if (Status s = scan(); !s) return s.error();
@@ -457,7 +476,7 @@ class Merger {
     stats.tile_entries = dirs->entries();
     progress_.copying = true;
     progress_.bytes_total = stats.tile_bytes;
-    Status written = write_archive(o_.archive, o_.metadata_json, *root, *dirs, stats,
+    Status written = write_archive(o_.archive, metadata_json_, *root, *dirs, stats,
                                    [&](BufferedOut& w) { return copy(w, *bits); });
     if (!written) return written.error();
     tick(true);
@@ -469,29 +488,34 @@ class Merger {
 
   Status scan() {
     if (o_.parts.empty()) return make_error(ErrorCode::invalid_argument, "no parts to merge");
-    for (const std::filesystem::path& p : o_.parts) {
+    for (const std::string& name : o_.parts) {
+      const std::filesystem::path p = name;
       Result<Fd> fd = open_part(p);
       if (!fd) return fd.error();
-      Result<PartLayout> l = scan_part(fd->get(), p, false);
+      Result<PartLayout> l = scan_part(fd->get(), p, static_cast<bool>(o_.check_part));
       if (!l) return l.error();
+      if (o_.check_part)
+        if (Status s = o_.check_part(l->info); !s) return s;
+      const auto index = static_cast<std::uint32_t>(parts_.size());
+      for (const PartInfo::Segment& s : l->info.segments) segments_.push_back({index, s});
       progress_.tiles_total += l->records;
-      parts_.push_back(std::move(*l));
+      parts_.push_back({name, l->index_offset});
       if (cancelled()) return make_error(ErrorCode::cancelled, "merge cancelled");
     }
-    for (std::uint32_t i = 0; i < parts_.size(); ++i)
-      for (const PartInfo::Segment& s : parts_[i].info.segments) segments_.push_back({i, s});
+    segments_.shrink_to_fit();
     std::sort(segments_.begin(), segments_.end(), [](const SegmentRef& a, const SegmentRef& b) {
       return a.segment.first_tile_id < b.segment.first_tile_id;
     });
     for (std::size_t i = 1; i < segments_.size(); ++i)
       if (segments_[i].segment.first_tile_id <= segments_[i - 1].segment.last_tile_id)
         return make_error(ErrorCode::invalid_argument,
-                          "parts " + files_.path(segments_[i - 1].part).string() + " and " +
-                              files_.path(segments_[i].part).string() +
+                          "parts " + files_.name(segments_[i - 1].part) + " and " +
+                              files_.name(segments_[i].part) +
                               " hold overlapping tiles (tile ids " +
                               std::to_string(segments_[i].segment.first_tile_id) + "..)");
     if (progress_.tiles_total == 0)
       return make_error(ErrorCode::invalid_argument, "the parts hold no tiles");
+    if (o_.check_parts) return o_.check_parts(metadata_json_);
     return {};
   }
 
@@ -510,15 +534,15 @@ class Merger {
   // bytes (a part stores each payload once); across parts the bytes are compared.
   Result<bool> same(const PayloadRef& a, const PayloadRef& b, std::uint32_t length) {
     if (a.part == b.part) return a.offset == b.offset;
-    Result<int> fa = files_.fd(a.part);
+    Result<PartFiles::Open> fa = files_.open(a.part);
     if (!fa) return std::move(fa).error();
     cmp_a_.resize(length);
-    if (Status s = pread_all(*fa, cmp_a_.data(), length, a.offset, files_.path(a.part)); !s)
+    if (Status s = pread_all(fa->fd, cmp_a_.data(), length, a.offset, *fa->path); !s)
       return s.error();
-    Result<int> fb = files_.fd(b.part);
+    Result<PartFiles::Open> fb = files_.open(b.part);
     if (!fb) return std::move(fb).error();
     cmp_b_.resize(length);
-    if (Status s = pread_all(*fb, cmp_b_.data(), length, b.offset, files_.path(b.part)); !s)
+    if (Status s = pread_all(fb->fd, cmp_b_.data(), length, b.offset, *fb->path); !s)
       return s.error();
     return std::memcmp(cmp_a_.data(), cmp_b_.data(), length) == 0;
   }
@@ -527,15 +551,16 @@ class Merger {
   template <typename Visit>
   Status for_each_tile(Visit&& visit) {
     for (const SegmentRef& seg : segments_) {
-      Result<int> fd = files_.fd(seg.part);
-      if (!fd) return fd.error();
+      Result<PartFiles::Open> f = files_.open(seg.part);
+      if (!f) return f.error();
+      // visit() may open other parts (to compare payloads): keep this one's path.
+      const std::filesystem::path path = *f->path;
       Status inner;
-      Status st =
-          read_records(*fd, files_.path(seg.part), parts_[seg.part].index_offset,
-                       seg.segment.first_record, seg.segment.records, [&](const PartRecord& r) {
-                         inner = visit(seg.part, r);
-                         return static_cast<bool>(inner);
-                       });
+      Status st = read_records(f->fd, path, parts_[seg.part].index_offset, seg.segment.first_record,
+                               seg.segment.records, [&](const PartRecord& r) {
+                                 inner = visit(seg.part, r);
+                                 return static_cast<bool>(inner);
+                               });
       if (!st) return st;
       if (!inner) return inner;
       if (cancelled()) return make_error(ErrorCode::cancelled, "merge cancelled");
@@ -549,8 +574,8 @@ class Merger {
     std::uint64_t previous = 0;
     Status st = for_each_tile([&](std::uint32_t part, const PartRecord& r) -> Status {
       if (stats.addressed_tiles > 0 && r.tile_id <= previous)
-        return make_error(ErrorCode::corrupt, "part " + files_.path(part).string() +
-                                                  " repeats tile id " + std::to_string(r.tile_id));
+        return make_error(ErrorCode::corrupt, "part " + files_.name(part) + " repeats tile id " +
+                                                  std::to_string(r.tile_id));
       previous = r.tile_id;
       const PayloadKey key{r.hash_low, r.hash_high, r.length};
       auto placed = layout.place(
@@ -575,10 +600,10 @@ class Merger {
     std::uint64_t begin = 0, end = 0;
     const auto flush = [&]() -> Status {
       if (end == begin) return {};
-      Result<int> fd = files_.fd(part);
-      if (!fd) return fd.error();
+      Result<PartFiles::Open> f = files_.open(part);
+      if (!f) return f.error();
       progress_.bytes_copied += end - begin;
-      return w.clone_from(*fd, files_.path(part), begin, end - begin);
+      return w.clone_from(f->fd, *f->path, begin, end - begin);
     };
     Status st = for_each_tile([&](std::uint32_t p, const PartRecord& r) -> Status {
       Result<bool> fresh = bits.get();
@@ -606,15 +631,14 @@ class Merger {
       Result<bool> fresh = bits.get();
       if (!fresh) return fresh.error();
       if (!*fresh) return {};
-      Result<int> fd = files_.fd(part);
-      if (!fd) return fd.error();
+      Result<PartFiles::Open> f = files_.open(part);
+      if (!f) return f.error();
       std::span<const std::uint8_t> bytes;
-      if (Status s = window.read(*fd, part, files_.path(part), r.offset, r.length, bytes); !s)
-        return s;
+      if (Status s = window.read(f->fd, part, *f->path, r.offset, r.length, bytes); !s) return s;
       const XXH128_hash_t h = XXH3_128bits(bytes.data(), bytes.size());
       if (h.low64 != r.hash_low || h.high64 != r.hash_high) {
         Result<TileId> id = tile_id_to_zxy(r.tile_id);
-        return corrupt(files_.path(part), "the payload of tile " +
+        return corrupt(files_.name(part), "the payload of tile " +
                                               (id ? tile_name(*id) : std::to_string(r.tile_id)) +
                                               " does not match its checksum");
       }
@@ -624,7 +648,8 @@ class Merger {
   }
 
   const MergeOptions& o_;
-  std::vector<PartLayout> parts_;
+  std::string metadata_json_;
+  std::vector<MergePart> parts_;
   std::vector<SegmentRef> segments_;
   PartFiles files_;
   std::vector<std::uint8_t> cmp_a_, cmp_b_;

@@ -3,7 +3,7 @@
 // quarter one of 1000 uniform values, a quarter equal to the tile before (runs) — cut into the
 // sub-pyramids under every tile of a split level, plus the apex.
 //
-//   part_fixture parts DIR N SPLIT [LEAF]    writes DIR/apex.part and DIR/shard-*.part
+//   part_fixture parts DIR N SPLIT [LEAF]    writes DIR/apex.part, DIR/shard-*.part, DIR/tiles (N)
 //   part_fixture single OUT N [LEAF]         the same tiles through pmtiles::Writer
 //   part_fixture merge DIR OUT [LEAF]        merge_parts() of DIR/*.part in a child process;
 //                                            prints {"seconds":…, "max_rss_kib":…, "tiles":…}
@@ -68,6 +68,13 @@ void add(pmtiles::TileSink& sink, std::uint64_t id) {
 
 void write_parts(const fs::path& dir, std::uint64_t n, int split) {
   fs::create_directories(dir);
+  // The tile count, for the merge's header (it reads each part's index only once, in the merge).
+  if (std::FILE* f = std::fopen((dir / "tiles").c_str(), "w")) {
+    std::fprintf(f, "%llu\n", static_cast<unsigned long long>(n));
+    std::fclose(f);
+  } else {
+    die("cannot write " + (dir / "tiles").string());
+  }
   const auto finish = [](pmtiles::PartWriter& w) {
     auto r = w.finish({}, "{}");
     if (!r) die(r.error().message);
@@ -103,8 +110,10 @@ int merge(const fs::path& dir, const fs::path& out, std::size_t leaf) {
     pmtiles::MergeOptions m;
     for (const auto& e : fs::directory_iterator(dir))
       if (e.path().extension() == ".part") m.parts.push_back(e.path());
-    std::uint64_t tiles = 0;
-    for (const auto& p : m.parts) tiles += pmtiles::read_part_info(p).value().tiles;
+    unsigned long long tiles = 0;
+    std::FILE* f = std::fopen((dir / "tiles").c_str(), "r");
+    if (!f || std::fscanf(f, "%llu", &tiles) != 1) die("no tile count in " + dir.string());
+    std::fclose(f);
     m.archive = archive(out, tiles, leaf);
     m.metadata_json = "{}";
     auto r = pmtiles::merge_parts(m);

@@ -59,6 +59,13 @@ for codec in lossless bc1; do
   done
 done
 
+note "merge --no-verify (payloads copied by copy_file_range): the same bytes"
+mkdir -p "$WORK/no_verify"  # the same file name: the name is in the metadata
+expect_ok "$VTS" merge --plan "$WORK/earth_bc1_16.plan.json" "$WORK/earth_bc1_16.parts" \
+  -o "$WORK/no_verify/earth_bc1_16.pmtiles" --no-verify -q
+[[ $(sha "$WORK/no_verify/earth_bc1_16.pmtiles") == $(sha "$WORK/earth_bc1_16.pmtiles") ]] ||
+  fail "merge --no-verify wrote other bytes than vts build"
+
 note "a 2x2 --grid mosaic with lanczos3 (the widest halo), 4 shards"
 for r in 0 1; do
   for c in 0 1; do

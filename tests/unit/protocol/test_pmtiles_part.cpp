@@ -128,7 +128,7 @@ std::vector<fs::path> write_parts(const fs::path& dir, const std::map<std::uint6
 
 Result<WriterStats> merge(const std::vector<fs::path>& parts, const fs::path& out, int max_z) {
   MergeOptions m;
-  m.parts = parts;
+  m.parts.assign(parts.begin(), parts.end());
   std::reverse(m.parts.begin(), m.parts.end());  // any order
   m.archive = archive_options(out, max_z);
   m.metadata_json = "{\"name\":\"t\"}";
@@ -233,6 +233,51 @@ TEST(Part, SameTilesGiveTheSameBytesAndItsInfoReadsBack) {
             })));
 }
 
+// The caller checks each part's manifest and attachment as the merge reads it, and sets the
+// metadata once all are checked; its refusal stops the merge before anything is written.
+TEST(Merge, LetsTheCallerCheckEachPartAndSetTheMetadata) {
+  TempDir dir;
+  const auto tiles = make_tiles(4, 9);
+  const auto parts = write_parts(dir.path(), tiles, 4, 1);
+  const fs::path out = dir.path() / "out.pmtiles";
+  MergeOptions m;
+  m.parts.assign(parts.begin(), parts.end());
+  m.archive = archive_options(out, 4);
+  m.metadata_json = "{\"name\":\"not this\"}";
+  std::vector<std::string> seen;
+  m.check_part = [&](const PartInfo& info) -> Status {
+    EXPECT_EQ(info.attachment, (Bytes{1, 2, 3}));
+    seen.push_back(info.manifest_json);
+    return {};
+  };
+  m.check_parts = [&](std::string& metadata) -> Status {
+    EXPECT_EQ(seen.size(), parts.size());  // every part checked first
+    metadata = "{\"name\":\"t\"}";
+    return {};
+  };
+  ASSERT_TRUE(merge_parts(m));
+  EXPECT_EQ(seen.front(), "{\"part\":\"apex.part\"}");
+  EXPECT_EQ(read_all(out), read_all(write_single(dir.path(), tiles, 4)));
+
+  fs::remove(out);
+  m.check_part = [&](const PartInfo& info) -> Status {
+    if (info.path == parts[2]) return make_error(ErrorCode::invalid_argument, "stale part");
+    return {};
+  };
+  auto r = merge_parts(m);
+  ASSERT_FALSE(r);
+  EXPECT_EQ(r.error().message, "stale part");
+  EXPECT_FALSE(fs::exists(out));
+  m.check_part = nullptr;
+  m.check_parts = [](std::string&) -> Status {
+    return make_error(ErrorCode::invalid_argument, "apex stale");
+  };
+  r = merge_parts(m);
+  ASSERT_FALSE(r);
+  EXPECT_EQ(r.error().message, "apex stale");
+  EXPECT_FALSE(fs::exists(out));
+}
+
 TEST(Merge, NamesAMissingADamagedOrAnOverlappingPartAndWritesNothing) {
   TempDir dir;
   const auto tiles = make_tiles(4, 5);
@@ -304,7 +349,7 @@ TEST(Merge, NestsLeavesOfLeavesWhenTheRootCannotHoldEveryLeafAndReadersWalkThem)
   for (const auto& [id, b] : tiles) ASSERT_EQ(r->get_by_tile_id(id).value(), b) << id;
   const auto parts = write_parts(dir.path(), tiles, 6, 1);
   MergeOptions m;
-  m.parts = parts;
+  m.parts.assign(parts.begin(), parts.end());
   m.archive = o;
   m.archive.path = dir.path() / "merged.pmtiles";
   m.metadata_json = "{}";
@@ -324,7 +369,7 @@ TEST(Merge, CopiesInTheKernelWithoutVerifyingToTheSameBytes) {
   const Bytes single = read_all(write_single(dir.path(), tiles, 5));
   const auto parts = write_parts(dir.path(), tiles, 5, 2);
   MergeOptions m;
-  m.parts = parts;
+  m.parts.assign(parts.begin(), parts.end());
   m.archive = archive_options(dir.path() / "cloned.pmtiles", 5);
   m.metadata_json = "{\"name\":\"t\"}";
   m.verify = false;

@@ -113,8 +113,11 @@ struct MergeProgress {
 };
 
 struct MergeOptions {
-  std::vector<std::filesystem::path> parts;  // any order; their tiles must not overlap
-  WriterOptions archive;                     // as for Writer (path, compression, zooms, bounds)
+  // Paths of the parts, in any order; their tiles must not overlap. Text, not
+  // std::filesystem::path (which keeps its parsed components, ~10 times the size): a planet's
+  // merge has ~10^5 of them.
+  std::vector<std::string> parts;
+  WriterOptions archive;  // as for Writer (path, compression, zooms, bounds)
   std::string metadata_json;
   // Check each copied payload against its XXH3-128 (reading it through memory). Off: payloads are
   // copied in the kernel (copy_file_range; extents shared on XFS/Btrfs with reflink), and only
@@ -122,6 +125,12 @@ struct MergeOptions {
   bool verify = true;
   std::function<void(const MergeProgress&)> on_progress;  // about ten times a second
   const std::atomic<bool>* cancel = nullptr;
+  // Called for each part once it is checked, with its manifest and attachment (which the merge
+  // does not keep), then once all are, with the metadata to write (which may depend on what the
+  // parts said); an error from either stops the merge before it writes. The caller's own checks
+  // of the parts thus cost no second read of their indexes.
+  std::function<Status(const PartInfo&)> check_part;
+  std::function<Status(std::string& metadata_json)> check_parts;
 };
 
 // Writes the archive Writer would write from the parts' tiles, in bounded memory (about 64 MiB
