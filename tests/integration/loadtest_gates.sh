@@ -115,7 +115,9 @@ note "compare clean faulty: error_rate is a regression"
 expect_rc 0 "compare" "$VTS" loadtest compare "$WORK/clean.json" "$WORK/faulty.json"
 grep -qE '^error_rate +0% +[0-9.]+% +\+[0-9.]+% +- +REGRESSION$' "$OUT" ||
   { show_output; fail "the table does not mark error_rate"; }
-grep -qE '^p99 ' "$OUT" && grep -qE '^full_res_p99 ' "$OUT" || { show_output; fail "metrics missing"; }
+for m in p99 full_res_p99 requests_per_s; do
+  grep -qE "^$m " "$OUT" || { show_output; fail "compare shows no $m"; }
+done
 expect_rc 0 "compare --json" "$VTS" loadtest compare "$WORK/clean.json" "$WORK/faulty.json" --json
 json_check "$OUT" 'j.metrics.find(m => m.name == "error_rate").regression === true &&
   j.metrics.find(m => m.name == "error_rate").relative === null && j.regressions >= 1 &&
@@ -158,6 +160,7 @@ expect_rc 0 "merge" "$VTS" loadtest merge "$WORK/gen0.json" "$WORK/gen1.json" --
   --report "$WORK/merged-report"
 cp "$OUT" "$WORK/merged.json"
 node_sum() {
+  # shellcheck disable=SC2016  # JavaScript, not shell
   "$NODE" -e '
     const fs = require("fs");
     const [m, a, b] = process.argv.slice(1).map(f => JSON.parse(fs.readFileSync(f, "utf8")));
