@@ -190,6 +190,19 @@ expect_rc 1 "merge with a failing --slo" "$VTS" loadtest merge "$WORK/gen0.json"
 grep -q '^vts: gate failed: p50<1ns' "$ERR" || { show_output; fail "merge gate"; }
 expect_rc 1 "merge of a faulty run: the default error gate" "$VTS" loadtest merge \
   "$WORK/gen0.json" "$WORK/faulty.json"
+note "the generator index from \$SLURM_ARRAY_TASK_ID and \$AWS_BATCH_JOB_ARRAY_INDEX"
+for var in SLURM_ARRAY_TASK_ID AWS_BATCH_JOB_ARRAY_INDEX; do
+  expect_rc 0 "$var=1" env "$var=1" "$VTS" loadtest "$BASE/earth" --viewers 3 --duration 0.5 \
+    --quiet --json --generators 2
+  json_check "$OUT" 'j.generator.index == 1 && j.generator.first_viewer == 1 &&
+    j.generator.viewers == 2 && j.scenario.viewers == 2' "generator 1 of 2 from \$$var"
+done
+expect_rc 2 "--generators without an index" env -u JOB_COMPLETION_INDEX -u SLURM_ARRAY_TASK_ID \
+  -u AWS_BATCH_JOB_ARRAY_INDEX "$VTS" loadtest "$BASE/earth" "${LT[@]}" --generators 2
+grep -qF -- '--generators without --generator-index' "$ERR" || { show_output; fail "no index"; }
+expect_rc 2 "fewer viewers than generators" "$VTS" loadtest "$BASE/earth" --viewers 1 \
+  --generators 2 --generator-index 0 --duration 1
+grep -qF -- '--viewers 1 is fewer than --generators 2' "$ERR" || { show_output; fail "viewers"; }
 expect_rc 2 "--generator-index 2 of 2" "$VTS" loadtest "$BASE/earth" "${LT[@]}" --generators 2 \
   --generator-index 2
 grep -qF 'generator index 2 is not below --generators 2' "$ERR" || { show_output; fail "index"; }
