@@ -2,8 +2,9 @@
 // load generators into one (merge_reports): the histograms travel as their buckets, so the merge
 // is exact.
 #include <algorithm>
+#include <cstdlib>
 #include <fstream>
-#include <sstream>
+#include <type_traits>
 
 #include "vts/loadtest/load_report.hpp"
 
@@ -168,10 +169,12 @@ void add_counts(LoadReport& into, const LoadReport& r) {
 }  // namespace
 
 Result<LoadReport> report_from_json(const json& j) {
-  if (!j.is_object() || j.value("format", "") != "vts-loadtest-report")
+  // Checked by type first: json::value() throws on a field of another type.
+  if (!j.is_object() || !j.contains("format") || j["format"] != "vts-loadtest-report")
     return bad("not a vts loadtest report (no \"format\": \"vts-loadtest-report\")");
-  if (j.value("version", 0) != 1)
-    return bad("report version " + j.value("version", json(0)).dump() + " (this vts reads 1)");
+  if (!j.contains("version") || j["version"] != 1)
+    return bad("report version " + (j.contains("version") ? j["version"].dump() : "missing") +
+               " (this vts reads 1)");
   LoadReport r;
   if (auto st = scenario_from_json(j, r); !st) return st.error();
   if (auto st = totals_from_json(j, r); !st) return st.error();

@@ -118,6 +118,13 @@ TEST(LoadMerge, MalformedReportsAreRefusedNamingTheField) {
   r = report_from_json(no_totals);
   ASSERT_FALSE(r);
   EXPECT_NE(r.error().message.find("totals"), std::string::npos);
+  r = report_from_json(json{{"format", 5}, {"version", "one"}});  // no exception
+  ASSERT_FALSE(r);
+  json old_version = j;
+  old_version["version"] = "one";
+  r = report_from_json(old_version);
+  ASSERT_FALSE(r);
+  EXPECT_NE(r.error().message.find("version \"one\""), std::string::npos) << r.error().message;
   r = report_from_json(json{{"format", "something else"}});
   ASSERT_FALSE(r);
   EXPECT_NE(r.error().message.find("not a vts loadtest report"), std::string::npos);
