@@ -5,10 +5,13 @@
 #include <cstdio>
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 
 #include "commands.hpp"
+#include "loadtest_gates.hpp"
 #include "progress.hpp"
 #include "vts/loadtest/load_report.hpp"
 #include "vts/loadtest/load_test.hpp"
@@ -19,7 +22,7 @@ namespace vts::cli {
 namespace {
 
 struct LoadArgs {
-  std::string url, path = "flyover", cache = "none", cache_dir, daemon, report, title;
+  std::string url, path = "flyover", cache = "none", cache_dir, daemon, report, title, baseline;
   std::uint32_t viewers = 8;
   double duration = 30, fps = 30, rate = 0;
   int width = 1280, height = 720, feedback = 8, anisotropy = 8, retries = 0, threads = 0;
@@ -27,6 +30,9 @@ struct LoadArgs {
   std::uint64_t seed = 1;
   bool json = false, quiet = false;
   std::string command_line;
+  GateArgs gates;
+  GeneratorArgs generator;
+  GeneratorShare share;  // from `generator`, once parsed
 };
 
 std::string latency_text(std::uint64_t ns) {
@@ -63,10 +69,10 @@ std::function<void(const client::LoadProgress&)> progress_printer(const LoadArgs
 client::CameraDemandOptions camera_options(const LoadArgs& a) {
   client::CameraDemandOptions c;
   c.path = a.path;
-  c.viewers = a.viewers;
+  c.viewers = a.share.viewers;
   c.fps = a.fps;
   c.duration_s = a.duration;
-  c.seed = a.seed;
+  c.seed = a.share.seed;
   c.width = a.width;
   c.height = a.height;
   c.feedback = a.feedback;
@@ -78,10 +84,10 @@ Result<client::LoadTestOptions> load_options(const LoadArgs& a) {
   client::LoadTestOptions o;
   if (auto st = client::apply_target({a.url, a.cache, a.cache_dir, a.daemon}, o); !st)
     return st.error();
-  o.viewers = a.viewers;
+  o.viewers = a.share.viewers;
   o.fps = a.fps;
   o.duration_s = a.duration;
-  o.rate = a.rate;
+  o.rate = a.share.rate;
   o.ram_bytes = std::size_t(a.ram_mb) << 20;
   o.threads = a.threads;
   o.title = a.title;
@@ -91,21 +97,38 @@ Result<client::LoadTestOptions> load_options(const LoadArgs& a) {
   return o;
 }
 
-void print_result(const LoadArgs& a, const client::LoadTestResult& result) {
+// Prints the results (JSON or tables) with the gates' verdict; returns check_gates()'s code.
+int print_result(const LoadArgs& a, const client::LoadTestResult& result,
+                 const std::vector<client::Gate>& gates) {
   const std::string report_file = (std::filesystem::path(a.report) / "index.html").string();
   if (a.json) {
     nlohmann::json j = client::to_json(result.report);
     j["simulation"] = client::simulation_json(result.run, camera_options(a), a.cache, a.retries);
+    if (a.share.generators > 1) j["generator"] = generator_json(a.share);
     if (!a.report.empty()) j["report"] = report_file;
+    const int code = check_gates(result.report, gates, &j);
     std::printf("%s\n", j.dump(2).c_str());
-    return;
+    return code;
   }
   std::fputs(client::summary_table(result.report).c_str(), stdout);
   std::fputs(client::simulation_line(result.run, a.rate > 0).c_str(), stdout);
   if (!a.report.empty()) std::printf("report: %s\n", report_file.c_str());
+  std::fflush(stdout);
+  return check_gates(result.report, gates, nullptr);
 }
 
-int run(const LoadArgs& a) {
+int run(LoadArgs& a) {
+  auto gates = parse_gates(a.gates);
+  if (!gates) return report_error(gates.error());
+  auto share = generator_share(a.generator, a.viewers, a.seed, a.rate);
+  if (!share) return report_error(share.error());
+  a.share = *share;
+  std::optional<client::LoadReport> baseline;
+  if (!a.baseline.empty()) {
+    auto b = client::read_report_file(a.baseline);
+    if (!b) return report_error(b.error());
+    baseline = std::move(*b);
+  }
   const std::atomic<bool>& stop = install_stop_signals();
   auto o = load_options(a);
   if (!o) return report_error(o.error());
@@ -123,11 +146,27 @@ int run(const LoadArgs& a) {
   if (!result) return report_error(result.error());
   result->report.target = a.url;
   if (!a.report.empty())
-    if (auto st = client::write_html_report(result->report, a.report); !st)
+    if (auto st =
+            client::write_html_report(result->report, a.report, baseline ? &*baseline : nullptr);
+        !st)
       return report_error(st.error());
-  print_result(a, *result);
-  if (stop.load()) return 130;
-  return 0;
+  const int code = print_result(a, *result, *gates);
+  return stop.load() ? 130 : code;
+}
+
+// Runs compare or merge when one was named, else the load test.
+Runner loadtest_runner(const std::shared_ptr<LoadArgs>& a, CLI::App* c) {
+  Runner tools = add_loadtest_tools(*c);
+  return [a, c, tools] {
+    if (!c->get_subcommands().empty()) return tools();
+    if (a->url.empty()) {
+      std::fprintf(stderr,
+                   "vts: error: loadtest: url is required (or: vts loadtest compare | merge)\n");
+      return 2;
+    }
+    a->command_line = command_line();
+    return run(*a);
+  };
 }
 
 }  // namespace
@@ -136,8 +175,7 @@ Runner add_loadtest(CLI::App& app) {
   auto a = std::make_shared<LoadArgs>();
   CLI::App* c = app.add_subcommand(
       "loadtest", "Simulated viewers on camera paths against a tile server: streaming latency");
-  c->add_option("url", a->url, "Tileset URL (http://host:port/NAME), remote or local .pmtiles")
-      ->required();
+  c->add_option("url", a->url, "Tileset URL (http://host:port/NAME), remote or local .pmtiles");
   c->add_option("--viewers", a->viewers, "Simulated viewers")
       ->capture_default_str()
       ->check(CLI::Range(1, 10000));
@@ -162,6 +200,8 @@ Runner add_loadtest(CLI::App& app) {
   c->add_option("--ram-mb", a->ram_mb, "RAM cache per viewer, MiB")->capture_default_str();
   c->add_option("--report", a->report, "Write an HTML report to DIR/index.html");
   c->add_option("--title", a->title, "Title of the report");
+  c->add_option("--baseline", a->baseline,
+                "An earlier run's --json output: the report overlays it and shows the change");
   c->add_option("--width", a->width, "Viewport width, pixels")
       ->capture_default_str()
       ->check(CLI::Range(1, 16384));
@@ -183,10 +223,9 @@ Runner add_loadtest(CLI::App& app) {
       ->capture_default_str();
   c->add_flag("--json", a->json, "Print the results as JSON");
   c->add_flag("--quiet", a->quiet, "No progress lines");
-  return [a] {
-    a->command_line = command_line();
-    return run(*a);
-  };
+  add_gate_options(c, a->gates);
+  add_generator_options(c, a->generator);
+  return loadtest_runner(a, c);
 }
 
 }  // namespace vts::cli

@@ -31,6 +31,9 @@ Runner add_sign(CLI::App& app);
 Runner add_cache(CLI::App& app);  // vts cache serve (cmd_cache.cpp)
 Runner add_warm(CLI::App& app);
 Runner add_loadtest(CLI::App& app);  // vts loadtest (cmd_loadtest.cpp)
+// vts loadtest compare | merge (cmd_loadtest_tools.cpp): subcommands of `loadtest`; the runner
+// runs the one that was parsed.
+Runner add_loadtest_tools(CLI::App& loadtest);
 #ifdef VTS_HAVE_ACCURACY
 Runner add_bench(CLI::App& app);  // vts bench accuracy (cmd_bench.cpp): only with VTS_BUILD_BENCH
 #endif
@@ -51,6 +54,11 @@ const std::atomic<bool>& install_stop_signals();
 
 // The command line as typed ("vts loadtest http://... --viewers 64"), for reports.
 const std::string& command_line();
+
+// "unknown command 'buidl'; did you mean 'build'?" when argv has a word where a subcommand of
+// `app` is expected that names none (below the top level: a plain lower-case word within 2 edits
+// of a subcommand, since it may be a positional argument); empty otherwise (suggest.cpp).
+std::string unknown_command(CLI::App& app, int argc, char** argv);
 
 // Prints "vts: error: <message>" to stderr and returns the mapped exit code.
 int report_error(const vts::Error& e);

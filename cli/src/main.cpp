@@ -78,6 +78,11 @@ int main(int argc, char** argv) {
     if (i) vts::cli::g_command_line += ' ';
     vts::cli::g_command_line += i == 0 ? "vts" : argv[i];
   }
+  if (const std::string unknown = vts::cli::unknown_command(app, argc, argv); !unknown.empty()) {
+    std::fprintf(stderr, "vts: error: %s\nRun with --help for the list of commands.\n",
+                 unknown.c_str());
+    return 2;
+  }
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -128,4 +128,37 @@ std::vector<LatencyHistogram::Bucket> LatencyHistogram::buckets() const {
   return out;
 }
 
+Result<LatencyHistogram> LatencyHistogram::from_buckets(int sub_bucket_bits,
+                                                        const std::vector<Bucket>& buckets,
+                                                        std::uint64_t min, std::uint64_t max,
+                                                        double mean) {
+  auto bad = [](const std::string& why) -> Result<LatencyHistogram> {
+    return make_error(ErrorCode::invalid_argument, "latency histogram: " + why);
+  };
+  if (sub_bucket_bits < kMinBits || sub_bucket_bits > kMaxBits)
+    return bad("sub_bucket_bits " + std::to_string(sub_bucket_bits) + " is not in [1, 16]");
+  LatencyHistogram h(sub_bucket_bits);
+  std::size_t next = 0;  // the lowest index the next bucket may have
+  for (const Bucket& b : buckets) {
+    const std::size_t index = bucket_index(b.low, sub_bucket_bits);
+    if (bucket_range(index, sub_bucket_bits) != std::pair{b.low, b.high})
+      return bad("[" + std::to_string(b.low) + ", " + std::to_string(b.high) + "] is not a bucket");
+    if (index < next) return bad("buckets out of order at " + std::to_string(b.low));
+    if (b.count == 0) return bad("bucket at " + std::to_string(b.low) + " has count 0");
+    if (index >= h.counts_.size()) h.counts_.resize(index + 1, 0);
+    h.counts_[index] = b.count;
+    h.count_ += b.count;
+    next = index + 1;
+  }
+  if (h.count_ == 0) return h;
+  if (min < buckets.front().low || min > buckets.front().high || max < buckets.back().low ||
+      max > buckets.back().high || !std::isfinite(mean))
+    return bad("min " + std::to_string(min) + " or max " + std::to_string(max) +
+               " outside the buckets");
+  h.min_ = min;
+  h.max_ = max;
+  h.sum_ = static_cast<long double>(mean) * static_cast<long double>(h.count_);
+  return h;
+}
+
 }  // namespace vts::client

@@ -14,6 +14,7 @@
 #include <string_view>
 #include <utility>
 
+#include "vts/loadtest/load_gates.hpp"
 #include "vts/plot/svg_plot.hpp"
 #include "vts/protocol/file_io.hpp"
 
@@ -341,25 +342,22 @@ std::vector<std::pair<double, double>> cdf_points(const LatencyHistogram& h) {
   return points;
 }
 
-std::string full_resolution_plot(const LoadReport& r) {
-  Plot plot;
-  plot.id = "plot-full-resolution";
-  plot.title = "Camera moves: time to first visible tile and to full resolution (CDF)";
-  plot.x_label = "time after the camera move";
-  plot.y_label = "camera moves done";
+// A CDF plot of `hists` (key, label, colour, histogram), log x when the range is wide.
+struct CdfLine {
+  std::string key, label, color;
+  const LatencyHistogram* h;
+};
+std::string cdf_plot(Plot plot, const std::vector<CdfLine>& lines) {
   plot.x_format = format_ns_tick;
   plot.y_format = [](double v) { return printf_string("%g", v) + "%"; };
-  plot.series.push_back(
-      Series{"full_resolution", "full resolution", "#1f77b4", cdf_points(r.full_resolution)});
-  plot.series.push_back(
-      Series{"first_visible", "first visible tile", "#9467bd", cdf_points(r.first_visible)});
   double lo = 0, hi = 0;
   bool any = false;
-  for (const LatencyHistogram* h : {&r.full_resolution, &r.first_visible}) {
-    if (h->count() == 0) continue;
-    const double hmin = static_cast<double>(std::max<std::uint64_t>(h->min(), 1));
+  for (const CdfLine& l : lines) {
+    plot.series.push_back(Series{l.key, l.label, l.color, cdf_points(*l.h)});
+    if (l.h->count() == 0) continue;
+    const double hmin = static_cast<double>(std::max<std::uint64_t>(l.h->min(), 1));
     lo = any ? std::min(lo, hmin) : hmin;
-    hi = std::max(hi, static_cast<double>(h->max()));
+    hi = std::max(hi, static_cast<double>(l.h->max()));
     any = true;
   }
   if (!any) return render_plot(plot, nullptr);
@@ -368,6 +366,35 @@ std::string full_resolution_plot(const LoadReport& r) {
                         : Axis::linear(0, hi, kMarginLeft, right);
   AxisSet axes{x, Axis::linear(0, 100, kPlotHeight - kMarginBottom, kMarginTop), std::nullopt};
   return render_plot(plot, &axes);
+}
+
+std::string full_resolution_plot(const LoadReport& r, const LoadReport* base) {
+  Plot plot;
+  plot.id = "plot-full-resolution";
+  plot.title = "Camera moves: time to first visible tile and to full resolution (CDF)";
+  plot.x_label = "time after the camera move";
+  plot.y_label = "camera moves done";
+  std::vector<CdfLine> lines = {
+      {"full_resolution", "full resolution", "#1f77b4", &r.full_resolution},
+      {"first_visible", "first visible tile", "#9467bd", &r.first_visible}};
+  if (base) {
+    lines.push_back({"baseline_full_resolution", "baseline: full resolution", "#aec7e8",
+                     &base->full_resolution});
+    lines.push_back({"baseline_first_visible", "baseline: first visible tile", "#c5b0d5",
+                     &base->first_visible});
+  }
+  return cdf_plot(std::move(plot), lines);
+}
+
+// Only with a baseline: the request latency distributions of both runs.
+std::string latency_cdf_plot(const LoadReport& r, const LoadReport& base) {
+  Plot plot;
+  plot.id = "plot-latency-cdf";
+  plot.title = "Request latency against the baseline (CDF)";
+  plot.x_label = "request latency";
+  plot.y_label = "requests done";
+  return cdf_plot(std::move(plot), {{"total", "this run", "#d62728", &r.total},
+                                    {"baseline_total", "baseline", "#ff9896", &base.total}});
 }
 
 std::string throughput_plot(const LoadReport& r) {
@@ -499,6 +526,17 @@ std::vector<std::vector<std::string>> error_rows(const LoadReport& r, bool for_t
   return rows;
 }
 
+// compare_reports(baseline, r) as an HTML table (class "compare"); regressions say so.
+std::string compare_html(const LoadReport& r, const LoadReport& base) {
+  std::vector<std::vector<std::string>> rows = {{"metric", "baseline", "this run", "relative", ""}};
+  for (const MetricChange& c : compare_reports(base, r, 0.1)) {
+    rows.push_back({c.name, format_metric(c.a, c.kind), format_metric(c.b, c.kind),
+                    std::isnan(c.relative) ? "-" : printf_string("%+.1f", c.relative * 100) + "%",
+                    c.regression ? "regression (> 10% worse)" : ""});
+  }
+  return html_table(rows, "compare");
+}
+
 constexpr std::string_view kCss = R"(
 body { font-family: system-ui, -apple-system, "Segoe UI", Helvetica, Arial, sans-serif;
        margin: 2em auto; max-width: 820px; padding: 0 1em; color: #222; background: #fafafa; }
@@ -603,7 +641,7 @@ std::string summary_table(const LoadReport& r) {
   return out;
 }
 
-std::string html_report(const LoadReport& r) {
+std::string html_report(const LoadReport& r, const LoadReport* baseline) {
   const std::string title = r.title.empty() ? "vts loadtest report" : r.title;
   std::string s;
   s += "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n";
@@ -632,12 +670,17 @@ std::string html_report(const LoadReport& r) {
   if (r.requests == 0) s += "<p class=\"empty\">No requests completed in this run.</p>\n";
 
   s += "<h2>Summary</h2>\n" + html_table(totals_rows(r), "totals");
+  if (baseline) s += "<h2>Change against the baseline</h2>\n" + compare_html(r, *baseline);
   s += "<h2>Latency</h2>\n" + html_table(latency_rows(r, "\xC2\xB5s"), "latency");
   s += "<p class=\"note\">Percentiles come from histograms with a relative error of at most " +
        format_percent(r.total.relative_error()) + ".</p>\n";
   s += "<figure>\n<h3>Request latency over time</h3>\n" + latency_plot(r) + "\n</figure>\n";
   s += "<figure>\n<h3>Time to first visible tile and to full resolution</h3>\n" +
-       full_resolution_plot(r) + "\n</figure>\n";
+       full_resolution_plot(r, baseline) + "\n</figure>\n";
+  if (baseline) {
+    s += "<figure>\n<h3>Request latency against the baseline</h3>\n" +
+         latency_cdf_plot(r, *baseline) + "\n</figure>\n";
+  }
   s += "<h2>Throughput and errors</h2>\n";
   s += "<figure>\n<h3>Throughput</h3>\n" + throughput_plot(r) + "\n</figure>\n";
   s += "<figure>\n<h3>Errors</h3>\n" + errors_plot(r) + "\n</figure>\n";
@@ -653,7 +696,8 @@ std::string html_report(const LoadReport& r) {
   return s;
 }
 
-Status write_html_report(const LoadReport& report, const fs::path& dir) {
+Status write_html_report(const LoadReport& report, const fs::path& dir,
+                         const LoadReport* baseline) {
   std::error_code ec;
   fs::create_directories(dir, ec);
   if (ec) {
@@ -663,7 +707,7 @@ Status write_html_report(const LoadReport& report, const fs::path& dir) {
   if (!fs::is_directory(dir, ec)) {
     return make_error(ErrorCode::io, "the report folder " + dir.string() + " is not a folder");
   }
-  return write_file_atomically(dir / "index.html", html_report(report));
+  return write_file_atomically(dir / "index.html", html_report(report, baseline));
 }
 
 }  // namespace vts::client

@@ -36,6 +36,26 @@ note "vts loadtest"
 expect_refused --threads "$VTS" loadtest http://127.0.0.1:1/t --threads 100000
 expect_refused --threads "$VTS" loadtest http://127.0.0.1:1/t --threads -5
 
+note "mistyped subcommands: named, with the nearest one"
+# expect_unknown LINE ARGS...: exit 2 and LINE (fixed string) on stderr.
+expect_unknown() {
+  local line=$1
+  shift
+  run "$VTS" "$@"
+  ((RC == 2)) || { show_output; fail "vts $* exited $RC, expected 2"; }
+  grep -qxF -- "vts: error: $line" "$ERR" || { show_output; fail "vts $*: expected '$line'"; }
+}
+expect_unknown "unknown command 'buidl'; did you mean 'build'?" buidl --synthetic 8x8 -o "$WORK/x.pmtiles"
+expect_unknown "unknown command 'sevre'; did you mean 'serve'?" sevre "$WORK/s.pmtiles"
+expect_unknown "unknown command 'loadtest compaer'; did you mean 'loadtest compare'?" \
+  loadtest compaer a.json b.json
+expect_unknown "unknown command 'loadtest merg'; did you mean 'loadtest merge'?" loadtest merg a.json
+expect_unknown "unknown command 'xyzzy'" xyzzy
+[[ ! -e $WORK/x.pmtiles ]] || fail "a mistyped build wrote its output"
+# A word that is far from every subcommand below the top level stays a positional argument.
+run "$VTS" loadtest earth --duration 0.1 --quiet
+grep -qF 'unknown command' "$ERR" && { show_output; fail "loadtest took its URL for a command"; }
+
 note "vts sign"
 expect_refused --ttl "$VTS" sign /t/0/0/0 --key k --ttl "$big"
 expect_refused --ttl "$VTS" sign /t/0/0/0 --key k --ttl -100

@@ -53,6 +53,15 @@ class LatencyHistogram {
   };
   std::vector<Bucket> buckets() const;
 
+  // The histogram that buckets() (with min(), max() and mean()) describes: the inverse of reading
+  // those, so a histogram written to JSON and read back has the same counts, percentiles, min and
+  // max, and its mean to double precision. invalid_argument when a bucket is not one of this
+  // sub_bucket_bits' buckets, the buckets are not in increasing order, a count is 0, or min/max
+  // lie outside the first/last bucket.
+  static Result<LatencyHistogram> from_buckets(int sub_bucket_bits,
+                                               const std::vector<Bucket>& buckets,
+                                               std::uint64_t min, std::uint64_t max, double mean);
+
  private:
   int bits_;
   std::vector<std::uint64_t> counts_;  // index = bucket_index(value)

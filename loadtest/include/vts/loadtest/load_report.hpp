@@ -105,9 +105,33 @@ std::string summary_table(const LoadReport& report);
 // Creates dir (and its parents) when missing. The page is written to a temporary file in dir,
 // flushed to disk and renamed to index.html, so a failure never leaves a half-written report;
 // an existing index.html is replaced. io on any file-system failure.
-Status write_html_report(const LoadReport& report, const std::filesystem::path& dir);
+//
+// With a baseline (an earlier run, `--baseline A.json`), plot-full-resolution and a request latency
+// CDF (plot-latency-cdf, drawn only then) overlay the baseline's distributions in lighter colours
+// as series whose data-series keys start with "baseline_", and a "Change against the baseline"
+// table (class "compare", compare_reports() of load_gates.hpp) follows the summary.
+Status write_html_report(const LoadReport& report, const std::filesystem::path& dir,
+                         const LoadReport* baseline = nullptr);
 
 // The page write_html_report() writes, as a string.
-std::string html_report(const LoadReport& report);
+std::string html_report(const LoadReport& report, const LoadReport* baseline = nullptr);
+
+// The LoadReport a to_json() document describes (the inverse of to_json for every field it
+// writes; the histograms are rebuilt from their buckets, so counts and percentiles are exact).
+// invalid_argument naming the first missing or malformed field, or a document that is not a
+// "vts-loadtest-report" of version 1.
+Result<LoadReport> report_from_json(const nlohmann::json& j);
+// report_from_json of a file; errors name the file (not_found, io, invalid_argument for bad JSON).
+Result<LoadReport> read_report_file(const std::filesystem::path& file);
+
+// One report of N load generators that ran at the same time against one target: every count,
+// histogram, status, error kind and tier summed, so the counts and percentiles are those of the
+// union of the runs' samples (histograms must have the same sub_bucket_bits). start is the
+// earliest start, duration_s the longest run (rates are totals over it), viewers and rate the
+// sums; title, target, path, fps and mode are the first report's. Per-second rows add up by
+// index (second i after each run's own start); their p50/p90/p99 are the highest of the runs'
+// (an upper bound of the union's, which the per-second figures cannot give exactly).
+// invalid_argument for no reports or different sub_bucket_bits.
+Result<LoadReport> merge_reports(const std::vector<LoadReport>& reports);
 
 }  // namespace vts::client
