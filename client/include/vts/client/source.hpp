@@ -96,8 +96,16 @@ class TileSource {
   virtual void cancel(Handle h) = 0;
 };
 
+// The default of SourceOptions::max_download (and of `--max-download`): 256 MiB.
+inline constexpr std::uint64_t kDefaultMaxDownload = std::uint64_t{256} << 20;
+
 struct SourceOptions {
   FetcherOptions fetcher;  // for HTTP sources
+  // A remote archive whose host ignores Range (answers 200 with the whole file, e.g.
+  // `python3 -m http.server`) is downloaded once, by the opening read, and held in memory when it
+  // is at most this many bytes; every tile is then read from that copy. A bigger one fails to
+  // open (unsupported, naming the host's behaviour) as soon as its size is known. 0: never.
+  std::uint64_t max_download = kDefaultMaxDownload;
   // Extra headers (e.g. "Authorization: Bearer ...") go in fetcher.headers.
 };
 
