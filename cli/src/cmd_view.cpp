@@ -189,12 +189,10 @@ Runner add_view(CLI::App& app) {
   CLI::App* c = app.add_subcommand(
       "view", "View a tileset through the sparse virtual texture (window, or --headless)");
   c->add_option("source", a->source,
-                "Tileset: a local archive, http://host:port/NAME (vts serve or vts cache serve), "
-                "a TileJSON URL or a remote .pmtiles URL")
+                "Tileset: an archive, http://host:port/NAME, a TileJSON or a remote .pmtiles URL")
       ->required();
   c->add_option("--cache-dir", a->cache_dir, "Disk cache folder (as vts warm fills it)");
-  c->add_option("--max-download", a->max_download, kMaxDownloadHelp)
-      ->transform(CLI::AsSizeValue(false));
+  add_max_download_option(c, a->max_download);
   c->add_option("--ram-mb", a->ram_mb, "RAM tile cache, MiB")
       ->check(CLI::Range(std::uint64_t{0}, std::uint64_t{1} << 20))
       ->capture_default_str();

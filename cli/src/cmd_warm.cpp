@@ -238,8 +238,7 @@ Runner add_warm(CLI::App& app) {
   c->add_option("--cache-size", a->cache_size,
                 "Cap on the cache's payload bytes, pinned included (suffix K/M/G/T: binary)")
       ->capture_default_str();
-  c->add_option("--max-download", a->max_download, kMaxDownloadHelp)
-      ->transform(CLI::AsSizeValue(false));
+  add_max_download_option(c, a->max_download);
   c->add_option("--max-errors", a->max_errors, "Stop after this many failed tiles (0: never)")
       ->capture_default_str();
   c->add_flag("--json", a->json, "Print the summary as JSON on stdout");

@@ -160,8 +160,10 @@ struct Opened {
   pmtiles::Header header;
   Directory root;
   SourceInfo info;
-  // The whole archive, when the host ignored Range and sent it all; null otherwise.
+  // The whole archive, when the host ignored Range and sent it all; null otherwise. Then the
+  // Cache-Control that came with it stands for every tile.
   std::shared_ptr<const std::vector<std::uint8_t>> whole;
+  std::string whole_cache_control;
 };
 
 struct RemotePending {
@@ -182,6 +184,7 @@ class RemoteArchiveSource final : public FetchingSource<RemotePending> {
         root_(std::move(opened.root)),
         info_(std::move(opened.info)),
         whole_(std::move(opened.whole)),
+        whole_cache_control_(std::move(opened.whole_cache_control)),
         max_tile_bytes_(max_tile_bytes) {}
 
   // Cancels every transfer: their callbacks finish their requests now. Then deliverer_'s
@@ -428,6 +431,7 @@ class RemoteArchiveSource final : public FetchingSource<RemotePending> {
                     true);
       }
       t.etag = std::move(*etag);
+      t.fresh_for = cache_control_lifetime(whole_ ? whole_cache_control_ : r.cache_control);
       std::string if_none_match;
       {
         std::lock_guard lock(mutex_);
@@ -456,6 +460,7 @@ class RemoteArchiveSource final : public FetchingSource<RemotePending> {
   const Directory root_;
   const SourceInfo info_;
   const std::shared_ptr<const std::vector<std::uint8_t>> whole_;  // see Opened::whole
+  const std::string whole_cache_control_;
   const std::size_t max_tile_bytes_;
 
   // Guarded by mutex_.
@@ -635,6 +640,7 @@ Result<std::unique_ptr<TileSource>> open_remote_archive(std::string_view url_vie
       pmtiles::archive_version(bytes.first(pmtiles::kHeaderSize), root_bytes, stored_metadata);
   opened.info.description_json = std::move(metadata_json);
   opened.whole = std::move(whole);
+  if (opened.whole) opened.whole_cache_control = head.cache_control;
   return std::unique_ptr<TileSource>(std::make_unique<RemoteArchiveSource>(
       std::move(*fetcher), url, std::move(opened), options.fetcher.max_body_bytes));
 }

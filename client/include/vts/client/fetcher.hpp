@@ -100,8 +100,8 @@ struct FetchResult {
   // and is retried.
   int status = 0;
   std::vector<std::uint8_t> body;
-  std::string etag;       // the ETag header as sent (quotes included); empty when absent
-  std::string vts_error;  // the Vts-Error header (docs/PROTOCOL.md); empty when absent
+  std::string etag;           // the ETag header as sent (quotes included); empty when absent
+  std::string vts_error;      // the Vts-Error header (docs/PROTOCOL.md); empty when absent
   std::string cache_control;  // the Cache-Control header(s) as sent, joined by ", "; may be empty
   // A ranged request the server answered with 200 and the whole resource (it ignores Range).
   bool range_ignored = false;

@@ -70,7 +70,19 @@ struct SourceTile {
   std::string etag;
   std::optional<Error> error;
   std::optional<SourceTransfer> transfer;  // set by sources that made one HTTP request for it
+  // Seconds the tile stays fresh, from the response's Cache-Control (cache_control_lifetime());
+  // -1 when the source does not know (no header, a local archive).
+  std::int64_t fresh_for = -1;
 };
+
+// "Fresh for ever": what `immutable` means to a cache (cache_control_lifetime()).
+inline constexpr std::int64_t kFreshForever = std::int64_t{1} << 40;
+
+// The freshness lifetime a Cache-Control header value gives a cached response, in seconds:
+// no-store / no-cache / must-revalidate with max-age=0 → 0 (revalidate at every use); immutable
+// → kFreshForever; max-age=N → N; none of these (or an empty value) → -1, "not said".
+// Directives are case-insensitive and comma-separated; s-maxage and unknown ones are ignored.
+std::int64_t cache_control_lifetime(std::string_view value);
 
 using SourceCallback = std::function<void(SourceTile&&)>;
 
