@@ -26,7 +26,7 @@ using namespace vts::renderer;
 struct ViewArgs {
   std::string source, cache_dir, scene = "plane", camera_path, debug = "none", screenshot, record;
   std::string center;  // --center LON,LAT; --level is level (-1: not given)
-  std::uint64_t ram_mb = 256;
+  std::uint64_t ram_mb = 256, max_download = client::kDefaultMaxDownload;
   int width = 1280, height = 720;
   std::uint32_t slots = 256, window = 64, upload_tiles = 32;
   int feedback = 8, anisotropy = 8, level = -1, frames = 0;
@@ -57,7 +57,9 @@ Status check_args(const ViewArgs& a) {
 
 // The source, or offline, what a cache that saw it before knows of it.
 Result<std::shared_ptr<client::TileSource>> open_source(const ViewArgs& a) {
-  auto opened = client::open_source(a.source, client::SourceOptions{});
+  client::SourceOptions so;
+  so.max_download = a.max_download;
+  auto opened = client::open_source(a.source, so);
   if (!opened && opened.error().code == ErrorCode::io && !a.cache_dir.empty()) {
     if (auto saved = client::load_source_info(a.cache_dir, a.source)) {
       log_line(a.source + ": " + opened.error().message + "; showing what the cache holds");
@@ -187,10 +189,10 @@ Runner add_view(CLI::App& app) {
   CLI::App* c = app.add_subcommand(
       "view", "View a tileset through the sparse virtual texture (window, or --headless)");
   c->add_option("source", a->source,
-                "Tileset: a local archive, http://host:port/NAME (vts serve or vts cache serve), "
-                "a TileJSON URL or a remote .pmtiles URL")
+                "Tileset: an archive, http://host:port/NAME, a TileJSON or a remote .pmtiles URL")
       ->required();
   c->add_option("--cache-dir", a->cache_dir, "Disk cache folder (as vts warm fills it)");
+  add_max_download_option(c, a->max_download);
   c->add_option("--ram-mb", a->ram_mb, "RAM tile cache, MiB")
       ->check(CLI::Range(std::uint64_t{0}, std::uint64_t{1} << 20))
       ->capture_default_str();

@@ -22,6 +22,7 @@ struct WarmArgs {
   std::string url, cache_dir, levels, region, bbox, cache_size = "10G";
   unsigned concurrency = 32;
   unsigned max_errors = 100;
+  std::uint64_t max_download = client::kDefaultMaxDownload;
   bool json = false, quiet = false;
 };
 
@@ -34,6 +35,7 @@ std::string levels_text(int a, int b) {
 Result<std::shared_ptr<client::TileSource>> open_warm_source(const WarmArgs& a, bool& offline) {
   client::SourceOptions so;
   so.fetcher.max_in_flight = a.concurrency;
+  so.max_download = a.max_download;
   auto opened = client::open_source(a.url, so);
   if (!opened && opened.error().code == ErrorCode::io) {
     if (auto saved = client::load_source_info(a.cache_dir, a.url)) {
@@ -236,6 +238,7 @@ Runner add_warm(CLI::App& app) {
   c->add_option("--cache-size", a->cache_size,
                 "Cap on the cache's payload bytes, pinned included (suffix K/M/G/T: binary)")
       ->capture_default_str();
+  add_max_download_option(c, a->max_download);
   c->add_option("--max-errors", a->max_errors, "Stop after this many failed tiles (0: never)")
       ->capture_default_str();
   c->add_flag("--json", a->json, "Print the summary as JSON on stdout");

@@ -45,6 +45,16 @@ Runner add_view(CLI::App& app);  // vts view (cmd_view.cpp): only when the rende
 // what makes thread creation fail.
 inline constexpr unsigned kMaxThreads = 1024;
 
+// --max-download (vts warm, vts view): client::SourceOptions::max_download.
+inline constexpr const char* kMaxDownloadHelp =
+    "A remote .pmtiles on a host that ignores HTTP Range (answers 200 with the whole file) is "
+    "downloaded once, whole, and held in RAM when it is at most this size (suffix K/M/G: binary; "
+    "0: never); a bigger one fails at once. Default 256M";
+inline void add_max_download_option(CLI::App* c, std::uint64_t& max_download) {
+  c->add_option("--max-download", max_download, kMaxDownloadHelp)
+      ->transform(CLI::AsSizeValue(false));
+}
+
 // "HOST:PORT" (HOST may be [IPv6] or empty for 0.0.0.0) for --listen / --admin.
 Result<std::pair<std::string, std::uint16_t>> parse_endpoint(const std::string& s);
 

@@ -1,14 +1,17 @@
 // DiskCache: SQLite 3 in WAL mode, one connection under one mutex.
 //
-// Schema (PRAGMA user_version = 1):
+// Schema (PRAGMA user_version = 2; a version-1 cache gets the fresh_for column when opened):
 //
 //   tilesets(id INTEGER PRIMARY KEY, key TEXT UNIQUE)   tileset key string -> small integer
-//   tiles(tileset_id, z, x, y, size, checksum, atime, validated, pinned, etag, payload)
+//   tiles(tileset_id, z, x, y, size, checksum, atime, validated, pinned, etag, payload, fresh_for)
 //     unique index tiles_key (tileset_id, z, x, y); index tiles_lru (pinned, atime) gives the
 //     eviction order (unpinned rows, oldest access first, rowid breaking ties).
 //     checksum = XXH3-64 (seed 0) of the whole payload, stored as a signed 64-bit integer.
 //     atime = microseconds since the epoch of the last access (see next_time_us()).
 //     validated = seconds since the epoch of the last fetch or revalidation.
+//     fresh_for = seconds the tile stays fresh after `validated`, from the server's Cache-Control
+//     (CachedTile::fresh_for); -1 when it said nothing. After the payload because it was added
+//     by ALTER TABLE in version 2; only the tile read, which walks the payload anyway, reads it.
 //     The payload is the last column, so reading the small columns (eviction, totals upkeep,
 //     access-time updates) never walks the blob's overflow pages.
 //   totals(id = 0, bytes, tiles, pinned_bytes, pinned_tiles)   one row
@@ -25,7 +28,7 @@
 // Size on disk, beyond the payload bytes (DiskCache::kFileSlackBytes and the max_bytes / 8
 // allowance in the header; FileStaysNearTheCapUnderHeavyOverwriting measures it: with a 4 MiB cap
 // and 8..40 KiB tiles the two files peaked at cap + 2.5 MiB):
-//   - pages: each payload occupies whole 4 KiB pages (on average half a page lost per tile) plus
+//   - pages: each payload occupies whole 16 KiB pages (on average half a page lost per tile) plus
 //     b-tree and index entries: a few percent for tiles of tens of KiB, but much more for tiles of
 //     a few bytes (the cap counts payload bytes only);
 //   - the WAL: checkpointed every kWalAutocheckpointPages pages (2 MiB) and truncated back to
@@ -57,9 +60,13 @@ namespace vts::client {
 namespace {
 
 constexpr int kEvictBatch = 64;               // rows fetched per eviction query
-constexpr int kWalAutocheckpointPages = 512;  // 2 MiB of 4 KiB pages
+constexpr int kWalAutocheckpointPages = 128;  // 2 MiB of 16 KiB pages
 constexpr int kJournalSizeLimit = 2 << 20;    // WAL truncated back to this after a checkpoint
-constexpr std::int64_t kFreePagesKept = 128;  // 512 KiB of 4 KiB pages
+constexpr std::int64_t kFreePagesKept = 32;   // 512 KiB of 16 KiB pages
+// The page size of new caches: 16 KiB rather than SQLite's 4 KiB, so a tile of tens of KiB is a
+// quarter of the pages, and of the page writes (to the WAL, then again at each checkpoint).
+// Caches made with 4 KiB pages keep them (their WAL is then checkpointed every 512 KiB).
+constexpr int kPageSize = 16384;
 constexpr std::size_t kMaxPendingTouchesFactor = 16;  // drop access times beyond batch * this
 
 constexpr const char* kSchemaSql = R"sql(
@@ -77,7 +84,8 @@ CREATE TABLE tiles(
   validated INTEGER NOT NULL,
   pinned INTEGER NOT NULL CHECK (pinned IN (0, 1)),
   etag TEXT NOT NULL,
-  payload BLOB NOT NULL);
+  payload BLOB NOT NULL,
+  fresh_for INTEGER NOT NULL DEFAULT -1);
 CREATE UNIQUE INDEX tiles_key ON tiles(tileset_id, z, x, y);
 CREATE INDEX tiles_lru ON tiles(pinned, atime);
 CREATE TABLE totals(
@@ -105,7 +113,13 @@ CREATE TRIGGER tiles_totals_update AFTER UPDATE OF size, pinned ON tiles BEGIN
                     pinned_tiles = pinned_tiles - OLD.pinned + NEW.pinned
    WHERE id = 0;
 END;
-PRAGMA user_version = 1;
+PRAGMA user_version = 2;
+)sql";
+
+// Version 1 → 2: each tile's freshness lifetime.
+constexpr const char* kUpgradeTo2Sql = R"sql(
+ALTER TABLE tiles ADD COLUMN fresh_for INTEGER NOT NULL DEFAULT -1;
+PRAGMA user_version = 2;
 )sql";
 
 #define VTS_TILE_KEY_WHERE "tileset_id = ?1 AND z = ?2 AND x = ?3 AND y = ?4"
@@ -497,6 +511,7 @@ struct DiskCache::Impl {
       const auto n = static_cast<std::size_t>(sqlite3_column_bytes(s, 5));
       if (blob) tile.payload.assign(blob, blob + n);
       tile.pinned = sqlite3_column_int(s, 6) != 0;
+      tile.fresh_for = sqlite3_column_int64(s, 7);
     }
     // Hash without the lock: other threads may use the connection meanwhile.
     lock.unlock();
@@ -570,8 +585,9 @@ struct DiskCache::Impl {
     if (*version == 0) {
       // Both take effect only before the first table is created (ignored otherwise). The page
       // size is what the slack constants above are counted in.
-      if (int rc = exec("PRAGMA page_size = 4096; PRAGMA auto_vacuum = INCREMENTAL");
-          rc != SQLITE_OK)
+      const std::string create =
+          "PRAGMA page_size = " + std::to_string(kPageSize) + "; PRAGMA auto_vacuum = INCREMENTAL";
+      if (int rc = exec(create.c_str()); rc != SQLITE_OK)
         return db_error(rc, "creating the database");
     }
     {
@@ -598,8 +614,12 @@ struct DiskCache::Impl {
                               std::string(mode ? mode : "?") +
                               "'); is the folder on a network file system?");
     }
+    // temp_store = MEMORY keeps each statement's journal in memory: an upsert (its triggers make
+    // it one that may need a partial rollback) otherwise spilled every page it touched to a temp
+    // file past 64 KiB, ~3 bytes written there for each byte cached (a cold `vts warm` of 65 MiB
+    // wrote 190 MiB of them).
     const std::string pragmas =
-        "PRAGMA synchronous = NORMAL; PRAGMA journal_size_limit = " +
+        "PRAGMA synchronous = NORMAL; PRAGMA temp_store = MEMORY; PRAGMA journal_size_limit = " +
         std::to_string(kJournalSizeLimit) +
         "; PRAGMA wal_autocheckpoint = " + std::to_string(kWalAutocheckpointPages) + ";";
     if (int rc = exec(pragmas.c_str()); rc != SQLITE_OK) return db_error(rc, "opening");
@@ -621,6 +641,23 @@ struct DiskCache::Impl {
         if (!sqlite3_get_autocommit(db())) exec("ROLLBACK");
         return s;
       }
+    } else if (*version == 1) {
+      // Upgrade under the write lock; another process may have done it meanwhile.
+      if (int rc = exec("BEGIN IMMEDIATE"); rc != SQLITE_OK)
+        return db_error(rc, "upgrading the database");
+      std::int64_t again = 0, tables_again = 0;
+      Status s = read_version("upgrading the database", again, tables_again);
+      if (s.ok() && again == 1) {
+        if (int rc = exec(kUpgradeTo2Sql); rc != SQLITE_OK)
+          s = db_error(rc, "upgrading the database");
+      }
+      if (s.ok()) {
+        if (int rc = exec("COMMIT"); rc != SQLITE_OK) s = db_error(rc, "upgrading the database");
+      }
+      if (!s.ok()) {
+        if (!sqlite3_get_autocommit(db())) exec("ROLLBACK");
+        return s;
+      }
     }
 
     struct {
@@ -630,24 +667,25 @@ struct DiskCache::Impl {
         {&find_tileset_stmt, "SELECT id FROM tilesets WHERE key = ?1"},
         {&insert_tileset_stmt, "INSERT INTO tilesets(key) VALUES (?1)"},
         {&get_stmt,
-         "SELECT rowid, size, checksum, validated, etag, payload, pinned FROM tiles "
+         "SELECT rowid, size, checksum, validated, etag, payload, pinned, fresh_for FROM tiles "
          "WHERE " VTS_TILE_KEY_WHERE},
         {&old_row_stmt, "SELECT rowid, size, pinned FROM tiles WHERE " VTS_TILE_KEY_WHERE},
         {&totals_stmt, "SELECT bytes, tiles, pinned_bytes, pinned_tiles FROM totals WHERE id = 0"},
         {&upsert_stmt,
          "INSERT INTO tiles(tileset_id, z, x, y, size, checksum, atime, validated, pinned, etag, "
-         "payload) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11) "
+         "payload, fresh_for) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12) "
          "ON CONFLICT(tileset_id, z, x, y) DO UPDATE SET size = excluded.size, "
          "checksum = excluded.checksum, atime = excluded.atime, validated = excluded.validated, "
          "pinned = max(pinned, excluded.pinned), etag = excluded.etag, "
-         "payload = excluded.payload"},
+         "payload = excluded.payload, fresh_for = excluded.fresh_for"},
         {&evict_candidates_stmt,
          "SELECT rowid, size FROM tiles WHERE pinned = 0 AND rowid <> ?1 "
          "ORDER BY atime, rowid LIMIT ?2"},
         {&delete_rowid_stmt, "DELETE FROM tiles WHERE rowid = ?1"},
         {&delete_corrupt_stmt, "DELETE FROM tiles WHERE rowid = ?1 AND checksum = ?2"},
         {&touch_stmt, "UPDATE tiles SET atime = ?5 WHERE " VTS_TILE_KEY_WHERE " AND atime < ?5"},
-        {&validated_stmt, "UPDATE tiles SET validated = ?5 WHERE " VTS_TILE_KEY_WHERE},
+        {&validated_stmt,
+         "UPDATE tiles SET validated = ?5, fresh_for = ?6 WHERE " VTS_TILE_KEY_WHERE},
         {&pinned_stmt, "UPDATE tiles SET pinned = ?5 WHERE " VTS_TILE_KEY_WHERE},
         {&remove_stmt, "DELETE FROM tiles WHERE " VTS_TILE_KEY_WHERE},
         {&freelist_stmt, "PRAGMA freelist_count"},
@@ -777,6 +815,7 @@ Status DiskCache::put_row(Impl& m, std::string_view tileset, TileId id, const Ca
     // A zero-length blob needs a non-null pointer, or SQLite binds NULL.
     static const std::uint8_t kEmpty = 0;
     sqlite3_bind_blob64(s, 11, size ? tile.payload.data() : &kEmpty, size, SQLITE_STATIC);
+    sqlite3_bind_int64(s, 12, tile.fresh_for);
     const int rc = DiskCache::Impl::run(s);
     if (rc != SQLITE_DONE) return m.db_error(rc, doing);
   }
@@ -832,11 +871,15 @@ Status DiskCache::update_row(std::string_view tileset, TileId id, const std::str
   });
 }
 
-Status DiskCache::set_validated(std::string_view tileset, TileId id, std::int64_t validated_unix) {
+Status DiskCache::set_validated(std::string_view tileset, TileId id, std::int64_t validated_unix,
+                                std::int64_t fresh_for) {
   return update_row(
       tileset, id, "recording the revalidation of " + tile_name(tileset, id),
       [](Impl& m) { return m.validated_stmt.get(); },
-      [&](sqlite3_stmt* s) { sqlite3_bind_int64(s, 5, validated_unix); });
+      [&](sqlite3_stmt* s) {
+        sqlite3_bind_int64(s, 5, validated_unix);
+        sqlite3_bind_int64(s, 6, fresh_for);
+      });
 }
 
 Status DiskCache::set_pinned(std::string_view tileset, TileId id, bool pinned) {

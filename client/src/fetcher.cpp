@@ -164,6 +164,8 @@ class Fetcher::Impl {
     std::string key;
     std::string url;
     std::optional<std::pair<std::uint64_t, std::uint64_t>> range;
+    bool whole_if_range_ignored = false;
+    std::uint64_t max_body = 0;  // this transfer's body limit
     std::string if_none_match;
     std::string group;
     std::vector<Waiter> waiters;
@@ -185,6 +187,8 @@ class Fetcher::Impl {
     std::string etag;
     std::string vts_error;
     std::string content_range;
+    std::string cache_control;
+    std::int64_t content_length = -1;  // the current response's Content-Length header
     bool too_large = false;
     bool sized = false;  // body capacity reserved from Content-Length
     char errbuf[CURL_ERROR_SIZE] = {};
@@ -264,6 +268,7 @@ class Fetcher::Impl {
         key += std::to_string(req.range->first) + "-" + std::to_string(req.range->second);
       key += '\n';
       key += req.if_none_match;
+      if (req.whole_if_range_ignored) key += "\nwhole";
     }
     if (auto it = by_key_.find(key); it != by_key_.end()) {
       Transfer* t = it->second.get();
@@ -279,6 +284,8 @@ class Fetcher::Impl {
     t->key = key;
     t->url = std::move(req.url);
     t->range = req.range;
+    t->whole_if_range_ignored = req.whole_if_range_ignored;
+    t->max_body = req.max_body_bytes != 0 ? req.max_body_bytes : options_.max_body_bytes;
     t->if_none_match = std::move(req.if_none_match);
     t->group = std::move(req.group);
     t->waiters.push_back(Waiter{h, std::move(cb), req.level, req.urgency, submitted});
@@ -454,7 +461,7 @@ class Fetcher::Impl {
   static std::size_t on_body(char* data, std::size_t size, std::size_t n, void* user) {
     auto* t = static_cast<Transfer*>(user);
     const std::size_t bytes = size * n;
-    const std::size_t limit = t->owner->options_.max_body_bytes;
+    const std::uint64_t limit = t->max_body;
     if (!t->sized) {
       t->sized = true;
       curl_off_t length = -1;
@@ -480,12 +487,23 @@ class Fetcher::Impl {
       t->etag.clear();
       t->vts_error.clear();
       t->content_range.clear();
+      t->cache_control.clear();
+      t->content_length = -1;
+    } else if (istarts_with(line, "content-length:")) {
+      const std::string_view v = trim(line.substr(15));
+      std::int64_t length = 0;
+      const auto [end, ec] = std::from_chars(v.data(), v.data() + v.size(), length);
+      t->content_length =
+          ec == std::errc() && end == v.data() + v.size() && length >= 0 ? length : -1;
     } else if (istarts_with(line, "etag:")) {
       t->etag = std::string(trim(line.substr(5)));
     } else if (istarts_with(line, "vts-error:")) {
       t->vts_error = std::string(trim(line.substr(10)));
     } else if (istarts_with(line, "content-range:")) {
       t->content_range = std::string(trim(line.substr(14)));
+    } else if (istarts_with(line, "cache-control:")) {
+      if (!t->cache_control.empty()) t->cache_control += ", ";
+      t->cache_control += std::string(trim(line.substr(14)));
     }
     return size * n;
   }
@@ -513,6 +531,8 @@ class Fetcher::Impl {
     t->etag.clear();
     t->vts_error.clear();
     t->content_range.clear();
+    t->cache_control.clear();
+    t->content_length = -1;
     t->too_large = false;
     t->sized = false;
     t->errbuf[0] = '\0';
@@ -541,7 +561,7 @@ class Fetcher::Impl {
       curl_easy_setopt(e, CURLOPT_LOW_SPEED_LIMIT, o.low_speed_bytes);
       curl_easy_setopt(e, CURLOPT_LOW_SPEED_TIME, long(o.low_speed_time.count()));
     }
-    curl_easy_setopt(e, CURLOPT_MAXFILESIZE_LARGE, curl_off_t(o.max_body_bytes));
+    curl_easy_setopt(e, CURLOPT_MAXFILESIZE_LARGE, curl_off_t(t->max_body));
     curl_easy_setopt(e, CURLOPT_USERAGENT, o.user_agent.c_str());
     if (t->headers != nullptr) curl_easy_setopt(e, CURLOPT_HTTPHEADER, t->headers);
     std::string range;
@@ -635,7 +655,14 @@ class Fetcher::Impl {
           code = ErrorCode::truncated;
         }
       } else if (t->range && status == 200) {
-        // The server ignored Range and sent the whole resource: keep the requested slice.
+        // The server ignored Range and sent the whole resource: keep the requested slice, or
+        // all of it when asked to.
+        if (t->whole_if_range_ignored) {
+          FetchResult r = take_response(t, status);
+          r.range_ignored = true;
+          finish(t, std::move(r));
+          return;
+        }
         const std::uint64_t first = t->range->first;
         if (first >= t->body.size()) {
           FetchResult r = take_response(t, status);
@@ -688,9 +715,9 @@ class Fetcher::Impl {
             FetchResult r;
             r.status = status;
             r.attempts = t->attempts;
+            r.content_length = t->content_length;
             r.error = make_error(ErrorCode::too_large, "GET " + t->url + ": body larger than " +
-                                                           std::to_string(options_.max_body_bytes) +
-                                                           " bytes");
+                                                           std::to_string(t->max_body) + " bytes");
             finish(t, std::move(r));
             return;
           }
@@ -757,9 +784,11 @@ class Fetcher::Impl {
   FetchResult take_response(Transfer* t, int status) {
     FetchResult r;
     r.status = status;
+    r.content_length = t->content_length;
     r.body = std::move(t->body);
     r.etag = std::move(t->etag);
     r.vts_error = std::move(t->vts_error);
+    r.cache_control = std::move(t->cache_control);
     r.attempts = t->attempts;
     return r;
   }

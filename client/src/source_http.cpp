@@ -10,6 +10,9 @@
 // error that says to reopen it.
 //
 // Every callback runs on the fetcher's thread.
+#include <algorithm>
+#include <cctype>
+#include <charconv>
 #include <cstdint>
 #include <future>
 #include <limits>
@@ -146,11 +149,13 @@ class TileJsonSource final : public FetchingSource<TileJsonPending> {
         // then asks unconditionally).
         t.etag = std::move(r.etag);
         t.payload = std::move(r.body);
+        t.fresh_for = cache_control_lifetime(r.cache_control);
         return finish(h, std::move(t));
       }
       case 304: {
         t.kind = SourceTile::Kind::not_modified;
         t.etag = std::move(r.etag);
+        t.fresh_for = cache_control_lifetime(r.cache_control);
         if (t.etag.empty()) {
           std::lock_guard lock(mutex_);
           if (auto it = pending_.find(h); it != pending_.end()) {
@@ -289,6 +294,39 @@ Result<std::unique_ptr<TileSource>> open_tilejson(std::string_view url, SourceOp
   info.description_json.assign(r.body.begin(), r.body.end());
   return std::unique_ptr<TileSource>(std::make_unique<TileJsonSource>(
       std::move(*fetcher), std::move(info), json_url, std::move(*tj)));
+}
+
+std::int64_t cache_control_lifetime(std::string_view value) {
+  std::int64_t max_age = -1;
+  bool immutable = false, no_cache = false;
+  while (!value.empty()) {
+    const std::size_t comma = value.find(',');
+    std::string_view d = value.substr(0, comma);
+    value = comma == std::string_view::npos ? std::string_view() : value.substr(comma + 1);
+    while (!d.empty() && std::isspace(static_cast<unsigned char>(d.front()))) d.remove_prefix(1);
+    while (!d.empty() && std::isspace(static_cast<unsigned char>(d.back()))) d.remove_suffix(1);
+    std::string name(d.substr(0, d.find('=')));
+    std::transform(name.begin(), name.end(), name.begin(),
+                   [](unsigned char c) { return char(std::tolower(c)); });
+    if (name == "no-store" || name == "no-cache") {
+      no_cache = true;
+    } else if (name == "immutable") {
+      immutable = true;
+    } else if (name == "max-age" && d.find('=') != std::string_view::npos) {
+      std::string_view v = d.substr(d.find('=') + 1);
+      if (v.size() >= 2 && v.front() == '"' && v.back() == '"') v = v.substr(1, v.size() - 2);
+      std::int64_t n = 0;
+      const auto [end, ec] = std::from_chars(v.data(), v.data() + v.size(), n);
+      if (ec == std::errc::result_out_of_range) n = kFreshForever;
+      if ((ec == std::errc() || ec == std::errc::result_out_of_range) &&
+          end == v.data() + v.size() && n >= 0) {
+        max_age = std::min(n, kFreshForever);
+      }
+    }
+  }
+  if (no_cache) return 0;
+  if (immutable) return kFreshForever;
+  return max_age;
 }
 
 }  // namespace vts::client

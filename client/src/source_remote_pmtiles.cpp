@@ -22,6 +22,11 @@
 // from the old directories point into the new file; such bytes fail the tile-header check (an
 // error) or the client's checksum, and reopening the source picks up the new archive.
 //
+// A host that ignores Range answers the opening read with 200 and the whole file. That read
+// keeps it (up to SourceOptions::max_download, else opening fails naming the host's behaviour)
+// and every later read is served from the copy in memory, on the delivery thread: the file is
+// downloaded once, never once per tile.
+//
 // Callbacks run on the fetcher's thread, or on the source's delivery thread for answers found
 // without the network (a tile outside the pyramid or missing from a cached directory).
 #include <xxhash.h>
@@ -155,6 +160,10 @@ struct Opened {
   pmtiles::Header header;
   Directory root;
   SourceInfo info;
+  // The whole archive, when the host ignored Range and sent it all; null otherwise. Then the
+  // Cache-Control that came with it stands for every tile.
+  std::shared_ptr<const std::vector<std::uint8_t>> whole;
+  std::string whole_cache_control;
 };
 
 struct RemotePending {
@@ -174,6 +183,8 @@ class RemoteArchiveSource final : public FetchingSource<RemotePending> {
         header_(opened.header),
         root_(std::move(opened.root)),
         info_(std::move(opened.info)),
+        whole_(std::move(opened.whole)),
+        whole_cache_control_(std::move(opened.whole_cache_control)),
         max_tile_bytes_(max_tile_bytes) {}
 
   // Cancels every transfer: their callbacks finish their requests now. Then deliverer_'s
@@ -329,6 +340,20 @@ class RemoteArchiveSource final : public FetchingSource<RemotePending> {
       t.kind = SourceTile::Kind::cancelled;
       return deliver(h, std::move(t), on_fetcher_thread);
     }
+    if (whole_) {
+      // The host ignores Range and we hold the whole file: answer as a 206 would, from the copy.
+      lock.unlock();
+      auto r = std::make_shared<FetchResult>();
+      r->status = 206;
+      if (offset < whole_->size()) {
+        const auto first = whole_->begin() + std::ptrdiff_t(offset);
+        r->body.assign(first, first + std::ptrdiff_t(std::min<std::uint64_t>(
+                                          length, whole_->size() - offset)));
+      }
+      auto cb = std::make_shared<FetchCallback>(std::move(callback));
+      deliverer_.post([r, cb] { (*cb)(std::move(*r)); });
+      return;
+    }
     FetchRequest r;
     r.url = url_;
     r.range = std::make_pair(offset, offset + length - 1);
@@ -406,6 +431,7 @@ class RemoteArchiveSource final : public FetchingSource<RemotePending> {
                     true);
       }
       t.etag = std::move(*etag);
+      t.fresh_for = cache_control_lifetime(whole_ ? whole_cache_control_ : r.cache_control);
       std::string if_none_match;
       {
         std::lock_guard lock(mutex_);
@@ -433,6 +459,8 @@ class RemoteArchiveSource final : public FetchingSource<RemotePending> {
   const pmtiles::Header header_;
   const Directory root_;
   const SourceInfo info_;
+  const std::shared_ptr<const std::vector<std::uint8_t>> whole_;  // see Opened::whole
+  const std::string whole_cache_control_;
   const std::size_t max_tile_bytes_;
 
   // Guarded by mutex_.
@@ -490,6 +518,27 @@ Status check_header(const pmtiles::Header& h, std::uint64_t first_read_size) {
   return {};
 }
 
+// "http://host:port" of a URL, for messages about the host.
+std::string host_of(const std::string& url) {
+  const std::size_t scheme = url.find("://");
+  const std::size_t start = scheme == std::string::npos ? 0 : scheme + 3;
+  const std::size_t end = url.find_first_of("/?#", start);
+  return url.substr(0, end);
+}
+
+Error ignores_range(const std::string& url, std::int64_t size, std::uint64_t max_download) {
+  const std::string whole = size >= 0 ? "the whole " + std::to_string(size) + "-byte file"
+                                      : "the whole file, of unknown length";
+  return make_error(
+      ErrorCode::unsupported,
+      "host " + host_of(url) + " ignores HTTP Range requests (answered 200 with " + whole +
+          " when asked for bytes 0-" + std::to_string(kFirstRead - 1) + " of " + url +
+          "); reading tiles from it would download the file once per tile, and it is over the " +
+          "download limit of " + std::to_string(max_download) +
+          " bytes (--max-download) for one full download; serve it with Range support (nginx, " +
+          "`vts serve`, an object store) or raise --max-download");
+}
+
 Error in_archive(const std::string& url, Error e) {
   e.message = url + ": " + e.message;
   return e;
@@ -506,7 +555,14 @@ Result<std::unique_ptr<TileSource>> open_remote_archive(std::string_view url_vie
   FetchRequest first;
   first.url = url;
   first.range = std::make_pair(std::uint64_t{0}, kFirstRead - 1);
-  const FetchResult head = fetch_blocking(**fetcher, std::move(first));
+  // A host that ignores Range sends the whole file here: keep it when it is small enough, and
+  // stop at once (CURLOPT_MAXFILESIZE, or the body limit) when it is not.
+  first.whole_if_range_ignored = true;
+  first.max_body_bytes = std::max(options.max_download, kFirstRead);
+  FetchResult head = fetch_blocking(**fetcher, std::move(first));
+  if (head.error && head.error->code == ErrorCode::too_large && head.status == 200) {
+    return ignores_range(url, head.content_length, options.max_download);
+  }
   if (head.error) {
     Error e = *head.error;
     e.message = "cannot open remote archive " + url + ": " + e.message;
@@ -519,14 +575,23 @@ Result<std::unique_ptr<TileSource>> open_remote_archive(std::string_view url_vie
     return make_error(ErrorCode::io, "cannot open remote archive " + url + ": HTTP " +
                                          std::to_string(head.status));
   }
-  const std::span<const std::uint8_t> bytes(head.body);
+  std::shared_ptr<const std::vector<std::uint8_t>> whole;
+  if (head.range_ignored) {
+    if (head.body.size() > options.max_download) {
+      return ignores_range(url, std::int64_t(head.body.size()), options.max_download);
+    }
+    whole = std::make_shared<const std::vector<std::uint8_t>>(std::move(head.body));
+  }
+  const std::span<const std::uint8_t> bytes(whole ? *whole : head.body);
   Result<pmtiles::Header> header = pmtiles::parse_header(bytes);
   if (!header) {
     return make_error(ErrorCode::corrupt,
                       url + " is not a PMTiles v3 archive (" + header.error().message + ")");
   }
   const pmtiles::Header& h = *header;
-  if (Status s = check_header(h, bytes.size()); !s) return in_archive(url, s.error());
+  if (Status s = check_header(h, std::min<std::uint64_t>(bytes.size(), kFirstRead)); !s) {
+    return in_archive(url, s.error());
+  }
 
   const auto root_bytes = bytes.subspan(h.root_dir_offset, h.root_dir_length);
   Result<Directory> root = decode_directory(root_bytes, h.internal_compression);
@@ -574,6 +639,8 @@ Result<std::unique_ptr<TileSource>> open_remote_archive(std::string_view url_vie
   opened.info.version =
       pmtiles::archive_version(bytes.first(pmtiles::kHeaderSize), root_bytes, stored_metadata);
   opened.info.description_json = std::move(metadata_json);
+  opened.whole = std::move(whole);
+  if (opened.whole) opened.whole_cache_control = head.cache_control;
   return std::unique_ptr<TileSource>(std::make_unique<RemoteArchiveSource>(
       std::move(*fetcher), url, std::move(opened), options.fetcher.max_body_bytes));
 }

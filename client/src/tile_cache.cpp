@@ -286,6 +286,7 @@ class TileCache::Impl {
     tile->payload = std::move(t.payload);
     tile->etag = std::move(t.etag);
     tile->validated_unix = now_unix();
+    tile->fresh_for = t.fresh_for;
     std::shared_ptr<const CachedTile> shared = std::move(tile);
     remember(id, shared, ram_pin);
     store_on_disk(id, shared, disk_pin);
@@ -579,7 +580,12 @@ class TileCache::Impl {
   void maybe_revalidate(TileId id, const std::shared_ptr<const CachedTile>& tile,
                         const GetOptions& options) {
     if (!options.revalidate || source_->local()) return;
-    if (now_unix() - tile->validated_unix < options_.revalidate_after.count()) return;
+    const std::int64_t fresh_for = tile->fresh_for >= 0 && !options_.fixed_revalidate_after
+                                       ? tile->fresh_for
+                                       : std::int64_t(options_.revalidate_after.count());
+    // A tile with no lifetime (0: no-cache) is revalidated at every hit, including in the
+    // second it was fetched.
+    if (fresh_for > 0 && now_unix() - tile->validated_unix < fresh_for) return;
     {
       std::lock_guard lock(mutex_);
       if (stopping_ || !revalidating_.emplace(id, 0).second) return;
@@ -616,10 +622,14 @@ class TileCache::Impl {
         stats_.not_modified.fetch_add(1, std::memory_order_relaxed);
         auto fresh = std::make_shared<CachedTile>(*old);
         fresh->validated_unix = now_unix();
+        if (t.fresh_for >= 0) fresh->fresh_for = t.fresh_for;  // the 304's Cache-Control
         remember(id, fresh, false);
         if (disk_) {
           const auto when = fresh->validated_unix;
-          post_disk(false, [this, id, when] { note_disk(disk_->set_validated(key_, id, when)); });
+          const auto fresh_for = fresh->fresh_for;
+          post_disk(false, [this, id, when, fresh_for] {
+            note_disk(disk_->set_validated(key_, id, when, fresh_for));
+          });
         }
         break;
       }

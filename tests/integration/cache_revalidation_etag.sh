@@ -7,7 +7,12 @@
 #   none  the origin sends no ETag: the daemon revalidates without If-None-Match (it used to send
 #         a tag it made from the payload, one the origin never issued); clients still get the
 #         derived tag.
-# The daemon runs with --revalidate-after 0, so every hit is revalidated in the background.
+# The daemon runs with --revalidate-after 0, so every hit is revalidated in the background (the
+# origin sends no Cache-Control, so that is the tiles' lifetime). Then it follows the origin's
+# Cache-Control (the daemon at its default --revalidate-after, an hour):
+#   maxage1    "max-age=1": hits a second later revalidate (If-None-Match with the origin's tag,
+#              304)
+#   immutable  "public, max-age=31536000, immutable": hits never revalidate
 # shellcheck source=lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 # shellcheck source=serve_lib.sh
@@ -31,6 +36,7 @@ cat >"$WORK/origin.py" <<'PY'
 # is 304; with "none", no ETag is sent and If-None-Match is ignored.
 import hashlib, http.server, os, sys
 root, mode = sys.argv[1], sys.argv[2]
+cache_control = sys.argv[3] if len(sys.argv) > 3 else ""
 class Handler(http.server.BaseHTTPRequestHandler):
     protocol_version = "HTTP/1.1"
     def do_GET(self):
@@ -46,6 +52,8 @@ class Handler(http.server.BaseHTTPRequestHandler):
         self.send_response(status)
         if mode == "etag" and data is not None:
             self.send_header("ETag", tag)
+        if cache_control and data is not None:
+            self.send_header("Cache-Control", cache_control)
         body = data if status == 200 else b""
         self.send_header("Content-Length", str(len(body)))
         self.end_headers()
@@ -116,6 +124,73 @@ json.dump(j, open(sys.argv[3], "w"))' "$WORK/tilejson" "$ORIGIN" "$WORK/origin/s
   kill -TERM "$DAEMON_PID"
   wait "$DAEMON_PID" || fail "vts cache serve exited $? after SIGTERM"
   DAEMON_PID=""
+  kill "$PY_PID"
+  wait "$PY_PID" 2>/dev/null || true
+  PY_PID=""
+done
+
+# origin_gets MODE: the origin's log lines for tile 0/0/0.
+origin_gets() { grep '^GET /syn/0/0/0 ' "$LOGS/origin_$1.log" || true; }
+
+for cc in maxage1 immutable; do
+  case $cc in
+    maxage1) header="max-age=1" ;;
+    immutable) header="public, max-age=31536000, immutable" ;;
+  esac
+  note "origin sends Cache-Control: $header"
+  "$PYTHON" "$WORK/origin.py" "$WORK/origin" etag "$header" >"$LOGS/origin_$cc.log" 2>&1 &
+  PY_PID=$!
+  for ((i = 0; i < 200; i++)); do
+    grep -q "^port " "$LOGS/origin_$cc.log" 2>/dev/null && break
+    sleep 0.05
+  done
+  py_port=$(sed -nE 's/^port ([0-9]+)$/\1/p' "$LOGS/origin_$cc.log")
+  [[ -n $py_port ]] || { cat "$LOGS/origin_$cc.log" >&2; fail "the Python origin did not start"; }
+  ORIGIN="http://127.0.0.1:$py_port"
+  "$PYTHON" -c 'import json, sys
+j = json.load(open(sys.argv[1])); j["tiles"] = [sys.argv[2] + "/syn/{z}/{x}/{y}"]
+json.dump(j, open(sys.argv[3], "w"))' "$WORK/tilejson" "$ORIGIN" "$WORK/origin/syn.json"
+  start_daemon cache "$VTS" cache serve --upstream "$ORIGIN/syn.json" --cache-dir "$WORK/cache_$cc" \
+    --listen 127.0.0.1:0 --no-admin
+  origin_tag=$("$PYTHON" -c 'import hashlib,sys; print("\"py-%s\"" % hashlib.sha1(open(sys.argv[1],"rb").read()).hexdigest()[:16])' \
+      "$WORK/origin/syn/0/0/0")
+  # Hits for 3 s: with max-age=1 the tile goes stale within the first 2 and a hit after that
+  # revalidates it; an immutable tile never does. (Waiting is the point here: ages are in seconds.)
+  end=$(($(date +%s%N) + 3000000000))
+  while (($(date +%s%N) < end)); do
+    curl -sf "$D/syn/0/0/0" -o "$WORK/d_body" || fail "daemon GET failed"
+    cmp -s "$WORK/d_body" "$WORK/origin/syn/0/0/0" || fail "daemon GET: other bytes"
+    [[ $cc == maxage1 ]] && (($(origin_gets "$cc" | wc -l) >= 2)) && break
+    sleep 0.1 # paces the hits; not a synchronisation
+  done
+  if [[ $cc == maxage1 ]]; then
+    # The revalidation runs in the background: poll for it.
+    for ((i = 0; i < 100; i++)); do
+      (($(origin_gets "$cc" | wc -l) >= 2)) && break
+      sleep 0.05
+    done
+    reval=$(origin_gets "$cc" | sed -n 2p)
+    [[ $reval == "GET /syn/0/0/0 inm=$origin_tag 304" ]] ||
+      fail "max-age=1: revalidation was '$reval', want If-None-Match $origin_tag answered 304 (origin saw: $(origin_gets "$cc" | tr '\n' ';'))"
+  else
+    [[ $(origin_gets "$cc" | wc -l) == 1 ]] ||
+      fail "immutable: the origin saw $(origin_gets "$cc" | tr '\n' ';'), want one GET and no revalidation"
+  fi
+  kill -TERM "$DAEMON_PID"
+  wait "$DAEMON_PID" || fail "vts cache serve exited $? after SIGTERM"
+  DAEMON_PID=""
+  if [[ $cc == immutable ]]; then
+    note "after a restart the tile's lifetime comes from the disk cache: still no revalidation"
+    start_daemon cache "$VTS" cache serve --upstream "$ORIGIN/syn.json" \
+      --cache-dir "$WORK/cache_$cc" --listen 127.0.0.1:0 --no-admin --revalidate-after 0
+    curl -sf "$D/syn/0/0/0" -o /dev/null || fail "daemon GET after restart"
+    curl -sf "$D/syn/0/0/0" -o /dev/null || fail "daemon GET after restart"
+    kill -TERM "$DAEMON_PID"
+    wait "$DAEMON_PID" || fail "vts cache serve exited $? after SIGTERM"
+    DAEMON_PID=""
+    [[ $(origin_gets "$cc" | wc -l) == 1 ]] ||
+      fail "immutable after restart: the origin saw $(origin_gets "$cc" | tr '\n' ';')"
+  fi
   kill "$PY_PID"
   wait "$PY_PID" 2>/dev/null || true
   PY_PID=""

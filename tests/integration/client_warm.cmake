@@ -21,3 +21,9 @@ vts_warm_test(levels_and_region_select_exactly_the_geometry_s_tiles subset)
 vts_warm_test(kill_9_and_sigint_leave_a_valid_cache_that_resumes crash)
 vts_warm_test(bad_input_fails_cleanly_and_creates_no_cache bad_input)
 vts_warm_test(bbox_warms_exactly_the_footprint_tiles_of_the_box bbox)
+
+# A host that ignores Range (python3 -m http.server): one download of the whole archive, or a
+# clean failure over --max-download.
+vts_integration_test(warm.host_ignoring_range_is_downloaded_once_or_refused warm_no_range.sh)
+set_property(TEST integration.warm.host_ignoring_range_is_downloaded_once_or_refused APPEND
+             PROPERTY ENVIRONMENT "SQLITE3=${VTS_SQLITE3_CLI}")

@@ -172,7 +172,8 @@ TEST(CacheProvider, AStaleTileIsRevalidatedWithTheUpstreamsTagAndTheUpstreamAnsw
   TileCacheOptions co;
   co.disk = DiskCacheOptions{};
   co.disk->dir = d.path / "cache";
-  co.revalidate_after = std::chrono::seconds(0);  // every hit is stale
+  co.revalidate_after = std::chrono::seconds(0);  // every hit is stale, whatever the server says
+  co.fixed_revalidate_after = true;
   auto cache = TileCache::create(upstream, co);
   ASSERT_TRUE(cache.ok()) << cache.error().to_string();
   TileCache* c = cache->get();

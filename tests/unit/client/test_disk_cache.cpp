@@ -2,6 +2,7 @@
 // directly with SQLite (linked through vts::client) to look behind the cache's back: to check the
 // schema and totals, and to damage rows the way a failing disk would.
 #include "vts/client/disk_cache.hpp"
+#include "vts/client/source.hpp"
 #include "vts/test/temp_dir.hpp"
 
 #include "fault_vfs.hpp"
@@ -177,6 +178,42 @@ TEST(DiskCache, KeepsTilesetsApart) {
   EXPECT_EQ(raw.integer("SELECT COUNT(*) FROM tilesets"), 2);
 }
 
+TEST(DiskCache, KeepsEachTilesFreshnessLifetime) {
+  TempFolder dir;
+  CachedTile t = make_tile(100, 1);
+  t.fresh_for = 60;
+  {
+    auto cache = open_ok(options_for(dir.path()));
+    ASSERT_TRUE(cache->put("a", tid(1), t).ok());
+    ASSERT_TRUE(cache->put("a", tid(2), make_tile(100, 2)).ok());
+    ASSERT_TRUE(cache->set_validated("a", tid(2), 1800000000, kFreshForever).ok());
+  }
+  auto cache = open_ok(options_for(dir.path()));
+  EXPECT_EQ(cache->get("a", tid(1)).value()->fresh_for, 60);
+  const auto second = cache->get("a", tid(2)).value();
+  EXPECT_EQ(second->fresh_for, kFreshForever);
+  EXPECT_EQ(second->validated_unix, 1800000000);
+}
+
+TEST(DiskCache, UpgradesAVersion1CacheKeepingItsTiles) {
+  TempFolder dir;
+  const CachedTile t = make_tile(5000, 3);
+  {
+    auto cache = open_ok(options_for(dir.path()));
+    ASSERT_TRUE(cache->put("a", tid(1), t).ok());
+  }
+  {  // what version 1 looked like: no fresh_for column
+    RawDb raw(dir.path() / "cache.db");
+    raw.exec("ALTER TABLE tiles DROP COLUMN fresh_for; PRAGMA user_version = 1");
+  }
+  auto cache = open_ok(options_for(dir.path()));
+  expect_tile(*cache, "a", tid(1), t);
+  EXPECT_EQ(cache->get("a", tid(1)).value()->fresh_for, -1);
+  RawDb raw(cache->path());
+  EXPECT_EQ(raw.integer("PRAGMA user_version"), 2);
+  EXPECT_EQ(raw.text("PRAGMA integrity_check"), "ok");
+}
+
 TEST(DiskCache, CreatesTheSchemaInWalModeWithIncrementalVacuum) {
   TempFolder dir;
   auto cache = open_ok(options_for(dir.path()));
@@ -184,7 +221,7 @@ TEST(DiskCache, CreatesTheSchemaInWalModeWithIncrementalVacuum) {
   RawDb raw(cache->path());
   EXPECT_EQ(raw.text("PRAGMA journal_mode"), "wal");
   EXPECT_EQ(raw.integer("PRAGMA auto_vacuum"), 2);  // incremental
-  EXPECT_EQ(raw.integer("PRAGMA page_size"), 4096);
+  EXPECT_EQ(raw.integer("PRAGMA page_size"), 16384);
   EXPECT_EQ(raw.integer("PRAGMA user_version"), DiskCache::kSchemaVersion);
   for (const char* name : {"tilesets", "tiles", "totals", "tiles_key", "tiles_lru"})
     EXPECT_EQ(

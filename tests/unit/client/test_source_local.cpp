@@ -342,3 +342,20 @@ TEST(SourceLocalOpen, TileEtagRejectsPayloadsWithoutATileHeader) {
   ASSERT_FALSE(e.ok());
   EXPECT_EQ(vts::client::tile_etag({}).ok(), false);
 }
+
+TEST(SourceLocalOpen, CacheControlGivesTheFreshnessLifetime) {
+  using vts::client::cache_control_lifetime;
+  using vts::client::kFreshForever;
+  EXPECT_EQ(cache_control_lifetime(""), -1);
+  EXPECT_EQ(cache_control_lifetime("public"), -1);
+  EXPECT_EQ(cache_control_lifetime("public, max-age=3600"), 3600);
+  EXPECT_EQ(cache_control_lifetime("Max-Age=1"), 1);
+  EXPECT_EQ(cache_control_lifetime("max-age=\"60\""), 60);
+  EXPECT_EQ(cache_control_lifetime("public, max-age=31536000, immutable"), kFreshForever);
+  EXPECT_EQ(cache_control_lifetime("no-cache"), 0);
+  EXPECT_EQ(cache_control_lifetime("no-store, max-age=600"), 0);
+  EXPECT_EQ(cache_control_lifetime("s-maxage=60"), -1);
+  EXPECT_EQ(cache_control_lifetime("max-age=-5"), -1);
+  EXPECT_EQ(cache_control_lifetime("max-age=abc"), -1);
+  EXPECT_EQ(cache_control_lifetime("max-age=99999999999999999999999"), kFreshForever);
+}

@@ -79,7 +79,7 @@ struct VerifyReport {
 
 class DiskCache {
  public:
-  static constexpr int kSchemaVersion = 1;  // PRAGMA user_version of the databases we write
+  static constexpr int kSchemaVersion = 2;  // PRAGMA user_version of the databases we write
   static constexpr const char* kFileName = "cache.db";
   // Allowance on top of max_bytes for the files on disk, besides max_bytes / 8 for page and index
   // overhead (which holds for tiles of a few KiB or more: the cap counts payload bytes only): the
@@ -118,7 +118,9 @@ class DiskCache {
   };
   Status put_batch(std::string_view tileset, std::span<const BatchItem> items);
   // Records a successful revalidation (HTTP 304). not_found when the tile is not cached.
-  Status set_validated(std::string_view tileset, TileId id, std::int64_t validated_unix);
+  // fresh_for: the tile's new freshness lifetime (CachedTile::fresh_for).
+  Status set_validated(std::string_view tileset, TileId id, std::int64_t validated_unix,
+                       std::int64_t fresh_for = -1);
   // Pins (never evicted) or unpins a cached tile. not_found when the tile is not cached.
   Status set_pinned(std::string_view tileset, TileId id, bool pinned);
   // Deletes the tile if present (absent is not an error).

@@ -79,6 +79,13 @@ struct FetchRequest {
   // Requests with equal keys are merged into one transfer. Empty: url + range + if_none_match
   // (the validator is part of the default key so that a 304 never reaches a caller who sent none).
   std::string merge_key;
+  // Ranged requests only: when the server ignores Range and answers 200 with the whole resource,
+  // deliver the whole body (FetchResult::range_ignored says so) instead of the slice. Part of the
+  // default merge key.
+  bool whole_if_range_ignored = false;
+  // This request's body limit (too_large above it, as FetcherOptions::max_body_bytes); 0: that
+  // option's.
+  std::uint64_t max_body_bytes = 0;
 };
 
 struct FetchResult {
@@ -93,8 +100,14 @@ struct FetchResult {
   // and is retried.
   int status = 0;
   std::vector<std::uint8_t> body;
-  std::string etag;       // the ETag header as sent (quotes included); empty when absent
-  std::string vts_error;  // the Vts-Error header (docs/PROTOCOL.md); empty when absent
+  std::string etag;           // the ETag header as sent (quotes included); empty when absent
+  std::string vts_error;      // the Vts-Error header (docs/PROTOCOL.md); empty when absent
+  std::string cache_control;  // the Cache-Control header(s) as sent, joined by ", "; may be empty
+  // A ranged request the server answered with 200 and the whole resource (it ignores Range).
+  bool range_ignored = false;
+  // The final response's Content-Length; -1 when absent or unknown. Set on success and on a
+  // too_large error (then it is the size the server announced, when it announced one).
+  std::int64_t content_length = -1;
   // Set on transport failure (io / invalid_argument), retries exhausted on 5xx/429 (io, with
   // the last status kept), a too-long Retry-After (io), a body over max_body_bytes (too_large),
   // a ranged answer that never matched (truncated), a passed FetcherOptions::deadline (io), or

@@ -28,6 +28,10 @@ struct CachedTile {
   std::vector<std::uint8_t> payload;
   std::string etag;
   std::int64_t validated_unix = 0;  // seconds since the epoch
+  // How long after validated_unix the tile stays fresh, as the server's Cache-Control said
+  // (cache_control_lifetime()); -1 when it said nothing (TileCacheOptions::revalidate_after
+  // applies).
+  std::int64_t fresh_for = -1;
   bool pinned = false;  // as read from the disk cache (its row is pinned); not used by RamCache
 };
 

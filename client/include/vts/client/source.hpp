@@ -70,7 +70,19 @@ struct SourceTile {
   std::string etag;
   std::optional<Error> error;
   std::optional<SourceTransfer> transfer;  // set by sources that made one HTTP request for it
+  // Seconds the tile stays fresh, from the response's Cache-Control (cache_control_lifetime());
+  // -1 when the source does not know (no header, a local archive).
+  std::int64_t fresh_for = -1;
 };
+
+// "Fresh for ever": what `immutable` means to a cache (cache_control_lifetime()).
+inline constexpr std::int64_t kFreshForever = std::int64_t{1} << 40;
+
+// The freshness lifetime a Cache-Control header value gives a cached response, in seconds:
+// no-store / no-cache / must-revalidate with max-age=0 → 0 (revalidate at every use); immutable
+// → kFreshForever; max-age=N → N; none of these (or an empty value) → -1, "not said".
+// Directives are case-insensitive and comma-separated; s-maxage and unknown ones are ignored.
+std::int64_t cache_control_lifetime(std::string_view value);
 
 using SourceCallback = std::function<void(SourceTile&&)>;
 
@@ -96,8 +108,16 @@ class TileSource {
   virtual void cancel(Handle h) = 0;
 };
 
+// The default of SourceOptions::max_download (and of `--max-download`): 256 MiB.
+inline constexpr std::uint64_t kDefaultMaxDownload = std::uint64_t{256} << 20;
+
 struct SourceOptions {
   FetcherOptions fetcher;  // for HTTP sources
+  // A remote archive whose host ignores Range (answers 200 with the whole file, e.g.
+  // `python3 -m http.server`) is downloaded once, by the opening read, and held in memory when it
+  // is at most this many bytes; every tile is then read from that copy. A bigger one fails to
+  // open (unsupported, naming the host's behaviour) as soon as its size is known. 0: never.
+  std::uint64_t max_download = kDefaultMaxDownload;
   // Extra headers (e.g. "Authorization: Bearer ...") go in fetcher.headers.
 };
 

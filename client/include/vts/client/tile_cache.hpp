@@ -14,7 +14,8 @@
 // fails (up to `corrupt_retries` times; then an error, ErrorCode::checksum or corrupt); rows read
 // from disk are checked by the disk cache's own checksum and again here (a row that fails is
 // dropped and fetched again). So a tile of another size or codec never reaches RAM, disk or a
-// caller. A tile older than `revalidate_after` is delivered at once and then
+// caller. A tile older than its freshness lifetime (its server's Cache-Control max-age / immutable,
+// else `revalidate_after`) is delivered at once and then
 // revalidated at the lowest priority (If-None-Match; 304 refreshes its age). Tiles the source
 // says are absent are remembered for the session and never asked for again.
 //
@@ -37,10 +38,14 @@
 namespace vts::client {
 
 struct TileCacheOptions {
-  std::size_t ram_bytes = 256u << 20;           // 0 = no RAM cache
-  std::optional<DiskCacheOptions> disk;         // none = no disk cache
-  std::chrono::seconds revalidate_after{3600};  // 0 = revalidate on every disk/RAM hit
-  int corrupt_retries = 2;                      // re-fetches of a payload that failed its checksum
+  std::size_t ram_bytes = 256u << 20;    // 0 = no RAM cache
+  std::optional<DiskCacheOptions> disk;  // none = no disk cache
+  // A tile's freshness lifetime when its server's Cache-Control stated none (see
+  // cache_control_lifetime()): max-age=N → N s, immutable → never stale, no-cache/no-store → stale
+  // at every hit. 0 = revalidate on every disk/RAM hit.
+  std::chrono::seconds revalidate_after{3600};
+  bool fixed_revalidate_after = false;  // true: revalidate_after for every tile, whatever it said
+  int corrupt_retries = 2;              // re-fetches of a payload that failed its checksum
   // Where failed disk writes (disk full, I/O error, a damaged or read-only cache.db) are
   // reported, one line without a newline, called on the disk thread: the first failure at once,
   // then at most one line per `disk_report_interval` counting the failures since the last line,
