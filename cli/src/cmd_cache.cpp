@@ -224,7 +224,8 @@ Runner add_cache(CLI::App& app) {
       ->check(CLI::Range(0, 256));
   c->add_option("--access-log", a->access_log, "JSON-lines access log: FILE, or - for stdout");
   c->add_option("--revalidate-after", a->revalidate_seconds,
-                "Seconds after which a cached tile is revalidated with the upstream when served")
+                "Seconds after which a cached tile is revalidated with the upstream when the "
+                "upstream's Cache-Control gave no lifetime (max-age, immutable, no-cache)")
       ->check(CLI::Range(0, 31536000))
       ->capture_default_str();
   c->add_option("--reconnect-interval", a->reconnect_seconds,
