@@ -7,6 +7,7 @@
 #include <string>
 
 #include "commands.hpp"
+#include "image_target.hpp"
 #include "progress.hpp"
 #include "vts/client/saved_source.hpp"
 #include "vts/client/source.hpp"
@@ -23,6 +24,7 @@ struct WarmArgs {
   unsigned concurrency = 32;
   unsigned max_errors = 100;
   bool json = false, quiet = false;
+  ImageTargetArgs image;
 };
 
 std::string levels_text(int a, int b) {
@@ -34,6 +36,7 @@ std::string levels_text(int a, int b) {
 Result<std::shared_ptr<client::TileSource>> open_warm_source(const WarmArgs& a, bool& offline) {
   client::SourceOptions so;
   so.fetcher.max_in_flight = a.concurrency;
+  if (auto st = apply_image_target(a.image, so); !st) return st.error();
   auto opened = client::open_source(a.url, so);
   if (!opened && opened.error().code == ErrorCode::io) {
     if (auto saved = client::load_source_info(a.cache_dir, a.url)) {
@@ -220,8 +223,8 @@ Runner add_warm(CLI::App& app) {
   CLI::App* c = app.add_subcommand(
       "warm", "Fill a disk cache with a tileset's tiles (pinned) for offline use; resumable");
   c->add_option("url", a->url,
-                "Tileset: http://host:port/NAME (vts serve), a TileJSON URL, a remote .pmtiles "
-                "URL or a local archive")
+                "Tileset: http://host:port/NAME (vts serve), a TileJSON URL, a {z}/{x}/{y} "
+                "template, a remote .pmtiles URL or a local archive")
       ->required();
   c->add_option("--cache-dir", a->cache_dir, "Cache folder (created if missing)")->required();
   c->add_option("--levels", a->levels, "Levels A-B (or one level A); default all");
@@ -238,6 +241,7 @@ Runner add_warm(CLI::App& app) {
       ->capture_default_str();
   c->add_option("--max-errors", a->max_errors, "Stop after this many failed tiles (0: never)")
       ->capture_default_str();
+  add_image_target_options(c, a->image);
   c->add_flag("--json", a->json, "Print the summary as JSON on stdout");
   c->add_flag("-q,--quiet", a->quiet, "No progress or summary");
   return [a] { return run_warm(*a); };

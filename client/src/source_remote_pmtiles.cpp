@@ -41,6 +41,7 @@
 #include <utility>
 
 #include "fetching_source.hpp"
+#include "image_layout.hpp"
 #include "vts/client/source.hpp"
 #include "vts/protocol/pmtiles.hpp"
 
@@ -397,7 +398,9 @@ class RemoteArchiveSource final : public FetchingSource<RemotePending> {
       if (Status s = check_range_result(r, url_, "tile " + name, offset, length); !s) {
         return fail(h, s.error(), true);
       }
-      Result<std::string> etag = tile_etag(r.body);
+      Result<std::string> etag = info_.image_format.empty()
+                                     ? tile_etag(r.body)
+                                     : stock_tile_etag(info_.version, offset, length);
       if (!etag) {
         return fail(h,
                     make_error(ErrorCode::corrupt,
@@ -490,6 +493,12 @@ Status check_header(const pmtiles::Header& h, std::uint64_t first_read_size) {
   return {};
 }
 
+// Raster tile types a stock archive may hold (image tilesets, image_layout.hpp).
+bool is_stock_image(const pmtiles::Header& h) {
+  return h.tile_type == pmtiles::TileType::png || h.tile_type == pmtiles::TileType::jpeg ||
+         h.tile_type == pmtiles::TileType::webp;
+}
+
 Error in_archive(const std::string& url, Error e) {
   e.message = url + ": " + e.message;
   return e;
@@ -564,16 +573,24 @@ Result<std::unique_ptr<TileSource>> open_remote_archive(std::string_view url_vie
   }
   std::string metadata_json(decoded_metadata->begin(), decoded_metadata->end());
   Result<TilesetInfo> info = TilesetInfo::from_json(metadata_json);
-  if (!info) return in_archive(url, std::move(info).error());
+  // A stock archive of standard images (no "vtstream" metadata): an image tileset.
+  const bool stock = !info && info.error().code == ErrorCode::unsupported && is_stock_image(h);
+  if (!info && !stock) return in_archive(url, std::move(info).error());
 
   Opened opened;
   opened.header = h;
   opened.root = std::move(*root);
-  opened.info.info = std::move(*info);
-  opened.info.key = url;
+  if (stock) {
+    auto image = stock_archive_info(h, metadata_json, url, options);
+    if (!image) return std::move(image).error();
+    opened.info = std::move(*image);
+  } else {
+    opened.info.info = std::move(*info);
+    opened.info.key = url;
+    opened.info.description_json = std::move(metadata_json);
+  }
   opened.info.version =
       pmtiles::archive_version(bytes.first(pmtiles::kHeaderSize), root_bytes, stored_metadata);
-  opened.info.description_json = std::move(metadata_json);
   return std::unique_ptr<TileSource>(std::make_unique<RemoteArchiveSource>(
       std::move(*fetcher), url, std::move(opened), options.fetcher.max_body_bytes));
 }

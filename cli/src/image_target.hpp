@@ -1,0 +1,22 @@
+// --bounds and --zoom: the layout of an XYZ/TMS template target (which says nothing of itself),
+// or an override of what a third-party TileJSON or archive says. Shared by loadtest, warm, view.
+#pragma once
+
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+#include "vts/client/source.hpp"
+#include "vts/protocol/result.hpp"
+
+namespace vts::cli {
+
+struct ImageTargetArgs {
+  std::string bounds, zoom;
+};
+
+void add_image_target_options(CLI::App* c, ImageTargetArgs& a);
+// Sets options.bounds and the zoom range; invalid_argument naming the flag.
+Status apply_image_target(const ImageTargetArgs& a, client::SourceOptions& options);
+
+}  // namespace vts::cli

@@ -1,0 +1,108 @@
+#!/usr/bin/env bash
+# vts loadtest and vts warm against third-party tile servers on loopback: nginx over a folder of
+# PNG tiles made by the real gdal2tiles.py (an XYZ template, the same folder as TMS with {-y}, a
+# third-party TileJSON pointing at it) and a stock raster PMTiles archive (vts export: no
+# "vtstream" metadata, tile type png) served by nginx with Range. Each run has requests and no
+# errors; warm fetches exactly the tiles of zooms 0-3 that exist; --decode counts a corrupted PNG as
+# "undecodable" (and without --decode it is not an error); a template that 404s counts http_404
+# errors and never a checksum error; a template without --zoom is refused naming --zoom.
+source "$(dirname "$0")/lib.sh"
+source "$(dirname "$0")/serve_lib.sh"
+source "$(dirname "$0")/deploy_lib.sh"
+require_tool gdal2tiles.py
+require_tool gdal_translate
+
+note "PNG tiles of zooms 0-3 by gdal2tiles.py (XYZ and TMS folders) and a stock PMTiles archive"
+WWW="$WORK/www"
+mkdir -p "$WWW"
+expect_ok gdal_translate -q -of GTiff -outsize 1024 512 -a_srs EPSG:4326 \
+  -a_ullr -180 85 180 -85 "$EARTH" "$WORK/earth.tif"
+expect_ok gdal2tiles.py -q -z 0-3 -w none --processes=1 --xyz "$WORK/earth.tif" "$WWW/xyz"
+expect_ok gdal2tiles.py -q -z 0-3 -w none --processes=1 "$WORK/earth.tif" "$WWW/tms"
+n=$(find "$WWW/xyz" -name '*.png' | wc -l)
+[[ $n == 85 ]] || fail "gdal2tiles wrote $n PNG tiles, expected 85 (zooms 0-3 of the world)"
+# The root tile, which every view asks for, replaced by bytes that are no PNG.
+cp -r "$WWW/xyz" "$WWW/bad"
+printf 'this is not a PNG' >"$WWW/bad/0/0/0.png"
+build_earth "$WORK/earth.pmtiles" --quiet
+expect_ok "$VTS" export "$WORK/earth.pmtiles" -o "$WWW/stock.pmtiles" --format png --quiet
+
+nginx_prepare "$WORK/nginx"
+cat >"$N/conf.d/tiles.conf" <<CONF
+server {
+  listen 127.0.0.1:$HTTP_PORT;
+  root $WWW;
+}
+CONF
+if ((EUID == 0)); then chmod -R a+rX "$WWW"; fi
+start_nginx "$N"
+S="http://127.0.0.1:$HTTP_PORT"
+wait_http "$S/xyz/0/0/0.png"
+cat >"$WWW/tilejson.json" <<JSON
+{"tilejson": "2.2.0", "name": "earth", "scheme": "xyz", "minzoom": 0, "maxzoom": 3,
+ "bounds": [-180, -85, 180, 85], "tiles": ["$S/xyz/{z}/{x}/{y}.png"]}
+JSON
+if ((EUID == 0)); then chmod a+r "$WWW/tilejson.json"; fi
+# Range requests work on this nginx (a PMTiles reader needs them).
+[[ $(curl -s -o /dev/null -w '%{http_code}' -r 0-126 "$S/stock.pmtiles") == 206 ]] ||
+  fail "nginx does not answer Range requests for $S/stock.pmtiles"
+
+# loadtest_json NAME URL ARGS...: a 2 s load test, its JSON in $WORK/NAME.json.
+loadtest_json() {
+  local name=$1 url=$2
+  shift 2
+  expect_ok "$VTS" loadtest "$url" --viewers 2 --duration 2 --fps 10 --json --quiet "$@"
+  cp "$OUT" "$WORK/$name.json"
+}
+
+# NAME|URL|ARGS|TILES: the gdal2tiles folder has all 85 tiles of zooms 0-3; the exported plain
+# 2048x1024 image covers the top half of the Web Mercator square: 1 + 2 + 8 + 32 = 43 tiles.
+for target in "xyz|$S/xyz/{z}/{x}/{y}.png|--zoom 0-3|85" \
+  "tms|$S/tms/{z}/{x}/{-y}.png|--zoom 0-3|85" "tilejson|$S/tilejson.json||85" \
+  "pmtiles|$S/stock.pmtiles||43"; do
+  IFS='|' read -r name url extra tiles <<<"$target"
+  note "loadtest $name: requests, bytes, no errors"
+  # shellcheck disable=SC2086  # extra is a list of arguments
+  loadtest_json "$name" "$url" $extra
+  json_check "$WORK/$name.json" 'j.totals.requests > 0 && j.totals.errors === 0 && j.totals.bytes > 0' \
+    "$name: requests > 0, bytes, 0 errors"
+  note "warm $name: exactly its $tiles tiles of zooms 0-3 from the network, the rest absent"
+  # shellcheck disable=SC2086
+  expect_ok "$VTS" warm "$url" --cache-dir "$WORK/cache-$name" --json --quiet $extra
+  cp "$OUT" "$WORK/warm-$name.json"
+  json_check "$WORK/warm-$name.json" \
+    "j.tiles_total === 85 && j.from_network === $tiles && j.absent === 85 - $tiles &&
+     j.failed === 0 && j.complete === true" "$name: warm fetched the $tiles tiles"
+done
+# 0/0/0 of the stock archive is the exported root tile, a PNG byte for byte in the cache.
+[[ $(sqlite3 "$WORK/cache-xyz/cache.db" "SELECT hex(substr(payload, 2, 3)) FROM tiles \
+  WHERE z = 0") == 504E47 ]] || fail "the warmed root tile is not the server's PNG"
+
+note "--decode: the corrupted root PNG is an undecodable error; without --decode it is not"
+loadtest_json nodecode "$S/bad/{z}/{x}/{y}.png" --zoom 0-3
+json_check "$WORK/nodecode.json" 'j.totals.errors === 0' "no decode, no error"
+loadtest_json decode "$S/bad/{z}/{x}/{y}.png" --zoom 0-3 --decode
+json_check "$WORK/decode.json" \
+  'j.errors_by_kind.undecodable > 0 && j.totals.errors === j.errors_by_kind.undecodable' \
+  "--decode counts the corrupted PNG as undecodable, and only it"
+loadtest_json decode_ok "$S/xyz/{z}/{x}/{y}.png" --zoom 0-3 --decode
+json_check "$WORK/decode_ok.json" 'j.totals.requests > 0 && j.totals.errors === 0' "valid PNGs decode"
+
+note "a template that 404s: http_404 errors, no checksum errors"
+loadtest_json missing "$S/nope/{z}/{x}/{y}.png" --zoom 0-3
+json_check "$WORK/missing.json" \
+  'j.totals.errors > 0 && j.errors_by_kind.http_404 === j.totals.errors && !("checksum" in j.errors_by_kind)' \
+  "every error is http_404"
+
+note "--bounds limits requests to the tiles over the box"
+expect_ok "$VTS" warm "$S/xyz/{z}/{x}/{y}.png" --zoom 0-3 --bounds 0,0,90,60 \
+  --cache-dir "$WORK/cache-bounds" --json --quiet
+cp "$OUT" "$WORK/warm-bounds.json"
+# z0: 1, z1: 1 (x 1, y 0), z2: 1 (x 2, y 1), z3: x 4-5, y 2-3 = 4 tiles.
+json_check "$WORK/warm-bounds.json" \
+  'j.from_network === 7 && j.absent === j.tiles_total - 7 && j.failed === 0' "7 tiles over the box"
+
+note "a template without --zoom is refused, naming --zoom"
+expect_clean_failure "$VTS" loadtest "$S/xyz/{z}/{x}/{y}.png" --duration 1
+grep -q -- '--zoom' "$ERR" || fail "the refusal does not name --zoom: $(cat "$ERR")"
+note "ok"
