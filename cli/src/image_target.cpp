@@ -27,4 +27,11 @@ Status apply_image_target(const ImageTargetArgs& a, client::SourceOptions& o) {
   return {};
 }
 
+Result<std::unique_ptr<client::TileSource>> open_with_layout(const std::string& location,
+                                                             const ImageTargetArgs& a,
+                                                             client::SourceOptions options) {
+  if (auto st = apply_image_target(a, options); !st) return st.error();
+  return client::open_source(location, std::move(options));
+}
+
 }  // namespace vts::cli

@@ -2,6 +2,7 @@
 // or an override of what a third-party TileJSON or archive says. Shared by loadtest, warm, view.
 #pragma once
 
+#include <memory>
 #include <string>
 
 #include <CLI/CLI.hpp>
@@ -18,5 +19,10 @@ struct ImageTargetArgs {
 void add_image_target_options(CLI::App* c, ImageTargetArgs& a);
 // Sets options.bounds and the zoom range; invalid_argument naming the flag.
 Status apply_image_target(const ImageTargetArgs& a, client::SourceOptions& options);
+
+// apply_image_target() then client::open_source().
+Result<std::unique_ptr<client::TileSource>> open_with_layout(const std::string& location,
+                                                             const ImageTargetArgs& a,
+                                                             client::SourceOptions options = {});
 
 }  // namespace vts::cli

@@ -2,7 +2,7 @@
 # vts loadtest and vts warm against third-party tile servers on loopback: nginx over a folder of
 # PNG tiles made by the real gdal2tiles.py (an XYZ template, the same folder as TMS with {-y}, a
 # third-party TileJSON pointing at it) and a stock raster PMTiles archive (vts export: no
-# "vtstream" metadata, tile type png) served by nginx with Range. Each run has requests and no
+# "vtstream" metadata, tile type png) served by nginx with Range; vts view shows the templates. Each run has requests and no
 # errors; warm fetches exactly the tiles of zooms 0-3 that exist; --decode counts a corrupted PNG as
 # "undecodable" (and without --decode it is not an error); a template that 404s counts http_404
 # errors and never a checksum error; a template without --zoom is refused naming --zoom.
@@ -105,4 +105,25 @@ json_check "$WORK/warm-bounds.json" \
 note "a template without --zoom is refused, naming --zoom"
 expect_clean_failure "$VTS" loadtest "$S/xyz/{z}/{x}/{y}.png" --duration 1
 grep -q -- '--zoom' "$ERR" || fail "the refusal does not name --zoom: $(cat "$ERR")"
+note "vts view --headless of the XYZ and the TMS template: complete, no errors, the same picture"
+XVFB=(xvfb-run -a -s "-screen 0 1280x1024x24")
+require_tool xvfb-run
+for name in xyz tms; do
+  url="$S/$name/{z}/{x}/{y}.png"
+  [[ $name == tms ]] && url="$S/tms/{z}/{x}/{-y}.png"
+  expect_ok "${XVFB[@]}" "$VTS" view "$url" --zoom 0-3 --headless --frames 200 --until-complete \
+    --screenshot "$WORK/view-$name.png" --json --width 320 --height 200
+  cp "$OUT" "$WORK/view-$name.json"
+  json_check "$WORK/view-$name.json" 'j.complete_at !== null && j.frames.at(-1).errors === 0 &&
+    j.frames.at(-1).resident > 0' "$name: the view completes with resident tiles, no errors"
+done
+cmp -s "$WORK/view-xyz.png" "$WORK/view-tms.png" || fail "the XYZ and TMS views differ"
+# Not one flat colour: the decoded Earth shows (its channels' min and max differ).
+python3 - "$WORK/view-xyz.png" <<'EOF_PY' || fail "the view of the XYZ template is one flat colour"
+import sys, zlib, struct
+data = open(sys.argv[1], "rb").read()
+idat = b"".join(data[i + 8:i + 8 + struct.unpack(">I", data[i:i + 4])[0]]
+                for i in range(8, len(data)) if data[i + 4:i + 8] == b"IDAT")
+sys.exit(0 if len(set(zlib.decompress(idat))) > 16 else 1)
+EOF_PY
 note "ok"
