@@ -94,6 +94,38 @@ json_check "$WORK/missing.json" \
   'j.totals.errors > 0 && j.errors_by_kind.http_404 === j.totals.errors && !("checksum" in j.errors_by_kind)' \
   "every error is http_404"
 
+note "nothing listening: every error is of kind connect"
+dead=$(free_port)
+loadtest_json dead "http://127.0.0.1:$dead/{z}/{x}/{y}.png" --zoom 0-3
+json_check "$WORK/dead.json" 'j.totals.errors > 0 && j.errors_by_kind.connect === j.totals.errors' \
+  "connection refused counts as connect"
+
+note "bodies shorter than their Content-Length: every error is of kind truncated"
+timeout 120 python3 - "$WORK/short.port" >"$LOGS/short.out" 2>&1 <<'EOF_PY' &
+import http.server, sys
+class H(http.server.BaseHTTPRequestHandler):
+    def do_GET(self):
+        self.send_response(200)
+        self.send_header("Content-Length", "1000")
+        self.send_header("Connection", "close")
+        self.end_headers()
+        self.wfile.write(b"\x89PNG short")
+        self.close_connection = True
+    def log_message(self, *a):
+        pass
+s = http.server.ThreadingHTTPServer(("127.0.0.1", 0), H)
+open(sys.argv[1] + ".tmp", "w").write(str(s.server_address[1]))
+__import__("os").rename(sys.argv[1] + ".tmp", sys.argv[1])
+s.serve_forever()
+EOF_PY
+SHORT_PID=$!
+for ((i = 0; i < 100; i++)); do [[ -s $WORK/short.port ]] && break; sleep 0.05; done
+[[ -s $WORK/short.port ]] || fail "the short-body server did not start: $(cat "$LOGS/short.out")"
+loadtest_json short "http://127.0.0.1:$(cat "$WORK/short.port")/{z}/{x}/{y}.png" --zoom 0-3
+kill "$SHORT_PID" 2>/dev/null || true
+json_check "$WORK/short.json" \
+  'j.totals.errors > 0 && j.errors_by_kind.truncated === j.totals.errors' "short bodies: truncated"
+
 note "--bounds limits requests to the tiles over the box"
 expect_ok "$VTS" warm "$S/xyz/{z}/{x}/{y}.png" --zoom 0-3 --bounds 0,0,90,60 \
   --cache-dir "$WORK/cache-bounds" --json --quiet
