@@ -11,6 +11,7 @@ source "$(dirname "$0")/serve_lib.sh"
 source "$(dirname "$0")/deploy_lib.sh"
 require_tool gdal2tiles.py
 require_tool gdal_translate
+require_tool sqlite3
 
 note "PNG tiles of zooms 0-3 by gdal2tiles.py (XYZ and TMS folders) and a stock PMTiles archive"
 WWW="$WORK/www"
@@ -42,7 +43,10 @@ cat >"$WWW/tilejson.json" <<JSON
 {"tilejson": "2.2.0", "name": "earth", "scheme": "xyz", "minzoom": 0, "maxzoom": 3,
  "bounds": [-180, -85, 180, 85], "tiles": ["$S/xyz/{z}/{x}/{y}.png"]}
 JSON
-if ((EUID == 0)); then chmod a+r "$WWW/tilejson.json"; fi
+cat >"$WWW/tms.json" <<JSON
+{"tilejson": "3.0.0", "scheme": "tms", "maxzoom": 3, "tiles": ["tms/{z}/{x}/{y}.png"]}
+JSON
+if ((EUID == 0)); then chmod a+r "$WWW/tilejson.json" "$WWW/tms.json"; fi
 # Range requests work on this nginx (a PMTiles reader needs them).
 [[ $(curl -s -o /dev/null -w '%{http_code}' -r 0-126 "$S/stock.pmtiles") == 206 ]] ||
   fail "nginx does not answer Range requests for $S/stock.pmtiles"
@@ -59,6 +63,7 @@ loadtest_json() {
 # 2048x1024 image covers the top half of the Web Mercator square: 1 + 2 + 8 + 32 = 43 tiles.
 for target in "xyz|$S/xyz/{z}/{x}/{y}.png|--zoom 0-3|85" \
   "tms|$S/tms/{z}/{x}/{-y}.png|--zoom 0-3|85" "tilejson|$S/tilejson.json||85" \
+  "tmsjson|$S/tms.json||85" \
   "pmtiles|$S/stock.pmtiles||43"; do
   IFS='|' read -r name url extra tiles <<<"$target"
   note "loadtest $name: requests, bytes, no errors"
@@ -74,9 +79,21 @@ for target in "xyz|$S/xyz/{z}/{x}/{y}.png|--zoom 0-3|85" \
     "j.tiles_total === 85 && j.from_network === $tiles && j.absent === 85 - $tiles &&
      j.failed === 0 && j.complete === true" "$name: warm fetched the $tiles tiles"
 done
-# 0/0/0 of the stock archive is the exported root tile, a PNG byte for byte in the cache.
-[[ $(sqlite3 "$WORK/cache-xyz/cache.db" "SELECT hex(substr(payload, 2, 3)) FROM tiles \
-  WHERE z = 0") == 504E47 ]] || fail "the warmed root tile is not the server's PNG"
+# Every cache holds the server's PNGs byte for byte at the same z/x/y: TMS rows ({-y}, a
+# TileJSON with "scheme": "tms" and a relative template) were flipped right.
+tiles_of() {
+  sqlite3 "$WORK/cache-$1/cache.db" "SELECT z, x, y, hex(payload) FROM tiles ORDER BY z, x, y"
+}
+[[ $(tiles_of xyz | wc -l) == 85 && $(tiles_of xyz | cut -d'|' -f4 | cut -c1-8 | sort -u) == 89504E47 ]] ||
+  fail "the warmed tiles are not the server's 85 PNGs"
+for name in tms tilejson tmsjson; do
+  [[ $(tiles_of xyz | md5sum) == $(tiles_of "$name" | md5sum) ]] ||
+    fail "the $name cache holds other tiles than the xyz cache"
+done
+
+note "the viewers' disk caches take image tiles"
+loadtest_json disk "$S/xyz/{z}/{x}/{y}.png" --zoom 0-3 --cache disk --cache-dir "$WORK/lt-caches"
+json_check "$WORK/disk.json" 'j.totals.requests > 0 && j.totals.errors === 0' "--cache disk"
 
 note "--decode: the corrupted root PNG is an undecodable error; without --decode it is not"
 loadtest_json nodecode "$S/bad/{z}/{x}/{y}.png" --zoom 0-3
@@ -158,4 +175,11 @@ idat = b"".join(data[i + 8:i + 8 + struct.unpack(">I", data[i:i + 4])[0]]
                 for i in range(8, len(data)) if data[i + 4:i + 8] == b"IDAT")
 sys.exit(0 if len(set(zlib.decompress(idat))) > 16 else 1)
 EOF_PY
+note "nginx gone: vts warm of the TileJSON checks its cache offline, every tile still there"
+kill -QUIT "$NGINX_PID"
+wait "$NGINX_PID" 2>/dev/null || true
+expect_ok "$VTS" warm "$S/tilejson.json" --cache-dir "$WORK/cache-tilejson" --json --quiet
+cp "$OUT" "$WORK/warm-offline.json"
+json_check "$WORK/warm-offline.json" \
+  'j.already_cached === 85 && j.from_network === 0 && j.complete === true' "offline: 85 cached"
 note "ok"
