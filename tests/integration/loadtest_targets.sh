@@ -71,6 +71,9 @@ for target in "xyz|$S/xyz/{z}/{x}/{y}.png|--zoom 0-3|85" \
   loadtest_json "$name" "$url" $extra
   json_check "$WORK/$name.json" 'j.totals.requests > 0 && j.totals.errors === 0 && j.totals.bytes > 0' \
     "$name: requests > 0, bytes, 0 errors"
+  json_check "$WORK/$name.json" 'j.latency_ns.first_visible.count > 0 &&
+    j.latency_ns.full_resolution.count > 0 && j.latency_ns.total.count === j.totals.requests' \
+    "$name: moves timed to first visible tile and full resolution"
   note "warm $name: exactly its $tiles tiles of zooms 0-3 from the network, the rest absent"
   # shellcheck disable=SC2086
   expect_ok "$VTS" warm "$url" --cache-dir "$WORK/cache-$name" --json --quiet $extra
@@ -151,9 +154,17 @@ cp "$OUT" "$WORK/warm-bounds.json"
 json_check "$WORK/warm-bounds.json" \
   'j.from_network === 7 && j.absent === j.tiles_total - 7 && j.failed === 0' "7 tiles over the box"
 
-note "a template without --zoom is refused, naming --zoom"
+note "a template without --zoom, a bad --zoom or --bounds: refused, naming the option"
 expect_clean_failure "$VTS" loadtest "$S/xyz/{z}/{x}/{y}.png" --duration 1
 grep -q -- '--zoom' "$ERR" || fail "the refusal does not name --zoom: $(cat "$ERR")"
+for bad in "--zoom 3-1" "--zoom x" "--zoom 0-25" "--zoom 0-3 --bounds 1,2,3" \
+  "--zoom 0-3 --bounds 10,0,5,10"; do
+  # shellcheck disable=SC2086  # bad is flags and their values
+  expect_clean_failure "$VTS" warm "$S/xyz/{z}/{x}/{y}.png" $bad --cache-dir "$WORK/c-bad"
+  [[ $bad == *bounds* ]] && word=bounds || word=zoom
+  grep -q -- "$word" "$ERR" || fail "'$bad' refused without naming $word: $(cat "$ERR")"
+  [[ ! -e $WORK/c-bad ]] || fail "'$bad' was refused but made a cache folder"
+done
 note "vts view --headless of the XYZ and the TMS template: complete, no errors, the same picture"
 XVFB=(xvfb-run -a -s "-screen 0 1280x1024x24")
 require_tool xvfb-run
