@@ -124,6 +124,16 @@ bool etag_matches(std::string_view header, std::string_view etag) {
 }
 
 Result<std::unique_ptr<TileSource>> open_source(std::string_view location, SourceOptions options) {
+  if (options.vtstream_only) {
+    options.vtstream_only = false;
+    auto opened = open_source(location, std::move(options));
+    if (opened && !(*opened)->info().image_format.empty()) {
+      return make_error(ErrorCode::unsupported,
+                        std::string(trim(location)) + " is a tileset of standard image tiles (" +
+                            (*opened)->info().image_format + "), not a vtstream tileset");
+    }
+    return opened;
+  }
   const std::string_view loc = trim(location);
   if (loc.empty()) return make_error(ErrorCode::invalid_argument, "empty tileset location");
 

@@ -186,6 +186,11 @@ idat = b"".join(data[i + 8:i + 8 + struct.unpack(">I", data[i:i + 4])[0]]
                 for i in range(8, len(data)) if data[i + 4:i + 8] == b"IDAT")
 sys.exit(0 if len(set(zlib.decompress(idat))) > 16 else 1)
 EOF_PY
+note "vts cache serve refuses a server of image tiles, saying so"
+expect_clean_failure "$VTS" cache serve --upstream "$S/tilejson.json" --cache-dir "$WORK/daemon" \
+  --listen 127.0.0.1:0
+grep -q "standard image tiles" "$ERR" || fail "the refusal does not say why: $(cat "$ERR")"
+
 note "nginx gone: vts warm of the TileJSON checks its cache offline, every tile still there"
 kill -QUIT "$NGINX_PID"
 wait "$NGINX_PID" 2>/dev/null || true

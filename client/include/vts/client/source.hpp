@@ -116,6 +116,9 @@ struct SourceOptions {
   std::optional<LonLatBounds> bounds;
   int min_zoom = -1, max_zoom = -1;
   std::uint32_t tile_size = 256;  // a template's tile size in pixels
+  // open_source() refuses image tilesets (unsupported), for users that serve our tiles only
+  // (the cache daemon).
+  bool vtstream_only = false;
 };
 
 // Where an image tileset's tiles are and what they are: a template's or TileJSON's layout.
