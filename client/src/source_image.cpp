@@ -239,6 +239,8 @@ Result<ImageLayout> read_image_tilejson(std::span<const std::uint8_t> body, cons
   l.format = j.contains("format") && j["format"].is_string() ? j["format"].get<std::string>()
                                                              : format_from_suffix(l.tiles);
   if (l.format == "jpg") l.format = "jpeg";
+  if (l.format == "pbf" || l.format == "mvt" || j.contains("vector_layers"))
+    return make_error(ErrorCode::unsupported, url + " describes vector tiles, not images");
   if (options.min_zoom >= 0) l.min_zoom = options.min_zoom;
   if (options.max_zoom >= 0) l.max_zoom = options.max_zoom;
   if (options.bounds) l.bounds = *options.bounds;

@@ -46,7 +46,10 @@ JSON
 cat >"$WWW/tms.json" <<JSON
 {"tilejson": "3.0.0", "scheme": "tms", "maxzoom": 3, "tiles": ["tms/{z}/{x}/{y}.png"]}
 JSON
-if ((EUID == 0)); then chmod a+r "$WWW/tilejson.json" "$WWW/tms.json"; fi
+cat >"$WWW/vector.json" <<JSON
+{"tilejson": "3.0.0", "tiles": ["$S/v/{z}/{x}/{y}.pbf"], "vector_layers": [{"id": "roads"}]}
+JSON
+if ((EUID == 0)); then chmod a+r "$WWW/tilejson.json" "$WWW/tms.json" "$WWW/vector.json"; fi
 # Range requests work on this nginx (a PMTiles reader needs them).
 [[ $(curl -s -o /dev/null -w '%{http_code}' -r 0-126 "$S/stock.pmtiles") == 206 ]] ||
   fail "nginx does not answer Range requests for $S/stock.pmtiles"
@@ -186,6 +189,10 @@ idat = b"".join(data[i + 8:i + 8 + struct.unpack(">I", data[i:i + 4])[0]]
                 for i in range(8, len(data)) if data[i + 4:i + 8] == b"IDAT")
 sys.exit(0 if len(set(zlib.decompress(idat))) > 16 else 1)
 EOF_PY
+note "a TileJSON of vector tiles is refused, saying so"
+expect_clean_failure "$VTS" loadtest "$S/vector.json" --duration 1
+grep -q "vector tiles" "$ERR" || fail "the refusal does not say why: $(cat "$ERR")"
+
 note "vts cache serve refuses a server of image tiles, saying so"
 expect_clean_failure "$VTS" cache serve --upstream "$S/tilejson.json" --cache-dir "$WORK/daemon" \
   --listen 127.0.0.1:0
