@@ -104,6 +104,7 @@ Result<std::shared_ptr<client::CacheProvider>> make_provider(const CacheServeArg
   // would.
   client::SourceOptions so;
   so.fetcher.max_attempts = 3;
+  so.vtstream_only = true;  // the daemon serves our tiles (ETags from their headers)
   so.fetcher.connect_timeout = std::chrono::milliseconds(3000);
   so.fetcher.request_timeout = std::chrono::milliseconds(15000);
   so.fetcher.deadline = std::chrono::seconds(a.deadline_seconds);

@@ -12,6 +12,7 @@
 
 #include "commands.hpp"
 #include "loadtest_gates.hpp"
+#include "image_target.hpp"
 #include "progress.hpp"
 #include "vts/loadtest/load_report.hpp"
 #include "vts/loadtest/load_test.hpp"
@@ -28,7 +29,8 @@ struct LoadArgs {
   int width = 1280, height = 720, feedback = 8, anisotropy = 8, retries = 0, threads = 0;
   std::uint64_t ram_mb = 64;
   std::uint64_t seed = 1;
-  bool json = false, quiet = false;
+  bool json = false, quiet = false, decode = false;
+  ImageTargetArgs image;
   std::string command_line;
   GateArgs gates;
   GeneratorArgs generator;
@@ -84,6 +86,8 @@ Result<client::LoadTestOptions> load_options(const LoadArgs& a) {
   client::LoadTestOptions o;
   if (auto st = client::apply_target({a.url, a.cache, a.cache_dir, a.daemon}, o); !st)
     return st.error();
+  if (auto st = apply_image_target(a.image, o.source); !st) return st.error();
+  o.decode = a.decode;
   o.viewers = a.share.viewers;
   o.fps = a.fps;
   o.duration_s = a.duration;
@@ -175,7 +179,8 @@ Runner add_loadtest(CLI::App& app) {
   auto a = std::make_shared<LoadArgs>();
   CLI::App* c = app.add_subcommand(
       "loadtest", "Simulated viewers on camera paths against a tile server: streaming latency");
-  c->add_option("url", a->url, "Tileset URL (http://host:port/NAME), remote or local .pmtiles");
+  c->add_option("url", a->url,
+                "Tileset URL (http://host:port/NAME), TileJSON, {z}/{x}/{y} template, .pmtiles");
   c->add_option("--viewers", a->viewers, "Simulated viewers")
       ->capture_default_str()
       ->check(CLI::Range(1, 10000));
@@ -221,6 +226,8 @@ Runner add_loadtest(CLI::App& app) {
   c->add_option("--threads", a->threads, "Driver threads (0: one per core)")
       ->check(CLI::Range(0, int(kMaxThreads)))
       ->capture_default_str();
+  add_image_target_options(c, a->image);
+  c->add_flag("--decode", a->decode, "Decode image tiles; undecodable ones count as errors");
   c->add_flag("--json", a->json, "Print the results as JSON");
   c->add_flag("--quiet", a->quiet, "No progress lines");
   add_gate_options(c, a->gates);

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "commands.hpp"
+#include "image_target.hpp"
 #include "vts/builder/image_io.hpp"
 #include "vts/client/saved_source.hpp"
 #include "vts/client/source.hpp"
@@ -26,11 +27,12 @@ using namespace vts::renderer;
 struct ViewArgs {
   std::string source, cache_dir, scene = "plane", camera_path, debug = "none", screenshot, record;
   std::string center;  // --center LON,LAT; --level is level (-1: not given)
-  std::uint64_t ram_mb = 256, max_download = client::kDefaultMaxDownload;
+  std::uint64_t ram_mb = 256;
   int width = 1280, height = 720;
   std::uint32_t slots = 256, window = 64, upload_tiles = 32;
   int feedback = 8, anisotropy = 8, level = -1, frames = 0;
   bool headless = false, json = false, until_complete = false, hud = false, print_camera = false;
+  ImageTargetArgs image;  // --bounds, --zoom: an XYZ template's layout
 };
 
 void log_line(const std::string& text) {
@@ -57,9 +59,7 @@ Status check_args(const ViewArgs& a) {
 
 // The source, or offline, what a cache that saw it before knows of it.
 Result<std::shared_ptr<client::TileSource>> open_source(const ViewArgs& a) {
-  client::SourceOptions so;
-  so.max_download = a.max_download;
-  auto opened = client::open_source(a.source, so);
+  auto opened = open_with_layout(a.source, a.image);
   if (!opened && opened.error().code == ErrorCode::io && !a.cache_dir.empty()) {
     if (auto saved = client::load_source_info(a.cache_dir, a.source)) {
       log_line(a.source + ": " + opened.error().message + "; showing what the cache holds");
@@ -189,10 +189,11 @@ Runner add_view(CLI::App& app) {
   CLI::App* c = app.add_subcommand(
       "view", "View a tileset through the sparse virtual texture (window, or --headless)");
   c->add_option("source", a->source,
-                "Tileset: an archive, http://host:port/NAME, a TileJSON or a remote .pmtiles URL")
+                "Tileset: a local archive, http://host:port/NAME (vts serve or vts cache serve), "
+                "a TileJSON URL, a {z}/{x}/{y} image template or a remote .pmtiles URL")
       ->required();
+  add_image_target_options(c, a->image);
   c->add_option("--cache-dir", a->cache_dir, "Disk cache folder (as vts warm fills it)");
-  add_max_download_option(c, a->max_download);
   c->add_option("--ram-mb", a->ram_mb, "RAM tile cache, MiB")
       ->check(CLI::Range(std::uint64_t{0}, std::uint64_t{1} << 20))
       ->capture_default_str();
@@ -239,8 +240,7 @@ Runner add_view(CLI::App& app) {
               "On exit, print the camera as a one-key camera path (JSON, one line) that "
               "--camera-path replays")
       ->excludes(json);
-  c->add_flag("--until-complete", a->until_complete,
-              "Stop at the first complete frame (--headless)")
+  c->add_flag("--until-complete", a->until_complete, "Stop at the first complete frame")
       ->needs(headless);
   return [a] { return run_view(*a); };
 }

@@ -7,6 +7,7 @@
 #include <string>
 
 #include "commands.hpp"
+#include "image_target.hpp"
 #include "progress.hpp"
 #include "vts/client/saved_source.hpp"
 #include "vts/client/source.hpp"
@@ -22,8 +23,8 @@ struct WarmArgs {
   std::string url, cache_dir, levels, region, bbox, cache_size = "10G";
   unsigned concurrency = 32;
   unsigned max_errors = 100;
-  std::uint64_t max_download = client::kDefaultMaxDownload;
   bool json = false, quiet = false;
+  ImageTargetArgs image;
 };
 
 std::string levels_text(int a, int b) {
@@ -35,7 +36,7 @@ std::string levels_text(int a, int b) {
 Result<std::shared_ptr<client::TileSource>> open_warm_source(const WarmArgs& a, bool& offline) {
   client::SourceOptions so;
   so.fetcher.max_in_flight = a.concurrency;
-  so.max_download = a.max_download;
+  if (auto st = apply_image_target(a.image, so); !st) return st.error();
   auto opened = client::open_source(a.url, so);
   if (!opened && opened.error().code == ErrorCode::io) {
     if (auto saved = client::load_source_info(a.cache_dir, a.url)) {
@@ -222,8 +223,8 @@ Runner add_warm(CLI::App& app) {
   CLI::App* c = app.add_subcommand(
       "warm", "Fill a disk cache with a tileset's tiles (pinned) for offline use; resumable");
   c->add_option("url", a->url,
-                "Tileset: http://host:port/NAME (vts serve), a TileJSON URL, a remote .pmtiles "
-                "URL or a local archive")
+                "Tileset: http://host:port/NAME (vts serve), a TileJSON URL, a {z}/{x}/{y} "
+                "template, a remote .pmtiles URL or a local archive")
       ->required();
   c->add_option("--cache-dir", a->cache_dir, "Cache folder (created if missing)")->required();
   c->add_option("--levels", a->levels, "Levels A-B (or one level A); default all");
@@ -238,9 +239,9 @@ Runner add_warm(CLI::App& app) {
   c->add_option("--cache-size", a->cache_size,
                 "Cap on the cache's payload bytes, pinned included (suffix K/M/G/T: binary)")
       ->capture_default_str();
-  add_max_download_option(c, a->max_download);
   c->add_option("--max-errors", a->max_errors, "Stop after this many failed tiles (0: never)")
       ->capture_default_str();
+  add_image_target_options(c, a->image);
   c->add_flag("--json", a->json, "Print the summary as JSON on stdout");
   c->add_flag("-q,--quiet", a->quiet, "No progress or summary");
   return [a] { return run_warm(*a); };

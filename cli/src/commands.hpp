@@ -45,7 +45,7 @@ Runner add_view(CLI::App& app);  // vts view (cmd_view.cpp): only when the rende
 // what makes thread creation fail.
 inline constexpr unsigned kMaxThreads = 1024;
 
-// --max-download (vts warm, vts view): client::SourceOptions::max_download.
+// --max-download (vts loadtest, warm, view): client::SourceOptions::max_download.
 inline constexpr const char* kMaxDownloadHelp =
     "A remote .pmtiles on a host that ignores HTTP Range (answers 200 with the whole file) is "
     "downloaded once, whole, and held in RAM when it is at most this size (suffix K/M/G: binary; "

@@ -51,6 +51,9 @@ Status save_source_info(const fs::path& cache_dir, std::string_view location,
       {"version", info.version},
       {"metadata", json::parse(info.info.to_json(), nullptr, false)},
       {"description_json", info.description_json},
+      {"image_format", info.image_format},
+      {"image_tile_size", info.image_tile_size},
+      {"min_zoom", info.min_zoom},
       {"saved_unix", std::int64_t(std::time(nullptr))},
   };
   const std::string text = j.dump(2, ' ', false, json::error_handler_t::replace) + "\n";
@@ -76,6 +79,10 @@ Result<SourceInfo> load_source_info(const fs::path& cache_dir, std::string_view 
     info.key = j.at("key").get<std::string>();
     info.version = j.at("version").get<std::string>();
     info.description_json = j.at("description_json").get<std::string>();
+    // Image tilesets (absent in files saved before them: our tiles).
+    info.image_format = j.value("image_format", std::string());
+    info.image_tile_size = j.value("image_tile_size", std::uint32_t{0});
+    info.min_zoom = j.value("min_zoom", 0);
     auto meta = TilesetInfo::from_json(j.at("metadata").dump());
     if (!meta) return bad(meta.error().message);
     info.info = std::move(*meta);

@@ -20,6 +20,7 @@
 #include <utility>
 
 #include "fetching_source.hpp"
+#include "image_layout.hpp"
 #include "vts/client/source.hpp"
 #include "vts/protocol/file_io.hpp"
 #include "vts/protocol/tilejson.hpp"
@@ -285,6 +286,13 @@ Result<std::unique_ptr<TileSource>> open_tilejson(std::string_view url, SourceOp
         json_url + ": TileJSON of " + std::to_string(r.body.size()) + " bytes is too large");
   }
   Result<TileJson> tj = read_tilejson(r.body, json_url);
+  if (!tj && tj.error().code == ErrorCode::unsupported) {
+    // No "vtstream" object: a third-party server's TileJSON of standard image tiles.
+    auto layout = read_image_tilejson(r.body, json_url, options);
+    if (!layout) return std::move(layout).error();
+    return open_image_template(*layout, std::move(key), std::string(r.body.begin(), r.body.end()),
+                               std::move(options));
+  }
   if (!tj) return std::move(tj).error();
 
   SourceInfo info;

@@ -1,9 +1,13 @@
 // open_source(): which kind of source a location names, and the pieces every source shares (the
 // tile ETag, If-None-Match matching) plus the offline source.
+#include <algorithm>
 #include <atomic>
 #include <cstdio>
 #include <utility>
 
+#include <nlohmann/json.hpp>
+
+#include "image_layout.hpp"
 #include "vts/client/source.hpp"
 #include "vts/protocol/codec.hpp"
 #include "vts/protocol/file_io.hpp"
@@ -69,6 +73,30 @@ class OfflineSource final : public TileSource {
   std::atomic<Handle> next_handle_{0};
 };
 
+// An XYZ/TMS template says nothing of itself: its layout comes from the options.
+Result<std::unique_ptr<TileSource>> open_template(std::string_view loc, SourceOptions options) {
+  ImageLayout l;
+  l.tiles = std::string(loc.substr(0, loc.find('#')));
+  if (l.tiles.find("{x}") == std::string::npos ||
+      (l.tiles.find("{y}") == std::string::npos && l.tiles.find("{-y}") == std::string::npos)) {
+    return make_error(ErrorCode::invalid_argument,
+                      "tile template " + l.tiles + " lacks {x} or {y} (or {-y} for TMS rows)");
+  }
+  l.min_zoom = std::max(options.min_zoom, 0);
+  l.max_zoom = options.max_zoom;
+  if (options.bounds) l.bounds = *options.bounds;
+  l.tile_size = options.tile_size;
+  l.format = format_from_suffix(l.tiles);
+  // The key drops the query (it may hold expiring credentials).
+  std::string key = l.tiles.substr(0, l.tiles.find('?'));
+  nlohmann::json doc = {{"tilejson", "3.0.0"},
+                        {"tiles", {l.tiles}},
+                        {"minzoom", l.min_zoom},
+                        {"maxzoom", l.max_zoom},
+                        {"bounds", {l.bounds.west, l.bounds.south, l.bounds.east, l.bounds.north}}};
+  return open_image_template(l, std::move(key), doc.dump(), std::move(options));
+}
+
 }  // namespace
 
 Result<std::string> tile_etag(std::span<const std::uint8_t> payload) {
@@ -96,6 +124,16 @@ bool etag_matches(std::string_view header, std::string_view etag) {
 }
 
 Result<std::unique_ptr<TileSource>> open_source(std::string_view location, SourceOptions options) {
+  if (options.vtstream_only) {
+    options.vtstream_only = false;
+    auto opened = open_source(location, std::move(options));
+    if (opened && !(*opened)->info().image_format.empty()) {
+      return make_error(ErrorCode::unsupported,
+                        std::string(trim(location)) + " is a tileset of standard image tiles (" +
+                            (*opened)->info().image_format + "), not a vtstream tileset");
+    }
+    return opened;
+  }
   const std::string_view loc = trim(location);
   if (loc.empty()) return make_error(ErrorCode::invalid_argument, "empty tileset location");
 
@@ -103,6 +141,7 @@ Result<std::unique_ptr<TileSource>> open_source(std::string_view location, Sourc
     // The suffix is judged on the path alone: a query (a signed object-store URL) or a fragment
     // does not change what the resource is.
     const std::string_view path = loc.substr(0, loc.find_first_of("?#"));
+    if (path.find("{z}") != std::string_view::npos) return open_template(loc, std::move(options));
     if (path.ends_with(".pmtiles")) return open_remote_archive(loc, std::move(options));
     return open_tilejson(loc, std::move(options));
   }

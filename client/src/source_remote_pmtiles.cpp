@@ -45,7 +45,9 @@
 #include <tuple>
 #include <utility>
 
+#include "deliverer.hpp"
 #include "fetching_source.hpp"
+#include "image_layout.hpp"
 #include "vts/client/source.hpp"
 #include "vts/protocol/pmtiles.hpp"
 
@@ -113,48 +115,6 @@ Result<Directory> decode_directory(std::span<const std::uint8_t> stored,
   if (!entries) return std::move(entries).error();
   return std::make_shared<const std::vector<pmtiles::Entry>>(std::move(*entries));
 }
-
-// Runs callbacks on one thread of the source's own, in order. The destructor runs what is queued,
-// then joins.
-class Deliverer {
- public:
-  Deliverer() : thread_([this] { run(); }) {}
-  ~Deliverer() {
-    {
-      std::lock_guard lock(mutex_);
-      stop_ = true;
-    }
-    cv_.notify_one();
-    thread_.join();
-  }
-  void post(std::function<void()> fn) {
-    {
-      std::lock_guard lock(mutex_);
-      queue_.push_back(std::move(fn));
-    }
-    cv_.notify_one();
-  }
-
- private:
-  void run() {
-    std::unique_lock lock(mutex_);
-    for (;;) {
-      cv_.wait(lock, [this] { return stop_ || !queue_.empty(); });
-      if (queue_.empty()) return;  // stop_ and drained
-      std::function<void()> fn = std::move(queue_.front());
-      queue_.pop_front();
-      lock.unlock();
-      fn();
-      lock.lock();
-    }
-  }
-
-  std::mutex mutex_;
-  std::condition_variable cv_;
-  std::deque<std::function<void()>> queue_;
-  bool stop_ = false;
-  std::thread thread_;  // last: starts once the rest is constructed
-};
 
 struct Opened {
   pmtiles::Header header;
@@ -422,7 +382,9 @@ class RemoteArchiveSource final : public FetchingSource<RemotePending> {
       if (Status s = check_range_result(r, url_, "tile " + name, offset, length); !s) {
         return fail(h, s.error(), true);
       }
-      Result<std::string> etag = tile_etag(r.body);
+      Result<std::string> etag = info_.image_format.empty()
+                                     ? tile_etag(r.body)
+                                     : stock_tile_etag(info_.version, offset, length);
       if (!etag) {
         return fail(h,
                     make_error(ErrorCode::corrupt,
@@ -467,7 +429,7 @@ class RemoteArchiveSource final : public FetchingSource<RemotePending> {
   std::list<std::pair<LeafKey, Directory>> leaf_lru_;  // most recently used first
   std::map<LeafKey, std::list<std::pair<LeafKey, Directory>>::iterator> leaf_index_;
 
-  Deliverer deliverer_;  // last: destroyed first, after the fetcher is gone
+  CallbackThread deliverer_;  // last: destroyed first, after the fetcher is gone
 };
 
 // Checks the header's sections are well-formed and lie where we can read them.
@@ -537,6 +499,12 @@ Error ignores_range(const std::string& url, std::int64_t size, std::uint64_t max
           "download limit of " + std::to_string(max_download) +
           " bytes (--max-download) for one full download; serve it with Range support (nginx, " +
           "`vts serve`, an object store) or raise --max-download");
+}
+
+// Raster tile types a stock archive may hold (image tilesets, image_layout.hpp).
+bool is_stock_image(const pmtiles::Header& h) {
+  return h.tile_type == pmtiles::TileType::png || h.tile_type == pmtiles::TileType::jpeg ||
+         h.tile_type == pmtiles::TileType::webp;
 }
 
 Error in_archive(const std::string& url, Error e) {
@@ -629,16 +597,24 @@ Result<std::unique_ptr<TileSource>> open_remote_archive(std::string_view url_vie
   }
   std::string metadata_json(decoded_metadata->begin(), decoded_metadata->end());
   Result<TilesetInfo> info = TilesetInfo::from_json(metadata_json);
-  if (!info) return in_archive(url, std::move(info).error());
+  // A stock archive of standard images (no "vtstream" metadata): an image tileset.
+  const bool stock = !info && info.error().code == ErrorCode::unsupported && is_stock_image(h);
+  if (!info && !stock) return in_archive(url, std::move(info).error());
 
   Opened opened;
   opened.header = h;
   opened.root = std::move(*root);
-  opened.info.info = std::move(*info);
-  opened.info.key = url;
+  if (stock) {
+    auto image = stock_archive_info(h, metadata_json, url, options);
+    if (!image) return std::move(image).error();
+    opened.info = std::move(*image);
+  } else {
+    opened.info.info = std::move(*info);
+    opened.info.key = url;
+    opened.info.description_json = std::move(metadata_json);
+  }
   opened.info.version =
       pmtiles::archive_version(bytes.first(pmtiles::kHeaderSize), root_bytes, stored_metadata);
-  opened.info.description_json = std::move(metadata_json);
   opened.whole = std::move(whole);
   if (opened.whole) opened.whole_cache_control = head.cache_control;
   return std::unique_ptr<TileSource>(std::make_unique<RemoteArchiveSource>(

@@ -9,6 +9,8 @@
 #include <set>
 #include <thread>
 
+#include "vts/protocol/web_image.hpp"
+
 namespace vts::client {
 
 class TileClient::Impl {
@@ -175,8 +177,7 @@ class TileClient::Impl {
       TileEvent e;
       e.id = job.id;
       e.from = job.payload.from;
-      // The tileset's size and codec bound the decode (the cache refused other tiles already).
-      auto image = decode_tile(job.payload.tile->payload, spec_);
+      auto image = decode(job.payload.tile->payload);
       if (image) {
         e.kind = TileEvent::Kind::decoded;
         e.image = std::move(*image);
@@ -207,9 +208,23 @@ class TileClient::Impl {
     }
   }
 
+  // The tileset's size and codec bound the decode (the cache refused other tiles already). An
+  // image tileset's PNG/JPEG/WebP tiles must decode to its stored size (T x T, no border).
+  Result<TileImage> decode(std::span<const std::uint8_t> payload) const {
+    if (!image_) return decode_tile(payload, spec_);
+    auto image = decode_web_image(payload);
+    if (image && (image->width != spec_.width || image->height != spec_.height))
+      return make_error(ErrorCode::corrupt, "image tile of " + std::to_string(image->width) + "x" +
+                                                std::to_string(image->height) +
+                                                " pixels in a tileset of " +
+                                                std::to_string(spec_.width) + " px tiles");
+    return image;
+  }
+
   std::unique_ptr<TileCache> cache_;
   TileClientOptions options_;
-  const TileSpec spec_;  // what the tileset's tiles are
+  const TileSpec spec_;                                      // what the tileset's tiles are
+  const bool image_ = !cache_->info().image_format.empty();  // standard image tiles
   mutable std::mutex mutex_;
   std::condition_variable decode_cv_, space_cv_, events_cv_;
   std::map<TileId, Slot> inflight_;

@@ -12,6 +12,7 @@
 #include <utility>
 
 #include "vts/client/tile_cache.hpp"
+#include "vts/protocol/web_image.hpp"
 
 namespace vts::client {
 
@@ -29,10 +30,12 @@ std::string error_kind(const PayloadResult& r) {
   if (r.transfer && r.transfer->status >= 400) return "http_" + std::to_string(r.transfer->status);
   if (!r.error) return "unknown";
   const std::string& m = r.error->message;
-  if (m.find("timed out") != std::string::npos) return "timeout";
-  if (m.find("connection reset") != std::string::npos) return "reset";
-  if (m.find("connection refused") != std::string::npos) return "refused";
-  if (m.find("empty reply") != std::string::npos) return "empty_reply";
+  const auto has = [&m](const char* s) { return m.find(s) != std::string::npos; };
+  if (r.error->code == ErrorCode::truncated || has("partial body")) return "truncated";
+  if (has("timed out")) return "timeout";
+  if (has("connection refused") || has("could not connect") || has("resolve")) return "connect";
+  if (has("connection reset")) return "reset";
+  if (has("empty reply")) return "empty_reply";
   return error_code_name(r.error->code);
 }
 
@@ -41,13 +44,14 @@ class Metrics {
  public:
   explicit Metrics(Clock::time_point start) : start_(start) {}
 
+  // `kind`: the error's kind when the engine judged it (undecodable), else from r.
   void request_done(const PayloadResult& r, Clock::time_point intended, Clock::time_point sent,
-                    Clock::time_point done) {
+                    Clock::time_point done, const char* kind = nullptr) {
     const Ns lag = sent - intended;
     const std::uint64_t total = ns(done - intended);
     std::uint64_t bytes = 0;
     if (r.kind == PayloadResult::Kind::ok && r.tile) bytes = r.tile->payload.size();
-    const bool error = r.kind == PayloadResult::Kind::error;
+    const bool error = r.kind == PayloadResult::Kind::error || kind != nullptr;
     std::lock_guard lock(mutex_);
     ++requests_;
     report_.total.record(total);
@@ -58,7 +62,7 @@ class Metrics {
     } else {
       report_.queue_time.record(ns(lag));
     }
-    if (!error && r.kind == PayloadResult::Kind::ok) {
+    if (!error && r.kind == PayloadResult::Kind::ok) {  // an undecodable tile is an error
       switch (r.from) {
         case PayloadResult::From::ram:
           ++report_.tiers.ram;
@@ -73,7 +77,7 @@ class Metrics {
     }
     if (error) {
       ++errors_;
-      ++report_.errors_by_kind[error_kind(r)];
+      ++report_.errors_by_kind[kind ? std::string(kind) : error_kind(r)];
     }
     bytes_ += bytes;
     const auto second = std::size_t(std::max<std::int64_t>(
@@ -370,6 +374,12 @@ bool Viewer::send(const std::shared_ptr<Request>& req, Clock::time_point slot) {
 
 void Viewer::done(const std::shared_ptr<Request>& req, PayloadResult&& r) {
   if (r.kind == PayloadResult::Kind::cancelled) return;
+  // --decode: an image tile that does not decode shows nothing; it is an error, not resident.
+  const char* kind = nullptr;
+  if (engine_.options.decode && r.kind == PayloadResult::Kind::ok && r.tile &&
+      r.from == PayloadResult::From::network && !cache_->info().image_format.empty() &&
+      !decode_web_image(r.tile->payload))
+    kind = "undecodable";
   const auto now = Clock::now();
   bool counted = false;
   {
@@ -378,7 +388,7 @@ void Viewer::done(const std::shared_ptr<Request>& req, PayloadResult&& r) {
     if (it != inflight_.end() && it->second == req) inflight_.erase(it);
     // Dropped while its answer was on its way: already counted as cancelled or abandoned.
     counted = !req->cancelled;
-    if (r.kind == PayloadResult::Kind::ok || r.kind == PayloadResult::Kind::absent) {
+    if (!kind && (r.kind == PayloadResult::Kind::ok || r.kind == PayloadResult::Kind::absent)) {
       arrived_[req->key] = now;
       backoff_.erase(req->key);
     } else {
@@ -387,7 +397,7 @@ void Viewer::done(const std::shared_ptr<Request>& req, PayloadResult&& r) {
       b.until = now + std::chrono::milliseconds(125 << b.failures);
     }
   }
-  if (counted) engine_.metrics.request_done(r, req->intended, req->sent, now);
+  if (counted) engine_.metrics.request_done(r, req->intended, req->sent, now, kind);
 }
 
 void Viewer::evict(std::uint64_t frame) {

@@ -20,6 +20,7 @@
 #include "vts/protocol/geometry.hpp"
 #include "vts/protocol/result.hpp"
 #include "vts/protocol/tileset.hpp"
+#include "vts/protocol/tiling.hpp"
 
 namespace vts::client {
 
@@ -35,6 +36,14 @@ struct SourceInfo {
   // The source's own description, JSON (TileJSON for HTTP sources, the archive's metadata for
   // archives): what a cache stores so the tileset can be opened offline.
   std::string description_json;
+  // Standard image tiles of a third-party server or archive (an XYZ/TMS template, a TileJSON
+  // without our "vtstream" object, a stock PMTiles archive): "png", "jpeg", "webp", or "image"
+  // when the source does not say. Their payloads are the server's bytes as they came: no tile
+  // header, no checksum. Empty for our tiles. Such a tileset's `info` is a WebMercatorQuad
+  // pyramid of `image_tile_size` px tiles without border, georeferenced to the source's bounds.
+  std::string image_format;
+  std::uint32_t image_tile_size = 0;
+  int min_zoom = 0;  // coarser levels have no tiles (image tilesets; 0 for ours)
 };
 
 struct SourceRequest {
@@ -119,11 +128,41 @@ struct SourceOptions {
   // open (unsupported, naming the host's behaviour) as soon as its size is known. 0: never.
   std::uint64_t max_download = kDefaultMaxDownload;
   // Extra headers (e.g. "Authorization: Bearer ...") go in fetcher.headers.
+
+  // For image tilesets (an XYZ/TMS template says nothing of itself): the area with tiles
+  // (default: the whole Web Mercator square) and the zoom range (a template needs max_zoom; a
+  // TileJSON or archive says its own, which these override when set). Tiles outside them are
+  // absent without a request.
+  std::optional<LonLatBounds> bounds;
+  int min_zoom = -1, max_zoom = -1;
+  std::uint32_t tile_size = 256;  // a template's tile size in pixels
+  // open_source() refuses image tilesets (unsupported), for users that serve our tiles only
+  // (the cache daemon).
+  bool vtstream_only = false;
 };
+
+// Where an image tileset's tiles are and what they are: a template's or TileJSON's layout.
+struct ImageLayout {
+  std::string tiles;  // URL template with {z}, {x} and {y} or {-y}
+  bool tms = false;   // {y} counts rows from the south (TileJSON "scheme": "tms")
+  int min_zoom = 0, max_zoom = -1;
+  LonLatBounds bounds = {-180, -kWebMercatorMaxLat, 180, kWebMercatorMaxLat};
+  std::uint32_t tile_size = 256;
+  std::string format;  // "png", "jpeg", "webp", or "image"
+};
+// The SourceInfo of an image tileset (see SourceInfo::image_format): invalid_argument naming the
+// field for a zoom range outside 0..24 or upside down, bounds that are not a box, a tile size that
+// is not a power of two in 64..1024.
+Result<SourceInfo> image_source_info(const ImageLayout& layout, std::string key,
+                                     std::string description_json);
+// Whether an image tileset has tile `id`: inside its zoom range and its bounds.
+bool image_tile_exists(const SourceInfo& info, TileId id);
 
 // Opens `location`:
 //   - a path to a *.pmtiles file (or file:///path)                → local archive;
 //   - an http(s) URL ending in .pmtiles                           → remote archive, range reads;
+//   - an http(s) URL with {z} in it (https://host/{z}/{x}/{y}.png; {-y}: TMS rows) → an XYZ
+//     template of image tiles, laid out by options' bounds and zoom range (max_zoom required);
 //   - an http(s) URL ending in .json                              → TileJSON;
 //   - any other http(s) URL (e.g. http://host:8080/earth)         → TileJSON at URL + ".json".
 // The suffix is judged on the URL's path (a query such as an object store's signature is kept and
@@ -132,7 +171,9 @@ struct SourceOptions {
 // root directory. Errors name the location and what was wrong (unreachable, not an archive, not
 // our tileset, bad TileJSON...): not_found for a missing file, tileset or archive (HTTP 404), io
 // for an unreachable server or another HTTP status, corrupt for bytes that are not TileJSON or
-// PMTiles, unsupported for an archive or TileJSON without our "vtstream" metadata.
+// PMTiles. A TileJSON without our "vtstream" object (TileJSON 2.x/3.0: "tiles", "minzoom",
+// "maxzoom", "bounds", "scheme") and a remote PMTiles archive without it whose tile type is png,
+// jpeg or webp open as image tilesets; other archives and TileJSON without it are unsupported.
 //
 // A TileJSON source follows a rebuilt tileset: when a versioned tile URL answers 404 "not
 // current", it refetches the TileJSON, moves to its new tile URLs and retries the tile. info()
@@ -140,6 +181,13 @@ struct SourceOptions {
 // tiles fail (unsupported) until the tileset is opened again.
 Result<std::unique_ptr<TileSource>> open_source(std::string_view location,
                                                 SourceOptions options = {});
+
+// An image tileset fetched one URL per tile (an XYZ/TMS template or a third-party TileJSON):
+// 200 is the tile, 204 absent, another status (404 included: the layout says the tile exists)
+// an error naming it. Tiles outside the layout's zoom range and bounds are absent at once.
+Result<std::unique_ptr<TileSource>> open_image_template(const ImageLayout& layout, std::string key,
+                                                        std::string description_json,
+                                                        SourceOptions options = {});
 
 // The three kinds of source, for callers that know which one they want (open_source picks one
 // from the location's form). Same blocking and error behaviour as open_source().

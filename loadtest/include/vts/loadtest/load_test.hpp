@@ -21,6 +21,11 @@
 //     (absent tiles count as resolved). A move that is not complete after `view_timeout`, or when
 //     the next move starts, is counted as incomplete and not in the histograms.
 //
+// Errors are counted by kind (LoadReport::errors_by_kind): "http_NNN" for an HTTP status >= 400,
+// "connect" (refused, unreachable), "timeout", "truncated" (the body ended before its length),
+// "reset", "empty_reply", "undecodable" (decode), "checksum" and "corrupt" (our tiles only: image
+// tiles have no checksum), else the error code's name.
+//
 // Latency is measured from the intended send time, never from when a busy driver thread got
 // round to it, so a stalled server or a lagging load generator cannot hide latency (no
 // coordinated omission):
@@ -96,6 +101,9 @@ struct LoadTestOptions {
   std::chrono::milliseconds view_timeout{10000};
   std::chrono::milliseconds drain_timeout{5000};  // at the end, for requests still on their way
   int threads = 0;                                // driver threads; 0: one per core
+  // Image targets (SourceInfo::image_format): decode every tile from the network (PNG, JPEG,
+  // WebP); one that does not decode is an error of kind "undecodable" (and is not resident).
+  bool decode = false;
   // Report fields passed through.
   std::string title, path_name, command_line;
   std::function<void(const LoadProgress&)> progress;  // about once a second

@@ -1,0 +1,30 @@
+// How to open a target, shared by loadtest, warm and view: --bounds and --zoom, the layout of an
+// XYZ/TMS template target (which says nothing of itself) or an override of what a third-party
+// TileJSON or archive says; --max-download, for a host that ignores HTTP Range.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+#include "vts/client/source.hpp"
+#include "vts/protocol/result.hpp"
+
+namespace vts::cli {
+
+struct ImageTargetArgs {
+  std::string bounds, zoom;
+  std::uint64_t max_download = client::kDefaultMaxDownload;
+};
+
+void add_image_target_options(CLI::App* c, ImageTargetArgs& a);
+// Sets options.bounds, the zoom range and max_download; invalid_argument naming the flag.
+Status apply_image_target(const ImageTargetArgs& a, client::SourceOptions& options);
+
+// apply_image_target() then client::open_source().
+Result<std::unique_ptr<client::TileSource>> open_with_layout(const std::string& location,
+                                                             const ImageTargetArgs& a,
+                                                             client::SourceOptions options = {});
+
+}  // namespace vts::cli
