@@ -11,8 +11,8 @@
 #include <string>
 
 #include "commands.hpp"
-#include "loadtest_gates.hpp"
 #include "image_target.hpp"
+#include "loadtest_gates.hpp"
 #include "progress.hpp"
 #include "vts/loadtest/load_report.hpp"
 #include "vts/loadtest/load_test.hpp"
