@@ -225,8 +225,7 @@ Runner add_cache(CLI::App& app) {
       ->check(CLI::Range(0, 256));
   c->add_option("--access-log", a->access_log, "JSON-lines access log: FILE, or - for stdout");
   c->add_option("--revalidate-after", a->revalidate_seconds,
-                "Seconds after which a cached tile is revalidated with the upstream when the "
-                "upstream's Cache-Control gave no lifetime (max-age, immutable, no-cache)")
+                "Revalidate a tile after this many seconds when its Cache-Control gave no lifetime")
       ->check(CLI::Range(0, 31536000))
       ->capture_default_str();
   c->add_option("--reconnect-interval", a->reconnect_seconds,
