@@ -57,21 +57,12 @@ void add_generator_options(CLI::App* c, GeneratorArgs& g) {
 
 namespace {
 
-constexpr const char* kIndexVariables[] = {"JOB_COMPLETION_INDEX", "SLURM_ARRAY_TASK_ID",
-                                           "AWS_BATCH_JOB_ARRAY_INDEX"};
-
 Result<std::uint64_t> generator_index(const GeneratorArgs& g) {
   if (g.index) return *g.index;
   if (g.generators == 1) return 0;
-  for (const char* name : kIndexVariables) {
-    const char* value = std::getenv(name);
-    if (!value || !*value) continue;
-    std::uint64_t index = 0;
-    if (!parse_u64(value, index))
-      return make_error(ErrorCode::invalid_argument,
-                        std::string("$") + name + "='" + value + "' is not a generator index");
-    return index;
-  }
+  auto index = array_job_index("generator index");
+  if (!index) return index.error();
+  if (*index) return **index;
   return make_error(ErrorCode::invalid_argument,
                     "--generators without --generator-index, $JOB_COMPLETION_INDEX, "
                     "$SLURM_ARRAY_TASK_ID or $AWS_BATCH_JOB_ARRAY_INDEX");

@@ -13,21 +13,12 @@ namespace vts::cli {
 
 namespace {
 
-constexpr const char* kIndexVariables[] = {"JOB_COMPLETION_INDEX", "SLURM_ARRAY_TASK_ID",
-                                           "AWS_BATCH_JOB_ARRAY_INDEX"};
-
 // --shard, else the first array-index variable of Kubernetes, Slurm or AWS Batch that is set.
 Result<std::uint64_t> shard_index(const PlanBuildArgs& p) {
   if (p.shard) return *p.shard;
-  for (const char* name : kIndexVariables) {
-    const char* value = std::getenv(name);
-    if (!value || !*value) continue;
-    std::uint64_t index = 0;
-    if (!parse_u64(value, index))
-      return make_error(ErrorCode::invalid_argument,
-                        std::string("$") + name + "='" + value + "' is not a shard index");
-    return index;
-  }
+  auto index = array_job_index("shard index");
+  if (!index) return index.error();
+  if (*index) return **index;
   return make_error(ErrorCode::invalid_argument,
                     "no shard given: --shard I, or $JOB_COMPLETION_INDEX, $SLURM_ARRAY_TASK_ID or "
                     "$AWS_BATCH_JOB_ARRAY_INDEX (an array job's index)");

@@ -82,6 +82,20 @@ bool parse_u64(std::string_view s, std::uint64_t& out) {
   return true;
 }
 
+Result<std::optional<std::uint64_t>> array_job_index(const std::string& what) {
+  for (const char* name :
+       {"JOB_COMPLETION_INDEX", "SLURM_ARRAY_TASK_ID", "AWS_BATCH_JOB_ARRAY_INDEX"}) {
+    const char* value = std::getenv(name);
+    if (!value || !*value) continue;
+    std::uint64_t index = 0;
+    if (!parse_u64(value, index))
+      return make_error(ErrorCode::invalid_argument,
+                        std::string("$") + name + "='" + value + "' is not a " + what);
+    return std::optional<std::uint64_t>(index);
+  }
+  return std::optional<std::uint64_t>();
+}
+
 Result<std::uint64_t> parse_byte_size(const std::string& text, std::string_view flag) {
   auto bad = [&] {
     return make_error(ErrorCode::invalid_argument, std::string(flag) + " '" + text +

@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cstdint>
 #include <limits>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <utility>
@@ -37,6 +38,11 @@ std::string human_duration(double seconds);
 
 // Decimal digits only, no sign; false on overflow or anything else.
 bool parse_u64(std::string_view s, std::uint64_t& out);
+
+// The index an array job gives this process: the first of $JOB_COMPLETION_INDEX (Kubernetes),
+// $SLURM_ARRAY_TASK_ID and $AWS_BATCH_JOB_ARRAY_INDEX that is set; nullopt when none is. A value
+// that is not an index is invalid_argument naming the variable and `what` ("shard index").
+Result<std::optional<std::uint64_t>> array_job_index(const std::string& what);
 // "A<sep>B" (--grid CxR, --synthetic WxH), both decimal digits only (no sign) within T's range;
 // false otherwise, leaving a and b unchanged.
 template <typename T>

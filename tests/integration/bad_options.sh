@@ -80,6 +80,12 @@ expect_refused --upstream-deadline "$VTS" cache serve --upstream "$WORK/s.pmtile
   --cache-dir "$WORK/c" --listen 127.0.0.1:0 --no-admin --upstream-deadline 0
 expect_refused --upstream-region-cap "$VTS" cache serve --upstream "$WORK/s.pmtiles" \
   --cache-dir "$WORK/c" --listen 127.0.0.1:0 --no-admin --upstream-region-cap -1
+note "an array job's index that is not one"
+expect_ok "$VTS" plan --synthetic 1000x500 --shards 4 -o "$WORK/p.json" -q
+JOB_COMPLETION_INDEX=x expect_refused "JOB_COMPLETION_INDEX='x' is not a shard index" \
+  "$VTS" build --plan "$WORK/p.json" --out-dir "$WORK/parts"
+SLURM_ARRAY_TASK_ID=-1 expect_refused "SLURM_ARRAY_TASK_ID='-1' is not a generator index" \
+  "$VTS" loadtest "http://127.0.0.1:1/x" --generators 2 --duration 1
 # The defaults PROTOCOL.md §11 states.
 "$VTS" cache serve --help >"$OUT" 2>&1 || true
 grep -qE -- '--upstream-deadline .*=20$' "$OUT" || fail "--upstream-deadline default is not 20"
