@@ -246,7 +246,9 @@ t = j["totals"]
 n = max(1, t["requests"])
 net = max(cpu - startup, 1e-9)
 per_core = t["requests"] / net
-met = "yes" if t["requests_per_s"] >= 5000 and per_core >= 5000 else "no"
+# Met: the asked rate was kept (within 1%: the first slots pass while the viewers start) at
+# 5,000 req/s or more, on at most one core's worth of CPU per 5,000 requests.
+met = "yes" if rate >= 5000 and t["requests_per_s"] >= 0.99 * rate and per_core >= 5000 else "no"
 print(f"| {rate:.0f} | {t['requests_per_s']:.0f} | {j['simulation']['idle_slots']} | {t['errors']} | "
       f"{j['latency_ns']['total']['p99'] / 1e6:.2f} | {cpu:.2f} | {wall:.2f} | {cpu / wall:.2f} | "
       f"{cpu / n * 1e6:.0f} | {net / n * 1e6:.0f} | {per_core:.0f} | {met} |")

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <memory>
 #include <optional>
+#include <variant>
 #include <vector>
 
 #include "vts/protocol/file_io.hpp"
@@ -26,6 +27,9 @@ struct ViewerCamera {
   double offset = 0;          // frames: viewers replaying one file start at different places in it
   std::vector<double> moves;  // floor of the frames where the path starts a new view, sorted
   std::unique_ptr<DemandSimulator> sim;
+  // The previous frame's view and tiles: a camera that has not moved wants the same tiles.
+  std::variant<std::monostate, GlobeView, PlaneView> last_view;
+  std::vector<DemandTile> last_tiles;
 };
 
 struct Cameras {
@@ -44,14 +48,28 @@ struct Cameras {
     ViewerDemand d;
     d.move = std::binary_search(c.moves.begin(), c.moves.end(), std::floor(t));
     const int w = options.width, h = options.height;
+    const bool globe = p.has_globe() && !p.has_plane();
+    std::variant<std::monostate, GlobeView, PlaneView> view;
+    if (globe)
+      view = p.globe_at(t);
+    else
+      view = p.plane_at(t);
+    if (view == c.last_view) {
+      d.tiles = c.last_tiles;
+      d.reused = true;
+      return d;
+    }
     Result<std::vector<TileRequest>> wanted =
-        p.has_globe() && !p.has_plane()
-            ? c.sim->demand(GlobeScene(p.globe_at(t), geometry.width(), geometry.height()), w, h)
-            : c.sim->demand(PlaneScene(p.plane_at(t)), w, h);
+        globe
+            ? c.sim->demand(
+                  GlobeScene(std::get<GlobeView>(view), geometry.width(), geometry.height()), w, h)
+            : c.sim->demand(PlaneScene(std::get<PlaneView>(view)), w, h);
     if (!wanted) return wanted.error();
     d.tiles.reserve(wanted->size());
     for (const TileRequest& r : *wanted)
       d.tiles.push_back(DemandTile{r.tile, double(r.coverage), r.direct});
+    c.last_view = view;
+    c.last_tiles = d.tiles;
     return d;
   }
 };
@@ -157,6 +175,7 @@ nlohmann::json simulation_json(const LoadRunStats& run, const CameraDemandOption
           {"startup_slots", run.startup_slots},
           {"abandoned", run.abandoned},
           {"demand_cpu_ms_per_frame", run.demand_cpu_ms_per_frame},
+          {"demand_reused_frames", run.demand_reused},
           {"viewport", {camera.width, camera.height}},
           {"feedback_divisor", camera.feedback},
           {"anisotropy", camera.anisotropy},
@@ -168,10 +187,11 @@ std::string simulation_line(const LoadRunStats& run, bool open_loop) {
   char line[512];
   std::snprintf(
       line, sizeof line,
-      "simulation: %llu viewer-frames (%llu late), demand %.2f ms/frame, %llu moves not at full "
-      "resolution in time, %llu abandoned at the end%s\n",
+      "simulation: %llu viewer-frames (%llu late, %llu unmoved), demand %.2f ms CPU/frame, %llu "
+      "moves not at full resolution in time, %llu abandoned at the end%s\n",
       static_cast<unsigned long long>(run.frames), static_cast<unsigned long long>(run.late_frames),
-      run.demand_cpu_ms_per_frame, static_cast<unsigned long long>(run.moves_incomplete),
+      static_cast<unsigned long long>(run.demand_reused), run.demand_cpu_ms_per_frame,
+      static_cast<unsigned long long>(run.moves_incomplete),
       static_cast<unsigned long long>(run.abandoned),
       open_loop ? (", " + std::to_string(run.idle_slots) + " idle slots (" +
                    std::to_string(run.startup_slots) + " more at start-up)")

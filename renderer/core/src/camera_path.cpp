@@ -47,8 +47,8 @@ double lerp(double a, double b, double f) {
   return a + (b - a) * f;
 }
 double log_lerp(double a, double b, double f) {
-  if (f <= 0) return a;  // exactly the key's value on (and beyond) a key
-  if (f >= 1) return b;
+  if (f <= 0) return a;            // exactly the key's value on (and beyond) a key
+  if (f >= 1 || a == b) return b;  // a held value stays exactly itself (exp(log(a)) may not)
   return std::exp(lerp(std::log(a), std::log(b), f));
 }
 

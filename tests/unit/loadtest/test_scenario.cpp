@@ -91,6 +91,48 @@ TEST(Scenario, APresetGivesEveryViewerCoarseFirstDemandStartingWithAMove) {
   }
 }
 
+// A camera that stays put wants the same tiles: the jumps preset holds each place for its dwell,
+// and every frame after the first of a place reuses the demand instead of simulating it again,
+// with the tiles a fresh simulation of that frame gives.
+TEST(Scenario, AnUnmovedCameraReusesItsDemandAndAMovedOneIsSimulatedAgain) {
+  auto g = vts::Geometry::create(1 << 16, 1 << 15);
+  ASSERT_TRUE(g.ok());
+  CameraDemandOptions c;
+  c.path = "jumps";
+  c.viewers = 1;
+  c.duration_s = 10;
+  c.fps = 10;
+  c.width = 320;
+  c.height = 200;
+  auto d = camera_demand(*g, c);
+  ASSERT_TRUE(d.ok()) << d.error().to_string();
+  int reused = 0, moves = 0;
+  for (std::uint64_t f = 0; f < 100; ++f) {
+    auto r = d->demand(0, f);
+    ASSERT_TRUE(r.ok()) << r.error().to_string();
+    if (r->move || f == 0) {
+      ++moves;
+      EXPECT_FALSE(r->reused) << "frame " << f << " starts a view";
+    }
+    reused += r->reused;
+    if (f % 7 == 3) {
+      auto fresh = camera_demand(*g, c);  // the same viewer, asked only for this frame
+      ASSERT_TRUE(fresh.ok());
+      auto one = fresh->demand(0, f);
+      ASSERT_TRUE(one.ok());
+      EXPECT_FALSE(one->reused) << "frame " << f;
+      ASSERT_EQ(one->tiles.size(), r->tiles.size()) << "frame " << f;
+      for (std::size_t i = 0; i < r->tiles.size(); ++i) {
+        EXPECT_EQ(one->tiles[i].id, r->tiles[i].id) << "frame " << f;
+        EXPECT_EQ(one->tiles[i].urgency, r->tiles[i].urgency) << "frame " << f;
+        EXPECT_EQ(one->tiles[i].direct, r->tiles[i].direct) << "frame " << f;
+      }
+    }
+  }
+  EXPECT_GT(moves, 1);
+  EXPECT_EQ(reused, 100 - moves) << "every frame but a place's first reuses its demand";
+}
+
 TEST(Scenario, TheSimulationFiguresAppearInTheJsonAndTheLine) {
   LoadRunStats run;
   run.frames = 120;
@@ -100,6 +142,7 @@ TEST(Scenario, TheSimulationFiguresAppearInTheJsonAndTheLine) {
   run.startup_slots = 2;
   run.abandoned = 1;
   run.demand_cpu_ms_per_frame = 0.25;
+  run.demand_reused = 90;
   CameraDemandOptions c;
   c.width = 640;
   c.height = 480;
@@ -112,10 +155,11 @@ TEST(Scenario, TheSimulationFiguresAppearInTheJsonAndTheLine) {
   EXPECT_EQ(j["feedback_divisor"], 8);
   EXPECT_EQ(j["cache"], "ram");
   EXPECT_EQ(j["retries"], 2);
+  EXPECT_EQ(j["demand_reused_frames"], 90);
 
   EXPECT_EQ(simulation_line(run, false),
-            "simulation: 120 viewer-frames (3 late), demand 0.25 ms/frame, 2 moves not at full "
-            "resolution in time, 1 abandoned at the end\n");
+            "simulation: 120 viewer-frames (3 late, 90 unmoved), demand 0.25 ms CPU/frame, 2 moves "
+            "not at full resolution in time, 1 abandoned at the end\n");
   EXPECT_NE(simulation_line(run, true).find(", 7 idle slots (2 more at start-up)\n"),
             std::string::npos);
 }

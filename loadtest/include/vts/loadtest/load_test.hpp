@@ -69,6 +69,9 @@ struct DemandTile {
 struct ViewerDemand {
   std::vector<DemandTile> tiles;  // coarse first
   bool move = false;              // the camera jumped / started a new view at this frame
+  // The camera had not moved since the viewer's previous frame, so its tiles are the previous
+  // frame's, not simulated again (a view's demand depends only on its camera).
+  bool reused = false;
 };
 
 using DemandFn = std::function<Result<ViewerDemand>(std::uint32_t viewer, std::uint64_t frame)>;
@@ -117,7 +120,8 @@ struct LoadRunStats {
   std::uint64_t idle_slots = 0;        // open loop: slots with nothing to send after the first
   std::uint64_t startup_slots = 0;     // open loop: slots that passed before the first request
   std::uint64_t abandoned = 0;         // still on their way at the end of the drain
-  double demand_cpu_ms_per_frame = 0;  // mean time in the demand function
+  double demand_cpu_ms_per_frame = 0;  // mean CPU time of the driver thread in the demand function
+  std::uint64_t demand_reused = 0;     // frames whose camera had not moved (ViewerDemand::reused)
 };
 
 struct LoadTestResult {

@@ -51,7 +51,8 @@ Result<CameraDemand> camera_demand(const Geometry& geometry, const CameraDemandO
 
 // The figures of a run that the report has no field for, and the simulation settings:
 // {viewer_frames, late_frames, moves_incomplete, idle_slots, startup_slots, abandoned,
-// demand_cpu_ms_per_frame, viewport [w, h], feedback_divisor, anisotropy, cache, retries}.
+// demand_cpu_ms_per_frame, demand_reused_frames, viewport [w, h], feedback_divisor, anisotropy,
+// cache, retries}.
 nlohmann::json simulation_json(const LoadRunStats& run, const CameraDemandOptions& camera,
                                const std::string& cache, int retries);
 // "simulation: N viewer-frames (L late), demand ..." with the idle slots when open loop; with a

@@ -50,6 +50,7 @@ struct PlaneView {
   double heading = 0;                 // radians
   double tilt = 0;                    // radians, [0, 1.5]
   double fov_y = 0.8;                 // vertical field of view, radians, (0, pi)
+  friend bool operator==(const PlaneView&, const PlaneView&) = default;
 };
 
 // The camera basis and eye derived from a PlaneView for a viewport; every field in world units.

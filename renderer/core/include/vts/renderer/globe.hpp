@@ -26,6 +26,7 @@ struct GlobeView {
   double tilt = 0;                  // radians: 0 looks straight down, towards pi/2 at the horizon
   double fov_y = 0.8;               // vertical field of view, radians
   double radius_m = kEarthRadiusM;
+  friend bool operator==(const GlobeView&, const GlobeView&) = default;
 };
 
 class GlobeScene final : public Scene {
