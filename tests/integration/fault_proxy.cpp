@@ -9,6 +9,7 @@
 #include "fault_proxy.hpp"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <boost/asio/as_tuple.hpp>
 #include <boost/asio/co_spawn.hpp>
@@ -26,6 +27,7 @@
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <sstream>
 #include <string_view>
 #include <thread>
 #include <unordered_map>
@@ -49,7 +51,7 @@ constexpr std::string_view kStatsPath = "/_proxy/stats";
 using Request = http::request<http::string_body>;
 using Response = http::response<http::string_body>;
 
-enum class Fault { none, error, reset, delay };
+enum class Fault { none, error, reset, truncate, delay };
 
 // Removes the hop-by-hop fields (RFC 9110 section 7.6.1), those the Connection field names
 // included. A chunked body was decoded by the parser, so it is re-framed with a Content-Length
@@ -124,6 +126,7 @@ std::string FaultProxyStats::to_json() const {
   j["errors"] = errors;
   j["delays"] = delays;
   j["resets"] = resets;
+  j["truncations"] = truncations;
   j["upstream_errors"] = upstream_errors;
   j["delay_ms"] = delay_ms;
   return j.dump();
@@ -182,6 +185,7 @@ class FaultProxy::Impl {
     s.forwarded = forwarded_.load();
     s.errors = errors_.load();
     s.resets = resets_.load();
+    s.truncations = truncations_.load();
     s.delays = delays_.load();
     s.upstream_errors = upstream_errors_.load();
     s.delay_ms = options_.delay.count();
@@ -214,6 +218,7 @@ class FaultProxy::Impl {
     const auto every = [n](int k) { return k > 0 && n % std::uint64_t(k) == 0; };
     if (every(options_.error_every)) return Fault::error;
     if (every(options_.reset_every)) return Fault::reset;
+    if (every(options_.truncate_every)) return Fault::truncate;
     if (every(options_.delay_every)) return Fault::delay;
     return Fault::none;
   }
@@ -308,6 +313,12 @@ class FaultProxy::Impl {
           }
           res = co_await forward(*c, req, head);
           if (stopping_) co_return;
+          if (fault == Fault::truncate) {
+            truncations_.fetch_add(1);
+            res.version(version);
+            co_await cut_short(*c, res, head);
+            co_return;
+          }
         }
       }
       res.version(version);
@@ -323,6 +334,23 @@ class FaultProxy::Impl {
         co_return;
       }
     }
+  }
+
+  // Writes res's header, with the Content-Length of its whole body, and the first half of the
+  // body, then closes the connection: a transfer that breaks off part way.
+  asio::awaitable<void> cut_short(Connection& c, Response& res, bool head) {
+    if (!head) res.content_length(res.body().size());
+    std::ostringstream header;
+    header << res.base();
+    const std::string head_bytes = header.str();
+    const std::size_t half = head ? 0 : res.body().size() / 2;
+    const std::array<asio::const_buffer, 2> bytes{asio::buffer(head_bytes),
+                                                  asio::buffer(res.body().data(), half)};
+    c.client.expires_after(options_.idle_timeout);
+    co_await asio::async_write(c.client, bytes, kUse);
+    beast::error_code ignored;
+    c.client.socket().shutdown(tcp::socket::shutdown_send, ignored);
+    c.close();
   }
 
   // Sends req upstream over the connection's upstream stream (opened when needed) and returns the
@@ -385,7 +413,8 @@ class FaultProxy::Impl {
   std::uint16_t port_ = 0;
 
   std::atomic<std::uint64_t> requests_{0}, matched_{0}, forwarded_{0};
-  std::atomic<std::uint64_t> errors_{0}, resets_{0}, delays_{0}, upstream_errors_{0};
+  std::atomic<std::uint64_t> errors_{0}, resets_{0}, truncations_{0}, delays_{0},
+      upstream_errors_{0};
 
   // Declared before the io_context: coroutine frames it may still destroy unregister from here.
   std::mutex conns_mutex_;
@@ -402,7 +431,8 @@ Result<std::unique_ptr<FaultProxy>> FaultProxy::start(FaultProxyOptions options)
     return make_error(ErrorCode::invalid_argument, std::move(message));
   };
   if (options.upstream_port == 0) return bad("no upstream port");
-  if (options.error_every < 0 || options.reset_every < 0 || options.delay_every < 0) {
+  if (options.error_every < 0 || options.reset_every < 0 || options.truncate_every < 0 ||
+      options.delay_every < 0) {
     return bad("a fault schedule's period must be >= 0 (0: off)");
   }
   if (options.error_status < 400 || options.error_status > 599) {

@@ -10,12 +10,16 @@
 //             text body, upstream is not contacted;
 //   a reset   when reset_every > 0 and n % reset_every == 0: the client connection is aborted
 //             with a TCP RST (SO_LINGER 0) instead of an answer, upstream is not contacted;
+//   a truncation when truncate_every > 0 and n % truncate_every == 0: forwarded, and upstream's
+//             answer sent with the Content-Length of its whole body but only the first half of
+//             the body (rounded down), then the connection is closed (a transfer broken off part
+//             way; an answer without a body arrives whole, and still counts);
 //   a delay   when delay_every > 0 and n % delay_every == 0: forwarded after waiting `delay`
 //             (an asynchronous timer: other connections keep being served meanwhile).
 // The schedules count independently (each looks at n alone); a request picked by more than one
-// gets only one fault, by precedence error > reset > delay, and only that one is counted. So with
-// N matching requests, errors = floor(N / error_every) exactly, whatever the concurrency.
-// Requests that do not match are forwarded untouched and are not numbered.
+// gets only one fault, by precedence error > reset > truncation > delay, and only that one is
+// counted. So with N matching requests, errors = floor(N / error_every) exactly, whatever the
+// concurrency. Requests that do not match are forwarded untouched and are not numbered.
 //
 // A reset is only seen by a client as a failure on a fresh connection: libcurl (like most HTTP
 // clients) silently retries a request once when a connection it reused dies before any byte of
@@ -27,7 +31,8 @@
 // Stats. GET /_proxy/stats (never forwarded, never counted) answers with stats().to_json():
 //   {"requests": all requests proxied, "matched": those numbered by the schedule,
 //    "forwarded": answered by upstream and relayed (delayed ones included),
-//    "errors", "resets", "delays": faults injected,
+//    "errors", "resets", "truncations", "delays": faults injected (truncations are among the
+//    forwarded),
 //    "upstream_errors": answered 502 (upstream unreachable or broken) or 504 (upstream timeout),
 //    "delay_ms": the configured delay}
 // and requests = forwarded + errors + resets + upstream_errors once no request is in flight.
@@ -65,8 +70,9 @@ struct FaultProxyOptions {
 
   int error_every = 0;  // 0: off
   int error_status = 503;
-  int reset_every = 0;  // 0: off
-  int delay_every = 0;  // 0: off
+  int reset_every = 0;     // 0: off
+  int truncate_every = 0;  // 0: off
+  int delay_every = 0;     // 0: off
   std::chrono::milliseconds delay{0};
 
   int threads = 2;
@@ -76,7 +82,7 @@ struct FaultProxyOptions {
 
 struct FaultProxyStats {
   std::uint64_t requests = 0, matched = 0, forwarded = 0;
-  std::uint64_t errors = 0, resets = 0, delays = 0, upstream_errors = 0;
+  std::uint64_t errors = 0, resets = 0, truncations = 0, delays = 0, upstream_errors = 0;
   std::int64_t delay_ms = 0;
 
   std::string to_json() const;  // one line, no trailing newline

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # fault_proxy (tests/integration/fault_proxy.hpp) in front of the real `vts serve`, driven by the
-# curl CLI: it injects exactly the errors, resets and delays its schedule names, in arrival order,
-# only on requests under --prefix, with precedence error > reset > delay; forwarded answers are
+# curl CLI: it injects exactly the errors, resets, truncations and delays its schedule names, in
+# arrival order, only on requests under --prefix, with precedence error > reset > delay (a
+# truncation sends half the body under the full Content-Length); forwarded answers are
 # byte-identical to direct ones and reuse one upstream connection per client connection; delays
 # do not hold up other connections (64 in parallel); /_proxy/stats and the --stats file count
 # exactly what was injected; SIGTERM ends it promptly (a delay in progress included) with exit 0;
@@ -285,6 +286,36 @@ curl -sSf "$RST/_proxy/stats" -o "$WORK/rst.live.json"
 expect_stats "$WORK/rst.live.json" 'j.requests == 24' 'j.errors == 4' 'j.resets == 4' \
   'j.delays == 4' 'j.forwarded == 16' 'j.upstream_errors == 0'
 note "4 errors over 4 resets over 4 delays, as the precedence says"
+
+note "truncations: --truncate-every 3 (the header's full Content-Length, half the body, then close)"
+start_proxy trunc --prefix /syn/ --truncate-every 3
+TRUNC_PID=$PROXY_PID
+for ((n = 1; n <= 9; n++)); do
+  t=${TILES[n - 1]}
+  direct=$WORK/direct/${t//\//_}
+  set +e
+  code=$(timeout 30 curl -sS -o "$WORK/trunc_$n" -w '%{http_code}' "$PROXY/syn/$t" \
+    2>"$LOGS/curl_trunc_$n.txt")
+  rc=$?
+  set -e
+  if ((n % 3 == 0)); then
+    # curl 18: "transfer closed with N bytes remaining to read"
+    [[ $rc == 18 && $code == 200 ]] ||
+      fail "request $n: rc $rc status $code, expected a partial file (curl 18): $(cat "$LOGS/curl_trunc_$n.txt")"
+    half=$(($(stat -c %s "$direct") / 2))
+    [[ $(stat -c %s "$WORK/trunc_$n") == "$half" ]] ||
+      fail "request $n: $(stat -c %s "$WORK/trunc_$n") bytes arrived, expected half ($half)"
+    cmp -s "$WORK/trunc_$n" <(head -c "$half" "$direct") || fail "request $n: the half that came differs"
+  else
+    [[ $rc == 0 && $code == 200 ]] || fail "request $n: rc $rc status $code, expected 200"
+    cmp -s "$WORK/trunc_$n" "$direct" || fail "request $n: bytes differ"
+  fi
+done
+curl -sSf "$PROXY/_proxy/stats" -o "$WORK/trunc.live.json"
+expect_stats "$WORK/trunc.live.json" 'j.requests == 9' 'j.truncations == 3' 'j.forwarded == 9' \
+  'j.errors == 0' 'j.resets == 0'
+stop_proxy "$TRUNC_PID" trunc
+note "3 of 9 answers broken off at half their body, curl says so (18); the rest whole"
 
 note "SIGTERM during a delay ends the proxy promptly"
 start_proxy slow --delay-every 1 --delay-ms 60000

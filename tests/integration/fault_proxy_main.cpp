@@ -37,6 +37,7 @@ int usage(const std::string& why) {
                "fault_proxy: %s\n"
                "usage: fault_proxy --upstream URL [--port N] [--prefix P]\n"
                "                   [--error-every N [--error-status S]] [--reset-every N]\n"
+               "                   [--truncate-every N]\n"
                "                   [--delay-every N --delay-ms D] [--threads N] [--stats FILE]\n",
                why.c_str());
   return 2;
@@ -90,6 +91,8 @@ int main(int argc, char** argv) {
       ok = have_status = parse_number(value, options.error_status);
     } else if (flag == "--reset-every") {
       ok = parse_number(value, options.reset_every) && options.reset_every > 0;
+    } else if (flag == "--truncate-every") {
+      ok = parse_number(value, options.truncate_every) && options.truncate_every > 0;
     } else if (flag == "--delay-every") {
       ok = parse_number(value, options.delay_every) && options.delay_every > 0;
     } else if (flag == "--delay-ms") {

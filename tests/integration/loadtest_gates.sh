@@ -33,19 +33,29 @@ expect_rc() {
   ((RC == want)) || { show_output; fail "$what: exited $RC, expected $want"; }
 }
 
+# start_proxy ARGS...: fault_proxy in front of vts serve's tiles; sets PROXY and PROXY_PID.
+start_proxy() {
+  : >"$LOGS/proxy.out"
+  "$FAULT_PROXY" --upstream "$BASE" --prefix /earth@ "$@" --stats "$WORK/proxy.stats.json" \
+    >"$LOGS/proxy.out" 2>"$LOGS/proxy.err" </dev/null &
+  PROXY_PID=$!
+  for ((i = 0; i < 100; i++)); do
+    grep -q '^listening on [0-9]' "$LOGS/proxy.out" && break
+    kill -0 "$PROXY_PID" 2>/dev/null || { cat "$LOGS/proxy.err" >&2; fail "fault_proxy exited"; }
+    sleep 0.05
+  done
+  PROXY="http://127.0.0.1:$(sed -nE 's/^listening on ([0-9]+)$/\1/p' "$LOGS/proxy.out")"
+}
+stop_proxy() {
+  kill -TERM "$PROXY_PID"
+  wait "$PROXY_PID" || fail "fault_proxy exited non-zero after SIGTERM"
+  PROXY_PID=""
+}
+
 note "Earth archive and vts serve; fault_proxy answering every 5th tile with 503"
 build_earth "$WORK/earth.pmtiles" --quiet
 start_server "$WORK/earth.pmtiles"
-: >"$LOGS/proxy.out"
-"$FAULT_PROXY" --upstream "$BASE" --prefix /earth@ --error-every 5 --error-status 503 \
-  >"$LOGS/proxy.out" 2>"$LOGS/proxy.err" </dev/null &
-PROXY_PID=$!
-for ((i = 0; i < 100; i++)); do
-  grep -q '^listening on [0-9]' "$LOGS/proxy.out" && break
-  kill -0 "$PROXY_PID" 2>/dev/null || { cat "$LOGS/proxy.err" >&2; fail "fault_proxy exited"; }
-  sleep 0.05
-done
-PROXY="http://127.0.0.1:$(sed -nE 's/^listening on ([0-9]+)$/\1/p' "$LOGS/proxy.out")"
+start_proxy --error-every 5 --error-status 503
 LT=(--viewers 3 --duration 2 --path jumps --quiet)
 
 # ---- the error rate gate ---------------------------------------------------------------------
@@ -77,9 +87,26 @@ note "--max-error-rate 5% is violated: exit 1 also without --json, after the tab
 expect_rc 1 "--max-error-rate 5%" "$VTS" loadtest "$PROXY/earth" "${LT[@]}" --max-error-rate 5%
 grep -q '^vts: gate failed: error_rate<=5% ' "$ERR" || { show_output; fail "no reason for 5%"; }
 grep -q 'http_503' "$OUT" || { show_output; fail "the tables are missing"; }
-kill -TERM "$PROXY_PID"
-wait "$PROXY_PID" || fail "fault_proxy exited non-zero after SIGTERM"
-PROXY_PID=""
+stop_proxy
+
+note "fault_proxy breaking off every 4th tile half way: the gate fires on truncated bodies"
+start_proxy --truncate-every 4
+expect_rc 1 "25% truncated, no gate" "$VTS" loadtest "$PROXY/earth" "${LT[@]}" --json
+cp "$OUT" "$WORK/truncated.json"
+grep -qE '^vts: gate failed: error_rate<=1% \(error_rate = [0-9.]+%\)$' "$ERR" ||
+  { show_output; fail "the reason does not name the error rate gate"; }
+expect_rc 0 "--max-error-rate 50% with truncations" "$VTS" loadtest "$PROXY/earth" "${LT[@]}" \
+  --json --max-error-rate 50%
+stop_proxy
+truncations=$(json_get "$WORK/proxy.stats.json" 'j.truncations')
+# Every error is a truncated body, never a checksum error; a request the view dropped while its
+# body was on the way is cancelled, not an error, so errors <= truncations of the first run.
+json_check "$WORK/truncated.json" "j.totals.errors > 0 && j.errors_by_kind.truncated == j.totals.errors &&
+  j.totals.error_ratio > 0.1 && j.totals.error_ratio < 0.4" "the errors are the truncated bodies"
+errors=$(json_get "$WORK/truncated.json" 'j.totals.errors')
+((errors + $(json_get "$OUT" 'j.totals.errors') <= truncations)) ||
+  fail "$errors + $(json_get "$OUT" 'j.totals.errors') truncated errors counted, the proxy cut $truncations"
+note "$errors truncated bodies counted (proxy: $truncations cut over both runs)"
 
 # ---- --slo on a clean run ----------------------------------------------------------------------
 note "straight against vts serve: --slo 'p99<60s' --slo 'full_res_p95<60s' hold"
