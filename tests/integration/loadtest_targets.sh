@@ -2,8 +2,9 @@
 # vts loadtest and vts warm against third-party tile servers on loopback: nginx over a folder of
 # PNG tiles made by the real gdal2tiles.py (an XYZ template, the same folder as TMS with {-y}, a
 # third-party TileJSON pointing at it) and a stock raster PMTiles archive (vts export: no
-# "vtstream" metadata, tile type png) served by nginx with Range; vts view shows the templates. Each run has requests and no
-# errors; warm fetches exactly the tiles of zooms 0-3 that exist; --decode counts a corrupted PNG as
+# "vtstream" metadata, tile type png; and the same rewritten with uncompressed directories in
+# leaves by pmtiles_uncompressed.py) served by nginx with Range; vts view shows the templates.
+# Each run has requests and no errors; warm fetches exactly the tiles of zooms 0-3 that exist; --decode counts a corrupted PNG as
 # "undecodable" (and without --decode it is not an error); a template that 404s counts http_404
 # errors and never a checksum error; a template without --zoom is refused naming --zoom.
 source "$(dirname "$0")/lib.sh"
@@ -27,6 +28,19 @@ cp -r "$WWW/xyz" "$WWW/bad"
 printf 'this is not a PNG' >"$WWW/bad/0/0/0.png"
 build_earth "$WORK/earth.pmtiles" --quiet
 expect_ok "$VTS" export "$WORK/earth.pmtiles" -o "$WWW/stock.pmtiles" --format png --quiet
+# The same archive as another writer may lay it out: directories and metadata uncompressed
+# (internal compression none), the tile entries in leaf directories of 8. Stock npm pmtiles reads
+# the same 43 tiles from both.
+expect_ok python3 "$(dirname "$0")/pmtiles_uncompressed.py" "$WWW/stock.pmtiles" \
+  "$WWW/stock-raw.pmtiles" 8
+for a in stock stock-raw; do
+  expect_ok "$NODE" "$PMTILES_JS/read_export.mjs" "$WWW/$a.pmtiles" "$WORK/js-$a"
+  cp "$OUT" "$WORK/js-$a.json"
+done
+json_check "$WORK/js-stock.json" 'j.internalCompression === 2 && j.tiles_read === 43' "gzip directories"
+json_check "$WORK/js-stock-raw.json" 'j.internalCompression === 1 && j.tiles_read === 43' \
+  "uncompressed directories"
+diff -r "$WORK/js-stock" "$WORK/js-stock-raw" >/dev/null || fail "npm pmtiles reads other tiles"
 
 nginx_prepare "$WORK/nginx"
 cat >"$N/conf.d/tiles.conf" <<CONF
@@ -69,7 +83,7 @@ loadtest_json() {
 for target in "xyz|$S/xyz/{z}/{x}/{y}.png|--zoom 0-3|85" \
   "tms|$S/tms/{z}/{x}/{-y}.png|--zoom 0-3|85" "tilejson|$S/tilejson.json||85" \
   "tmsjson|$S/tms.json||85" \
-  "pmtiles|$S/stock.pmtiles||43"; do
+  "pmtiles|$S/stock.pmtiles||43" "pmtiles-raw|$S/stock-raw.pmtiles||43"; do
   IFS='|' read -r name url extra tiles <<<"$target"
   note "loadtest $name: requests, bytes, no errors"
   # shellcheck disable=SC2086  # extra is a list of arguments
@@ -98,6 +112,8 @@ for name in tms tilejson tmsjson; do
   [[ $(tiles_of xyz | md5sum) == $(tiles_of "$name" | md5sum) ]] ||
     fail "the $name cache holds other tiles than the xyz cache"
 done
+[[ $(tiles_of pmtiles | wc -l) == 43 && $(tiles_of pmtiles | md5sum) == $(tiles_of pmtiles-raw | md5sum) ]] ||
+  fail "the archive with uncompressed directories warms other tiles than the gzip one"
 
 note "the viewers' disk caches take image tiles"
 loadtest_json disk "$S/xyz/{z}/{x}/{y}.png" --zoom 0-3 --cache disk --cache-dir "$WORK/lt-caches"
