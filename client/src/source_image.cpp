@@ -6,9 +6,11 @@
 //
 // Callbacks run on the fetcher's thread, or on the source's callback thread for tiles outside the
 // zoom range or bounds (absent without a request).
+#include <cctype>
 #include <cmath>
 #include <memory>
 #include <utility>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -35,6 +37,37 @@ void replace_all(std::string& s, std::string_view from, const std::string& to) {
   }
 }
 
+// A template's hosts: {s} as a, b, c (Leaflet's default subdomains), a range {a-c} or {1-4}
+// (OpenLayers') as each character of it; else the template itself.
+std::vector<std::string> expand_hosts(const std::string& t) {
+  std::string_view from = "{s}";
+  std::vector<std::string> hosts;
+  if (t.find(from) != std::string::npos) {
+    hosts = {"a", "b", "c"};
+  } else {
+    for (std::size_t p = t.find('{'); p != std::string::npos; p = t.find('{', p + 1)) {
+      if (p + 4 >= t.size() || t[p + 2] != '-' || t[p + 4] != '}') continue;
+      const char a = t[p + 1], b = t[p + 3];
+      const bool letters = std::islower(static_cast<unsigned char>(a)) &&
+                           std::islower(static_cast<unsigned char>(b));
+      const bool digits = std::isdigit(static_cast<unsigned char>(a)) &&
+                          std::isdigit(static_cast<unsigned char>(b));
+      if (!(letters || digits) || a > b) continue;
+      from = std::string_view(t).substr(p, 5);
+      for (char c = a; c <= b; ++c) hosts.emplace_back(1, c);
+      break;
+    }
+  }
+  if (hosts.empty()) return {t};
+  std::vector<std::string> out;
+  for (const std::string& h : hosts) {
+    std::string u = t;
+    replace_all(u, from, h);
+    out.push_back(std::move(u));
+  }
+  return out;
+}
+
 bool lower_ends_with(std::string s, std::string_view suffix) {
   for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
   return s.ends_with(suffix);
@@ -50,7 +83,14 @@ struct ImagePending {
 class ImageTemplateSource final : public FetchingSource<ImagePending> {
  public:
   ImageTemplateSource(std::unique_ptr<Fetcher> fetcher, SourceInfo info, ImageLayout layout)
-      : FetchingSource(std::move(fetcher)), info_(std::move(info)), layout_(std::move(layout)) {}
+      : FetchingSource(std::move(fetcher)), info_(std::move(info)), layout_(std::move(layout)) {
+    for (const std::string& t : layout_.mirrors) {
+      auto more = expand_hosts(t);
+      urls_.insert(urls_.end(), more.begin(), more.end());
+    }
+    auto first = expand_hosts(layout_.tiles);
+    urls_.insert(urls_.begin(), first.begin(), first.end());
+  }
   ~ImageTemplateSource() override { close(); }
 
   const SourceInfo& info() const override { return info_; }
@@ -83,7 +123,7 @@ class ImageTemplateSource final : public FetchingSource<ImagePending> {
  private:
   std::string tile_url(TileId id) const {
     const std::uint32_t flipped = ((std::uint32_t{1} << id.z) - 1) - id.y;
-    std::string url = layout_.tiles;
+    std::string url = urls_[(std::uint64_t(id.x) + id.y) % urls_.size()];
     replace_all(url, "{z}", std::to_string(id.z));
     replace_all(url, "{x}", std::to_string(id.x));
     replace_all(url, "{-y}", std::to_string(flipped));
@@ -125,7 +165,8 @@ class ImageTemplateSource final : public FetchingSource<ImagePending> {
 
   const SourceInfo info_;
   const ImageLayout layout_;
-  CallbackThread callbacks_;  // last: destroyed first, running what is queued
+  std::vector<std::string> urls_;  // the templates requests are spread over
+  CallbackThread callbacks_;       // last: destroyed first, running what is queued
 };
 
 Result<double> number_at(const nlohmann::json& j, const char* key, const std::string& url) {
@@ -211,10 +252,17 @@ Result<ImageLayout> read_image_tilejson(std::span<const std::uint8_t> body, cons
   if (tiles == j.end() || !tiles->is_array() || tiles->empty() || !(*tiles)[0].is_string())
     return corrupt("no \"tiles\" array of URL templates");
   ImageLayout l;
-  l.tiles = resolve_url(url, (*tiles)[0].get<std::string>());
-  if (l.tiles.find("{z}") == std::string::npos || l.tiles.find("{x}") == std::string::npos ||
-      (l.tiles.find("{y}") == std::string::npos && l.tiles.find("{-y}") == std::string::npos))
-    return corrupt("tile template " + l.tiles + " lacks {z}, {x} or {y}");
+  for (const auto& t : *tiles) {
+    if (!t.is_string()) return corrupt("a \"tiles\" entry is not a URL template");
+    std::string u = resolve_url(url, t.get<std::string>());
+    if (u.find("{z}") == std::string::npos || u.find("{x}") == std::string::npos ||
+        (u.find("{y}") == std::string::npos && u.find("{-y}") == std::string::npos))
+      return corrupt("tile template " + u + " lacks {z}, {x} or {y}");
+    if (l.tiles.empty())
+      l.tiles = std::move(u);
+    else
+      l.mirrors.push_back(std::move(u));
+  }
   l.tms = j.value("scheme", std::string("xyz")) == "tms";
   l.min_zoom = 0;
   l.max_zoom = kMaxImageZoom;  // TileJSON's default is 30; finer levels are not addressed

@@ -47,6 +47,7 @@ cat >"$N/conf.d/tiles.conf" <<CONF
 server {
   listen 127.0.0.1:$HTTP_PORT;
   root $WWW;
+  access_log $N/logs/access.log;
 }
 CONF
 if ((EUID == 0)); then chmod -R a+rX "$WWW"; fi
@@ -114,6 +115,39 @@ for name in tms tilejson tmsjson; do
 done
 [[ $(tiles_of pmtiles | wc -l) == 43 && $(tiles_of pmtiles | md5sum) == $(tiles_of pmtiles-raw | md5sum) ]] ||
   fail "the archive with uncompressed directories warms other tiles than the gzip one"
+
+note "hosts: {s}, {a-c} and a TileJSON's three templates spread requests by (x + y) % 3"
+mkdir -p "$WWW/sub"
+for h in a b c; do ln -s ../xyz "$WWW/sub/$h"; done
+cat >"$WWW/mirrors.json" <<JSON
+{"tilejson": "3.0.0", "maxzoom": 3,
+ "tiles": ["sub/a/{z}/{x}/{y}.png", "sub/b/{z}/{x}/{y}.png", "$S/sub/c/{z}/{x}/{y}.png"]}
+JSON
+if ((EUID == 0)); then chmod a+r "$WWW/mirrors.json"; fi
+for target in "s|$S/sub/{s}/{z}/{x}/{y}.png|--zoom 0-3" \
+  "range|$S/sub/{a-c}/{z}/{x}/{y}.png|--zoom 0-3" "mirrors|$S/mirrors.json|"; do
+  IFS='|' read -r name url extra <<<"$target"
+  : >"$N/logs/access.log"
+  # shellcheck disable=SC2086
+  expect_ok "$VTS" warm "$url" --cache-dir "$WORK/cache-$name" --json --quiet $extra
+  [[ $(tiles_of xyz | md5sum) == $(tiles_of "$name" | md5sum) ]] ||
+    fail "the $name cache holds other tiles than the xyz cache"
+  python3 - "$N/logs/access.log" "$name" <<'EOF_PY' || fail "$name: requests not spread as web maps do"
+import re, sys
+hosts = {}
+for line in open(sys.argv[1]):
+    m = re.search(r'"GET /sub/([abc])/(\d+)/(\d+)/(\d+)\.png HTTP', line)
+    if not m:
+        continue
+    h, z, x, y = m.group(1), *map(int, m.groups()[1:])
+    if h != "abc"[(x + y) % 3]:
+        sys.exit(f"{sys.argv[2]}: tile {z}/{x}/{y} asked of host {h}")
+    hosts[h] = hosts.get(h, 0) + 1
+if sum(hosts.values()) != 85 or len(hosts) != 3:
+    sys.exit(f"{sys.argv[2]}: requests per host {hosts}, expected 85 over a, b and c")
+print(f"{sys.argv[2]}: {hosts}")
+EOF_PY
+done
 
 note "the viewers' disk caches take image tiles"
 loadtest_json disk "$S/xyz/{z}/{x}/{y}.png" --zoom 0-3 --cache disk --cache-dir "$WORK/lt-caches"

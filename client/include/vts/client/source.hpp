@@ -144,7 +144,11 @@ struct SourceOptions {
 // Where an image tileset's tiles are and what they are: a template's or TileJSON's layout.
 struct ImageLayout {
   std::string tiles;  // URL template with {z}, {x} and {y} or {-y}
-  bool tms = false;   // {y} counts rows from the south (TileJSON "scheme": "tms")
+  // More templates of the same tiles (a TileJSON's further "tiles"). Requests are spread over all
+  // of them, each with {s} taken as the hosts a, b, c and a range {a-c} or {1-4} as its hosts, a
+  // tile always to the same one: (x + y) modulo their number, as web maps pick.
+  std::vector<std::string> mirrors;
+  bool tms = false;  // {y} counts rows from the south (TileJSON "scheme": "tms")
   int min_zoom = 0, max_zoom = -1;
   LonLatBounds bounds = {-180, -kWebMercatorMaxLat, 180, kWebMercatorMaxLat};
   std::uint32_t tile_size = 256;
@@ -161,8 +165,9 @@ bool image_tile_exists(const SourceInfo& info, TileId id);
 // Opens `location`:
 //   - a path to a *.pmtiles file (or file:///path)                → local archive;
 //   - an http(s) URL ending in .pmtiles                           → remote archive, range reads;
-//   - an http(s) URL with {z} in it (https://host/{z}/{x}/{y}.png; {-y}: TMS rows) → an XYZ
-//     template of image tiles, laid out by options' bounds and zoom range (max_zoom required);
+//   - an http(s) URL with {z} in it (https://host/{z}/{x}/{y}.png; {-y}: TMS rows; {s} or
+//     {a-c}: hosts, see ImageLayout::mirrors) → an XYZ template of image tiles, laid out by
+//     options' bounds and zoom range (max_zoom required);
 //   - an http(s) URL ending in .json                              → TileJSON;
 //   - any other http(s) URL (e.g. http://host:8080/earth)         → TileJSON at URL + ".json".
 // The suffix is judged on the URL's path (a query such as an object store's signature is kept and
