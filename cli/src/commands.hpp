@@ -69,6 +69,10 @@ const std::string& command_line();
 // `app` is expected that names none (below the top level: a plain lower-case word within 2 edits
 // of a subcommand, since it may be a positional argument); empty otherwise (suggest.cpp).
 std::string unknown_command(CLI::App& app, int argc, char** argv);
+// For CLI11's "argument(s) not expected" (`extras`, after a parse): the first --option among them
+// named with the command it was given to, and the nearest option of that command if near; "" when
+// no extra is an --option.
+std::string unknown_option(CLI::App& app, const std::vector<std::string>& extras);
 
 // Prints "vts: error: <message>" to stderr and returns the mapped exit code.
 int report_error(const vts::Error& e);

@@ -86,6 +86,14 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
+    // A mistyped option first: it may be why a required one is missing (--cache-dri).
+    const std::string unknown =
+        e.get_exit_code() != 0 ? vts::cli::unknown_option(app, app.remaining(true)) : "";
+    if (!unknown.empty()) {
+      std::fprintf(stderr, "vts: error: %s\nRun with --help for more information.\n",
+                   unknown.c_str());
+      return 2;
+    }
     // --help and --version exit 0; every malformed command line exits 2 (README), whatever
     // CLI11's own code for the kind of mistake (105 for a value its check refused, ...).
     return app.exit(e) == 0 ? 0 : 2;

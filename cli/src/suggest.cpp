@@ -1,5 +1,6 @@
 // "unknown command 'buidl'; did you mean 'build'?": a word where a subcommand is expected that
-// names none, with the nearest subcommand by edit distance.
+// names none, with the nearest subcommand by edit distance; and the same for a mistyped option
+// ("unknown option '--viewer' of 'vts loadtest'; did you mean '--viewers'?").
 #include <algorithm>
 #include <cctype>
 #include <string>
@@ -33,7 +34,42 @@ bool plain_word(const std::string& w) {
   });
 }
 
+// The nearest of `names` to `w` when near enough to be a typo of it, else "".
+std::string nearest(const std::string& w, const std::vector<std::string>& names) {
+  std::string best;
+  std::size_t best_d = ~std::size_t{0};
+  for (const std::string& n : names) {
+    const std::size_t d = edit_distance(w, n);
+    if (d < best_d) best = n, best_d = d;
+  }
+  return best_d <= std::max<std::size_t>(2, w.size() / 3) ? best : "";
+}
+
 }  // namespace
+
+std::string unknown_option(CLI::App& app, const std::vector<std::string>& extras) {
+  CLI::App* cur = &app;
+  std::string path = "vts";
+  for (;;) {
+    const std::vector<CLI::App*> parsed =
+        cur->get_subcommands([](CLI::App* s) { return s->parsed(); });
+    if (parsed.empty()) break;
+    cur = parsed.front();
+    path += " " + cur->get_name();
+  }
+  for (const std::string& e : extras) {
+    if (e.size() < 3 || e.compare(0, 2, "--") != 0) continue;
+    const std::string flag = e.substr(0, e.find('='));
+    std::vector<std::string> names;
+    for (const CLI::Option* o : cur->get_options())
+      for (const std::string& l : o->get_lnames()) names.push_back("--" + l);
+    std::string msg = "unknown option '" + flag + "' of '" + path + "'";
+    if (const std::string best = nearest(flag, names); !best.empty())
+      msg += "; did you mean '" + best + "'?";
+    return msg;
+  }
+  return "";
+}
 
 std::string unknown_command(CLI::App& app, int argc, char** argv) {
   CLI::App* cur = &app;

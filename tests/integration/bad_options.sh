@@ -55,6 +55,18 @@ expect_unknown "unknown command 'xyzzy'" xyzzy
 # A word that is far from every subcommand below the top level stays a positional argument.
 run "$VTS" loadtest earth --duration 0.1 --quiet
 grep -qF 'unknown command' "$ERR" && { show_output; fail "loadtest took its URL for a command"; }
+# A mistyped option: the command it was given to and its nearest option.
+expect_unknown "unknown option '--viewer' of 'vts loadtest'; did you mean '--viewers'?" \
+  loadtest http://127.0.0.1:9/t --viewer 3
+expect_unknown "unknown option '--lisen' of 'vts serve'; did you mean '--listen'?" \
+  serve --lisen 127.0.0.1:0 "$WORK/s.pmtiles"
+expect_unknown "unknown option '--threshhold' of 'vts loadtest compare'; did you mean '--threshold'?" \
+  loadtest compare a.json b.json --threshhold=3
+expect_unknown "unknown option '--zzzzzzzz' of 'vts warm'" warm http://127.0.0.1:9/t --zzzzzzzz \
+  --cache-dir "$WORK/c"
+# ... and before the required option it may have been meant to be.
+expect_unknown "unknown option '--cache-dri' of 'vts warm'; did you mean '--cache-dir'?" \
+  warm http://127.0.0.1:9/t --cache-dri "$WORK/c"
 
 note "vts sign"
 expect_refused --ttl "$VTS" sign /t/0/0/0 --key k --ttl "$big"
