@@ -29,6 +29,31 @@ std::atomic<bool> g_stop{false};
 extern "C" void on_stop_signal(int) {
   g_stop.store(true);
 }
+
+// Parses the command line; -1 when a subcommand is to run, else the exit status: 0 after --help
+// or --version, 2 for every malformed command line (README), whatever CLI11's own code for the
+// kind of mistake (105 for a value its check refused, ...).
+int parse(CLI::App& app, int argc, char** argv) {
+  std::string unknown = vts::cli::unknown_command(app, argc, argv);
+  if (!unknown.empty()) {
+    std::fprintf(stderr, "vts: error: %s\nRun with --help for the list of commands.\n",
+                 unknown.c_str());
+    return 2;
+  }
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    // A mistyped option first: it may be why a required one is missing (--cache-dri).
+    if (e.get_exit_code() != 0) unknown = vts::cli::unknown_option(app, app.remaining(true));
+    if (!unknown.empty()) {
+      std::fprintf(stderr, "vts: error: %s\nRun with --help for more information.\n",
+                   unknown.c_str());
+      return 2;
+    }
+    return app.exit(e) == 0 ? 0 : 2;
+  }
+  return -1;
+}
 }  // namespace
 
 const std::atomic<bool>& vts::cli::install_stop_signals() {
@@ -78,26 +103,7 @@ int main(int argc, char** argv) {
     if (i) vts::cli::g_command_line += ' ';
     vts::cli::g_command_line += i == 0 ? "vts" : argv[i];
   }
-  if (const std::string unknown = vts::cli::unknown_command(app, argc, argv); !unknown.empty()) {
-    std::fprintf(stderr, "vts: error: %s\nRun with --help for the list of commands.\n",
-                 unknown.c_str());
-    return 2;
-  }
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    // A mistyped option first: it may be why a required one is missing (--cache-dri).
-    const std::string unknown =
-        e.get_exit_code() != 0 ? vts::cli::unknown_option(app, app.remaining(true)) : "";
-    if (!unknown.empty()) {
-      std::fprintf(stderr, "vts: error: %s\nRun with --help for more information.\n",
-                   unknown.c_str());
-      return 2;
-    }
-    // --help and --version exit 0; every malformed command line exits 2 (README), whatever
-    // CLI11's own code for the kind of mistake (105 for a value its check refused, ...).
-    return app.exit(e) == 0 ? 0 : 2;
-  }
+  if (const int rc = parse(app, argc, argv); rc >= 0) return rc;
   try {
     for (auto& [sub, run] : runners)
       if (sub->parsed()) return run();
