@@ -117,6 +117,7 @@ part_fill() {
   json_check "$LOGS/warm.json" "j.from_network == 0 && j.already_cached == $SYN_TILES &&
     j.complete" "offline: everything from the cache"
   note "the cache daemon starts offline from a cache that only warm filled"
+  : >"$LOGS/daemon.out" # exists before the poll reads it (the job opens it when it starts)
   "$VTS" cache serve --upstream "$url" --cache-dir "$dir" --listen 127.0.0.1:0 --no-admin \
     >"$LOGS/daemon.out" 2>"$LOGS/daemon.err" </dev/null &
   local daemon_pid=$! dport="" i

@@ -26,6 +26,7 @@ TILES=341 # 4096x4096, T = 256: levels 0-4 hold 1 + 4 + 16 + 64 + 256 tiles
 ((SIZE > 16384)) || fail "the archive ($SIZE bytes) must be larger than the opening read"
 
 note "python3 -m http.server on 127.0.0.1 (port 0), polled until it listens"
+: >"$LOGS/http.out" # exists before the poll reads it (the job opens it when it starts)
 (cd "$WORK/www" && exec "$PYTHON" -u -m http.server 0 --bind 127.0.0.1) \
   >"$LOGS/http.out" 2>"$LOGS/http.log" </dev/null &
 HTTP_PID=$!
