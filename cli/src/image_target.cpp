@@ -12,10 +12,15 @@ void add_image_target_options(CLI::App* c, ImageTargetArgs& a) {
   c->add_option("--zoom", a.zoom,
                 "Image tiles: zoom levels A-B the server has (a {z}/{x}/{y} template needs it)");
   add_max_download_option(c, a.max_download);
+  c->add_option("--cacert", a.ca_file,
+                "Verify https:// servers with the CA certificates in this PEM file instead of the "
+                "system's")
+      ->check(CLI::ExistingFile);
 }
 
 Status apply_image_target(const ImageTargetArgs& a, client::SourceOptions& o) {
   o.max_download = a.max_download;
+  if (!a.ca_file.empty()) o.fetcher.ca_file = a.ca_file;
   if (!a.bounds.empty()) {
     auto b = parse_numbers(a.bounds, 4, "--bounds", "W,S,E,N");
     if (!b) return b.error();

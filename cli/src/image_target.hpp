@@ -1,6 +1,7 @@
 // How to open a target, shared by loadtest, warm and view: --bounds and --zoom, the layout of an
 // XYZ/TMS template target (which says nothing of itself) or an override of what a third-party
-// TileJSON or archive says; --max-download, for a host that ignores HTTP Range.
+// TileJSON or archive says; --max-download, for a host that ignores HTTP Range; --cacert, for an
+// https:// server whose certificate a private CA signed.
 #pragma once
 
 #include <memory>
@@ -16,6 +17,7 @@ namespace vts::cli {
 struct ImageTargetArgs {
   std::string bounds, zoom;
   std::uint64_t max_download = client::kDefaultMaxDownload;
+  std::string ca_file;  // --cacert
 };
 
 void add_image_target_options(CLI::App* c, ImageTargetArgs& a);

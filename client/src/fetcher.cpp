@@ -10,6 +10,7 @@
 #include "vts/client/fetcher.hpp"
 
 #include <curl/curl.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
@@ -547,6 +548,7 @@ class Fetcher::Impl {
     curl_easy_setopt(e, CURLOPT_FOLLOWLOCATION, 1L);
     curl_easy_setopt(e, CURLOPT_MAXREDIRS, 5L);
     curl_easy_setopt(e, CURLOPT_HTTP_VERSION, long(CURL_HTTP_VERSION_2TLS));
+    if (!o.ca_file.empty()) curl_easy_setopt(e, CURLOPT_CAINFO, o.ca_file.c_str());
     // Prefer multiplexing on an HTTP/2 connection to opening another one. Only over TLS: that is
     // where HTTP/2 is negotiated (ALPN, known right after the handshake). Over plain http:// the
     // answer would only come with the first response, so one stalled request would hold back
@@ -727,8 +729,15 @@ class Fetcher::Impl {
           r.status = status;
           r.attempts = t->attempts;
           const bool bad_url = rc == CURLE_URL_MALFORMAT || rc == CURLE_UNSUPPORTED_PROTOCOL;
+          // The server's certificate or the handshake: not retried, said as TLS.
+          const bool tls = rc == CURLE_PEER_FAILED_VERIFICATION || rc == CURLE_SSL_CONNECT_ERROR ||
+                           rc == CURLE_SSL_CERTPROBLEM || rc == CURLE_SSL_CACERT_BADFILE ||
+                           rc == CURLE_SSL_ISSUER_ERROR || rc == CURLE_SSL_PINNEDPUBKEYNOTMATCH;
+          const std::string what = bad_url ? "bad URL"
+                                   : tls   ? std::string("TLS: ") + curl_easy_strerror(rc)
+                                           : curl_easy_strerror(rc);
           r.error = make_error(bad_url ? ErrorCode::invalid_argument : ErrorCode::io,
-                               describe(t, bad_url ? "bad URL" : curl_easy_strerror(rc), true));
+                               describe(t, what, true));
           finish(t, std::move(r));
           return;
         }
@@ -907,6 +916,10 @@ Result<std::unique_ptr<Fetcher>> Fetcher::create(FetcherOptions options) {
   }
   if (options.max_attempts < 1) {
     return make_error(ErrorCode::invalid_argument, "fetcher: max_attempts must be at least 1");
+  }
+  if (!options.ca_file.empty() && ::access(options.ca_file.c_str(), R_OK) != 0) {
+    return make_error(ErrorCode::not_found,
+                      "CA certificate file " + options.ca_file + " cannot be read");
   }
   if (Status st = init_curl_once(); !st.ok()) return st.error();
   auto impl = std::make_unique<Impl>(std::move(options));

@@ -45,6 +45,7 @@ std::string error_kind(const PayloadResult& r) {
   if (has("connection refused") || has("could not connect") || has("resolve")) return "connect";
   if (has("connection reset")) return "reset";
   if (has("empty reply")) return "empty_reply";
+  if (has(": TLS: ")) return "tls";
   return error_code_name(r.error->code);
 }
 

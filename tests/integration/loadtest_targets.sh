@@ -49,6 +49,14 @@ server {
   root $WWW;
   access_log $N/logs/access.log;
 }
+log_format protocol '\$server_protocol \$request_uri';
+server {
+  listen 127.0.0.1:$HTTPS_PORT ssl http2;
+  ssl_certificate $N/tls/cert.pem;
+  ssl_certificate_key $N/tls/key.pem;
+  root $WWW;
+  access_log $N/logs/tls.log protocol;
+}
 CONF
 if ((EUID == 0)); then chmod -R a+rX "$WWW"; fi
 start_nginx "$N"
@@ -148,6 +156,23 @@ if sum(hosts.values()) != 85 or len(hosts) != 3:
 print(f"{sys.argv[2]}: {hosts}")
 EOF_PY
 done
+
+note "https with HTTP/2: --cacert trusts the server's private certificate; without it, kind tls"
+TLS="https://127.0.0.1:$HTTPS_PORT/xyz/{z}/{x}/{y}.png"
+: >"$N/logs/tls.log"
+loadtest_json https "$TLS" --zoom 0-3 --cacert "$N/tls/cert.pem"
+json_check "$WORK/https.json" 'j.totals.requests > 0 && j.totals.errors === 0' "https load test"
+expect_ok "$VTS" warm "$TLS" --zoom 0-3 --cacert "$N/tls/cert.pem" --cache-dir "$WORK/cache-https" \
+  --json --quiet
+[[ $(tiles_of xyz | md5sum) == $(tiles_of https | md5sum) ]] ||
+  fail "the https cache holds other tiles than the xyz cache"
+[[ $(grep -c . "$N/logs/tls.log") -gt 85 && -z $(grep -v '^HTTP/2.0 ' "$N/logs/tls.log") ]] ||
+  fail "not every request came over HTTP/2: $(sort "$N/logs/tls.log" | cut -d' ' -f1 | uniq -c)"
+loadtest_json untrusted "$TLS" --zoom 0-3
+json_check "$WORK/untrusted.json" 'j.totals.errors > 0 && j.errors_by_kind.tls === j.totals.errors' \
+  "an untrusted certificate: every error is of kind tls"
+run "$VTS" loadtest "$TLS" --zoom 0-3 --cacert "$WORK/no-such.pem" --duration 1
+((RC == 2)) && grep -q 'no-such.pem' "$ERR" || { show_output; fail "a missing --cacert is not named"; }
 
 note "the viewers' disk caches take image tiles"
 loadtest_json disk "$S/xyz/{z}/{x}/{y}.png" --zoom 0-3 --cache disk --cache-dir "$WORK/lt-caches"

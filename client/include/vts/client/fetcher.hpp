@@ -61,6 +61,9 @@ struct FetcherOptions {
   std::size_t max_body_bytes = 64u << 20;    // bigger bodies fail with too_large (bomb guard)
   std::string user_agent = "vtstream/0.1";
   std::vector<std::string> headers;  // sent with every request, e.g. "Authorization: Bearer x"
+  // CA certificates (PEM) to verify https:// servers with instead of the system's (CURLOPT_CAINFO):
+  // a staging server's private CA. create() fails with not_found when it cannot be read.
+  std::string ca_file;
 };
 
 struct FetchRequest {
