@@ -2,6 +2,8 @@
 // long a person waits. Parses the arguments, runs the load engine (vts/loadtest/) with the
 // viewers' camera demand (scenario.hpp), prints the results (terminal or --json) and writes the
 // HTML report.
+#include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <functional>
@@ -25,7 +27,7 @@ namespace {
 struct LoadArgs {
   std::string url, path = "flyover", cache = "none", cache_dir, daemon, report, title, baseline;
   std::uint32_t viewers = 8;
-  double duration = 30, fps = 30, rate = 0;
+  double duration = 30, fps = 30, rate = 0, timeout_s = 30;
   int width = 1280, height = 720, feedback = 8, anisotropy = 8, retries = 0, threads = 0;
   std::uint64_t ram_mb = 64;
   std::uint64_t seed = 1;
@@ -98,6 +100,7 @@ Result<client::LoadTestOptions> load_options(const LoadArgs& a) {
   o.command_line = a.command_line;
   // A load tester shows the server's failures: no silent retries unless asked for.
   o.source.fetcher.max_attempts = a.retries + 1;
+  o.source.fetcher.request_timeout = std::chrono::milliseconds(std::llround(a.timeout_s * 1000));
   return o;
 }
 
@@ -175,6 +178,22 @@ Runner loadtest_runner(const std::shared_ptr<LoadArgs>& a, CLI::App* c) {
 
 }  // namespace
 
+// The simulated viewer's view: the feedback pass it would render.
+void add_view_options(CLI::App* c, LoadArgs& a) {
+  c->add_option("--width", a.width, "Viewport width, pixels")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 16384));
+  c->add_option("--height", a.height, "Viewport height, pixels")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 16384));
+  c->add_option("--feedback", a.feedback, "Feedback resolution 1/K (1, 2, 4, 8, 16)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({1, 2, 4, 8, 16}));
+  c->add_option("--anisotropy", a.anisotropy, "Anisotropic taps the viewer uses (1-16)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 16));
+}
+
 Runner add_loadtest(CLI::App& app) {
   auto a = std::make_shared<LoadArgs>();
   CLI::App* c = app.add_subcommand(
@@ -207,21 +226,14 @@ Runner add_loadtest(CLI::App& app) {
   c->add_option("--title", a->title, "Title of the report");
   c->add_option("--baseline", a->baseline,
                 "An earlier run's --json output: the report overlays it and shows the change");
-  c->add_option("--width", a->width, "Viewport width, pixels")
-      ->capture_default_str()
-      ->check(CLI::Range(1, 16384));
-  c->add_option("--height", a->height, "Viewport height, pixels")
-      ->capture_default_str()
-      ->check(CLI::Range(1, 16384));
-  c->add_option("--feedback", a->feedback, "Feedback resolution 1/K (1, 2, 4, 8, 16)")
-      ->capture_default_str()
-      ->check(CLI::IsMember({1, 2, 4, 8, 16}));
-  c->add_option("--anisotropy", a->anisotropy, "Anisotropic taps the viewer uses (1-16)")
-      ->capture_default_str()
-      ->check(CLI::Range(1, 16));
+  add_view_options(c, *a);
   c->add_option("--retries", a->retries, "Retries of a failed request (0: every failure counts)")
       ->capture_default_str()
       ->check(CLI::Range(0, 10));
+  c->add_option("--timeout", a->timeout_s,
+                "Seconds a request may take before it fails as an error of kind timeout")
+      ->capture_default_str()
+      ->check(CLI::Range(0.01, 3600.0));
   c->add_option("--seed", a->seed, "Seed of the presets' places")->capture_default_str();
   c->add_option("--threads", a->threads, "Driver threads (0: one per core)")
       ->check(CLI::Range(0, int(kMaxThreads)))

@@ -108,6 +108,14 @@ errors=$(json_get "$WORK/truncated.json" 'j.totals.errors')
   fail "$errors + $(json_get "$OUT" 'j.totals.errors') truncated errors counted, the proxy cut $truncations"
 note "$errors truncated bodies counted (proxy: $truncations cut over both runs)"
 
+note "fault_proxy holding every 4th tile for 3 s, --timeout 0.5: errors of kind timeout"
+start_proxy --delay-every 4 --delay-ms 3000
+expect_rc 1 "--timeout 0.5 with 3 s delays" "$VTS" loadtest "$PROXY/earth" "${LT[@]}" --json \
+  --timeout 0.5
+stop_proxy
+json_check "$OUT" "j.totals.errors > 0 && j.errors_by_kind.timeout == j.totals.errors &&
+  j.totals.errors <= $(json_get "$WORK/proxy.stats.json" 'j.delays')" "the errors are the delayed tiles"
+
 # ---- --slo on a clean run ----------------------------------------------------------------------
 note "straight against vts serve: --slo 'p99<60s' --slo 'full_res_p95<60s' hold"
 expect_rc 0 "holding SLOs" "$VTS" loadtest "$BASE/earth" "${LT[@]}" --json --slo 'p99<60s' \
