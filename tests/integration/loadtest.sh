@@ -11,40 +11,13 @@ source "$(dirname "$0")/serve_lib.sh"
 : "${FAULT_PROXY:?FAULT_PROXY must name the fault_proxy executable}"
 require_tool "$FAULT_PROXY"
 
-PROXY_PID=""
 LT_PID=""
-# PROXY_PID is timeout(1)'s: SIGTERM reaches fault_proxy through it (SIGKILL would orphan it).
 loadtest_cleanup() {
-  local i
   if [[ -n $LT_PID ]]; then kill -KILL "$LT_PID" 2>/dev/null || true; fi
-  if [[ -n $PROXY_PID ]] && kill -TERM "$PROXY_PID" 2>/dev/null; then
-    for ((i = 0; i < 40; i++)); do
-      kill -0 "$PROXY_PID" 2>/dev/null || break
-      sleep 0.05
-    done
-    kill -KILL "$PROXY_PID" 2>/dev/null || true
-  fi
+  fault_proxy_cleanup
   serve_cleanup
 }
 trap loadtest_cleanup EXIT
-
-# start_proxy ARGS...: `fault_proxy --upstream $BASE ARGS` in the background; sets PROXY_PID and
-# PROXY (its base URL).
-start_proxy() {
-  local i port
-  : >"$LOGS/proxy.out"
-  timeout -k 5 "$CMD_TIMEOUT" "$FAULT_PROXY" --upstream "$BASE" "$@" \
-    >"$LOGS/proxy.out" 2>"$LOGS/proxy.err" </dev/null &
-  PROXY_PID=$!
-  for ((i = 0; i < 100; i++)); do
-    grep -q '^listening on [0-9]' "$LOGS/proxy.out" && break
-    kill -0 "$PROXY_PID" 2>/dev/null || { cat "$LOGS/proxy.err" >&2; fail "fault_proxy exited"; }
-    sleep 0.05
-  done
-  port=$(sed -nE 's/^listening on ([0-9]+)$/\1/p' "$LOGS/proxy.out")
-  [[ -n $port ]] || { cat "$LOGS/proxy.err" >&2; fail "fault_proxy printed no port"; }
-  PROXY="http://127.0.0.1:$port"
-}
 
 # no_sanitizer_report FILE: FILE (a captured stderr) holds no sanitizer report.
 no_sanitizer_report() {
@@ -64,7 +37,7 @@ curl -sSf "$BASE/earth.json" -o "$WORK/earth.json" || fail "no TileJSON at $BASE
 note "jumps through fault_proxy --error-every 10 --delay-every 7 --delay-ms 300"
 # 300 ms: far above anything a loaded 2-core machine adds to an undelayed request on loopback
 # (at 100 ms, concurrent tests once pushed 22 undelayed requests over the line).
-start_proxy --prefix /earth@ --error-every 10 --error-status 503 --delay-every 7 --delay-ms 300
+start_fault_proxy --prefix /earth@ --error-every 10 --error-status 503 --delay-every 7 --delay-ms 300
 # --max-error-rate 100%: 10% errors would fail the default 1% gate (loadtest_gates.sh tests that).
 expect_ok "$VTS" loadtest "$PROXY/earth" --viewers 4 --duration 4 --path jumps --json --quiet \
   --report "$WORK/report" --title "through the fault proxy" --max-error-rate 100%
@@ -104,9 +77,7 @@ json_check "$WORK/faults.json" "j.report == \"$WORK/report/index.html\"" "report
 for id in plot-latency plot-full-resolution plot-throughput plot-errors; do
   grep -q "id=\"$id\"" "$WORK/report/index.html" || fail "the HTML report has no $id"
 done
-kill -TERM "$PROXY_PID"
-wait "$PROXY_PID" || fail "fault_proxy exited non-zero after SIGTERM"
-PROXY_PID=""
+stop_fault_proxy
 
 # ---- 2. clean closed-loop runs on the presets, straight against vts serve ----------------------
 for path in flyover pan; do

@@ -18,9 +18,8 @@ source "$(dirname "$0")/serve_lib.sh"
 require_tool "$FAULT_PROXY"
 require_tool "$NODE"
 
-PROXY_PID=""
 gates_cleanup() {
-  if [[ -n $PROXY_PID ]]; then kill -KILL "$PROXY_PID" 2>/dev/null || true; fi
+  fault_proxy_cleanup
   serve_cleanup
 }
 trap gates_cleanup EXIT
@@ -33,23 +32,9 @@ expect_rc() {
   ((RC == want)) || { show_output; fail "$what: exited $RC, expected $want"; }
 }
 
-# start_proxy ARGS...: fault_proxy in front of vts serve's tiles; sets PROXY and PROXY_PID.
+# start_proxy ARGS...: fault_proxy in front of vts serve's tiles, its counts in proxy.stats.json.
 start_proxy() {
-  : >"$LOGS/proxy.out"
-  "$FAULT_PROXY" --upstream "$BASE" --prefix /earth@ "$@" --stats "$WORK/proxy.stats.json" \
-    >"$LOGS/proxy.out" 2>"$LOGS/proxy.err" </dev/null &
-  PROXY_PID=$!
-  for ((i = 0; i < 100; i++)); do
-    grep -q '^listening on [0-9]' "$LOGS/proxy.out" && break
-    kill -0 "$PROXY_PID" 2>/dev/null || { cat "$LOGS/proxy.err" >&2; fail "fault_proxy exited"; }
-    sleep 0.05
-  done
-  PROXY="http://127.0.0.1:$(sed -nE 's/^listening on ([0-9]+)$/\1/p' "$LOGS/proxy.out")"
-}
-stop_proxy() {
-  kill -TERM "$PROXY_PID"
-  wait "$PROXY_PID" || fail "fault_proxy exited non-zero after SIGTERM"
-  PROXY_PID=""
+  start_fault_proxy --prefix /earth@ "$@" --stats "$WORK/proxy.stats.json"
 }
 
 note "Earth archive and vts serve; fault_proxy answering every 5th tile with 503"
@@ -87,7 +72,7 @@ note "--max-error-rate 5% is violated: exit 1 also without --json, after the tab
 expect_rc 1 "--max-error-rate 5%" "$VTS" loadtest "$PROXY/earth" "${LT[@]}" --max-error-rate 5%
 grep -q '^vts: gate failed: error_rate<=5% ' "$ERR" || { show_output; fail "no reason for 5%"; }
 grep -q 'http_503' "$OUT" || { show_output; fail "the tables are missing"; }
-stop_proxy
+stop_fault_proxy
 
 note "fault_proxy breaking off every 4th tile half way: the gate fires on truncated bodies"
 start_proxy --truncate-every 4
@@ -97,7 +82,7 @@ grep -qE '^vts: gate failed: error_rate<=1% \(error_rate = [0-9.]+%\)$' "$ERR" |
   { show_output; fail "the reason does not name the error rate gate"; }
 expect_rc 0 "--max-error-rate 50% with truncations" "$VTS" loadtest "$PROXY/earth" "${LT[@]}" \
   --json --max-error-rate 50%
-stop_proxy
+stop_fault_proxy
 truncations=$(json_get "$WORK/proxy.stats.json" 'j.truncations')
 # Every error is a truncated body, never a checksum error; a request the view dropped while its
 # body was on the way is cancelled, not an error, so errors <= truncations of the first run.
@@ -112,7 +97,7 @@ note "fault_proxy holding every 4th tile for 3 s, --timeout 0.5: errors of kind 
 start_proxy --delay-every 4 --delay-ms 3000
 expect_rc 1 "--timeout 0.5 with 3 s delays" "$VTS" loadtest "$PROXY/earth" "${LT[@]}" --json \
   --timeout 0.5
-stop_proxy
+stop_fault_proxy
 json_check "$OUT" "j.totals.errors > 0 && j.errors_by_kind.timeout == j.totals.errors &&
   j.totals.errors <= $(json_get "$WORK/proxy.stats.json" 'j.delays')" "the errors are the delayed tiles"
 

@@ -86,3 +86,41 @@ expect_status() {
 
 # archive_bytes ARCHIVE OFFSET LENGTH: the raw bytes at OFFSET (independent of any reader).
 archive_bytes() { tail -c +$(($2 + 1)) "$1" | head -c "$3"; }
+
+# fault_proxy (tests/integration/fault_proxy.hpp) in front of the server started above, for the
+# load test scripts. FAULT_PROXY names the executable.
+PROXY_PID=""
+# start_fault_proxy ARGS...: `fault_proxy --upstream $BASE ARGS` in the background; sets
+# PROXY_PID (timeout(1)'s: SIGTERM reaches fault_proxy through it) and PROXY (its base URL).
+start_fault_proxy() {
+  local i port
+  : >"$LOGS/proxy.out"
+  timeout -k 5 "$CMD_TIMEOUT" "$FAULT_PROXY" --upstream "$BASE" "$@" \
+    >"$LOGS/proxy.out" 2>"$LOGS/proxy.err" </dev/null &
+  PROXY_PID=$!
+  for ((i = 0; i < 100; i++)); do
+    grep -q '^listening on [0-9]' "$LOGS/proxy.out" && break
+    kill -0 "$PROXY_PID" 2>/dev/null || { cat "$LOGS/proxy.err" >&2; fail "fault_proxy exited"; }
+    sleep 0.05
+  done
+  port=$(sed -nE 's/^listening on ([0-9]+)$/\1/p' "$LOGS/proxy.out")
+  [[ -n $port ]] || { cat "$LOGS/proxy.err" >&2; fail "fault_proxy printed no port"; }
+  PROXY="http://127.0.0.1:$port"
+}
+# stop_fault_proxy: SIGTERM; fault_proxy must exit 0 (writing its --stats file, if any).
+stop_fault_proxy() {
+  kill -TERM "$PROXY_PID"
+  wait "$PROXY_PID" || fail "fault_proxy exited non-zero after SIGTERM"
+  PROXY_PID=""
+}
+# fault_proxy_cleanup: for an EXIT trap; SIGTERM first (SIGKILL of timeout(1) would orphan it).
+fault_proxy_cleanup() {
+  local i
+  if [[ -n $PROXY_PID ]] && kill -TERM "$PROXY_PID" 2>/dev/null; then
+    for ((i = 0; i < 40; i++)); do
+      kill -0 "$PROXY_PID" 2>/dev/null || break
+      sleep 0.05
+    done
+    kill -KILL "$PROXY_PID" 2>/dev/null || true
+  fi
+}
