@@ -176,8 +176,6 @@ Runner loadtest_runner(const std::shared_ptr<LoadArgs>& a, CLI::App* c) {
   };
 }
 
-}  // namespace
-
 // The simulated viewer's view: the feedback pass it would render.
 void add_view_options(CLI::App* c, LoadArgs& a) {
   c->add_option("--width", a.width, "Viewport width, pixels")
@@ -193,6 +191,8 @@ void add_view_options(CLI::App* c, LoadArgs& a) {
       ->capture_default_str()
       ->check(CLI::Range(1, 16));
 }
+
+}  // namespace
 
 Runner add_loadtest(CLI::App& app) {
   auto a = std::make_shared<LoadArgs>();

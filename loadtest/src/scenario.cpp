@@ -21,6 +21,9 @@ namespace {
 
 using namespace vts::renderer;
 
+// A viewer's camera at one frame: on a globe or over a plane (none before the first frame).
+using View = std::variant<std::monostate, GlobeView, PlaneView>;
+
 // One viewer's camera: its path, where it starts in it, and its demand simulator.
 struct ViewerCamera {
   std::optional<CameraPath> path;
@@ -28,7 +31,7 @@ struct ViewerCamera {
   std::vector<double> moves;  // floor of the frames where the path starts a new view, sorted
   std::unique_ptr<DemandSimulator> sim;
   // The previous frame's view and tiles: a camera that has not moved wants the same tiles.
-  std::variant<std::monostate, GlobeView, PlaneView> last_view;
+  View last_view;
   std::vector<DemandTile> last_tiles;
 };
 
@@ -49,11 +52,7 @@ struct Cameras {
     d.move = std::binary_search(c.moves.begin(), c.moves.end(), std::floor(t));
     const int w = options.width, h = options.height;
     const bool globe = p.has_globe() && !p.has_plane();
-    std::variant<std::monostate, GlobeView, PlaneView> view;
-    if (globe)
-      view = p.globe_at(t);
-    else
-      view = p.plane_at(t);
+    const View view = globe ? View{p.globe_at(t)} : View{p.plane_at(t)};
     if (view == c.last_view) {
       d.tiles = c.last_tiles;
       d.reused = true;
