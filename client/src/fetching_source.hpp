@@ -14,14 +14,49 @@
 
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
+#include <string_view>
 #include <unordered_map>
 #include <utility>
+#include <vector>
 
 #include "vts/client/fetcher.hpp"
 #include "vts/client/source.hpp"
 
 namespace vts::client {
+
+// The first line of a (text) error body, at most 200 bytes, for messages.
+inline std::string first_line(const std::vector<std::uint8_t>& body) {
+  std::string s;
+  for (std::uint8_t b : body) {
+    if (b == '\n' || b == '\r' || s.size() >= 200) break;
+    s.push_back(b >= 0x20 && b < 0x7f ? static_cast<char>(b) : '?');
+  }
+  return s;
+}
+
+// "WHAT URL: HTTP NNN (the body's first line)".
+inline std::string http_failure(std::string_view what, const std::string& url,
+                                const FetchResult& r) {
+  std::string m = std::string(what) + " " + url + ": HTTP " + std::to_string(r.status);
+  const std::string line = first_line(r.body);
+  if (!line.empty()) m += " (" + line + ")";
+  return m;
+}
+
+// Replaces every `from` in s (a URL template's {z}, {x}, ...).
+inline void replace_all(std::string& s, std::string_view from, const std::string& to) {
+  for (std::size_t pos = s.find(from); pos != std::string::npos; pos = s.find(from, pos)) {
+    s.replace(pos, from.size(), to);
+    pos += to.size();
+  }
+}
+
+inline SourceTransfer transfer_of(const FetchResult& r) {
+  return {r.status,        r.body.size(),       r.attempts,
+          r.timing.queued, r.timing.first_byte, r.timing.total};
+}
 
 // The fetcher group of a tile's transfers (FetchRequest::group): its level and its 8x8-tile
 // block, the unit of "one slow region of the origin". A viewer's screen spans a few blocks of a
@@ -92,6 +127,67 @@ class FetchingSource : public TileSource {
       tile.kind = SourceTile::Kind::cancelled;
     }
     p->callback(std::move(tile));
+  }
+
+  void finish_kind(Handle h, SourceTile::Kind kind,
+                   std::optional<SourceTransfer> transfer = std::nullopt) {
+    SourceTile t;
+    t.kind = kind;
+    t.transfer = transfer;
+    finish(h, std::move(t));
+  }
+
+  void finish_error(Handle h, Error e, std::optional<SourceTransfer> transfer = std::nullopt) {
+    SourceTile t;
+    t.kind = SourceTile::Kind::error;
+    t.error = std::move(e);
+    t.transfer = transfer;
+    finish(h, std::move(t));
+  }
+
+  // The answers to a tile's GET every network source takes alike: cancelled, a transfer error,
+  // 200 (the payload, the server's own ETag, the lifetime its Cache-Control gives), 304 (with
+  // the ETag asked with when the answer names none) and 204 (no tile here). True when `r` was one
+  // of them and the request is finished; false leaves the status (404, others) to the source.
+  bool finish_fetched(Handle h, FetchResult& r) {
+    if (r.cancelled) {
+      finish_kind(h, SourceTile::Kind::cancelled);
+      return true;
+    }
+    const SourceTransfer transfer = transfer_of(r);
+    if (r.error) {
+      finish_error(h, std::move(*r.error), transfer);
+      return true;
+    }
+    SourceTile t;
+    t.transfer = transfer;
+    switch (r.status) {
+      case 200:
+        t.kind = SourceTile::Kind::ok;
+        // A tag made here from the payload would be one the server never issued: empty when it
+        // sends none (a revalidation then asks unconditionally).
+        t.etag = std::move(r.etag);
+        t.payload = std::move(r.body);
+        t.fresh_for = cache_control_lifetime(r.cache_control);
+        break;
+      case 304:
+        t.kind = SourceTile::Kind::not_modified;
+        t.etag = std::move(r.etag);
+        t.fresh_for = cache_control_lifetime(r.cache_control);
+        if (t.etag.empty()) {
+          std::lock_guard lock(mutex_);
+          if (auto it = pending_.find(h); it != pending_.end())
+            t.etag = it->second->request.if_none_match;
+        }
+        break;
+      case 204:
+        t.kind = SourceTile::Kind::absent;
+        break;
+      default:
+        return false;
+    }
+    finish(h, std::move(t));
+    return true;
   }
 
   // The request to continue after a step, under mutex_: nullptr when it is done, cancelled or the

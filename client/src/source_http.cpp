@@ -30,30 +30,6 @@ namespace {
 
 constexpr std::size_t kMaxTileJsonBytes = 4u << 20;
 
-// The first line of a (text) error body, at most 200 bytes, for messages.
-std::string first_line(const std::vector<std::uint8_t>& body) {
-  std::string s;
-  for (std::uint8_t b : body) {
-    if (b == '\n' || b == '\r' || s.size() >= 200) break;
-    s.push_back(b >= 0x20 && b < 0x7f ? static_cast<char>(b) : '?');
-  }
-  return s;
-}
-
-std::string http_failure(std::string_view what, const std::string& url, const FetchResult& r) {
-  std::string m = std::string(what) + " " + url + ": HTTP " + std::to_string(r.status);
-  const std::string line = first_line(r.body);
-  if (!line.empty()) m += " (" + line + ")";
-  return m;
-}
-
-void replace_all(std::string& s, std::string_view from, const std::string& to) {
-  for (std::size_t pos = s.find(from); pos != std::string::npos; pos = s.find(from, pos)) {
-    s.replace(pos, from.size(), to);
-    pos += to.size();
-  }
-}
-
 FetchResult fetch_blocking(Fetcher& fetcher, FetchRequest request) {
   std::promise<FetchResult> promise;
   std::future<FetchResult> future = promise.get_future();
@@ -119,63 +95,12 @@ class TileJsonSource final : public FetchingSource<TileJsonPending> {
         std::move(r), [this, h, url](FetchResult&& res) { on_tile(h, url, std::move(res)); });
   }
 
-  void finish_kind(Handle h, SourceTile::Kind kind,
-                   std::optional<SourceTransfer> transfer = std::nullopt) {
-    SourceTile t;
-    t.kind = kind;
-    t.transfer = transfer;
-    finish(h, std::move(t));
-  }
-
-  void finish_error(Handle h, Error e, std::optional<SourceTransfer> transfer = std::nullopt) {
-    SourceTile t;
-    t.kind = SourceTile::Kind::error;
-    t.error = std::move(e);
-    t.transfer = transfer;
-    finish(h, std::move(t));
-  }
-
   void on_tile(Handle h, const std::string& url, FetchResult&& r) {
-    if (r.cancelled) return finish_kind(h, SourceTile::Kind::cancelled);
-    const SourceTransfer transfer{r.status,        r.body.size(),       r.attempts,
-                                  r.timing.queued, r.timing.first_byte, r.timing.total};
-    if (r.error) return finish_error(h, std::move(*r.error), transfer);
-    SourceTile t;
-    t.transfer = transfer;
-    switch (r.status) {
-      case 200: {
-        t.kind = SourceTile::Kind::ok;
-        // The server's own tag, the one it will recognise in If-None-Match; empty when it sends
-        // none (a tag made here from the payload would be one it never issued: a revalidation
-        // then asks unconditionally).
-        t.etag = std::move(r.etag);
-        t.payload = std::move(r.body);
-        t.fresh_for = cache_control_lifetime(r.cache_control);
-        return finish(h, std::move(t));
-      }
-      case 304: {
-        t.kind = SourceTile::Kind::not_modified;
-        t.etag = std::move(r.etag);
-        t.fresh_for = cache_control_lifetime(r.cache_control);
-        if (t.etag.empty()) {
-          std::lock_guard lock(mutex_);
-          if (auto it = pending_.find(h); it != pending_.end()) {
-            t.etag = it->second->request.if_none_match;
-          }
-        }
-        return finish(h, std::move(t));
-      }
-      case 204:
-        return finish_kind(h, SourceTile::Kind::absent, transfer);
-      case 404: {
-        if (r.vts_error != kVersionNotCurrent) {
-          return finish_kind(h, SourceTile::Kind::absent, transfer);
-        }
-        return on_not_current(h, url, first_line(r.body));
-      }
-      default:
-        return finish_error(h, make_error(ErrorCode::io, http_failure("GET", url, r)), transfer);
-    }
+    if (finish_fetched(h, r)) return;
+    if (r.status == 404 && r.vts_error == kVersionNotCurrent)
+      return on_not_current(h, url, first_line(r.body));
+    if (r.status == 404) return finish_kind(h, SourceTile::Kind::absent, transfer_of(r));
+    finish_error(h, make_error(ErrorCode::io, http_failure("GET", url, r)), transfer_of(r));
   }
 
   // The archive behind the template was rebuilt: move to the new template (refetching the

@@ -30,13 +30,6 @@ Error bad(std::string m) {
   return make_error(ErrorCode::invalid_argument, std::move(m));
 }
 
-void replace_all(std::string& s, std::string_view from, const std::string& to) {
-  for (std::size_t pos = s.find(from); pos != std::string::npos; pos = s.find(from, pos)) {
-    s.replace(pos, from.size(), to);
-    pos += to.size();
-  }
-}
-
 // A template's hosts: {s} as a, b, c (Leaflet's default subdomains), a range {a-c} or {1-4}
 // (OpenLayers') as each character of it; else the template itself.
 std::vector<std::string> expand_hosts(const std::string& t) {
@@ -132,35 +125,10 @@ class ImageTemplateSource final : public FetchingSource<ImagePending> {
   }
 
   void on_tile(Handle h, const std::string& url, FetchResult&& r) {
-    SourceTile t;
-    if (r.cancelled) {
-      t.kind = SourceTile::Kind::cancelled;
-      return finish(h, std::move(t));
-    }
-    t.transfer = SourceTransfer{r.status,        r.body.size(),       r.attempts,
-                                r.timing.queued, r.timing.first_byte, r.timing.total};
-    if (r.error) {
-      t.error = std::move(*r.error);
-    } else if (r.status == 200) {
-      t.kind = SourceTile::Kind::ok;
-      t.etag = std::move(r.etag);
-      t.payload = std::move(r.body);
-    } else if (r.status == 304) {
-      t.kind = SourceTile::Kind::not_modified;
-      t.etag = r.etag;
-      if (t.etag.empty()) {
-        std::lock_guard lock(mutex_);
-        if (auto it = pending_.find(h); it != pending_.end())
-          t.etag = it->second->request.if_none_match;
-      }
-    } else if (r.status == 204) {
-      t.kind = SourceTile::Kind::absent;  // the server's way of saying "no tile here"
-    } else {
-      // 404 too: the layout (bounds, zoom range) says the tile exists, so a 404 is a wrong
-      // template or missing data, which a load test and a warm must show.
-      t.error = make_error(ErrorCode::io, "GET " + url + ": HTTP " + std::to_string(r.status));
-    }
-    finish(h, std::move(t));
+    if (finish_fetched(h, r)) return;
+    // 404 too: the layout (bounds, zoom range) says the tile exists, so a 404 is a wrong
+    // template or missing data, which a load test and a warm must show.
+    finish_error(h, make_error(ErrorCode::io, http_failure("GET", url, r)), transfer_of(r));
   }
 
   const SourceInfo info_;

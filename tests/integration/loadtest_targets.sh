@@ -48,6 +48,7 @@ server {
   listen 127.0.0.1:$HTTP_PORT;
   root $WWW;
   access_log $N/logs/access.log;
+  location /xyz/ { add_header Cache-Control "max-age=3600"; }
 }
 log_format protocol '\$server_protocol \$request_uri';
 server {
@@ -121,6 +122,11 @@ for name in tms tilejson tmsjson; do
   [[ $(tiles_of xyz | md5sum) == $(tiles_of "$name" | md5sum) ]] ||
     fail "the $name cache holds other tiles than the xyz cache"
 done
+# Each tile keeps the lifetime its answer's Cache-Control gave: max-age=3600 under /xyz/, none
+# under /tms/ (-1: the cache's own revalidation rule).
+fresh_of() { sqlite3 "$WORK/cache-$1/cache.db" "SELECT DISTINCT fresh_for FROM tiles"; }
+[[ $(fresh_of xyz) == 3600 && $(fresh_of tms) == -1 ]] ||
+  fail "fresh_for: xyz $(fresh_of xyz), tms $(fresh_of tms); expected 3600 and -1"
 [[ $(tiles_of pmtiles | wc -l) == 43 && $(tiles_of pmtiles | md5sum) == $(tiles_of pmtiles-raw | md5sum) ]] ||
   fail "the archive with uncompressed directories warms other tiles than the gzip one"
 
