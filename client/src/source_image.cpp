@@ -6,6 +6,7 @@
 //
 // Callbacks run on the fetcher's thread, or on the source's callback thread for tiles outside the
 // zoom range or bounds (absent without a request).
+#include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <memory>
@@ -231,6 +232,8 @@ Result<ImageLayout> read_image_tilejson(std::span<const std::uint8_t> body, cons
     else
       l.mirrors.push_back(std::move(u));
   }
+  if (j.contains("scheme") && !j["scheme"].is_string())
+    return bad(url + ": \"scheme\" is not \"xyz\" or \"tms\"");
   l.tms = j.value("scheme", std::string("xyz")) == "tms";
   l.min_zoom = 0;
   l.max_zoom = kMaxImageZoom;  // TileJSON's default is 30; finer levels are not addressed
@@ -238,12 +241,14 @@ Result<ImageLayout> read_image_tilejson(std::span<const std::uint8_t> body, cons
     if (!j.contains(key)) continue;
     auto v = number_at(j, key, url);
     if (!v) return v.error();
-    (key[1] == 'i' ? l.min_zoom : l.max_zoom) = int(std::min<double>(*v, kMaxImageZoom));
+    // Clamped before the conversion (a huge number would not fit an int); a negative one stays
+    // negative, for image_source_info() to refuse naming the field.
+    (key[1] == 'i' ? l.min_zoom : l.max_zoom) = int(std::clamp(*v, -1.0, double(kMaxImageZoom)));
   }
   if (j.contains("tileSize")) {
     auto v = number_at(j, "tileSize", url);
     if (!v) return v.error();
-    l.tile_size = std::uint32_t(std::max(0.0, *v));
+    l.tile_size = std::uint32_t(std::clamp(*v, 0.0, 65536.0));  // refused below unless 64..1024
   }
   if (j.contains("bounds")) {
     const auto& b = j["bounds"];
@@ -283,6 +288,12 @@ Result<SourceInfo> stock_archive_info(const pmtiles::Header& h, const std::strin
                             "of png, jpeg or webp tiles (tile type " +
                             std::to_string(int(h.tile_type)) + ")");
   }
+  if (h.tile_compression != pmtiles::Compression::none &&
+      h.tile_compression != pmtiles::Compression::unknown)
+    return make_error(ErrorCode::unsupported,
+                      key + ": its image tiles are compressed again (tile compression " +
+                          std::to_string(int(h.tile_compression)) +
+                          "); a web map reads them only uncompressed (none)");
   const auto meta = nlohmann::json::parse(metadata_json, nullptr, false);
   if (meta.is_object() && meta.contains("tileSize") && meta["tileSize"].is_number_unsigned())
     l.tile_size = meta["tileSize"].get<std::uint32_t>();

@@ -3,8 +3,10 @@
 // real tiles is tests/integration/loadtest_targets.sh's (nginx over gdal2tiles folders).
 #include <gtest/gtest.h>
 
+#include <span>
 #include <string>
 
+#include "image_layout.hpp"
 #include "vts/client/source.hpp"
 
 using vts::ErrorCode;
@@ -75,6 +77,48 @@ TEST(ImageTileset, RefusesALayoutItCannotUseNamingWhatIsWrong) {
   l = layout(0, 3);
   l.tile_size = 300;
   refused(l, "tile size");
+}
+
+// A third-party TileJSON is untrusted input: a field of the wrong type or a number no int holds is
+// an error naming it, never an exception or a wrapped value.
+TEST(ImageTileset, AHostileTileJsonIsRefusedNamingTheField) {
+  const auto read = [](const std::string& extra) {
+    const std::string doc = R"({"tiles": ["http://127.0.0.1:9/{z}/{x}/{y}.png"])" + extra + "}";
+    return vts::client::read_image_tilejson(
+        std::span(reinterpret_cast<const std::uint8_t*>(doc.data()), doc.size()), "t.json", {});
+  };
+  auto scheme = read(R"(, "scheme": 5)");
+  ASSERT_FALSE(scheme);
+  EXPECT_NE(scheme.error().message.find("\"scheme\""), std::string::npos);
+  for (const char* field :
+       {R"(, "minzoom": -1e300)", R"(, "maxzoom": -1e300)", R"(, "tileSize": 1e20)"}) {
+    auto l = read(field);
+    ASSERT_TRUE(l) << field << ": " << l.error().to_string();
+    EXPECT_FALSE(image_source_info(*l, "k", "{}")) << field << " is refused as a layout";
+  }
+  auto huge = read(R"(, "maxzoom": 1e300)");
+  ASSERT_TRUE(huge);
+  EXPECT_EQ(huge->max_zoom, 24) << "clamped to the deepest addressed level";
+  EXPECT_TRUE(image_source_info(*huge, "k", "{}"));
+}
+
+// A stock archive whose PNG/JPEG/WebP tiles are compressed again (gzip) is no web map's: refused
+// at open, not a decode error on every tile.
+TEST(ImageTileset, AStockArchiveOfRecompressedImagesIsUnsupported) {
+  vts::pmtiles::Header h;
+  h.tile_type = vts::pmtiles::TileType::png;
+  h.max_zoom = 3;
+  h.min_lon_e7 = -1800000000;
+  h.max_lon_e7 = 1800000000;
+  h.min_lat_e7 = -800000000;
+  h.max_lat_e7 = 800000000;
+  h.tile_compression = vts::pmtiles::Compression::none;
+  EXPECT_TRUE(vts::client::stock_archive_info(h, "{}", "a.pmtiles", {}));
+  h.tile_compression = vts::pmtiles::Compression::gzip;
+  auto gz = vts::client::stock_archive_info(h, "{}", "a.pmtiles", {});
+  ASSERT_FALSE(gz);
+  EXPECT_EQ(gz.error().code, ErrorCode::unsupported);
+  EXPECT_NE(gz.error().message.find("tile compression 2"), std::string::npos) << gz.error().message;
 }
 
 TEST(ImageTileset, OpenSourceTakesATemplateOnlyWithItsZoomRange) {
