@@ -74,6 +74,8 @@ client::CameraDemandOptions camera_options(const LoadArgs& a) {
   client::CameraDemandOptions c;
   c.path = a.path;
   c.viewers = a.share.viewers;
+  c.first_viewer = a.share.first_viewer;
+  c.total_viewers = a.viewers;
   c.fps = a.fps;
   c.duration_s = a.duration;
   c.seed = a.share.seed;
@@ -145,17 +147,15 @@ int run(LoadArgs& a) {
   auto cameras = client::camera_demand(*geometry, camera_options(a));
   if (!cameras) return report_error(cameras.error());
   o->path_name = cameras->path_name;
-
   const bool bar = !a.quiet && !a.json && ProgressBar::stderr_is_terminal();
   o->progress = progress_printer(a, bar);
   auto result = client::run_load_test(*o, cameras->demand);
   if (bar) std::fprintf(stderr, "\r\033[K");
   if (!result) return report_error(result.error());
   result->report.target = a.url;
+  const client::LoadReport* base = baseline ? &*baseline : nullptr;
   if (!a.report.empty())
-    if (auto st =
-            client::write_html_report(result->report, a.report, baseline ? &*baseline : nullptr);
-        !st)
+    if (auto st = client::write_html_report(result->report, a.report, base); !st)
       return report_error(st.error());
   const int code = print_result(a, *result, *gates);
   return stop.load() ? 130 : code;

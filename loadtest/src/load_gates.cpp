@@ -7,16 +7,12 @@
 #include <cstdio>
 #include <limits>
 
+#include "vts/protocol/file_io.hpp"
+
 namespace vts::client {
 namespace {
 
 using nlohmann::json;
-
-std::string_view trim(std::string_view s) {
-  while (!s.empty() && s.front() == ' ') s.remove_prefix(1);
-  while (!s.empty() && s.back() == ' ') s.remove_suffix(1);
-  return s;
-}
 
 bool starts_with(std::string_view s, std::string_view p) {
   return s.substr(0, p.size()) == p;
@@ -41,9 +37,12 @@ bool percentile_of(std::string_view stat, double& p) {
   return take_number(rest, p) && rest.empty() && p <= 100;
 }
 
+// An empty histogram measured nothing: NaN, which holds no gate (a server that never reached
+// full resolution does not pass full_res_p95<1.5s).
 Result<MetricValue> histogram_metric(const LatencyHistogram& h, std::string_view stat) {
   double p = 0;
   double v = 0;
+  const bool empty = h.count() == 0;
   if (stat == "min")
     v = static_cast<double>(h.min());
   else if (stat == "max")
@@ -54,7 +53,7 @@ Result<MetricValue> histogram_metric(const LatencyHistogram& h, std::string_view
     v = static_cast<double>(h.percentile(p));
   else
     return make_error(ErrorCode::not_found, "");
-  return MetricValue{v, MetricKind::latency};
+  return MetricValue{empty ? std::numeric_limits<double>::quiet_NaN() : v, MetricKind::latency};
 }
 
 double per_s(double n, double seconds) {
@@ -182,6 +181,8 @@ Result<Gate> parse_slo(std::string_view text) {
   } else if (!unit.empty()) {
     return malformed("unit '" + unit + "' does not fit " + g.metric);
   }
+  if (g.kind == MetricKind::ratio && g.threshold > 1)
+    return malformed(g.metric + " is a fraction in [0, 1] or a percentage (5%)");
   return g;
 }
 

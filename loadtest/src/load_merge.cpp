@@ -3,10 +3,10 @@
 // is exact.
 #include <algorithm>
 #include <cstdlib>
-#include <fstream>
 #include <type_traits>
 
 #include "vts/loadtest/load_report.hpp"
+#include "vts/protocol/file_io.hpp"
 
 namespace vts::client {
 namespace {
@@ -195,9 +195,9 @@ Result<LoadReport> report_from_json(const json& j) {
 }
 
 Result<LoadReport> read_report_file(const std::filesystem::path& file) {
-  std::ifstream in(file);
-  if (!in) return make_error(ErrorCode::not_found, "cannot read " + file.string());
-  json j = json::parse(in, nullptr, false);
+  auto text = read_file(file);  // not_found, io, or a folder, naming the file
+  if (!text) return text.error();
+  json j = json::parse(*text, nullptr, false);
   if (j.is_discarded()) return bad(file.string() + ": not JSON");
   auto r = report_from_json(j);
   if (!r) return bad(file.string() + ": " + r.error().message);

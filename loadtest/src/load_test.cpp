@@ -385,13 +385,13 @@ bool Viewer::send(const std::shared_ptr<Request>& req, Clock::time_point slot) {
 
 void Viewer::done(const std::shared_ptr<Request>& req, PayloadResult&& r) {
   if (r.kind == PayloadResult::Kind::cancelled) return;
+  const auto now = Clock::now();  // the answer's arrival: --decode's time is not the server's
   // --decode: an image tile that does not decode shows nothing; it is an error, not resident.
   const char* kind = nullptr;
   if (engine_.options.decode && r.kind == PayloadResult::Kind::ok && r.tile &&
       r.from == PayloadResult::From::network && !cache_->info().image_format.empty() &&
       !decode_web_image(r.tile->payload))
     kind = "undecodable";
-  const auto now = Clock::now();
   bool counted = false;
   {
     std::lock_guard lock(mutex_);

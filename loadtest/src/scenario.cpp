@@ -156,7 +156,8 @@ Result<CameraDemand> camera_demand(const Geometry& geometry, const CameraDemandO
     c.sim = std::make_unique<DemandSimulator>(std::move(*sim));
     if (!cams->preset) {
       const double span = c.path->last_frame() - c.path->first_frame();
-      c.offset = span > 0 ? span * double(v) / double(o.viewers) : 0;
+      const double total = o.total_viewers ? o.total_viewers : o.viewers;
+      c.offset = span > 0 ? span * double(o.first_viewer + v) / total : 0;
     }
   }
   CameraDemand d;

@@ -3,6 +3,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 #include <random>
 #include <string>
 #include <vector>
@@ -163,8 +165,9 @@ TEST(LoadGates, ParsesSlosWithUnitsAndOperators) {
 }
 
 TEST(LoadGates, MalformedSlosNameTheTextAndListTheMetrics) {
-  for (const char* bad : {"p99", "p99<", "p99<200", "p99<200 parsecs", "p101<1s", "latency<1s",
-                          "requests<5ms", "p99=200ms", "p99<-1ms", "<1s"}) {
+  for (const char* bad :
+       {"p99", "p99<", "p99<200", "p99<200 parsecs", "p101<1s", "latency<1s", "requests<5ms",
+        "p99=200ms", "p99<-1ms", "<1s", "error_rate<5", "error_rate<200%"}) {
     auto g = parse_slo(bad);
     ASSERT_FALSE(g) << bad;
     EXPECT_EQ(g.error().code, ErrorCode::invalid_argument);
@@ -207,6 +210,19 @@ TEST(LoadGates, GatesHoldOrFailOnTheMeasuredValue) {
   EXPECT_EQ(j[3]["held"], false);
   EXPECT_DOUBLE_EQ(j[3]["measured"].get<double>(), 0.015);
   EXPECT_EQ(gate_failure_line(evaluate_gates(r, {gates[0]})), "");
+}
+
+// Nothing measured holds no gate: moves that never reached full resolution are not in its
+// histogram, so an empty one must not pass full_res_p95<1.5s as if it were 0.
+TEST(LoadGates, AGateOnAnEmptyHistogramFails) {
+  LoadReport r;
+  r.requests = 10;
+  r.duration_s = 1;
+  const auto results = evaluate_gates(r, {*parse_slo("full_res_p95<1.5s"), *parse_slo("p99>1ns")});
+  ASSERT_EQ(results.size(), 2u);
+  EXPECT_FALSE(results[0].held);
+  EXPECT_FALSE(results[1].held);
+  EXPECT_TRUE(std::isnan(results[0].measured));
 }
 
 TEST(LoadCompare, MarksChangesForTheWorseBeyondTheThreshold) {

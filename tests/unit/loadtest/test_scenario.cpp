@@ -3,6 +3,8 @@
 // figures as JSON and as a terminal line.
 #include "vts/loadtest/scenario.hpp"
 
+#include <algorithm>
+
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -131,6 +133,44 @@ TEST(Scenario, AnUnmovedCameraReusesItsDemandAndAMovedOneIsSimulatedAgain) {
   }
   EXPECT_GT(moves, 1);
   EXPECT_EQ(reused, 100 - moves) << "every frame but a place's first reuses its demand";
+}
+
+// Viewers replaying a camera file start spread along it over all the generators: generator 1 of 2
+// (viewers 2 and 3 of 4) flies what viewers 2 and 3 of one generator of 4 fly, not viewers 0, 1.
+TEST(Scenario, GeneratorsSpreadTheirViewersAlongACameraFileTogether) {
+  auto g = vts::Geometry::create(1 << 14, 1 << 13);
+  ASSERT_TRUE(g.ok());
+  // A flight round the globe at 2,000 km: each viewer's start is a different place.
+  const fs::path file =
+      fs::temp_directory_path() / ("vts-scenario-spread-" + std::to_string(::getpid()) + ".json");
+  std::ofstream(file) << R"({"keys": [
+    {"frame": 0, "lon": -180, "lat": 0, "altitude_m": 2e6},
+    {"frame": 100, "lon": 0, "lat": 30, "altitude_m": 2e6},
+    {"frame": 200, "lon": 180, "lat": 0, "altitude_m": 2e6}]})";
+  CameraDemandOptions all;
+  all.path = file.string();
+  all.viewers = 4;
+  all.width = 320;
+  all.height = 200;
+  CameraDemandOptions second = all;
+  second.viewers = 2;
+  second.first_viewer = 2;
+  second.total_viewers = 4;
+  auto a = camera_demand(*g, all);
+  auto b = camera_demand(*g, second);
+  fs::remove(file);
+  ASSERT_TRUE(a.ok() && b.ok());
+  for (std::uint32_t v = 0; v < 2; ++v) {
+    auto want = a->demand(2 + v, 0), got = b->demand(v, 0), first = a->demand(v, 0);
+    ASSERT_TRUE(want.ok() && got.ok() && first.ok());
+    ASSERT_EQ(got->tiles.size(), want->tiles.size()) << "viewer " << v;
+    for (std::size_t i = 0; i < got->tiles.size(); ++i)
+      EXPECT_EQ(got->tiles[i].id, want->tiles[i].id) << "viewer " << v;
+    EXPECT_FALSE(first->tiles.size() == got->tiles.size() &&
+                 std::equal(got->tiles.begin(), got->tiles.end(), first->tiles.begin(),
+                            [](const DemandTile& x, const DemandTile& y) { return x.id == y.id; }))
+        << "viewer " << v << " flies what generator 0's viewer " << v << " flies";
+  }
 }
 
 TEST(Scenario, TheSimulationFiguresAppearInTheJsonAndTheLine) {

@@ -36,6 +36,10 @@ struct CameraDemandOptions {
   std::uint64_t seed = 1;  // presets: viewer v's places come from seed * 1000003 + v
   int width = 1280, height = 720;
   int feedback = 8, anisotropy = 8;  // the demand simulator's DemandOptions
+  // One generator of several: its viewers are [first_viewer, first_viewer + viewers) of
+  // total_viewers (0: viewers), so viewers replaying a camera file spread along it over all the
+  // generators, not each generator's own.
+  std::uint32_t first_viewer = 0, total_viewers = 0;
 };
 
 struct CameraDemand {
