@@ -34,15 +34,20 @@ bool plain_word(const std::string& w) {
   });
 }
 
-// The nearest of `names` to `w` when near enough to be a typo of it, else "".
-std::string nearest(const std::string& w, const std::vector<std::string>& names) {
-  std::string best;
-  std::size_t best_d = ~std::size_t{0};
+struct Nearest {
+  std::string name;  // "" when none is near enough to be a typo of the word
+  std::size_t distance = ~std::size_t{0};
+};
+
+// The nearest of `names` to `w`, and its edit distance.
+Nearest nearest(const std::string& w, const std::vector<std::string>& names) {
+  Nearest best;
   for (const std::string& n : names) {
     const std::size_t d = edit_distance(w, n);
-    if (d < best_d) best = n, best_d = d;
+    if (d < best.distance) best = {n, d};
   }
-  return best_d <= std::max<std::size_t>(2, w.size() / 3) ? best : "";
+  if (best.distance > std::max<std::size_t>(2, w.size() / 3)) best.name.clear();
+  return best;
 }
 
 }  // namespace
@@ -64,8 +69,8 @@ std::string unknown_option(CLI::App& app, const std::vector<std::string>& extras
     for (const CLI::Option* o : cur->get_options())
       for (const std::string& l : o->get_lnames()) names.push_back("--" + l);
     std::string msg = "unknown option '" + flag + "' of '" + path + "'";
-    if (const std::string best = nearest(flag, names); !best.empty())
-      msg += "; did you mean '" + best + "'?";
+    if (const Nearest best = nearest(flag, names); !best.name.empty())
+      msg += "; did you mean '" + best.name + "'?";
     return msg;
   }
   return "";
@@ -86,18 +91,14 @@ std::string unknown_command(CLI::App& app, int argc, char** argv) {
       prefix += cur->get_name() + " ";
       continue;
     }
-    std::string best;
-    std::size_t best_d = ~std::size_t{0};
-    for (CLI::App* s : subs) {
-      const std::size_t d = edit_distance(w, s->get_name());
-      if (d < best_d) best = s->get_name(), best_d = d;
-    }
-    const bool near = best_d <= std::max<std::size_t>(2, w.size() / 3);
+    std::vector<std::string> names;
+    for (CLI::App* s : subs) names.push_back(s->get_name());
+    const Nearest best = nearest(w, names);
     // Below the top level a word may be a positional argument (vts loadtest URL): only a plain
     // word close to a subcommand is taken for a mistyped one.
-    if (cur != &app && !(plain_word(w) && best_d <= 2)) return "";
+    if (cur != &app && !(plain_word(w) && best.distance <= 2)) return "";
     std::string msg = "unknown command '" + prefix + w + "'";
-    if (near) msg += "; did you mean '" + prefix + best + "'?";
+    if (!best.name.empty()) msg += "; did you mean '" + prefix + best.name + "'?";
     return msg;
   }
   return "";

@@ -29,6 +29,13 @@ std::string location_hash(std::string_view location) {
   return buf;
 }
 
+// A URL's query may hold credentials (a signature, a token that rotates): it is neither written
+// to the cache nor needed to find the description again.
+std::string_view without_query(std::string_view location) {
+  const bool url = location.starts_with("http://") || location.starts_with("https://");
+  return url ? location.substr(0, location.find('?')) : location;
+}
+
 fs::path source_file(const fs::path& cache_dir, std::string_view location) {
   return cache_dir / "sources" / (location_hash(location) + ".json");
 }
@@ -38,6 +45,7 @@ fs::path source_file(const fs::path& cache_dir, std::string_view location) {
 // Atomic, so that another daemon or a crash never leaves a half-written file behind.
 Status save_source_info(const fs::path& cache_dir, std::string_view location,
                         const SourceInfo& info) {
+  location = without_query(location);
   const fs::path file = source_file(cache_dir, location);
   std::error_code ec;
   fs::create_directories(file.parent_path(), ec);
@@ -61,6 +69,7 @@ Status save_source_info(const fs::path& cache_dir, std::string_view location,
 }
 
 Result<SourceInfo> load_source_info(const fs::path& cache_dir, std::string_view location) {
+  location = without_query(location);
   const fs::path file = source_file(cache_dir, location);
   auto text = read_file(file);
   if (!text)

@@ -87,10 +87,10 @@ Result<std::unique_ptr<TileSource>> open_template(std::string_view loc, SourceOp
   if (options.bounds) l.bounds = *options.bounds;
   l.tile_size = options.tile_size;
   l.format = format_from_suffix(l.tiles);
-  // The key drops the query (it may hold expiring credentials).
+  // The key and the description (saved in caches) drop the query: it may hold credentials.
   std::string key = l.tiles.substr(0, l.tiles.find('?'));
   nlohmann::json doc = {{"tilejson", "3.0.0"},
-                        {"tiles", {l.tiles}},
+                        {"tiles", {key}},
                         {"minzoom", l.min_zoom},
                         {"maxzoom", l.max_zoom},
                         {"bounds", {l.bounds.west, l.bounds.south, l.bounds.east, l.bounds.north}}};

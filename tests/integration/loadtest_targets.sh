@@ -163,6 +163,13 @@ print(f"{sys.argv[2]}: {hosts}")
 EOF_PY
 done
 
+note "a template's query (credentials) is sent but not saved in the cache"
+expect_ok "$VTS" warm "$S/xyz/{z}/{x}/{y}.png?token=s3cret" --zoom 0-3 --cache-dir "$WORK/cache-query" \
+  --json --quiet
+[[ $(tiles_of xyz | md5sum) == $(tiles_of query | md5sum) ]] || fail "the query cache differs"
+grep -q 'token=s3cret' "$N/logs/access.log" || fail "the query was not sent"
+! grep -rqa 's3cret' "$WORK/cache-query" || fail "the query's credentials were saved in the cache"
+
 note "https with HTTP/2: --cacert trusts the server's private certificate; without it, kind tls"
 TLS="https://127.0.0.1:$HTTPS_PORT/xyz/{z}/{x}/{y}.png"
 : >"$N/logs/tls.log"

@@ -13,6 +13,7 @@
 namespace vts::client {
 
 // Writes `info` as the description of `location` (temporary file + rename: never half-written).
+// An http(s) location is kept without its query (credentials), on writing and on reading.
 Status save_source_info(const std::filesystem::path& cache_dir, std::string_view location,
                         const SourceInfo& info);
 // The saved description of `location`; not_found when none was saved, corrupt when the file is
