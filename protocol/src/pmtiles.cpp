@@ -427,7 +427,8 @@ Result<std::vector<Entry>> parse_directory(std::span<const std::uint8_t> bytes,
   if (n > max_entries) {
     return make_error(ErrorCode::too_large, "directory declares " + std::to_string(n) +
                                                 " entries, more than the limit of " +
-                                                std::to_string(max_entries));
+                                                std::to_string(max_entries) +
+                                                " entries per directory");
   }
   // Every entry takes at least four one-byte varints; check before allocating n entries.
   const std::size_t remaining = bytes.size() - pos;
@@ -517,6 +518,15 @@ Result<std::vector<Entry>> parse_directory(std::span<const std::uint8_t> bytes,
     }
   }
   return entries;
+}
+
+Result<Directory> decode_directory(std::span<const std::uint8_t> stored, Compression c,
+                                   std::size_t max_decoded_bytes) {
+  Result<std::vector<std::uint8_t>> raw = decompress(stored, c, max_decoded_bytes);
+  if (!raw) return std::move(raw).error();
+  Result<std::vector<Entry>> entries = parse_directory(*raw);
+  if (!entries) return std::move(entries).error();
+  return std::make_shared<const std::vector<Entry>>(std::move(*entries));
 }
 
 // ---- compression --------------------------------------------------------------------------------

@@ -12,8 +12,9 @@
 // the file size once, at open; every directory entry is checked when it is followed (leaf pointers
 // against the leaf section, tile entries against the tile-data section); stored sizes are bounded
 // before anything is allocated; directory chains are cut at kMaxDirectoryDepth, which also ends
-// cycles. Decoded leaf directories are shared immutable vectors held by a small LRU, so
-// concurrent lookups never see a directory change under them.
+// cycles; a directory holds at most kMaxDirectoryEntries entries. Decoded leaf directories are
+// shared immutable vectors held by a DirectoryCache bounded in bytes, so concurrent lookups never
+// see a directory change under them and a few KiB of leaf bombs cannot grow the process.
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -38,8 +39,6 @@
 
 namespace vts::pmtiles {
 namespace {
-
-using Directory = std::shared_ptr<const std::vector<Entry>>;
 
 // Where a reader's bytes come from.
 class ByteSource {
@@ -146,16 +145,13 @@ struct LeafKey {
   bool operator==(const LeafKey&) const = default;
   auto operator<=>(const LeafKey&) const = default;
 };
-struct LeafKeyHash {
-  std::size_t operator()(const LeafKey& k) const noexcept {
-    return std::hash<std::uint64_t>{}(k.offset * 0x9E3779B97F4A7C15ULL ^ k.length);
-  }
-};
 
 class ReaderImpl final : public Reader {
  public:
   ReaderImpl(std::unique_ptr<ByteSource> source, ReaderOptions options)
-      : source_(std::move(source)), options_(options) {}
+      : source_(std::move(source)),
+        options_(options),
+        cache_(options.leaf_cache_bytes, options.leaf_cache_entries) {}
 
   // Validates the header against the archive size, reads and decodes the root directory and
   // metadata, and works out the version.
@@ -339,12 +335,8 @@ class ReaderImpl final : public Reader {
 
   // Decompresses and parses a directory as stored.
   Result<Directory> decode_directory(std::span<const std::uint8_t> stored) const {
-    Result<std::vector<std::uint8_t>> raw =
-        decompress(stored, header_.internal_compression, options_.max_directory_bytes);
-    if (!raw) return std::move(raw).error();
-    Result<std::vector<Entry>> entries = parse_directory(*raw);
-    if (!entries) return std::move(entries).error();
-    return std::make_shared<const std::vector<Entry>>(std::move(*entries));
+    return pmtiles::decode_directory(stored, header_.internal_compression,
+                                     options_.max_directory_bytes);
   }
 
   // Bounds-checks a leaf pointer against the leaf section, reads and decodes the leaf.
@@ -364,33 +356,14 @@ class ReaderImpl final : public Reader {
     return d;
   }
 
-  // decode_leaf() through the LRU cache. Decoding happens outside the lock, so one slow leaf
-  // does not stall lookups in cached ones; two threads missing the same leaf both decode it and
-  // the first to finish wins.
+  // decode_leaf() through the cache. Decoding happens outside the cache's lock, so one slow
+  // leaf does not stall lookups in cached ones; two threads missing the same leaf both decode it
+  // and the first to finish wins.
   Result<Directory> load_leaf(const Entry& pointer) const {
-    const LeafKey key{pointer.offset, pointer.length};
-    if (options_.leaf_cache_entries == 0) return decode_leaf(pointer);
-    {
-      std::lock_guard lock(cache_mutex_);
-      if (auto it = cache_index_.find(key); it != cache_index_.end()) {
-        lru_.splice(lru_.begin(), lru_, it->second);
-        return it->second->second;
-      }
-    }
+    if (Directory d = cache_.find(pointer.offset, pointer.length)) return d;
     Result<Directory> leaf = decode_leaf(pointer);
     if (!leaf) return leaf;
-    std::lock_guard lock(cache_mutex_);
-    if (auto it = cache_index_.find(key); it != cache_index_.end()) {
-      lru_.splice(lru_.begin(), lru_, it->second);
-      return it->second->second;
-    }
-    lru_.emplace_front(key, *leaf);
-    cache_index_.emplace(key, lru_.begin());
-    if (lru_.size() > options_.leaf_cache_entries) {
-      cache_index_.erase(lru_.back().first);
-      lru_.pop_back();
-    }
-    return leaf;
+    return cache_.insert(pointer.offset, pointer.length, std::move(*leaf));
   }
 
   // Depth-first, in directory order, without the cache (a full walk would only flush it).
@@ -441,12 +414,7 @@ class ReaderImpl final : public Reader {
   std::string metadata_;
   std::string version_;
   Directory root_;
-
-  mutable std::mutex cache_mutex_;
-  mutable std::list<std::pair<LeafKey, Directory>> lru_;  // most recently used first
-  mutable std::unordered_map<LeafKey, std::list<std::pair<LeafKey, Directory>>::iterator,
-                             LeafKeyHash>
-      cache_index_;
+  mutable DirectoryCache cache_;  // decoded leaves
 };
 
 Result<std::shared_ptr<Reader>> make_reader(std::unique_ptr<ByteSource> source,
@@ -457,6 +425,57 @@ Result<std::shared_ptr<Reader>> make_reader(std::unique_ptr<ByteSource> source,
 }
 
 }  // namespace
+
+// ---- DirectoryCache
+// ------------------------------------------------------------------------------
+
+std::size_t DirectoryCache::KeyHash::operator()(const Key& k) const noexcept {
+  return std::hash<std::uint64_t>{}(k.offset * 0x9E3779B97F4A7C15ULL ^ k.length);
+}
+
+std::size_t DirectoryCache::cost(const std::vector<Entry>& d) {
+  // The vector's storage, plus its control block, the list node and the index slot.
+  return d.capacity() * sizeof(Entry) + 160;
+}
+
+Directory DirectoryCache::find(std::uint64_t offset, std::uint64_t length) {
+  std::lock_guard lock(mutex_);
+  auto it = index_.find(Key{offset, length});
+  if (it == index_.end()) return nullptr;
+  lru_.splice(lru_.begin(), lru_, it->second);
+  return it->second->directory;
+}
+
+Directory DirectoryCache::insert(std::uint64_t offset, std::uint64_t length, Directory d) {
+  if (d == nullptr) return d;
+  const Key key{offset, length};
+  const std::size_t c = cost(*d);
+  std::lock_guard lock(mutex_);
+  if (auto it = index_.find(key); it != index_.end()) {
+    lru_.splice(lru_.begin(), lru_, it->second);
+    return it->second->directory;
+  }
+  if (c > max_bytes_ || max_directories_ == 0) return d;
+  while (!lru_.empty() && (bytes_ + c > max_bytes_ || lru_.size() >= max_directories_)) {
+    bytes_ -= lru_.back().cost;
+    index_.erase(lru_.back().key);
+    lru_.pop_back();
+  }
+  lru_.push_front(Held{key, d, c});
+  index_.emplace(key, lru_.begin());
+  bytes_ += c;
+  return d;
+}
+
+std::size_t DirectoryCache::bytes() const {
+  std::lock_guard lock(mutex_);
+  return bytes_;
+}
+
+std::size_t DirectoryCache::size() const {
+  std::lock_guard lock(mutex_);
+  return lru_.size();
+}
 
 Result<std::shared_ptr<Reader>> Reader::open(const std::filesystem::path& path,
                                              ReaderOptions options) {

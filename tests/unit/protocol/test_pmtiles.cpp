@@ -1144,6 +1144,97 @@ TEST(Reader, ServesConcurrentLookupsThroughATinyLeafCache) {
   EXPECT_EQ(bad.load(), 0);
 }
 
+// A directory of n one-tile entries (ids first.., all at offset 0, length 1), gzip-compressed:
+// a few KiB however large n is.
+Bytes uniform_directory(std::uint64_t first, std::size_t n) {
+  std::vector<Entry> entries(n);
+  for (std::size_t i = 0; i < n; ++i) entries[i] = Entry{first + i, 0, 1, 1};
+  return compress(serialize_directory(entries), Compression::gzip).value();
+}
+
+TEST(Directory, CapsEntriesPerDirectoryFarAboveWhatWritersMake) {
+  // A writer makes 4096 per leaf (ours) or some 10^5 (go-pmtiles' planet leaves).
+  static_assert(kMaxDirectoryEntries >= 1000 * 1024);
+  std::vector<Entry> entries(kMaxDirectoryEntries + 1);
+  for (std::size_t i = 0; i < entries.size(); ++i) entries[i] = Entry{i, 0, 1, 1};
+  const Bytes over = serialize_directory(entries);
+  Result<std::vector<Entry>> got = parse_directory(over);
+  ASSERT_FALSE(got.ok());
+  EXPECT_EQ(got.error().code, ErrorCode::too_large);
+  EXPECT_NE(got.error().message.find("entries per directory"), std::string::npos)
+      << got.error().message;
+  entries.pop_back();
+  EXPECT_EQ(parse_directory(serialize_directory(entries)).value().size(), kMaxDirectoryEntries);
+}
+
+TEST(DirectoryCache, EvictsTheLeastRecentlyUsedToStayWithinItsBytes) {
+  auto dir = [](std::size_t n) {
+    return std::make_shared<const std::vector<Entry>>(n, Entry{0, 0, 1, 1});
+  };
+  const std::size_t each = DirectoryCache::cost(*dir(1000));
+  DirectoryCache cache(3 * each);
+  for (std::uint64_t i = 0; i < 3; ++i) cache.insert(i, 10, dir(1000));
+  EXPECT_EQ(cache.size(), 3u);
+  EXPECT_EQ(cache.bytes(), 3 * each);
+  ASSERT_NE(cache.find(0, 10), nullptr);  // 0 is now the most recently used; 1 the least
+  EXPECT_EQ(cache.find(0, 11), nullptr);  // the length is part of the key
+  cache.insert(3, 10, dir(1000));
+  EXPECT_EQ(cache.find(1, 10), nullptr);
+  EXPECT_NE(cache.find(0, 10), nullptr);
+  EXPECT_NE(cache.find(3, 10), nullptr);
+  EXPECT_LE(cache.bytes(), 3 * each);
+  // One directory costing more than the whole budget is handed back but never kept.
+  const Directory big = dir(4000);
+  EXPECT_EQ(cache.insert(9, 10, big), big);
+  EXPECT_EQ(cache.find(9, 10), nullptr);
+  EXPECT_EQ(cache.size(), 3u);
+}
+
+TEST(DirectoryCache, KeepsTheFirstCopyOfADirectoryDecodedTwice) {
+  DirectoryCache cache(1u << 20, 2);
+  const Directory first = std::make_shared<const std::vector<Entry>>(1, Entry{1, 0, 1, 1});
+  const Directory second = std::make_shared<const std::vector<Entry>>(1, Entry{1, 0, 1, 1});
+  EXPECT_EQ(cache.insert(5, 7, first), first);
+  EXPECT_EQ(cache.insert(5, 7, second), first);
+  cache.insert(6, 7, second);
+  cache.insert(8, 7, second);  // over the count limit of 2: 5 goes
+  EXPECT_EQ(cache.size(), 2u);
+  EXPECT_EQ(cache.find(5, 7), nullptr);
+}
+
+TEST(Reader, RefusesALeafOverTheEntryCapAsTooLarge) {
+  // Old readers took 4M entries per leaf: 96 MiB each from a few KiB of gzip.
+  Parts p;
+  p.compression = Compression::gzip;
+  p.leaves = uniform_directory(0, kMaxDirectoryEntries + 1);
+  p.root = compress(serialize_directory(
+                        std::vector<Entry>{{0, 0, static_cast<std::uint32_t>(p.leaves.size()), 0}}),
+                    Compression::gzip)
+               .value();
+  p.data = bytes_of("x");
+  const Bytes file = assemble(p);  // must outlive the reader
+  auto r = Reader::open_bytes(file).value();
+  Result<std::vector<std::uint8_t>> got = r->get_by_tile_id(7);
+  ASSERT_FALSE(got.ok());
+  EXPECT_EQ(got.error().code, ErrorCode::too_large);
+  EXPECT_NE(got.error().message.find("entries per directory"), std::string::npos)
+      << got.error().message;
+  EXPECT_NE(got.error().message.find("leaf directory at offset 0"), std::string::npos)
+      << got.error().message;
+}
+
+TEST(Reader, RefusesARootOverTheEntryCapAsTooLarge) {
+  Parts p;
+  p.compression = Compression::gzip;
+  p.root = uniform_directory(0, kMaxDirectoryEntries + 1);
+  p.data = bytes_of("x");
+  const Bytes file = assemble(p);  // must outlive the reader
+  auto r = Reader::open_bytes(file);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.error().code, ErrorCode::too_large);
+  EXPECT_NE(r.error().message.find("root directory"), std::string::npos) << r.error().message;
+}
+
 TEST(Reader, ReadsAnArchiveWithoutMetadata) {
   Parts p = two_level_parts();
   p.metadata.clear();

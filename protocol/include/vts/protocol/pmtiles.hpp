@@ -11,9 +11,13 @@
 #include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <limits>
+#include <list>
 #include <memory>
+#include <mutex>
 #include <span>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "vts/protocol/geometry.hpp"
@@ -28,6 +32,11 @@ enum class TileType : std::uint8_t { unknown = 0, mvt = 1, png = 2, jpeg = 3, we
 constexpr std::size_t kHeaderSize = 127;
 constexpr std::size_t kRootDirectoryLimit = 16384 - kHeaderSize;  // root dir ends within 16 KiB
 constexpr int kMaxDirectoryDepth = 4;  // root + up to 3 leaf levels; deeper means a cycle/hostile
+// Entries one directory may hold (2^20, 24 MiB decoded). Our writer makes at most 4096 per
+// directory; go-pmtiles grows its leaves until the root fits 16 KiB, some 10^5 entries for a
+// planet. More is a directory bomb (a few KiB of gzip that decode to 10^7 entries): refused
+// as too_large by parse_directory().
+constexpr std::size_t kMaxDirectoryEntries = std::size_t{1} << 20;
 
 // Hilbert tile id of (z, x, y): the count of tiles on all coarser levels plus the position of
 // (x, y) along the level's Hilbert curve. Requires z <= 31 and x, y < 2^z.
@@ -79,15 +88,67 @@ struct Entry {
 // Uncompressed varint serialisation of a directory (entries sorted by tile_id).
 std::vector<std::uint8_t> serialize_directory(std::span<const Entry> entries);
 // Parses an uncompressed directory; rejects truncation, trailing bytes, non-increasing ids,
-// zero-length entries and more than max_entries entries.
+// zero-length entries and more than max_entries entries (too_large, before allocating).
 Result<std::vector<Entry>> parse_directory(std::span<const std::uint8_t> bytes,
-                                           std::size_t max_entries = 1u << 22);
+                                           std::size_t max_entries = kMaxDirectoryEntries);
+
+// A decoded directory: shared and immutable, so a lookup holding one never sees it change.
+using Directory = std::shared_ptr<const std::vector<Entry>>;
+// Decompresses a directory as stored (at most max_decoded_bytes, else too_large) and parses it
+// (at most kMaxDirectoryEntries entries). What every reader of directories calls.
+Result<Directory> decode_directory(std::span<const std::uint8_t> stored, Compression c,
+                                   std::size_t max_decoded_bytes);
 
 // Compress / decompress with an internal-compression method (none, gzip, zstd). decompress()
 // fails with too_large rather than produce more than max_output bytes (decompression bombs).
 Result<std::vector<std::uint8_t>> compress(std::span<const std::uint8_t> bytes, Compression c);
 Result<std::vector<std::uint8_t>> decompress(std::span<const std::uint8_t> bytes, Compression c,
                                              std::size_t max_output);
+
+// Decoded directories by where they are stored (offset and length of the stored bytes), least
+// recently used evicted first, bounded in bytes: the directories held cost at most max_bytes
+// (cost(): their entries plus a fixed overhead each) and number at most max_directories. A
+// directory that alone costs more than max_bytes is never kept. Directories handed out stay
+// valid (shared) after eviction. Thread-safe: every call takes one mutex, and none decodes.
+class DirectoryCache {
+ public:
+  explicit DirectoryCache(std::size_t max_bytes,
+                          std::size_t max_directories = std::numeric_limits<std::size_t>::max())
+      : max_bytes_(max_bytes), max_directories_(max_directories) {}
+  DirectoryCache(const DirectoryCache&) = delete;
+  DirectoryCache& operator=(const DirectoryCache&) = delete;
+
+  // The directory stored at (offset, length), now the most recently used; null when not held.
+  Directory find(std::uint64_t offset, std::uint64_t length);
+  // Keeps `d` as the directory at (offset, length) unless one is held already; returns the one
+  // held (or `d` when it is not kept), so two threads that decoded the same leaf share one copy.
+  Directory insert(std::uint64_t offset, std::uint64_t length, Directory d);
+  // What the held directories cost in bytes (<= max_bytes), and how many there are.
+  std::size_t bytes() const;
+  std::size_t size() const;
+  // What holding `d` costs, in bytes.
+  static std::size_t cost(const std::vector<Entry>& d);
+
+ private:
+  struct Key {
+    std::uint64_t offset, length;
+    bool operator==(const Key&) const = default;
+  };
+  struct KeyHash {
+    std::size_t operator()(const Key& k) const noexcept;
+  };
+  struct Held {
+    Key key;
+    Directory directory;
+    std::size_t cost;
+  };
+
+  const std::size_t max_bytes_, max_directories_;
+  mutable std::mutex mutex_;
+  std::list<Held> lru_;  // most recently used first
+  std::unordered_map<Key, std::list<Held>::iterator, KeyHash> index_;
+  std::size_t bytes_ = 0;
+};
 
 struct WriterOptions {
   std::filesystem::path path;  // final name; nothing appears under it until finish() succeeds
@@ -140,7 +201,10 @@ class Writer : public TileSink {
 };
 
 struct ReaderOptions {
-  std::size_t leaf_cache_entries = 64;          // decoded leaf directories kept (LRU)
+  // Decoded leaf directories kept (LRU): at most this many, costing at most leaf_cache_bytes
+  // (DirectoryCache::cost()). 0 entries or 0 bytes: none kept.
+  std::size_t leaf_cache_entries = 64;
+  std::size_t leaf_cache_bytes = 64u << 20;
   std::size_t max_directory_bytes = 64u << 20;  // size limit of one directory, stored or decoded
   std::size_t max_metadata_bytes = 16u << 20;   // size limit of the metadata, stored or decoded
   std::size_t max_tile_bytes = 256u << 20;      // a larger tile entry is too_large
