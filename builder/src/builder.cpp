@@ -244,26 +244,35 @@ void run_pass(PassContext& c, const detail::Pass& pass, const std::vector<Window
   const std::uint64_t first = w.y0 / strip_rows * strip_rows;  // strip i: [first + i * rows, ...)
   const auto nreaders = static_cast<unsigned>(readers.size());
   StripChannel channel(nreaders + 2, strip_rows * row_bytes, nreaders);
-  std::vector<std::thread> threads;
-  for (unsigned k = 0; k < nreaders; ++k)
-    threads.emplace_back([&, k] {
-      std::optional<Error> error;
-      for (std::uint64_t i = k;; i += nreaders) {
-        const std::uint64_t y = std::max(w.y0, first + i * strip_rows);
-        if (y >= w.y1) break;
-        auto strip = channel.take_free(i);
-        if (!strip || shared.failed) break;
-        strip->y = y;
-        strip->rows = static_cast<std::uint32_t>(
-            std::min<std::uint64_t>(first + (i + 1) * strip_rows, w.y1) - y);
-        if (auto st = readers[k](w.x0, w.x1, y, strip->rows, strip->pixels.data()); !st) {
-          error = st.error();
-          break;
-        }
-        channel.put_full(std::move(*strip));
-      }
-      channel.finish_reading(std::move(error));
-    });
+  detail::ThreadGroup threads;
+  for (unsigned k = 0; k < nreaders; ++k) {
+    Status started = threads.start(
+        [&, k] {
+          std::optional<Error> error;
+          for (std::uint64_t i = k;; i += nreaders) {
+            const std::uint64_t y = std::max(w.y0, first + i * strip_rows);
+            if (y >= w.y1) break;
+            auto strip = channel.take_free(i);
+            if (!strip || shared.failed) break;
+            strip->y = y;
+            strip->rows = static_cast<std::uint32_t>(
+                std::min<std::uint64_t>(first + (i + 1) * strip_rows, w.y1) - y);
+            if (auto st = readers[k](w.x0, w.x1, y, strip->rows, strip->pixels.data()); !st) {
+              error = st.error();
+              break;
+            }
+            channel.put_full(std::move(*strip));
+          }
+          channel.finish_reading(std::move(error));
+        },
+        "reader");
+    if (!started) {
+      // The readers started so far stop at their next strip; the missing ones never finish.
+      shared.fail(started.error());
+      channel.close();
+      return;
+    }
+  }
   std::uint64_t rows = 0;
   while (auto strip = channel.take_full()) {
     for (std::uint32_t r = 0; r < strip->rows && !shared.stopping(); ++r)
@@ -274,7 +283,7 @@ void run_pass(PassContext& c, const detail::Pass& pass, const std::vector<Window
     if (shared.stopping()) break;
   }
   channel.close();
-  for (auto& t : threads) t.join();
+  threads.join();
   c.rows += rows;
   if (auto e = channel.error(); e && !shared.failed) shared.fail(*e);
   if (!shared.failed && rows != w.height())
@@ -291,9 +300,10 @@ void build_from_source(const BuildOptions& o, const std::filesystem::path& scrat
     if (!r) return shared.fail(std::move(r).error());
     scratch.push_back(std::move(r).value());
   }
-  WorkQueue queue(threads, std::size_t{threads} * 4);
+  auto queue = WorkQueue::start(threads, std::size_t{threads} * 4);
+  if (!queue) return shared.fail(std::move(queue).error());
   ProgressTicker ticker(o, shared, plan.tiles, plan.rows);
-  PassContext c{o, g, shared, queue, ticker};
+  PassContext c{o, g, shared, **queue, ticker};
   for (const detail::Pass& pass : plan.passes) {
     if (shared.stopping()) break;
     std::vector<WindowReader> from_scratch;
@@ -305,7 +315,7 @@ void build_from_source(const BuildOptions& o, const std::filesystem::path& scrat
     run_pass(c, pass, pass.source >= 0 ? from_scratch : read_input,
              pass.scratch >= 0 ? &scratch[static_cast<std::size_t>(pass.scratch)] : nullptr);
   }
-  queue.close_and_join();
+  (*queue)->close_and_join();
   ticker.tick(c.rows, true);
 }
 
@@ -314,19 +324,22 @@ void build_synthetic(const BuildOptions& o, const std::vector<TileRect>& levels,
   std::uint64_t total = 0;
   for (const TileRect& r : levels) total += r.count();
   ProgressTicker ticker(o, shared, total, 0);
-  WorkQueue queue(threads, std::size_t{threads} * 4);
+  auto started = WorkQueue::start(threads, std::size_t{threads} * 4);
+  if (!started) return shared.fail(std::move(started).error());
+  WorkQueue& queue = **started;
   for (int z = 0; z < static_cast<int>(levels.size()) && !shared.stopping(); ++z) {
     const TileRect r = levels[static_cast<std::size_t>(z)];
     for (std::uint32_t y = r.y0; y < r.y1 && !shared.stopping(); ++y) {
-      for (std::uint32_t x = r.x0; x < r.x1; ++x) {
+      // A row can be millions of tiles long (--synthetic 4294967296x1): stop checks per tile.
+      for (std::uint32_t x = r.x0; x < r.x1 && !shared.stopping(); ++x) {
         const TileId id{static_cast<std::uint8_t>(z), x, y};
         Shared* s = &shared;
         const Geometry* gp = &g;
         queue.submit([s, gp, id] {
           if (!s->failed) s->store(id, synthetic_tile(*gp, id));
         });
+        ticker.tick(0);
       }
-      ticker.tick(0);
     }
   }
   queue.close_and_join();

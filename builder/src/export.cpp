@@ -1,6 +1,7 @@
 #include "vts/builder/export.hpp"
 
 #include <fcntl.h>
+#include <sys/file.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -14,6 +15,7 @@
 #include <nlohmann/json.hpp>
 #include <thread>
 
+#include "vts/protocol/json_input.hpp"
 #include "vts/protocol/web_mercator.hpp"
 #include "work_queue.hpp"
 
@@ -90,15 +92,21 @@ class FolderSink final : public TileSink {
     fs::create_directories(parent, ec);
     if (ec)
       return make_error(ErrorCode::io, "cannot create '" + parent.string() + "': " + ec.message());
-    std::string tmpl = (parent / ("." + dest.filename().string() + ".partial-XXXXXX")).string();
+    const std::string prefix = "." + dest.filename().string() + ".partial-";
+    remove_stale_partials(parent, prefix);
+    std::string tmpl = (parent / (prefix + "XXXXXX")).string();
     if (::mkdtemp(tmpl.data()) == nullptr)
       return io_error("create a folder in", parent, errno).error();
+    auto s = std::unique_ptr<FolderSink>(new FolderSink);
+    s->tmp_ = tmpl;  // removed by the destructor from here on
+    // Held until the export ends: the next export to this output sees that it is not stale.
+    s->lock_fd_ = ::open(tmpl.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (s->lock_fd_ < 0 || ::flock(s->lock_fd_, LOCK_EX | LOCK_NB) != 0)
+      return io_error("lock", tmpl, errno).error();
     // mkdtemp makes it 0700; a folder for static hosting is readable by the web server.
     std::error_code perm_ec;
     fs::permissions(tmpl, fs::perms(0755), perm_ec);
-    auto s = std::unique_ptr<FolderSink>(new FolderSink);
     s->dest_ = dest;
-    s->tmp_ = tmpl;
     s->ext_ = web_format_extension(f);
     return s;
   }
@@ -107,6 +115,7 @@ class FolderSink final : public TileSink {
       std::error_code ec;
       fs::remove_all(tmp_, ec);
     }
+    if (lock_fd_ >= 0) ::close(lock_fd_);
   }
   Status put(TileId id, std::span<const std::uint8_t> bytes) override {
     const fs::path dir = tmp_ / std::to_string(id.z) / std::to_string(id.x);
@@ -140,6 +149,25 @@ class FolderSink final : public TileSink {
 
  private:
   FolderSink() = default;
+
+  // The partial folders of exports to the same output that were killed (SIGKILL, a second
+  // signal): those no running export holds locked. Best effort: what cannot be removed stays.
+  static void remove_stale_partials(const fs::path& parent, const std::string& prefix) {
+    std::error_code ec;
+    for (fs::directory_iterator it(parent, ec), end; !ec && it != end; it.increment(ec)) {
+      const std::string name = it->path().filename().string();
+      if (name.size() != prefix.size() + 6 || name.compare(0, prefix.size(), prefix) != 0) continue;
+      const int fd = ::open(it->path().c_str(), O_RDONLY | O_DIRECTORY | O_NOFOLLOW | O_CLOEXEC);
+      if (fd < 0) continue;
+      if (::flock(fd, LOCK_EX | LOCK_NB) == 0) {
+        std::error_code rm_ec;
+        fs::remove_all(it->path(), rm_ec);
+      }
+      ::close(fd);
+    }
+  }
+
+  int lock_fd_ = -1;
   fs::path dest_, tmp_;
   std::string_view ext_;
   std::mutex mutex_;
@@ -407,16 +435,23 @@ Result<std::unique_ptr<TileSink>> open_sink(const TilesetInfo& info, const Expor
 class Feeder {
  public:
   Feeder(const ExportOptions& o, const Counters& c, std::uint64_t total)
-      : options_(o), counters_(c), total_(total), queue_(threads(o), std::size_t{threads(o)} * 4) {}
+      : options_(o), counters_(c), total_(total) {
+    auto q = detail::WorkQueue::start(threads(o), std::size_t{threads(o)} * 4);
+    if (q)
+      queue_ = std::move(q).value();
+    else
+      first_.set(std::move(q).error());
+  }
 
-  // Queues the job (blocking while the queue is full); false when the walk should stop.
+  // Queues the job (blocking while the queue is full); false when the walk should stop (an
+  // error, the pool's threads not starting included, or cancellation).
   bool submit(std::function<Status()> job) {
     if (first_.failed()) return false;
     if (options_.cancel && options_.cancel->load()) {
       first_.set(make_error(ErrorCode::cancelled, "export cancelled"));
       return false;
     }
-    queue_.submit([this, job = std::move(job)] {
+    queue_->submit([this, job = std::move(job)] {
       if (first_.failed()) return;
       if (Status s = job(); !s) first_.set(s.error());
     });
@@ -428,7 +463,7 @@ class Feeder {
   }
   // Waits for the queued jobs; the first error, else the walk's own status.
   Status finish(Status walked) {
-    queue_.close_and_join();
+    if (queue_) queue_->close_and_join();
     if (auto e = first_.take()) return *e;
     if (!walked) return walked;
     if (options_.on_progress) options_.on_progress(counters_.done.load(), total_);
@@ -444,7 +479,8 @@ class Feeder {
   std::uint64_t total_;
   Clock::time_point last_ = Clock::now();
   FirstError first_;
-  detail::WorkQueue queue_;  // last: joined before the members its jobs use go away
+  // Last: joined before the members its jobs use go away. Null when its threads did not start.
+  std::unique_ptr<detail::WorkQueue> queue_;
 };
 
 // The archive's own grid: walks the source directory, one job per entry.
@@ -498,9 +534,12 @@ std::string export_metadata_json(const TilesetInfo& info, const std::string& sou
   nlohmann::json j;
   j["name"] = info.name;
   j["description"] = info.description;
-  const auto src = nlohmann::json::parse(source_metadata, nullptr, false);
-  if (src.is_object() && src.contains("attribution") && src["attribution"].is_string())
-    j["attribution"] = src["attribution"];
+  // The source's metadata is untrusted: only its attribution string is copied, and unreadable
+  // metadata has none.
+  if (auto src = parse_json(source_metadata, "the source's metadata")) {
+    const auto it = src->is_object() ? src->find("attribution") : src->end();
+    if (it != src->end() && it->is_string()) j["attribution"] = it->get<std::string>();
+  }
   j["type"] = "baselayer";
   j["format"] = std::string(web_format_extension(format));
   j["bounds"] = {b.west, b.south, b.east, b.north};

@@ -158,6 +158,7 @@ Status extract_level(const pmtiles::Reader& reader, const TilesetInfo& info, int
   const std::uint32_t T = g.tile_size(), B = g.border(), S = g.stored_size();
   std::vector<std::uint8_t> strip(w * T * 4);
   for (std::uint32_t ty = 0; ty < g.tiles_y(z); ++ty) {
+    if (o.cancel && o.cancel->load()) return make_error(ErrorCode::cancelled, "extract cancelled");
     std::fill(strip.begin(), strip.end(), 0);
     const std::uint64_t y0 = std::uint64_t{ty} * T;
     const auto rows = static_cast<std::uint32_t>(std::min<std::uint64_t>(T, h - y0));

@@ -8,6 +8,8 @@
 #include <mutex>
 
 #include <cpl_error.h>
+#include <cpl_minixml.h>
+#include <cpl_string.h>
 #include <gdal.h>
 #include <gdal_alg.h>
 #include <gdal_utils.h>
@@ -52,7 +54,89 @@ void register_gdal() {
     // tiles a block's warp reads) costs no time (an 80000-pixel-wide build: 2.2 s, 414 MiB
     // peak, vs 2.0 s, 578 MiB with 256 MiB). GDAL_CACHEMAX in the environment still rules.
     if (!std::getenv("GDAL_CACHEMAX")) GDALSetCacheMax64(GIntBig{64} << 20);
+    // A VRT's raw band (VRTRawRasterBand) reads any local file as pixels: an input handed to a
+    // build could put /etc/passwd into the tiles. Off unless the environment turns it on
+    // (GDAL_VRT_ENABLE_RAWRASTERBAND=YES); check_vrt_sources refuses it too (GDAL < 3.7).
+    if (!std::getenv("GDAL_VRT_ENABLE_RAWRASTERBAND"))
+      CPLSetConfigOption("GDAL_VRT_ENABLE_RAWRASTERBAND", "NO");
   });
+}
+
+// The deepest chain of VRTs naming VRTs as sources that check_vrt_sources follows.
+constexpr int kMaxVrtDepth = 16;
+
+bool is_vrt(const std::filesystem::path& path) {
+  GDALDriverH d = GDALIdentifyDriverEx(path.c_str(), GDAL_OF_RASTER, nullptr, nullptr);
+  return d && std::strcmp(GDALGetDriverShortName(d), "VRT") == 0;
+}
+
+// What check_vrt_sources needs of a VRT's XML: the local files it names (SourceFilename,
+// SourceDataset: sources, raw bands, overviews, a warped VRT's dataset), resolved as GDAL resolves
+// them, and whether it has a raw band. /vsi paths are GDAL's virtual file systems, not files here:
+// left to GDAL.
+struct VrtScan {
+  std::vector<std::filesystem::path> files;
+  bool raw_band = false;
+};
+VrtScan scan_vrt(const CPLXMLNode* root, const std::filesystem::path& dir) {
+  VrtScan scan;
+  std::vector<const CPLXMLNode*> todo{root};  // no recursion: the XML may nest deep
+  while (!todo.empty()) {
+    const CPLXMLNode* n = todo.back();
+    todo.pop_back();
+    for (; n; n = n->psNext) {
+      if (n->eType != CXT_Element) continue;
+      if (n->psChild) todo.push_back(n->psChild);
+      if (std::strcmp(n->pszValue, "VRTRasterBand") == 0 &&
+          EQUAL(CPLGetXMLValue(n, "subClass", ""), "VRTRawRasterBand"))
+        scan.raw_band = true;
+      if (std::strcmp(n->pszValue, "SourceFilename") != 0 &&
+          std::strcmp(n->pszValue, "SourceDataset") != 0)
+        continue;
+      const std::string name = CPLGetXMLValue(n, nullptr, "");
+      if (name.empty() || name.rfind("/vsi", 0) == 0) continue;
+      const bool relative = CPLTestBool(CPLGetXMLValue(n, "relativeToVRT", "0"));
+      scan.files.push_back(relative ? dir / name : std::filesystem::path(name));
+    }
+  }
+  return scan;
+}
+
+// A VRT input, checked before GDAL opens it (opening it opens its sources):
+// - a raw band (VRTRawRasterBand: any local file's bytes as pixels) is invalid_argument unless
+//   GDAL_VRT_ENABLE_RAWRASTERBAND=YES is in the environment (GDAL before 3.7 has no such switch of
+//   its own; register_gdal() sets GDAL's for later ones);
+// - each source that exists is a regular file (open_input_file): GDAL would block on a FIFO or
+//   read a device forever. A name that is no file here may be GDAL's own syntax
+//   (NETCDF:"f.nc":v): GDAL resolves it;
+// - a source that is a VRT in turn is checked too, at most kMaxVrtDepth deep.
+// invalid_argument naming the VRT (and the source).
+Status check_vrt_sources(const std::filesystem::path& vrt, int depth = 0) {
+  if (depth > kMaxVrtDepth)
+    return make_error(ErrorCode::invalid_argument, vrt.string() +
+                                                       ": VRTs name VRTs as sources more than " +
+                                                       std::to_string(kMaxVrtDepth) + " deep");
+  std::unique_ptr<CPLXMLNode, void (*)(CPLXMLNode*)> xml(CPLParseXMLFile(vrt.c_str()),
+                                                         CPLDestroyXMLNode);
+  if (!xml) return {};  // GDAL's open reports what is wrong with it
+  const VrtScan scan = scan_vrt(xml.get(), vrt.parent_path());
+  const char* raw = std::getenv("GDAL_VRT_ENABLE_RAWRASTERBAND");
+  if (scan.raw_band && !(raw && CPLTestBool(raw)))
+    return make_error(ErrorCode::invalid_argument,
+                      vrt.string() +
+                          ": has a raw band (VRTRawRasterBand), which reads any file as pixels; "
+                          "refused unless GDAL_VRT_ENABLE_RAWRASTERBAND=YES is set");
+  for (const std::filesystem::path& source : scan.files) {
+    const Status checked = check_input_file(source);
+    if (!checked && checked.error().code != ErrorCode::not_found) {
+      Error e = checked.error();
+      e.message = vrt.string() + ": its source " + e.message;
+      return e;
+    }
+    if (checked && is_vrt(source))
+      if (Status st = check_vrt_sources(source, depth + 1); !st) return st;
+  }
+  return {};
 }
 
 // Collects GDAL's error messages on this thread instead of letting GDAL print them.
@@ -146,6 +230,9 @@ bool gdal_is_georeferenced(const std::filesystem::path& path) {
   if (!std::filesystem::is_regular_file(path, ec)) return false;
   register_gdal();
   ErrorCapture quiet;
+  // A VRT is GDAL's alone, and opening it opens its sources: GdalSource::open checks them first
+  // (and reports a VRT without a georeference).
+  if (is_vrt(path)) return true;
   GDALDatasetH ds =
       GDALOpenEx(path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY, nullptr, nullptr, nullptr);
   if (!ds) return false;
@@ -281,6 +368,8 @@ Status probe_input(GdalSource::Input& in, const GdalSourceOptions& o, const SrsP
   ErrorCapture errors;
   if (!GDALIdentifyDriverEx(name.c_str(), GDAL_OF_RASTER, nullptr, nullptr))
     return make_error(ErrorCode::invalid_argument, name + ": not a raster GDAL reads");
+  if (is_vrt(in.path))
+    if (Status st = check_vrt_sources(in.path); !st) return st;
   std::unique_ptr<void, void (*)(GDALDatasetH)> ds(
       GDALOpenEx(name.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY, nullptr, nullptr, nullptr),
       [](GDALDatasetH d) { GDALClose(d); });
@@ -292,6 +381,12 @@ Status probe_input(GdalSource::Input& in, const GdalSourceOptions& o, const SrsP
                       name +
                           ": no georeference (a CRS and a geotransform); inputs of a "
                           "georeferenced build must all have one");
+  for (const double v : gt)
+    if (!std::isfinite(v))
+      return make_error(ErrorCode::invalid_argument,
+                        name + ": its geotransform is not finite (" + fmt(gt[0]) + ", " +
+                            fmt(gt[1]) + ", " + fmt(gt[2]) + ", " + fmt(gt[3]) + ", " + fmt(gt[4]) +
+                            ", " + fmt(gt[5]) + "): fix its georeference");
   in.src_bands = GDALGetRasterCount(ds.get());
   if (Status st = choose_bands(in, ds.get(), o); !st) return st;
   if (!o.value_ranges.empty() && o.value_ranges.size() != 1 &&

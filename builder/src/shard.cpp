@@ -11,6 +11,7 @@
 #include "shard_internal.hpp"
 #include "vts/builder/shard.hpp"
 #include "vts/protocol/file_io.hpp"
+#include "vts/protocol/json_input.hpp"
 
 namespace vts {
 
@@ -183,6 +184,8 @@ Result<Geometry> plan_geometry(const ShardPlan& plan) {
 }  // namespace detail
 
 Result<std::string> input_fingerprint(const std::filesystem::path& path) {
+  // A FIFO or a device at an input's path is refused, not read (it would block or never end).
+  if (Status st = check_input_file(path); !st) return st.error();
   std::ifstream in(path, std::ios::binary);
   std::error_code ec;
   const std::uint64_t size = std::filesystem::file_size(path, ec);
@@ -271,8 +274,13 @@ std::string plan_to_json(const ShardPlan& plan) {
 }
 
 Result<ShardPlan> plan_from_json(const std::string& text) {
+  // Depth-limited and without exceptions; only the fields below are copied out of it.
+  auto parsed = parse_json(text, "plan");
+  if (!parsed) return std::move(parsed).error();
   try {
-    json j = json::parse(text);
+    json j = std::move(parsed).value();
+    if (!j.is_object())
+      return make_error(ErrorCode::invalid_argument, "not a vts plan: not an object");
     if (j.at("version").get<int>() != kPlanVersion)
       return make_error(ErrorCode::invalid_argument, "plan version " + j.at("version").dump() +
                                                          " is not " + std::to_string(kPlanVersion));

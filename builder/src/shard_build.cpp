@@ -10,6 +10,8 @@
 #include "shard_geo.hpp"
 #include "shard_internal.hpp"
 #include "vts/builder/shard.hpp"
+#include "vts/protocol/file_io.hpp"
+#include "vts/protocol/json_input.hpp"
 
 namespace vts {
 
@@ -35,10 +37,19 @@ json manifest(const ShardPlan& plan, std::optional<std::size_t> index, std::opti
   return j;
 }
 
+// A part about to be read: a regular file (a FIFO named like one would block the read forever).
+Status check_part_file(const std::filesystem::path& path) {
+  Status st = check_input_file(path);
+  if (st || st.error().code != ErrorCode::not_found) return st;
+  return make_error(ErrorCode::not_found, "missing part " + path.string());
+}
+
 // The part's manifest, checked against the plan (its build, the inputs it read): its content sum.
 Result<std::uint64_t> check_manifest(const ShardPlan& plan, const pmtiles::PartInfo& info) {
+  auto parsed = parse_json(info.manifest_json, "part " + info.path.string() + "'s manifest");
+  if (!parsed) return std::move(parsed).error();
   try {
-    const json j = json::parse(info.manifest_json);
+    const json& j = *parsed;
     if (Status st = detail::check_part_build(plan, j, info.path); !st) return st.error();
     return std::stoull(j.at("content_sum").get<std::string>(), nullptr, 16);
   } catch (const std::exception& e) {
@@ -49,9 +60,7 @@ Result<std::uint64_t> check_manifest(const ShardPlan& plan, const pmtiles::PartI
 
 Result<pmtiles::PartInfo> open_part(const ShardPlan& plan, const std::filesystem::path& path,
                                     std::uint64_t* content_sum) {
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec))
-    return make_error(ErrorCode::not_found, "missing part " + path.string());
+  if (Status st = check_part_file(path); !st) return st.error();
   auto info = pmtiles::read_part_info(path);
   if (!info)
     return make_error(info.error().code, "part " + path.string() + ": " + info.error().message);
@@ -93,6 +102,11 @@ Result<ShardReport> write_part(const ShardPlan& plan, detail::BuildRun& run,
                                std::optional<TileId> root,
                                const std::function<Status(json&)>& extend = {}) {
   const auto t0 = Clock::now();
+  // Not over a file the part is made from: an input, or (the apex) a shard's part.
+  std::vector<std::filesystem::path> read = plan.options.inputs;
+  for (std::size_t i = 0; i < plan.shards.size() && !index; ++i)
+    read.push_back(path.parent_path() / shard_part_name(i));
+  if (Status st = check_output_is_not_an_input(path, read); !st) return st.error();
   std::error_code ec;
   std::filesystem::create_directories(path.parent_path(), ec);
   auto part = pmtiles::PartWriter::create(path);
@@ -309,10 +323,7 @@ Result<ShardReport> build_apex(const ShardPlan& plan, const ShardBuildOptions& s
   for (std::size_t z = static_cast<std::size_t>(A); z < emit.size(); ++z) emit[z] = TileRect{};
   // Every shard's part must be there before any tile is built.
   for (std::size_t i = 0; i < plan.shards.size() && !o.synthetic; ++i) {
-    const auto path = so.out_dir / shard_part_name(i);
-    std::error_code ec;
-    if (!std::filesystem::exists(path, ec))
-      return make_error(ErrorCode::not_found, "missing part " + path.string());
+    if (Status st = check_part_file(so.out_dir / shard_part_name(i)); !st) return st.error();
   }
   detail::BuildRun run;
   run.options = &o;
@@ -363,6 +374,11 @@ Result<MergeReport> merge_plan(const ShardPlan& plan, const std::filesystem::pat
   if (plan.apex_level > 0) mo.parts.push_back(parts_dir / kApexPartName);
   for (std::size_t i = 0; i < plan.shards.size(); ++i)
     mo.parts.push_back(parts_dir / shard_part_name(i));
+  // Every part a regular file that is not the output, before the output is created.
+  const std::vector<std::filesystem::path> parts(mo.parts.begin(), mo.parts.end());
+  if (Status st = check_output_is_not_an_input(output, parts); !st) return st.error();
+  for (const std::filesystem::path& part : parts)
+    if (Status st = check_part_file(part); !st) return st.error();
   auto p = detail::plan_prepared(plan);
   if (!p) return std::move(p).error();
   // Each part's manifest is checked against the plan while the merge reads the part's index (one
@@ -374,10 +390,13 @@ Result<MergeReport> merge_plan(const ShardPlan& plan, const std::filesystem::pat
     auto sum = check_manifest(plan, info);
     if (!sum) return sum.error();
     content_sum += *sum;
-    if (info.path.filename() == kApexPartName)
-      apex = json::parse(info.manifest_json);
-    else
+    if (info.path.filename() == kApexPartName) {
+      auto parsed = parse_json(info.manifest_json, "part " + info.path.string() + "'s manifest");
+      if (!parsed) return parsed.error();
+      apex = std::move(parsed).value();
+    } else {
       attachments.push_back(detail::attachment_hash(info.attachment));
+    }
     return {};
   };
   MergeReport report;

@@ -4,8 +4,10 @@
 #include <glob.h>
 
 #include <algorithm>
-#include <fstream>
+#include <string_view>
 #include <system_error>
+
+#include "vts/protocol/file_io.hpp"
 
 namespace vts::cli {
 
@@ -46,16 +48,22 @@ Result<std::vector<std::filesystem::path>> expand_inputs(const std::vector<std::
     }
   }
   if (list_file.empty()) return out;
-  std::ifstream in(list_file);
-  if (!in)
-    return make_error(ErrorCode::not_found, "--input-list '" + list_file + "' cannot be read");
-  std::string line;
-  while (std::getline(in, line)) {
-    if (!line.empty() && line.back() == '\r') line.pop_back();
+  // Through read_file: a FIFO or a device (/dev/zero) is refused before a byte is read.
+  auto text = read_file(list_file);
+  if (!text) {
+    Error e = std::move(text).error();
+    e.message = "--input-list '" + list_file + "' cannot be read: " + e.message;
+    return e;
+  }
+  std::string_view rest = *text;
+  while (!rest.empty()) {
+    const std::size_t end = rest.find('\n');
+    std::string_view line = rest.substr(0, end);
+    rest.remove_prefix(end == std::string_view::npos ? rest.size() : end + 1);
+    if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
     if (line.empty() || line.front() == '#') continue;
     out.emplace_back(line);
   }
-  if (in.bad()) return make_error(ErrorCode::io, "--input-list '" + list_file + "': read error");
   return out;
 }
 

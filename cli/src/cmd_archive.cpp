@@ -183,6 +183,8 @@ int run_extract(const ExtractArgs& a) {
   o.output = a.output;
   o.with_border = a.with_border;
   o.channels = a.channels;
+  // SIGINT/SIGTERM stop a level's extraction cleanly (its temporary file removed); a second kills.
+  o.cancel = &install_stop_signals();
   Status st;
   if (!a.tile.empty()) {
     auto id = parse_tile_id(a.tile);

@@ -1,5 +1,6 @@
 // vts bench accuracy: what accuracy costs in time (docs/ACCURACY.md). Thin glue over vts::accuracy.
 #include <cstdio>
+#include <filesystem>
 #include <memory>
 #include <sstream>
 #include <string>
@@ -7,6 +8,7 @@
 
 #include "commands.hpp"
 #include "vts/accuracy/accuracy.hpp"
+#include "vts/protocol/file_io.hpp"
 
 namespace vts::cli {
 namespace {
@@ -35,6 +37,12 @@ int run_accuracy_bench(const BenchArgs& a) {
     o.progress = [](const std::string& line) {
       std::fprintf(stderr, "[accuracy] %s\n", line.c_str());
     };
+  }
+  if (!a.report.empty()) {
+    const std::filesystem::path input = a.input, dir = a.report;
+    for (const char* name : {"report.md", "report.json"})
+      if (Status s = check_output_is_not_an_input(dir / name, {&input, 1}); !s)
+        return report_error(s.error());
   }
   auto report = accuracy::run_accuracy(o);
   if (!report) return report_error(report.error());

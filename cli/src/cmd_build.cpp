@@ -11,6 +11,7 @@
 #include "plan_build.hpp"
 #include "progress.hpp"
 #include "vts/builder/builder.hpp"
+#include "vts/protocol/file_io.hpp"
 
 namespace vts::cli {
 
@@ -86,6 +87,12 @@ int run_build(const CLI::App& c, const BuildArgs& a, const PlanBuildArgs& plan_a
   if (a.output.empty())
     return report_error(make_error(ErrorCode::invalid_argument,
                                    "no output given: -o OUT.pmtiles (or --plan for a shard)"));
+  // build_pyramid checks the output against the inputs; the --input-list is the command's own.
+  if (!a.input_list.empty()) {
+    const std::filesystem::path list = a.input_list;
+    if (Status st = check_output_is_not_an_input(a.output, {&list, 1}); !st)
+      return report_error(st.error());
+  }
   auto o = build_options(a);
   if (!o) return report_error(o.error());
   ProgressBar bar("build", "tiles", !a.quiet && !a.json);

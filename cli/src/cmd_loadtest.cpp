@@ -19,6 +19,7 @@
 #include "vts/loadtest/load_report.hpp"
 #include "vts/loadtest/load_test.hpp"
 #include "vts/loadtest/scenario.hpp"
+#include "vts/protocol/file_io.hpp"
 
 namespace vts::cli {
 
@@ -129,6 +130,14 @@ int print_result(const LoadArgs& a, const client::LoadTestResult& result,
 int run(LoadArgs& a) {
   auto gates = parse_gates(a.gates);
   if (!gates) return report_error(gates.error());
+  if (!a.report.empty()) {
+    // The report written is none of the files read: the target, the camera path, the baseline.
+    const std::filesystem::path read[] = {a.url, a.path, a.baseline};
+    if (Status st =
+            check_output_is_not_an_input(std::filesystem::path(a.report) / "index.html", read);
+        !st)
+      return report_error(st.error());
+  }
   auto share = generator_share(a.generator, a.viewers, a.seed, a.rate);
   if (!share) return report_error(share.error());
   a.share = *share;

@@ -12,6 +12,7 @@
 #include "loadtest_gates.hpp"
 #include "vts/loadtest/load_gates.hpp"
 #include "vts/loadtest/load_report.hpp"
+#include "vts/protocol/file_io.hpp"
 
 namespace vts::cli {
 
@@ -57,6 +58,13 @@ struct MergeArgs {
 int run_merge(const MergeArgs& m) {
   auto gates = parse_gates(m.gates);
   if (!gates) return report_error(gates.error());
+  if (!m.report.empty()) {
+    const std::vector<std::filesystem::path> read(m.files.begin(), m.files.end());
+    if (Status st =
+            check_output_is_not_an_input(std::filesystem::path(m.report) / "index.html", read);
+        !st)
+      return report_error(st.error());
+  }
   std::vector<client::LoadReport> reports;
   for (const std::string& f : m.files) {
     auto r = client::read_report_file(f);

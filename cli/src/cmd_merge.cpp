@@ -5,6 +5,7 @@
 #include "commands.hpp"
 #include "progress.hpp"
 #include "vts/builder/shard.hpp"
+#include "vts/protocol/file_io.hpp"
 
 namespace vts::cli {
 
@@ -37,6 +38,10 @@ void print_report(const MergeArgs& a, const MergeReport& r) {
 }
 
 int run_merge(const MergeArgs& a) {
+  // merge_plan checks the output against the parts; the plan is the command's own input.
+  const std::filesystem::path plan_path = a.plan;
+  if (Status st = check_output_is_not_an_input(a.output, {&plan_path, 1}); !st)
+    return report_error(st.error());
   auto plan = load_plan(a.plan);
   if (!plan) return report_error(plan.error());
   ProgressBar bar("merge", "tiles", !a.quiet && !a.json);

@@ -7,6 +7,7 @@
 #include "build_inputs.hpp"
 #include "commands.hpp"
 #include "vts/builder/shard.hpp"
+#include "vts/protocol/file_io.hpp"
 
 namespace vts::cli {
 
@@ -32,6 +33,13 @@ Status check_update_options(const CLI::App& c) {
                       opt->get_name() + " does not go with --update: the old plan fixes the build");
   }
   return {};
+}
+
+// The plan written must not be a file it was made from: an input, the --input-list, the old plan.
+Status check_plan_output(const PlanArgs& a, std::vector<std::filesystem::path> inputs) {
+  if (!a.build.input_list.empty()) inputs.emplace_back(a.build.input_list);
+  if (!a.update.empty()) inputs.emplace_back(a.update);
+  return check_output_is_not_an_input(a.build.output, inputs);
 }
 
 void print_update(const PlanArgs& a, const PlanUpdate& u) {
@@ -68,6 +76,9 @@ int run_update(const CLI::App& c, const PlanArgs& a) {
   if (!old) return report_error(old.error());
   auto inputs = expand_inputs(a.build.inputs, a.build.input_list);
   if (!inputs) return report_error(inputs.error());
+  std::vector<std::filesystem::path> read = *inputs;
+  for (const PlanInput& in : old->inputs) read.push_back(in.path);
+  if (Status st = check_plan_output(a, std::move(read)); !st) return report_error(st.error());
   auto u = update_shard_plan(*old, *inputs);
   if (!u) return report_error(u.error());
   if (Status st = save_plan(u->plan, a.build.output); !st) return report_error(st.error());
@@ -82,6 +93,7 @@ int run_plan(const CLI::App& c, const PlanArgs& a) {
                                    "give one of --shards N (N >= 1) or --split-level L"));
   auto o = build_options(a.build);
   if (!o) return report_error(o.error());
+  if (Status st = check_plan_output(a, o->inputs); !st) return report_error(st.error());
   std::optional<int> level;
   if (a.split_level >= 0) level = a.split_level;
   auto plan = make_shard_plan(*o, level, a.shards, a.apex_levels);

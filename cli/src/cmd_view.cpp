@@ -45,6 +45,11 @@ Status check_args(const ViewArgs& a) {
     return make_error(ErrorCode::invalid_argument, "--width/--height must be between 1 and 16384");
   if (a.headless && a.frames < 1)
     return make_error(ErrorCode::invalid_argument, "--headless needs --frames N (N >= 1)");
+  // The files written (the camera path recorded, the screenshot) are none of those read.
+  const std::filesystem::path read[] = {a.source, a.camera_path, a.scene};
+  for (const std::string& out : {a.record, a.screenshot})
+    if (!out.empty())
+      if (Status s = check_output_is_not_an_input(out, read); !s) return s;
   if (!a.record.empty()) {
     // Known before a long session, not at its end: the folder the file goes to exists.
     namespace fs = std::filesystem;

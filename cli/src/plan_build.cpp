@@ -8,6 +8,7 @@
 #include "commands.hpp"
 #include "progress.hpp"
 #include "vts/builder/shard.hpp"
+#include "vts/protocol/file_io.hpp"
 
 namespace vts::cli {
 
@@ -101,6 +102,12 @@ int run_plan_build(const PlanBuildArgs& p, const BuildArgs& a) {
     if (!i) return report_error(i.error());
     index = *i;
   }
+  // The part is not the plan (build_shard/build_apex check it against the inputs and parts).
+  const std::filesystem::path plan_path = p.plan;
+  const std::filesystem::path part =
+      std::filesystem::path(p.out_dir) / (index ? shard_part_name(*index) : kApexPartName);
+  if (Status st = check_output_is_not_an_input(part, {&plan_path, 1}); !st)
+    return report_error(st.error());
   ProgressBar bar(p.apex ? "apex" : "shard", "tiles", !a.quiet && !a.json);
   ShardBuildOptions so;
   so.out_dir = p.out_dir;

@@ -102,6 +102,95 @@ expect_refused_at_once "fifo.json" "$VTS" serve "$WORK/s.pmtiles" --listen 127.0
   --config "$WORK/fifo.json"
 expect_refused_at_once "fifo.json" "$VTS" sign /s/0/0/0 --key-file "$WORK/fifo.json"
 
+note "plan and merge refuse an output that is one of their inputs (was: the image became a plan, a part or the plan the archive)"
+cp "$WORK/in.jpg" "$WORK/in.orig"
+expect_clean_failure "$VTS" plan "$WORK/in.jpg" --shards 2 -o "$WORK/in.jpg"
+((RC == 2)) && grep -q 'is the input' "$ERR" || { show_output; fail "vts plan -o INPUT exited $RC"; }
+cmp -s "$WORK/in.jpg" "$WORK/in.orig" || fail "vts plan -o INPUT changed its input"
+printf '%s\n' "$WORK/in.jpg" >"$WORK/list.txt"
+cp "$WORK/list.txt" "$WORK/list.orig"
+for cmd in plan build; do
+  extra=()
+  [[ $cmd == plan ]] && extra=(--shards 2)
+  expect_clean_failure "$VTS" "$cmd" --input-list "$WORK/list.txt" "${extra[@]}" -o "$WORK/list.txt"
+  ((RC == 2)) && grep -q 'is the input' "$ERR" || { show_output; fail "vts $cmd -o ITS-LIST exited $RC"; }
+  cmp -s "$WORK/list.txt" "$WORK/list.orig" || fail "vts $cmd -o ITS-LIST changed the list"
+done
+expect_ok "$VTS" plan --synthetic 1024x1024 --shards 4 -o "$WORK/p.json"
+for s in 0 1 2 3; do expect_ok "$VTS" build --plan "$WORK/p.json" --shard $s --out-dir "$WORK/parts" -q; done
+expect_ok "$VTS" build --plan "$WORK/p.json" --apex --out-dir "$WORK/parts" -q
+cp -r "$WORK/parts" "$WORK/parts.orig"
+cp "$WORK/p.json" "$WORK/p.orig"
+expect_clean_failure "$VTS" plan --update "$WORK/p.json" -o "$WORK/p.json"
+((RC == 2)) && grep -q 'is the input' "$ERR" || { show_output; fail "vts plan --update P -o P exited $RC"; }
+for out in "$WORK/parts/shard-000001.part" "$WORK/parts/apex.part" "$WORK/p.json"; do
+  expect_clean_failure "$VTS" merge --plan "$WORK/p.json" "$WORK/parts" -o "$out"
+  ((RC == 2)) && grep -q 'is the input' "$ERR" || { show_output; fail "vts merge -o $out exited $RC"; }
+done
+cmp -s "$WORK/p.json" "$WORK/p.orig" || fail "vts merge -o PLAN changed the plan"
+diff -r "$WORK/parts" "$WORK/parts.orig" >/dev/null || fail "vts merge -o PART changed the parts"
+expect_ok "$VTS" merge --plan "$WORK/p.json" "$WORK/parts" -o "$WORK/merged.pmtiles" -q
+
+note "a FIFO named like a part, an --input-list that is a FIFO or a device: refused at once"
+mv "$WORK/parts/shard-000002.part" "$WORK/shard-000002.part"
+mkfifo "$WORK/parts/shard-000002.part"
+expect_not_regular FIFO "$WORK/parts/shard-000002.part" \
+  "$VTS" merge --plan "$WORK/p.json" "$WORK/parts" -o "$D/x.pmtiles"
+expect_nothing_written
+mkfifo "$WORK/list.fifo"
+for list in /dev/zero "$WORK/list.fifo"; do
+  kind="character device"
+  [[ $list == /dev/zero ]] || kind=FIFO
+  expect_not_regular "$kind" "$list" "$VTS" build --input-list "$list" -o "$D/x.pmtiles"
+  expect_not_regular "$kind" "$list" "$VTS" plan --input-list "$list" --shards 2 -o "$D/x.json"
+  expect_nothing_written
+done
+
+note "a VRT whose source is a FIFO or a device: refused at once, naming it (was: blocked in GDAL)"
+# vrt FILE SOURCE [BAND-ATTRIBUTES] [GEOTRANSFORM] [BAND-CONTENT]: a one-band georeferenced VRT.
+vrt() {
+  local content=${5:-"<SimpleSource><SourceFilename>$2</SourceFilename><SourceBand>1</SourceBand></SimpleSource>"}
+  cat >"$1" <<EOF
+<VRTDataset rasterXSize="64" rasterYSize="32">
+  <SRS>EPSG:4326</SRS>
+  <GeoTransform>${4:--180,5.625,0,90,0,-5.625}</GeoTransform>
+  <VRTRasterBand dataType="Byte" band="1" ${3:-}>
+    $content
+  </VRTRasterBand>
+</VRTDataset>
+EOF
+}
+mkfifo "$WORK/source.fifo"
+vrt "$WORK/fifo.vrt" "$WORK/source.fifo"
+vrt "$WORK/zero.vrt" /dev/zero
+vrt "$WORK/nested.vrt" "$WORK/fifo.vrt"
+expect_not_regular FIFO "$WORK/source.fifo" "$VTS" build "$WORK/fifo.vrt" -o "$D/x.pmtiles"
+expect_not_regular FIFO "$WORK/source.fifo" "$VTS" build "$WORK/nested.vrt" -o "$D/x.pmtiles"
+expect_not_regular "character device" /dev/zero "$VTS" build "$WORK/zero.vrt" -o "$D/x.pmtiles"
+expect_nothing_written
+vrt "$WORK/good.vrt" "$EARTH"
+expect_ok "$VTS" build "$WORK/good.vrt" -o "$WORK/good.pmtiles"
+
+note "a VRT raw band is refused unless GDAL_VRT_ENABLE_RAWRASTERBAND=YES (was: any file's bytes in the tiles)"
+head -c 2048 /dev/urandom >"$WORK/secret.bin"
+vrt "$WORK/raw.vrt" "" 'subClass="VRTRawRasterBand"' "" \
+  "<SourceFilename>$WORK/secret.bin</SourceFilename><ImageOffset>0</ImageOffset><PixelOffset>1</PixelOffset><LineOffset>64</LineOffset>"
+vrt "$WORK/raw-nested.vrt" "$WORK/raw.vrt"
+for input in raw.vrt raw-nested.vrt; do
+  expect_clean_failure "$VTS" build "$WORK/$input" -o "$D/x.pmtiles"
+  ((RC == 2)) && grep -q 'raw band (VRTRawRasterBand).*GDAL_VRT_ENABLE_RAWRASTERBAND=YES' "$ERR" ||
+    { show_output; fail "a VRT raw band in $input was not refused (exit $RC)"; }
+  expect_nothing_written
+done
+expect_ok env GDAL_VRT_ENABLE_RAWRASTERBAND=YES "$VTS" build "$WORK/raw.vrt" -o "$WORK/raw.pmtiles"
+
+note "a geotransform that is not finite is named as such (was: 'crosses the antimeridian (inf .. -inf)')"
+vrt "$WORK/nan.vrt" "$EARTH" "" "nan,5.625,0,90,0,-5.625"
+expect_clean_failure "$VTS" build "$WORK/nan.vrt" -o "$D/x.pmtiles"
+((RC == 2)) && grep -q 'its geotransform is not finite' "$ERR" ||
+  { show_output; fail "a NaN geotransform (exit $RC) was not named"; }
+expect_nothing_written
+
 note "an output directory that does not exist"
 expect_clean_failure "$VTS" build "$EARTH" -o "$WORK/no-such-dir/x.pmtiles"
 [[ ! -e $WORK/no-such-dir ]] || fail "vts build created $WORK/no-such-dir"

@@ -15,8 +15,12 @@
 // independent of the image's size in texels (T = 256, 2 threads: under 10 MiB of tile buffers).
 //
 // Atomic: an archive is written under a temporary name beside the output and renamed at the end
-// (pmtiles::Writer); a folder is filled under "<DIR>.partial-XXXXXX" and renamed to DIR at the end.
-// A failed or cancelled export leaves nothing under the output name.
+// (pmtiles::Writer); a folder is filled under the hidden ".<DIR>.partial-XXXXXX" beside it and
+// renamed to DIR at the end. A failed or cancelled export leaves nothing under the output name and
+// removes its temporary. One killed outright (SIGKILL, a second SIGTERM) leaves its hidden partial
+// folder, which the next xyz export to the same DIR removes: a partial folder whose export still
+// runs holds a lock on it (flock) and is left alone. Failing to start the pool's threads is an
+// io error, not an abort.
 #pragma once
 
 #include <atomic>

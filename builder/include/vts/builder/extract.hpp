@@ -2,6 +2,7 @@
 // through OpenImageIO (format chosen by the file extension).
 #pragma once
 
+#include <atomic>
 #include <filesystem>
 
 #include "vts/protocol/pmtiles.hpp"
@@ -13,7 +14,14 @@ struct ExtractOptions {
   std::filesystem::path output;
   bool with_border = false;  // tile only: write the stored (T+2B)^2 texels, not just the content
   int channels = 4;          // 4 = RGBA, 3 = drop alpha
+  // Checked between rows of tiles: once set, the extraction stops with cancelled.
+  const std::atomic<bool>* cancel = nullptr;
 };
+
+// Both write OUTPUT.tmp beside the output and rename it over the output once complete; on any
+// error (cancellation included) the temporary is removed and an existing output is untouched. A
+// process killed outright leaves OUTPUT.tmp, which the next extraction to the same output
+// overwrites.
 
 // Writes tile `id`'s content (clipped to the image at its level) or, with_border, the stored
 // tile. not_found when the archive lacks the tile.
