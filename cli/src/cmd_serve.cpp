@@ -45,6 +45,7 @@ Status make_options(const ServeArgs& a, HttpServerOptions& o) {
   if (a.threads >= 0) o.threads = a.threads;
   if (!a.access_log.empty()) o.access_log = a.access_log;
   if (!a.cors_origin.empty()) o.router.cors_origin = a.cors_origin == "none" ? "" : a.cors_origin;
+  if (auto st = check_cors_origin(o.router.cors_origin); !st.ok()) return st;
   if (a.max_age >= 0) o.router.max_age_seconds = std::uint32_t(a.max_age);
   if (!a.public_url.empty()) o.router.public_base_url = a.public_url;
   return {};

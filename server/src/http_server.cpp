@@ -53,8 +53,10 @@ class Server final : public HttpServer, public SessionHost {
     options_.router.max_target_bytes =
         std::min(options_.router.max_target_bytes, options_.limits.max_target_bytes);
     if (!options_.router.web.cache) {
-      options_.router.web.cache =
-          std::make_shared<http_detail::WebTileCache>(options_.router.web.cache_bytes, n);
+      options_.router.web.cache = std::make_shared<http_detail::WebTileCache>(
+          options_.router.web.cache_bytes, n,
+          http_detail::EncodeLimits{options_.router.web.max_queued_encodes,
+                                    options_.router.web.max_queued_encodes_per_connection});
     }
     for (int i = 1; i < n; ++i) workers_.push_back(std::make_unique<asio::io_context>(1));
     // Deadline sweeps at an eighth of the shortest timeout (so a deadline is enforced within

@@ -88,6 +88,10 @@ std::string prometheus_text(const Metrics& m, std::size_t tilesets_loaded,
   append_single(out, "vts_http_refused_connections_total", "counter",
                 "Connections closed at once because max_connections were open.",
                 double(m.refused_connections.load()));
+  append_single(out, "vts_http_abandoned_connections_total", "counter",
+                "Connections their client closed while responses were still owed: the provider "
+                "fetches and web encodes only they waited for are dropped.",
+                double(m.abandoned_connections.load()));
   const std::size_t provided = provider ? provider->all().size() : 0;
   append_single(out, "vts_tilesets_loaded", "gauge", "Tilesets being served.",
                 double(tilesets_loaded + provided));

@@ -29,6 +29,8 @@ struct Metrics {
   std::atomic<std::int64_t> open_connections{0};
   std::atomic<std::uint64_t> reloads_swapped{0}, reloads_refused{0};
   std::atomic<std::uint64_t> refused_connections{0};
+  // Connections whose client went away while responses were still owed (their work abandoned).
+  std::atomic<std::uint64_t> abandoned_connections{0};
 
   // One answered request: its route, status, bytes written and time to its last byte.
   void record(Route route, int status, std::uint64_t bytes, std::chrono::nanoseconds d);

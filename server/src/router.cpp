@@ -564,7 +564,8 @@ HttpResponse provided_web(const HttpRequest& request, std::shared_ptr<const Prov
         1, std::memory_order_relaxed);
   }
   const std::string cc = cache_control(priv, config.max_age_seconds, false);
-  if (!g.exists(id)) return web_filler(g.tile_size(), *a.web, config, request.if_none_match, cc);
+  if (!g.exists(id))
+    return web_filler(g.tile_size(), *a.web, config, request.if_none_match, cc, request.connection);
   auto d = std::make_shared<DeferredTile>();
   d->id = id;
   d->if_none_match = std::string(request.if_none_match);
@@ -573,6 +574,7 @@ HttpResponse provided_web(const HttpRequest& request, std::shared_ptr<const Prov
   d->web = *a.web;
   d->web_options = config.web.encode;
   d->web_cache = config.web.cache;
+  d->connection = request.connection;
   HttpResponse r;
   r.route = Route::tile;
   r.deferred = std::move(d);
@@ -749,12 +751,19 @@ HttpResponse complete_deferred(HttpResponse marker, ProvidedTile tile) {
 }
 
 HttpResponse complete_web_wait(HttpResponse marker,
-                               const std::shared_ptr<const http_detail::WebTile>& tile,
+                               const std::shared_ptr<const http_detail::WebTile>& tile, int status,
                                const std::string& why) {
   assert(marker.web_wait);
   const DeferredWebTile& d = *marker.web_wait;
-  HttpResponse r = tile ? web_image_response(tile, d.if_none_match, d.cache_control)
-                        : tile_error(500, "cannot encode the web image: " + why);
+  HttpResponse r;
+  if (tile) {
+    r = web_image_response(tile, d.if_none_match, d.cache_control);
+  } else if (status == 503) {  // shed or dropped: the message says why
+    r = tile_error(503, why.empty() || why.back() != '\n' ? why : why.substr(0, why.size() - 1));
+    add(r, "Retry-After", "1");
+  } else {
+    r = tile_error(500, "cannot encode the web image: " + why);
+  }
   r.route = Route::tile;
   r.hold = std::move(marker.hold);
   for (auto& h : marker.headers) r.headers.push_back(std::move(h));  // CORS, from route()

@@ -111,9 +111,10 @@ HttpResponse web_mercator_tile_route(const HttpRequest& request, std::shared_ptr
 // The answer to a provided tile (vts cache serve) wanted as a web image, once it has arrived:
 // `payload` (null: absent from a sparse origin, the transparent filler).
 HttpResponse provided_web_image(const DeferredTile& d, const std::vector<std::uint8_t>* payload);
-// The transparent filler of a tile with nothing to show (T x T texels).
+// The transparent filler of a tile with nothing to show (T x T texels), asked for on connection
+// `owner` (HttpRequest::connection).
 HttpResponse web_filler(std::uint32_t tile_size, WebFormat f, const RouterConfig& config,
-                        std::string_view if_none_match, const std::string& cc);
+                        std::string_view if_none_match, const std::string& cc, std::uint64_t owner);
 // GET /{ts}.json?format=...[&tiling=...]: the TileJSON stock web maps read; 400 for an unknown
 // format or a tiling this tileset cannot be served in.
 // 200 with an encoded image, or 304 when `if_none_match` names its ETag.

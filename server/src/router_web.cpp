@@ -90,7 +90,7 @@ WebTilePtr encode_now(WebTileCache* cache, const std::string& key,
     cache->encodes.fetch_add(1, std::memory_order_relaxed);
     cache->encode_us_sum.fetch_add(std::uint64_t(us), std::memory_order_relaxed);
     if (!tile) cache->encode_failures.fetch_add(1, std::memory_order_relaxed);
-    cache->finish(key, lead, tile, why);
+    cache->finish(key, lead, tile, tile ? 200 : 500, why);
   }
   return tile;
 }
@@ -107,13 +107,27 @@ HttpResponse wait_for(std::shared_ptr<http_detail::Flight> flight, std::string_v
   return r;
 }
 
+// 503 with Retry-After for a miss the encode queue refused.
+HttpResponse shed(http_detail::EncodeQueue::Admit why, const WebTileCache& cache) {
+  const http_detail::EncodeLimits l = cache.limits();
+  HttpResponse r = tile_error(503, why == http_detail::EncodeQueue::Admit::owner_full
+                                       ? "this connection already has " +
+                                             std::to_string(l.max_queued_per_owner) +
+                                             " web images waiting to be encoded; retry after those"
+                                       : "the server has " + std::to_string(l.max_queued) +
+                                             " web images waiting to be encoded; retry shortly");
+  add(r, "Retry-After", "1");
+  return r;
+}
+
 // The image under `key`: from the cache; else encoded by the cache's workers (the first request
 // to miss it starts the encoding, it and every request for the same image meanwhile wait for it:
-// a web_wait marker the session completes without blocking its thread); without workers (or
-// without a cache), encoded now on this thread. `encode` must own what it reads.
+// a web_wait marker the session completes without blocking its thread; a miss the queue cannot
+// take, for connection `owner` or in all, is 503); without workers (or without a cache), encoded
+// now on this thread. `encode` must own what it reads.
 HttpResponse encoded(const RouterConfig& config, const std::string& key, std::string etag,
                      const char* type, Encoder encode, std::string_view if_none_match,
-                     const std::string& cc) {
+                     const std::string& cc, std::uint64_t owner) {
   WebTileCache* cache = config.web.cache.get();
   WebTileCache::Lookup found;
   if (cache != nullptr) {
@@ -121,12 +135,19 @@ HttpResponse encoded(const RouterConfig& config, const std::string& key, std::st
     if (found.hit) return web_image_response(found.hit, if_none_match, cc);
     if (found.wait) return wait_for(std::move(found.wait), if_none_match, cc);
     if (cache->has_workers()) {
-      // The cache outlives its jobs (its destructor runs the queued ones before it returns).
-      cache->run([cache, key, lead = found.lead, etag = std::move(etag), type,
-                  encode = std::move(encode)]() mutable {
-        std::string why;
-        encode_now(cache, key, lead, std::move(etag), type, encode, why);
-      });
+      const auto admit =
+          cache->queue(key, found.lead, owner,
+                       [cache, key, lead = found.lead, etag = std::move(etag), type,
+                        encode = std::move(encode)]() mutable {
+                         std::string why;
+                         encode_now(cache, key, lead, std::move(etag), type, encode, why);
+                       });
+      if (admit != http_detail::EncodeQueue::Admit::queued) {
+        HttpResponse r = shed(admit, *cache);
+        // Requests that joined the flight meanwhile get the same answer.
+        cache->finish(key, found.lead, nullptr, 503, r.owned);
+        return r;
+      }
       return wait_for(std::move(found.lead), if_none_match, cc);
     }
   }
@@ -141,14 +162,16 @@ HttpResponse encoded(const RouterConfig& config, const std::string& key, std::st
 // PNG, with Content-Type image/png: browsers decode images by their bytes, and a black square
 // would hide what lies under the layer.
 HttpResponse empty_tile(const Tileset& t, WebFormat f, const RouterConfig& config,
-                        std::string_view if_none_match, const std::string& cc) {
-  return web_filler(t.info.geometry.tile_size(), f, config, if_none_match, cc);
+                        const HttpRequest& request, const std::string& cc) {
+  return web_filler(t.info.geometry.tile_size(), f, config, request.if_none_match, cc,
+                    request.connection);
 }
 
 }  // namespace
 
 HttpResponse web_filler(std::uint32_t size, WebFormat f, const RouterConfig& config,
-                        std::string_view if_none_match, const std::string& cc) {
+                        std::string_view if_none_match, const std::string& cc,
+                        std::uint64_t owner) {
   const std::string tag = options_tag(f, config.web.encode);
   const WebFormat as = f == WebFormat::jpeg ? WebFormat::png : f;
   Encoder encode = [size, as, options = config.web.encode] {
@@ -158,7 +181,7 @@ HttpResponse web_filler(std::uint32_t size, WebFormat f, const RouterConfig& con
   };
   const std::string key = "empty/" + std::to_string(size) + "/" + tag;
   return encoded(config, key, "\"empty-" + std::to_string(size) + "-" + tag + "\"",
-                 web_format_content_type(as).data(), std::move(encode), if_none_match, cc);
+                 web_format_content_type(as).data(), std::move(encode), if_none_match, cc, owner);
 }
 
 std::optional<TileId> web_tile_id(std::span<const std::string_view> zxy, const Geometry& g,
@@ -196,7 +219,7 @@ HttpResponse web_tile_route(const HttpRequest& request, std::shared_ptr<const Ti
     r.hold = t;  // names the tileset in access logs
     return r;
   };
-  if (!g.exists(id)) return finish(empty_tile(*t, format, config, request.if_none_match, cc));
+  if (!g.exists(id)) return finish(empty_tile(*t, format, config, request, cc));
 
   const std::string tag = options_tag(format, config.web.encode);
   auto etag_of = [&tag](std::uint64_t checksum) {
@@ -232,7 +255,7 @@ HttpResponse web_tile_route(const HttpRequest& request, std::shared_ptr<const Ti
       return r;
     }
     if (http_status(e.code) == 404 && t->info.sparse) {
-      return finish(empty_tile(*t, format, config, request.if_none_match, cc));
+      return finish(empty_tile(*t, format, config, request, cc));
     }
     if (http_status(e.code) == 404) {
       return tile_error(404, "tile " + id.to_string() + " is missing from the archive of " +
@@ -259,7 +282,7 @@ HttpResponse web_tile_route(const HttpRequest& request, std::shared_ptr<const Ti
   };
   return finish(encoded(config, key, etag_of(header->checksum),
                         web_format_content_type(format).data(), std::move(encode),
-                        request.if_none_match, cc));
+                        request.if_none_match, cc, request.connection));
 }
 
 HttpResponse web_mercator_tile_route(const HttpRequest& request, std::shared_ptr<const Tileset> t,
@@ -293,7 +316,7 @@ HttpResponse web_mercator_tile_route(const HttpRequest& request, std::shared_ptr
   const LonLatBounds& b = range->bounds;
   if (x / n * 360 - 180 >= b.east || (x + 1) / n * 360 - 180 <= b.west || lat(y) <= b.south ||
       lat(y + 1.0) >= b.north) {
-    HttpResponse r = empty_tile(*t, format, config, request.if_none_match, cc);
+    HttpResponse r = empty_tile(*t, format, config, request, cc);
     r.hold = std::move(t);
     return r;
   }
@@ -337,7 +360,7 @@ HttpResponse web_mercator_tile_route(const HttpRequest& request, std::shared_ptr
     };
     r = encoded(config, t->name + "@" + t->version + "/wmq/" + zxy_text + "/" + tag, etag,
                 web_format_content_type(format).data(), std::move(encode), request.if_none_match,
-                cc);
+                cc, request.connection);
   }
   r.hold = std::move(t);
   return r;
@@ -350,7 +373,7 @@ HttpResponse provided_web_image(const DeferredTile& d, const std::vector<std::ui
   const std::string& name = d.tileset->name;
   if (payload == nullptr) {
     return web_filler(d.tileset->info.geometry.tile_size(), *d.web, config, d.if_none_match,
-                      d.cache_control);
+                      d.cache_control, d.connection);
   }
   auto header = parse_tile_header(*payload);
   if (!header) {
@@ -380,7 +403,7 @@ HttpResponse provided_web_image(const DeferredTile& d, const std::vector<std::ui
     return encode_web_image(*content, format, options);
   };
   return encoded(config, key, etag, web_format_content_type(*d.web).data(), std::move(encode),
-                 d.if_none_match, d.cache_control);
+                 d.if_none_match, d.cache_control, d.connection);
 }
 
 namespace {

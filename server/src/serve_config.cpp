@@ -7,6 +7,7 @@
 #include <type_traits>
 
 #include "vts/protocol/file_io.hpp"
+#include "vts/protocol/json_input.hpp"
 
 namespace vts {
 namespace {
@@ -17,8 +18,9 @@ constexpr std::array<std::string_view, 11> kTopKeys = {
     "listen",     "admin",      "threads", "cors_origin",        "max_age",
     "public_url", "access_log", "access",  "reload_interval_ms", "limits",
     "web"};
-constexpr std::array<std::string_view, 6> kWebKeys = {
-    "png_level", "webp_quality", "webp_lossless", "webp_method", "jpeg_quality", "cache_mib"};
+constexpr std::array<std::string_view, 8> kWebKeys = {
+    "png_level",    "webp_quality", "webp_lossless",      "webp_method",
+    "jpeg_quality", "cache_mib",    "max_queued_encodes", "max_queued_encodes_per_connection"};
 constexpr std::array<std::string_view, 9> kLimitKeys = {
     "max_header_bytes", "max_target_bytes",  "max_connections",  "max_pipeline",    "min_send_rate",
     "idle_timeout_ms",  "header_timeout_ms", "write_timeout_ms", "drain_timeout_ms"};
@@ -128,6 +130,8 @@ Status apply_web(const json& w, const std::string& file, WebTileConfig& web) {
   std::int64_t mib = -1;
   whole("cache_mib", 0, 1 << 20, mib);
   if (mib >= 0) web.cache_bytes = std::size_t(mib) << 20;
+  whole("max_queued_encodes", 1, 1 << 20, web.max_queued_encodes);
+  whole("max_queued_encodes_per_connection", 1, 1 << 20, web.max_queued_encodes_per_connection);
   if (bad.ok() && w.contains("webp_lossless")) {
     if (!w.at("webp_lossless").is_boolean())
       return config_error(
@@ -158,7 +162,11 @@ Status apply(const json& j, const std::string& file, HttpServerOptions& o) {
       return config_error(file, "threads is " + v.dump() + ": a whole number 0 to 256");
     o.threads = v.get<int>();
   }
-  if (j.contains("cors_origin")) o.router.cors_origin = j.at("cors_origin").get<std::string>();
+  if (j.contains("cors_origin")) {
+    o.router.cors_origin = j.at("cors_origin").get<std::string>();
+    if (Status st = check_cors_origin(o.router.cors_origin); !st.ok())
+      return config_error(file, st.error().message);
+  }
   if (j.contains("max_age")) {
     const json& v = j.at("max_age");
     if (!v.is_number_unsigned() || v.get<std::uint64_t>() > 31536000)
@@ -206,8 +214,10 @@ Result<std::pair<std::string, std::uint16_t>> parse_endpoint(const std::string& 
 
 Status apply_serve_config_text(std::string_view text, const std::string& file,
                                HttpServerOptions& options) {
+  auto j = parse_json(text, "config '" + file + "'");
+  if (!j) return make_error(ErrorCode::invalid_argument, j.error().message);
   try {
-    return apply(json::parse(text), file, options);
+    return apply(*j, file, options);
   } catch (const json::exception& e) {
     return config_error(file, e.what());
   }
@@ -221,6 +231,16 @@ Status apply_serve_config(const std::filesystem::path& file, HttpServerOptions& 
   auto text = read_file(file);
   if (!text) return make_error(ErrorCode::io, "cannot read config '" + file.string() + "'");
   return apply_serve_config_text(*text, file.string(), options);
+}
+
+Status check_cors_origin(std::string_view origin) {
+  for (unsigned char c : origin) {
+    if (c < 0x20 || c == 0x7f)
+      return make_error(ErrorCode::invalid_argument,
+                        "cors_origin holds a control character (CR, LF, ...): it is sent as the "
+                        "Access-Control-Allow-Origin header's value");
+  }
+  return {};
 }
 
 Status check_access_names(const HttpServerOptions& options, const TilesetRegistry& registry) {

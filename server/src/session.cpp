@@ -78,14 +78,25 @@ const char* framing_problem(const RequestParser& parser) {
     return "Transfer-Encoding must end with chunked; the body's length is unknown";
   const std::size_t hosts = req.count(http::field::host);
   if (hosts > 1) return "more than one Host header field";
+  // Two credentials: which one applies would depend on which a proxy or we read first.
+  if (req.count(http::field::authorization) > 1) return "more than one Authorization header field";
   if (hosts == 0 && req.version() >= 11) return "an HTTP/1.1 request needs a Host header field";
   return nullptr;
+}
+
+std::uint64_t next_connection_id() {
+  static std::atomic<std::uint64_t> next{1};
+  return next.fetch_add(1, std::memory_order_relaxed);
 }
 
 }  // namespace
 
 Session::Session(SessionHost& server, Sweeper& sweeper, tcp::socket socket, bool admin)
-    : server_(server), socket_(std::move(socket)), admin_(admin), sweeper_(sweeper) {
+    : server_(server),
+      socket_(std::move(socket)),
+      admin_(admin),
+      sweeper_(sweeper),
+      id_(next_connection_id()) {
   sweeper_.add(this);
   server_.metrics().open_connections.fetch_add(1, std::memory_order_relaxed);
   error_code ec;
@@ -165,15 +176,34 @@ void Session::drain_input() {
                           });
 }
 
+// The client closed its end (or reset it): nothing more will be read. Idle, the connection
+// closes; with responses still owed, nobody waits for them any more (as nginx does): the
+// provider's fetches and the web encodes only this connection waited for are abandoned, and
+// what is ready is still written until the socket refuses it.
+void Session::client_gone() {
+  read_done_ = true;
+  if (queue_.empty()) return close();
+  if (!abandon_.stop_requested())
+    server_.metrics().abandoned_connections.fetch_add(1, std::memory_order_relaxed);
+  abandon_.request_stop();
+}
+
 // Waits (idle timeout) for the first byte of the next request; the header then has its own
 // deadline, so a client that trickles a header cannot hold the connection for idle_timeout.
 void Session::wait_for_request() {
   if (closed_ || read_done_) return;
   if (queue_.size() >= server_.options().limits.max_pipeline) {
     read_paused_ = true;
-    return;
+    return read_ahead();
   }
   if (buffer_.size() > 0) return read_request();
+  if (reading_) {
+    // The read-ahead of a full pipeline is still outstanding: it goes on from here when bytes
+    // come, and meanwhile the connection is idle.
+    idle_wait_ = true;
+    set_read_deadline(server_.options().limits.idle_timeout);
+    return;
+  }
   reading_ = true;
   idle_wait_ = true;
   set_read_deadline(server_.options().limits.idle_timeout);
@@ -183,15 +213,7 @@ void Session::wait_for_request() {
                             self->idle_wait_ = false;
                             if (self->closed_) return;
                             self->clear_read_deadline();
-                            if (ec || n == 0) {
-                              self->read_done_ = true;
-                              // Gone while tiles are owed: nobody waits for them (as nginx does).
-                              if (self->queue_.empty())
-                                self->close();
-                              else
-                                self->abandon_.request_stop();
-                              return;
-                            }
+                            if (ec || n == 0) return self->client_gone();
                             self->buffer_.commit(n);
                             if (self->server_.stopping()) {
                               // Unread input may follow: a plain close would reset the connection
@@ -201,6 +223,27 @@ void Session::wait_for_request() {
                               return;
                             }
                             self->read_request();
+                          });
+}
+
+// While the pipeline is full, reads on without parsing, up to max_header_bytes buffered: a client
+// that goes away (closes after pipelining, as a flood does) is noticed while its responses are
+// still owed, and the work done only for it (provider fetches, web encodes) is abandoned, as
+// nginx does. Once the pipeline has room, wait_for_request() parses what was read.
+void Session::read_ahead() {
+  if (reading_ || buffer_.size() >= server_.options().limits.max_header_bytes) return;
+  reading_ = true;
+  socket_.async_read_some(buffer_.prepare(4096),
+                          [self = shared_from_this()](error_code ec, std::size_t n) {
+                            self->reading_ = false;
+                            if (self->closed_) return;
+                            if (self->idle_wait_) {
+                              self->idle_wait_ = false;
+                              self->clear_read_deadline();
+                            }
+                            if (ec || n == 0) return self->client_gone();
+                            self->buffer_.commit(n);
+                            self->wait_for_request();  // still full: reads ahead again
                           });
 }
 
@@ -277,13 +320,8 @@ void Session::on_parse_error(error_code ec) {
   if (ec == http::error::body_limit) return fail_parse(413, "request body not allowed");
   read_done_ = true;
   if (ec == http::error::end_of_stream || ec == asio::error::operation_aborted ||
-      ec == asio::error::connection_reset || ec == asio::error::eof || !socket_.is_open()) {
-    if (queue_.empty())
-      close();
-    else
-      abandon_.request_stop();
-    return;
-  }
+      ec == asio::error::connection_reset || ec == asio::error::eof || !socket_.is_open())
+    return client_gone();
   fail_parse(400, "bad request");
 }
 
@@ -297,6 +335,7 @@ std::unique_ptr<Outgoing> Session::answer(RequestParser::value_type& req) {
   const auto mt = req.method_string();
   hr.method_text = {mt.data(), mt.size()};
   hr.target = {target.data(), target.size()};
+  hr.connection = id_;
   read_fields(req, hr);
   if (admin_) {
     out->response = server_.admin_route(hr);
@@ -385,23 +424,27 @@ void Session::start_deferred(const Outgoing& o) {
 // Waits for the encoding of a web image another request leads (single flight). The flight's
 // callback runs on the leader's thread when it finishes (or here at once when it has finished
 // already) and posts the answer to this connection's thread: no thread ever blocks waiting.
+// The connection's stop token marks its interest: once the client has gone, an encoding not
+// started yet is dropped unless another connection waits for it too.
 void Session::start_web_wait(const Outgoing& o) {
   o.response.web_wait->flight->on_done(
       [self = shared_from_this(), seq = o.seq, executor = socket_.get_executor()](
-          const WebTilePtr& tile, const std::string& why) mutable {
-        asio::post(executor, [session = std::move(self), seq, tile, why] {
-          session->finish_web_wait(seq, tile, why);
+          const WebTilePtr& tile, int status, const std::string& why) mutable {
+        asio::post(executor, [session = std::move(self), seq, tile, status, why] {
+          session->finish_web_wait(seq, tile, status, why);
         });
-      });
+      },
+      abandon_.get_token());
 }
 
-void Session::finish_web_wait(std::uint64_t seq, const WebTilePtr& tile, const std::string& why) {
+void Session::finish_web_wait(std::uint64_t seq, const WebTilePtr& tile, int status,
+                              const std::string& why) {
   if (closed_) return;
   auto it = std::find_if(queue_.begin(), queue_.end(),
                          [seq](const std::unique_ptr<Outgoing>& o) { return o->seq == seq; });
   if (it == queue_.end() || (*it)->ready) return;
   Outgoing& o = **it;
-  o.response = complete_web_wait(std::move(o.response), tile, why);
+  o.response = complete_web_wait(std::move(o.response), tile, status, why);
   o.ready = true;
   prepare(o);
   if (!writing_ && !in_write_) write_next();

@@ -68,6 +68,8 @@ class Session final : public std::enable_shared_from_this<Session>, public Swept
  private:
   void wait_for_request();
   void read_request();
+  void read_ahead();
+  void client_gone();
   void on_read(error_code ec);
   void on_parse_error(error_code ec);
   std::unique_ptr<Outgoing> answer(RequestParser::value_type& req);
@@ -76,7 +78,7 @@ class Session final : public std::enable_shared_from_this<Session>, public Swept
   void start_deferred(const Outgoing& o);
   void finish_deferred(std::uint64_t seq, ProvidedTile tile);
   void start_web_wait(const Outgoing& o);
-  void finish_web_wait(std::uint64_t seq, const std::shared_ptr<const WebTile>& tile,
+  void finish_web_wait(std::uint64_t seq, const std::shared_ptr<const WebTile>& tile, int status,
                        const std::string& why);
   void write_next();
   void wait_writable();
@@ -118,6 +120,7 @@ class Session final : public std::enable_shared_from_this<Session>, public Swept
   // provider's tiles still owed are abandoned (AsyncTileProvider::tile).
   std::stop_source abandon_;
   std::string remote_;
+  const std::uint64_t id_;  // HttpRequest::connection: unique in this process
 };
 
 }  // namespace vts::http_detail

@@ -2,45 +2,46 @@
 
 namespace vts::http_detail {
 
-void Flight::on_done(Callback cb) {
+void Flight::on_done(Callback cb, std::stop_token interest) {
   std::unique_lock lock(m_);
+  if (expected_ > 0) --expected_;
   if (!done_) {
-    waiters_.push_back(std::move(cb));
+    waiters_.push_back({std::move(cb), std::move(interest)});
     return;
   }
   lock.unlock();
-  cb(tile_, error_);
+  cb(tile_, status_, error_);
 }
 
-void Flight::complete(WebTilePtr tile, std::string error) {
-  std::vector<Callback> waiters;
+void Flight::expect() {
+  std::lock_guard lock(m_);
+  ++expected_;
+}
+
+bool Flight::wanted() const {
+  std::lock_guard lock(m_);
+  if (expected_ > 0) return true;
+  for (const Waiter& w : waiters_)
+    if (!w.interest.stop_requested()) return true;
+  return false;
+}
+
+void Flight::complete(WebTilePtr tile, int status, std::string error) {
+  std::vector<Waiter> waiters;
   {
     std::lock_guard lock(m_);
     tile_ = std::move(tile);
+    status_ = status;
     error_ = std::move(error);
     done_ = true;
     waiters.swap(waiters_);
   }
-  for (auto& cb : waiters) cb(tile_, error_);  // tile_ and error_ no longer change
+  for (auto& w : waiters) w.cb(tile_, status_, error_);  // the result no longer changes
 }
 
-WebTileCache::WebTileCache(std::size_t capacity_bytes, int encode_threads)
+WebTileCache::WebTileCache(std::size_t capacity_bytes, int encode_threads, EncodeLimits limits)
     : capacity_(capacity_bytes) {
-  for (int i = 0; i < encode_threads; ++i) {
-    workers_.emplace_back([this] {
-      while (true) {
-        std::function<void()> job;
-        {
-          std::unique_lock lock(jobs_m_);
-          jobs_cv_.wait(lock, [this] { return stopping_ || !jobs_.empty(); });
-          if (jobs_.empty()) return;  // stopping, and nothing left to encode
-          job = std::move(jobs_.front());
-          jobs_.pop_front();
-        }
-        job();
-      }
-    });
-  }
+  if (encode_threads > 0) queue_ = std::make_unique<EncodeQueue>(encode_threads, limits);
 }
 
 WebTileCache::~WebTileCache() {
@@ -48,21 +49,33 @@ WebTileCache::~WebTileCache() {
 }
 
 void WebTileCache::stop() {
-  {
-    std::lock_guard lock(jobs_m_);
-    stopping_ = true;
-  }
-  jobs_cv_.notify_all();
-  for (auto& w : workers_) w.join();
-  workers_.clear();
+  if (queue_) queue_->stop();
 }
 
-void WebTileCache::run(std::function<void()> job) {
-  {
-    std::lock_guard lock(jobs_m_);
-    jobs_.push_back(std::move(job));
-  }
-  jobs_cv_.notify_one();
+EncodeQueue::Admit WebTileCache::queue(const std::string& key, const std::shared_ptr<Flight>& lead,
+                                       std::uint64_t owner, std::function<void()> encode) {
+  // The cache outlives its jobs (its destructor runs or drops the queued ones before it returns).
+  EncodeQueue::Job job;
+  job.owner = owner;
+  job.wanted = [this, key, lead] { return !drop_if_unwanted(key, lead); };
+  job.run = std::move(encode);
+  job.dropped = [this, lead] {
+    dropped.fetch_add(1, std::memory_order_relaxed);
+    lead->complete(nullptr, 503, "nobody waits for this image any more");
+  };
+  const auto admit = queue_->push(std::move(job));
+  if (admit != EncodeQueue::Admit::queued) shed.fetch_add(1, std::memory_order_relaxed);
+  return admit;
+}
+
+bool WebTileCache::drop_if_unwanted(const std::string& key, const std::shared_ptr<Flight>& flight) {
+  // Under the map's lock, so that a request arriving now either joins this flight before the
+  // check (and keeps it wanted) or finds no flight and leads a new one.
+  std::lock_guard lock(m_);
+  if (flight->wanted()) return false;
+  if (auto it = flights_.find(key); it != flights_.end() && it->second == flight)
+    flights_.erase(it);
+  return true;
 }
 
 WebTilePtr WebTileCache::peek(const std::string& key) {
@@ -84,18 +97,21 @@ WebTileCache::Lookup WebTileCache::acquire(const std::string& key) {
   misses.fetch_add(1, std::memory_order_relaxed);
   if (auto it = flights_.find(key); it != flights_.end()) {
     waits.fetch_add(1, std::memory_order_relaxed);
+    it->second->expect();
     return {.wait = it->second};
   }
   auto flight = std::make_shared<Flight>();
+  flight->expect();
   flights_.emplace(key, flight);
   return {.lead = std::move(flight)};
 }
 
 void WebTileCache::finish(const std::string& key, const std::shared_ptr<Flight>& flight,
-                          WebTilePtr tile, std::string error) {
+                          WebTilePtr tile, int status, std::string error) {
   {
     std::lock_guard lock(m_);
-    flights_.erase(key);
+    if (auto it = flights_.find(key); it != flights_.end() && it->second == flight)
+      flights_.erase(it);
     const std::size_t size = tile ? tile->bytes.size() : 0;
     if (tile && size <= capacity_ && !map_.contains(key)) {
       while (used_ + size > capacity_ && !lru_.empty()) {
@@ -112,7 +128,7 @@ void WebTileCache::finish(const std::string& key, const std::shared_ptr<Flight>&
     bytes.store(used_, std::memory_order_relaxed);
     entries.store(map_.size(), std::memory_order_relaxed);
   }
-  flight->complete(std::move(tile), std::move(error));
+  flight->complete(std::move(tile), status, std::move(error));
 }
 
 std::string web_metrics_text(const WebTileCache& c) {
@@ -143,6 +159,16 @@ std::string web_metrics_text(const WebTileCache& c) {
   s += "# HELP vts_web_cache_capacity_bytes The RAM cache's byte cap (web.cache_mib).\n";
   s += "# TYPE vts_web_cache_capacity_bytes gauge\n";
   s += "vts_web_cache_capacity_bytes " + std::to_string(c.capacity()) + "\n";
+  counter("vts_web_encodes_dropped_total",
+          "Web image encodes dropped before they ran: every request waiting for them had gone.",
+          c.dropped);
+  counter("vts_web_encodes_shed_total",
+          "Web image misses answered 503 (Retry-After) because the encode queue was full, in all "
+          "or for their connection.",
+          c.shed);
+  s += "# HELP vts_web_encode_queue_length Web image encodes waiting for a worker.\n";
+  s += "# TYPE vts_web_encode_queue_length gauge\n";
+  s += "vts_web_encode_queue_length " + std::to_string(c.queued()) + "\n";
   counter("vts_web_encodes_total", "Web images encoded (tile decoded, cropped, encoded).",
           c.encodes);
   counter("vts_web_encode_failures_total", "Web image encodings that failed.", c.encode_failures);

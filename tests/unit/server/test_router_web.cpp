@@ -3,12 +3,16 @@
 // bounded cache with single flight.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <condition_variable>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <stop_token>
 #include <string>
+#include <vector>
 
+#include "busy_worker.hpp"
 #include "vts/builder/builder.hpp"
 #include "vts/protocol/codec.hpp"
 #include "vts/protocol/web_image.hpp"
@@ -230,7 +234,7 @@ TEST(WebTileCache, StaysWithinItsByteCapEvictingTheLeastRecentlyUsed) {
   for (int i = 0; i < 3; ++i) {
     auto l = c.acquire("k" + std::to_string(i));
     ASSERT_TRUE(l.lead);
-    c.finish("k" + std::to_string(i), l.lead, image(400), "");
+    c.finish("k" + std::to_string(i), l.lead, image(400), 200, "");
   }
   EXPECT_EQ(c.bytes.load(), 800u);  // k0 evicted
   EXPECT_EQ(c.evictions.load(), 1u);
@@ -238,7 +242,7 @@ TEST(WebTileCache, StaysWithinItsByteCapEvictingTheLeastRecentlyUsed) {
   EXPECT_TRUE(c.acquire("k1").hit);
   // Too big to keep: answered, never stored.
   auto big = c.acquire("big");
-  c.finish("big", big.lead, image(2000), "");
+  c.finish("big", big.lead, image(2000), 200, "");
   EXPECT_LE(c.bytes.load(), 1000u);
   EXPECT_FALSE(c.acquire("big").hit);
 }
@@ -251,12 +255,12 @@ TEST(WebTileCache, ConcurrentMissesShareOneFlight) {
   ASSERT_TRUE(second.wait);
   EXPECT_EQ(second.wait, lead.lead);
   int woken = 0;
-  second.wait->on_done([&](const WebTilePtr& t, const std::string&) { woken += t ? 1 : 100; });
+  second.wait->on_done([&](const WebTilePtr& t, int, const std::string&) { woken += t ? 1 : 100; });
   EXPECT_EQ(woken, 0);
-  c.finish("k", lead.lead, image(10), "");
+  c.finish("k", lead.lead, image(10), 200, "");
   EXPECT_EQ(woken, 1);
   // After the flight: a late waiter is answered at once, a new miss leads a new flight.
-  second.wait->on_done([&](const WebTilePtr& t, const std::string&) { woken += t ? 1 : 100; });
+  second.wait->on_done([&](const WebTilePtr& t, int, const std::string&) { woken += t ? 1 : 100; });
   EXPECT_EQ(woken, 2);
   EXPECT_TRUE(c.acquire("k").lead);
 }
@@ -278,10 +282,10 @@ TEST_F(RouterWeb, AMissWhileAnotherEncodesWaitsForThatFlight) {
       WebTile{std::vector<std::uint8_t>(first.view.begin(), first.view.end()),
               *header(first, "ETag"), "image/png"});
   std::optional<vts::HttpResponse> done;
-  lead.lead->on_done([&](const WebTilePtr& img, const std::string& why) {
-    done = vts::complete_web_wait(std::move(marker), img, why);
+  lead.lead->on_done([&](const WebTilePtr& img, int status, const std::string& why) {
+    done = vts::complete_web_wait(std::move(marker), img, status, why);
   });
-  c->finish(key, lead.lead, tile, "");
+  c->finish(key, lead.lead, tile, 200, "");
   ASSERT_TRUE(done);
   EXPECT_EQ(done->status, 200);
   EXPECT_EQ(body(*done), body(first));
@@ -326,9 +330,9 @@ TEST_F(RouterWeb, WithWorkersEveryMissWaitsForTheEncodingOffTheIoThread) {
   std::mutex m;
   std::condition_variable cv;
   std::optional<vts::HttpResponse> done;
-  marker.web_wait->flight->on_done([&](const WebTilePtr& img, const std::string& why) {
+  marker.web_wait->flight->on_done([&](const WebTilePtr& img, int status, const std::string& why) {
     std::lock_guard lock(m);
-    done = vts::complete_web_wait(std::move(marker), img, why);
+    done = vts::complete_web_wait(std::move(marker), img, status, why);
     cv.notify_one();
   });
   std::unique_lock lock(m);
@@ -358,6 +362,69 @@ TEST_F(RouterWeb, ASecondRequestIsACacheHitAndIsNotEncodedAgain) {
   req_.if_none_match = tag;
   EXPECT_EQ(get("/dense/2/2/0.webp").status, 304);  // from the cached image's tag
   EXPECT_EQ(c.encodes.load(), 1u);
+}
+
+}  // namespace
+
+namespace {
+
+TEST_F(RouterWeb, AMissBeyondTheQueuesCapsIs503WithRetryAfterAndQueuesNothing) {
+  auto c = std::make_shared<WebTileCache>(1 << 20, 1, vts::http_detail::EncodeLimits{2, 1});
+  config_.web.cache = c;
+  vts::test::BusyWorker busy(*c);
+  req_.connection = 1;
+  EXPECT_TRUE(get("/dense/2/0/0.png").web_wait);
+  auto over = get("/dense/2/1/0.png");  // the same connection's second cold image
+  EXPECT_EQ(over.status, 503);
+  EXPECT_EQ(header(over, "Retry-After"), "1");
+  EXPECT_NE(body(over).find("this connection"), std::string::npos) << body(over);
+  req_.connection = 2;
+  // The image refused to connection 1 left no flight behind: connection 2 queues it anew.
+  EXPECT_TRUE(get("/dense/2/1/0.png").web_wait);
+  req_.connection = 3;
+  auto full = get("/dense/2/2/0.png");
+  EXPECT_EQ(full.status, 503);
+  EXPECT_EQ(header(full, "Retry-After"), "1");
+  EXPECT_EQ(c->shed.load(), 2u);
+  EXPECT_EQ(c->queued(), 2u);
+  busy.release();
+  c->stop();  // runs the two queued encodes
+  EXPECT_EQ(c->encodes.load(), 2u);
+}
+
+TEST_F(RouterWeb, AnEncodeEveryWaiterOfWhichHasGoneIsDroppedNotRun) {
+  auto c = std::make_shared<WebTileCache>(1 << 20, 1);
+  config_.web.cache = c;
+  std::mutex m;
+  std::condition_variable cv;
+  std::vector<int> statuses;
+  std::stop_source gone, still_here;
+  {
+    vts::test::BusyWorker busy(*c);
+    req_.connection = 1;
+    std::vector<vts::HttpResponse> markers;
+    for (const char* t : {"/dense/2/0/0.png", "/dense/2/1/0.png", "/dense/2/2/0.png"})
+      markers.push_back(get(t));
+    req_.connection = 2;
+    markers.push_back(get("/dense/2/2/0.png"));  // joins the third image's flight
+    for (std::size_t i = 0; i < markers.size(); ++i) {
+      ASSERT_TRUE(markers[i].web_wait) << i;
+      markers[i].web_wait->flight->on_done(
+          [&](const WebTilePtr&, int status, const std::string&) {
+            std::lock_guard lock(m);
+            statuses.push_back(status);
+            cv.notify_all();
+          },
+          i < 3 ? gone.get_token() : still_here.get_token());
+    }
+    gone.request_stop();  // connection 1 closed; connection 2 still waits for the third image
+  }
+  std::unique_lock lock(m);
+  ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(30), [&] { return statuses.size() == 4; }));
+  std::sort(statuses.begin(), statuses.end());
+  EXPECT_EQ(statuses, (std::vector<int>{200, 200, 503, 503}));
+  EXPECT_EQ(c->encodes.load(), 1u);
+  EXPECT_EQ(c->dropped.load(), 2u);
 }
 
 }  // namespace

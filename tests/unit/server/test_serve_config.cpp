@@ -148,6 +148,34 @@ TEST(ServeConfig, EmptyCredentialsOutOfRangeSettingsAndAFolderAreRefused) {
   fs::remove_all(dir);
 }
 
+TEST(ServeConfig, DeepNestingAndAControlCharacterInCorsOriginAreRefused) {
+  // 100,000 nested arrays (200 KB): refused at the parser, never copied or dumped (a stack
+  // overflow before).
+  const std::string deep =
+      R"({"access": )" + std::string(100000, '[') + std::string(100000, ']') + "}";
+  expect_refused(deep, "deeper than 64");
+  // CR/LF would end the Access-Control-Allow-Origin header and forge the rest.
+  expect_refused(R"({"cors_origin": "https://a.example\r\nSet-Cookie: x=1"})",
+                 "cors_origin holds a control character");
+  EXPECT_FALSE(check_cors_origin("https://a.example\n").ok());
+  EXPECT_TRUE(check_cors_origin("https://a.example").ok());
+  EXPECT_TRUE(check_cors_origin("").ok());  // no CORS headers
+}
+
+TEST(ServeConfig, TheEncodeQueueCapsAreAppliedAndZeroIsRefused) {
+  HttpServerOptions o;
+  ASSERT_TRUE(
+      apply(R"({"web": {"max_queued_encodes": 50, "max_queued_encodes_per_connection": 2}})", o)
+          .ok());
+  EXPECT_EQ(o.router.web.max_queued_encodes, 50u);
+  EXPECT_EQ(o.router.web.max_queued_encodes_per_connection, 2u);
+  EXPECT_EQ(HttpServerOptions{}.router.web.max_queued_encodes, 1024u);
+  EXPECT_EQ(HttpServerOptions{}.router.web.max_queued_encodes_per_connection, 8u);
+  expect_refused(R"({"web": {"max_queued_encodes": 0}})", "web.max_queued_encodes");
+  expect_refused(R"({"web": {"max_queued_encodes_per_connection": -1}})",
+                 "web.max_queued_encodes_per_connection");
+}
+
 TEST(ServeConfig, AFileIsReadAndAMissingOneIsAnIoErrorNamingIt) {
   const fs::path dir =
       fs::temp_directory_path() / ("vts-serve-config-" + std::to_string(::getpid()));

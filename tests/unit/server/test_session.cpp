@@ -12,7 +12,9 @@
 #include <optional>
 #include <string>
 
+#include "busy_worker.hpp"
 #include "vts/test/archive.hpp"
+#include "vts/test/clock.hpp"
 #include "vts/test/server.hpp"
 #include "vts/test/temp_dir.hpp"
 
@@ -191,6 +193,16 @@ TEST_F(Session, AnHttp11RequestWithoutHostOrWithTwoIs400AndCloses) {
   EXPECT_EQ(r.status_line().rfind("HTTP/1.1 400", 0), 0u) << r.status_line();
 }
 
+TEST_F(Session, TwoAuthorizationFieldsAre400AndClose) {
+  auto server = start(vts::test::RunningServer::quiet_options());
+  const Reply r = exchange(server->port(),
+                           "GET /syn/0/0/0 HTTP/1.1\r\nHost: a\r\nAuthorization: Bearer a\r\n"
+                           "authorization: Bearer b\r\n\r\n");
+  EXPECT_EQ(r.status_line().rfind("HTTP/1.1 400", 0), 0u) << r.status_line();
+  EXPECT_NE(r.bytes.find("more than one Authorization"), std::string::npos) << r.bytes;
+  expect_error_headers(r, true);
+}
+
 TEST_F(Session, ATransferCodingOtherThanChunkedLastIs400AndClosesTheConnection) {
   auto server = start(vts::test::RunningServer::quiet_options());
   for (const char* coding : {"gzip", "chunked, gzip", "identity"}) {
@@ -210,4 +222,42 @@ TEST_F(Session, ATransferCodingOtherThanChunkedLastIs400AndClosesTheConnection) 
                             "GET /syn/0/0/0 HTTP/1.1\r\nHost: a\r\nTransfer-Encoding: gzip, "
                             "chunked\r\nConnection: close\r\n\r\n0\r\n\r\n");
   EXPECT_EQ(ok.status_line(), "HTTP/1.1 200 OK") << ok.bytes;
+}
+
+namespace {
+
+// The value of the unlabelled counter `name` in a Prometheus exposition (-1 if absent).
+double counter(const std::string& text, const std::string& name) {
+  const auto at = text.find("\n" + name + " ");
+  return at == std::string::npos ? -1 : std::stod(text.substr(at + name.size() + 2));
+}
+
+}  // namespace
+
+TEST_F(Session, AClientThatPipelinesColdWebImagesAndClosesGetsNoneEncoded) {
+  vts::test::build_archive(
+      vts::test::synthetic_options(dir_->path() / "big" / "big.pmtiles", 2048, 1024));
+  auto o = vts::test::RunningServer::quiet_options();
+  o.threads = 1;
+  auto cache = std::make_shared<vts::http_detail::WebTileCache>(1 << 20, 1);
+  o.router.web.cache = cache;
+  vts::test::RunningServer server({dir_->path() / "big" / "big.pmtiles"}, o);
+  std::string requests;  // 16 distinct cold images: a full pipeline
+  for (int i = 0; i < 16; ++i)
+    requests += "GET /big/3/" + std::to_string(i % 8) + "/" + std::to_string(i / 8) +
+                ".png HTTP/1.1\r\nHost: a\r\n\r\n";
+  {
+    vts::test::BusyWorker busy(*cache);      // the encodes queue behind it
+    exchange(server.port(), requests, 0ms);  // sends, then closes at once
+    // The server notices the close although its pipeline is full, and abandons the work.
+    EXPECT_TRUE(vts::test::wait_until([&] {
+      return counter(server.server().metrics_text(), "vts_http_abandoned_connections_total") == 1;
+    })) << server.server().metrics_text();
+  }
+  // Eight queued (the per-connection cap; eight more were refused 503), all dropped unrun.
+  EXPECT_TRUE(vts::test::wait_until([&] { return cache->dropped.load() == 8; }))
+      << cache->dropped.load();
+  EXPECT_EQ(cache->shed.load(), 8u);
+  EXPECT_EQ(cache->encodes.load(), 0u);
+  EXPECT_EQ(cache->queued(), 0u);
 }

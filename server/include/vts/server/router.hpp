@@ -35,6 +35,11 @@ struct WebTile;
 struct WebTileConfig {
   WebEncodeOptions encode;
   std::size_t cache_bytes = std::size_t(64) << 20;  // "cache_mib" (default 64 MiB; 0 = no cache)
+  // Admission to the encode workers (docs/PROTOCOL.md §12): at most this many encodes wait, in
+  // all ("max_queued_encodes") and from one connection ("max_queued_encodes_per_connection");
+  // a miss beyond either is answered 503 with Retry-After.
+  std::size_t max_queued_encodes = 1024;
+  std::size_t max_queued_encodes_per_connection = 8;
   // Made by HttpServer from cache_bytes when null; route() without one encodes every request.
   std::shared_ptr<http_detail::WebTileCache> cache;
 };
@@ -72,6 +77,9 @@ struct HttpRequest {
   std::string_view authorization;
   std::string_view access_control_request_method;
   std::string_view accept;  // "text/html" in it: GET / answers the HTML index (a browser)
+  // Which connection asked (the session's id; 0 = unknown): web-image encodes are queued fairly
+  // between connections and capped per connection (WebTileConfig::limits).
+  std::uint64_t connection = 0;
 };
 
 // Which route answered, for metrics labels (stable names). `admin` is every answer of the admin
@@ -92,6 +100,7 @@ struct DeferredTile {
   std::optional<WebFormat> web;
   WebEncodeOptions web_options;
   std::shared_ptr<http_detail::WebTileCache> web_cache;
+  std::uint64_t connection = 0;  // HttpRequest::connection
 };
 
 // route()'s marker for a web image another request is encoding (single flight): wait for
@@ -166,10 +175,11 @@ HttpResponse route_admin(const HttpRequest& request, const AdminState& state);
 // answer may be a `web_wait` response (its encoding under way): wait for it as for route()'s.
 HttpResponse complete_deferred(HttpResponse marker, ProvidedTile tile);
 
-// Finishes a `web_wait` response (`marker`) once its flight is done: 200 / 304 with the image, or
-// 500 when its encoding failed (`error`).
+// Finishes a `web_wait` response (`marker`) once its flight is done: 200 / 304 with the image,
+// else `status` with `error`: 500 when its encoding failed, 503 with Retry-After when the server
+// shed or dropped it.
 HttpResponse complete_web_wait(HttpResponse marker,
-                               const std::shared_ptr<const http_detail::WebTile>& tile,
+                               const std::shared_ptr<const http_detail::WebTile>& tile, int status,
                                const std::string& error);
 
 // Signs a URL path for an HMAC-protected tileset: returns "?expires=<t>&sig=<hex>" to append.

@@ -7,7 +7,8 @@
 //            idle_timeout_ms, header_timeout_ms, write_timeout_ms,
 //            drain_timeout_ms},
 //   web: {png_level 0..9, webp_quality 0..100, webp_lossless, webp_method 0..6,
-//         jpeg_quality 1..100, cache_mib 0..1048576}.
+//         jpeg_quality 1..100, cache_mib 0..1048576, max_queued_encodes 1..1048576,
+//         max_queued_encodes_per_connection 1..1048576}.
 // A key not in this list, at any level, is an error naming the key and the file: a misspelt
 // limit must not silently leave the default in force.
 #pragma once
@@ -37,6 +38,11 @@ Status apply_serve_config(const std::filesystem::path& file, HttpServerOptions& 
 // The same for config text already read; `file` only names it in errors.
 Status apply_serve_config_text(std::string_view text, const std::string& file,
                                HttpServerOptions& options);
+
+// invalid_argument when `origin` (the Access-Control-Allow-Origin value, from the config or
+// --cors-origin) holds a control character: CR/LF would end the header and let the rest forge
+// another.
+Status check_cors_origin(std::string_view origin);
 
 // invalid_argument when an access entry of `options` names a tileset `registry` does not serve
 // (checked at start-up: a misspelt name would leave the real tileset public).
