@@ -476,11 +476,59 @@ struct DiskCache::Impl {
 
   // ---- reads ------------------------------------------------------------------------------
 
+  // A tile's row as get_stmt reads it.
+  struct Row {
+    std::int64_t rowid = 0, checksum = 0;
+    std::uint64_t size = 0;
+    CachedTile tile;
+    bool verifies() const {
+      return tile.payload.size() == size &&
+             static_cast<std::int64_t>(checksum_of(tile.payload)) == checksum;
+    }
+  };
+
+  Result<std::optional<Row>> read_row(std::int64_t tileset_id, TileId id, std::string_view doing) {
+    sqlite3_stmt* s = get_stmt.get();
+    ResetGuard guard(s);
+    bind_key(s, tileset_id, id);
+    const int rc = sqlite3_step(s);
+    if (rc == SQLITE_DONE) return {std::nullopt};
+    if (rc != SQLITE_ROW) return db_error(rc, doing);
+    Row row;
+    row.rowid = sqlite3_column_int64(s, 0);
+    row.size = static_cast<std::uint64_t>(sqlite3_column_int64(s, 1));
+    row.checksum = sqlite3_column_int64(s, 2);
+    CachedTile& tile = row.tile;
+    tile.validated_unix = sqlite3_column_int64(s, 3);
+    const auto* etag = reinterpret_cast<const char*>(sqlite3_column_text(s, 4));
+    if (etag) tile.etag.assign(etag, static_cast<std::size_t>(sqlite3_column_bytes(s, 4)));
+    const auto* blob = static_cast<const std::uint8_t*>(sqlite3_column_blob(s, 5));
+    const auto n = static_cast<std::size_t>(sqlite3_column_bytes(s, 5));
+    if (blob) tile.payload.assign(blob, blob + n);
+    tile.pinned = sqlite3_column_int(s, 6) != 0;
+    tile.fresh_for = sqlite3_column_int64(s, 7);
+    return {std::move(row)};
+  }
+
+  // Deletes only the bad version: another process may have replaced the row meanwhile. Inside a
+  // write transaction.
+  Status delete_corrupt(const Row& row, std::string_view doing) {
+    sqlite3_stmt* s = delete_corrupt_stmt.get();
+    ResetGuard guard(s);
+    sqlite3_bind_int64(s, 1, row.rowid);
+    sqlite3_bind_int64(s, 2, row.checksum);
+    const int rc = run(s);
+    if (rc != SQLITE_DONE) return db_error(rc, doing);
+    return {};
+  }
+
   // Looks a tile up and verifies it; drops a row that fails. With `count_and_touch`, counts a hit
-  // or miss and records the access time of a hit. Called with `lock` held; returns with it held.
+  // or miss and records the access time of a hit. With `pin`, a hit that is not pinned yet is read
+  // again, verified and pinned in one write transaction (lookup_and_pin). Called with `lock` held;
+  // returns with it held.
   Result<std::optional<CachedTile>> lookup(std::unique_lock<std::mutex>& lock,
                                            std::string_view tileset, TileId id,
-                                           bool count_and_touch) {
+                                           bool count_and_touch, bool pin = false) {
     const std::string_view doing = "reading a tile";
     auto tsid = find_tileset(tileset, doing);
     if (!tsid) return std::move(tsid).error();
@@ -488,57 +536,70 @@ struct DiskCache::Impl {
       if (count_and_touch) ++misses;
       return {std::nullopt};
     }
-    CachedTile tile;
-    std::int64_t rowid = 0, stored_checksum = 0;
-    std::uint64_t stored_size = 0;
-    {
-      sqlite3_stmt* s = get_stmt.get();
-      ResetGuard guard(s);
-      bind_key(s, **tsid, id);
-      const int rc = sqlite3_step(s);
-      if (rc == SQLITE_DONE) {
-        if (count_and_touch) ++misses;
-        return {std::nullopt};
-      }
-      if (rc != SQLITE_ROW) return db_error(rc, doing);
-      rowid = sqlite3_column_int64(s, 0);
-      stored_size = static_cast<std::uint64_t>(sqlite3_column_int64(s, 1));
-      stored_checksum = sqlite3_column_int64(s, 2);
-      tile.validated_unix = sqlite3_column_int64(s, 3);
-      const auto* etag = reinterpret_cast<const char*>(sqlite3_column_text(s, 4));
-      if (etag) tile.etag.assign(etag, static_cast<std::size_t>(sqlite3_column_bytes(s, 4)));
-      const auto* blob = static_cast<const std::uint8_t*>(sqlite3_column_blob(s, 5));
-      const auto n = static_cast<std::size_t>(sqlite3_column_bytes(s, 5));
-      if (blob) tile.payload.assign(blob, blob + n);
-      tile.pinned = sqlite3_column_int(s, 6) != 0;
-      tile.fresh_for = sqlite3_column_int64(s, 7);
+    auto row = read_row(**tsid, id, doing);
+    if (!row) return std::move(row).error();
+    if (!*row) {
+      if (count_and_touch) ++misses;
+      return {std::nullopt};
     }
     // Hash without the lock: other threads may use the connection meanwhile.
     lock.unlock();
-    const bool good = tile.payload.size() == stored_size &&
-                      static_cast<std::int64_t>(checksum_of(tile.payload)) == stored_checksum;
+    const bool good = (*row)->verifies();
     lock.lock();
     if (!good) {
       ++corrupt_dropped;
       if (count_and_touch) ++misses;
-      // Delete only the bad version: another process may have replaced the row meanwhile. If the
-      // delete fails (a full disk) the row stays, and is caught again on the next read.
-      (void)write_transaction("dropping a corrupt tile", [&]() -> Status {
-        sqlite3_stmt* s = delete_corrupt_stmt.get();
-        ResetGuard guard(s);
-        sqlite3_bind_int64(s, 1, rowid);
-        sqlite3_bind_int64(s, 2, stored_checksum);
-        const int rc = run(s);
-        if (rc != SQLITE_DONE) return db_error(rc, "dropping a corrupt tile");
-        return {};
-      });
+      // If the delete fails (a full disk) the row stays, and is caught again on the next read.
+      (void)write_transaction("dropping a corrupt tile",
+                              [&] { return delete_corrupt(**row, "dropping a corrupt tile"); });
       return {std::nullopt};
     }
+    // A pinned row stays (only an explicit unpin could change that): the read is enough.
+    if (pin && !(*row)->tile.pinned) return lookup_and_pin(tileset, id);
     if (count_and_touch) {
       ++hits;
       touch(**tsid, id);
     }
-    return {std::move(tile)};
+    return {std::move((*row)->tile)};
+  }
+
+  // get(..., pin = true) of a row that was not pinned: reads, verifies and pins it in one write
+  // transaction (with its access time), so another process's eviction is either wholly before
+  // (a miss) or wholly after (the row is pinned and stays). Counts the hit or miss.
+  Result<std::optional<CachedTile>> lookup_and_pin(std::string_view tileset, TileId id) {
+    const std::string doing = "reading and pinning " + tile_name(tileset, id);
+    std::optional<CachedTile> found;
+    bool corrupt = false;
+    const Status s = write_transaction(doing, [&]() -> Status {
+      found.reset();
+      corrupt = false;
+      auto tsid = find_tileset(tileset, doing);
+      if (!tsid) return std::move(tsid).error();
+      if (!*tsid) return {};
+      auto row = read_row(**tsid, id, doing);
+      if (!row) return std::move(row).error();
+      if (!*row) return {};  // evicted (or removed) since it was read
+      if (!(*row)->verifies()) {
+        corrupt = true;
+        return delete_corrupt(**row, doing);
+      }
+      for (sqlite3_stmt* st : {pinned_stmt.get(), touch_stmt.get()}) {
+        ResetGuard guard(st);
+        bind_key(st, **tsid, id);
+        sqlite3_bind_int64(st, 5, st == pinned_stmt.get() ? 1 : next_time_us());
+        if (const int rc = run(st); rc != SQLITE_DONE) return db_error(rc, doing);
+      }
+      (*row)->tile.pinned = true;
+      found = std::move((*row)->tile);
+      return {};
+    });
+    if (!s.ok()) return s.error();
+    if (corrupt) ++corrupt_dropped;
+    if (found)
+      ++hits;
+    else
+      ++misses;
+    return {std::move(found)};
   }
 
   // ---- opening ----------------------------------------------------------------------------
@@ -747,9 +808,9 @@ const std::filesystem::path& DiskCache::path() const {
   return impl_->path;
 }
 
-Result<std::optional<CachedTile>> DiskCache::get(std::string_view tileset, TileId id) {
+Result<std::optional<CachedTile>> DiskCache::get(std::string_view tileset, TileId id, bool pin) {
   std::unique_lock lock(impl_->mutex);
-  return impl_->lookup(lock, tileset, id, true);
+  return impl_->lookup(lock, tileset, id, true, pin);
 }
 
 Result<bool> DiskCache::contains(std::string_view tileset, TileId id) {

@@ -367,7 +367,13 @@ class TileCache::Impl {
   void disk_read(TileId id, std::uint64_t serial) {
     auto p = snapshot(id, serial);
     if (!p) return;  // cancelled meanwhile
-    auto row = disk_->get(key_, id);
+    // A pin is taken with the read, in one transaction: read then pinned in two, another process
+    // sharing the folder could evict the tile in between.
+    auto row = disk_->get(key_, id, p->pin);
+    if (!row && p->pin) {
+      note_disk(row.error());  // the pin could not be written (a full disk): serve it unpinned
+      row = disk_->get(key_, id);
+    }
     if (row && row->has_value()) {
       CachedTile& t = **row;
       // The disk cache checked its row checksum; the payload's own is checked too, so that not

@@ -1,11 +1,18 @@
 // An SQLite VFS for the client's tests of a full disk: the real default VFS, except that writes
 // fail with SQLITE_FULL once `fault::writes_left` reaches 0 (set it to n: n more writes succeed;
 // -1: never fail). One instance per process (inline), shared by every test file that includes it.
+// It also lets a test act as another process at the worst moment: `fault::before_write_lock` runs
+// once, on the connection's thread, just before a connection opened through this VFS takes the
+// write lock of its WAL database (the start of each write transaction, BEGIN IMMEDIATE), and is
+// cleared before it runs. Whatever it writes through a connection of the default VFS (another
+// DiskCache) is committed before this connection's transaction begins.
 #pragma once
 
 #include <sqlite3.h>
 
 #include <atomic>
+#include <functional>
+#include <mutex>
 
 namespace vts::client {
 
@@ -14,6 +21,13 @@ namespace fault {
 inline std::atomic<long> writes_left{-1};  // < 0: never fail
 inline std::atomic<long> failures{0};
 inline sqlite3_vfs* base = nullptr;
+inline std::mutex hook_mutex;
+inline std::function<void()> before_write_lock;  // guarded by hook_mutex
+
+inline void set_before_write_lock(std::function<void()> f) {
+  std::lock_guard lock(hook_mutex);
+  before_write_lock = std::move(f);
+}
 
 struct File {
   sqlite3_file head;
@@ -70,6 +84,15 @@ inline int x_shm_map(sqlite3_file* f, int i, int sz, int ext, void volatile** pp
   return real(f)->pMethods->xShmMap(real(f), i, sz, ext, pp);
 }
 inline int x_shm_lock(sqlite3_file* f, int o, int n, int fl) {
+  // Offset 0 of the WAL index's locks is the write lock (WAL_WRITE_LOCK in SQLite's wal.c).
+  if (o == 0 && n == 1 && fl == (SQLITE_SHM_LOCK | SQLITE_SHM_EXCLUSIVE)) {
+    std::function<void()> hook;
+    {
+      std::lock_guard lock(hook_mutex);
+      hook.swap(before_write_lock);
+    }
+    if (hook) hook();
+  }
   return real(f)->pMethods->xShmLock(real(f), o, n, fl);
 }
 inline void x_shm_barrier(sqlite3_file* f) {

@@ -432,6 +432,87 @@ TEST(DiskCache, PinnedTilesAreNeverEvicted) {
   EXPECT_EQ(missing.error().code, ErrorCode::not_found);
 }
 
+TEST(DiskCache, GetWithPinHandsOutAHitPinnedThatAnotherInstancesEvictionsKeep) {
+  TempFolder dir;
+  auto mine = open_ok(options_for(dir.path(), 10000));
+  auto other = open_ok(options_for(dir.path(), 10000));
+  const CachedTile t = make_tile(3000, 7);
+  ASSERT_TRUE(mine->put("a", tid(0), t).ok());
+  auto got = mine->get("a", tid(0), /*pin=*/true);
+  ASSERT_TRUE(got.ok()) << got.error().to_string();
+  ASSERT_TRUE(got->has_value());
+  EXPECT_TRUE((*got)->pinned);
+  EXPECT_EQ((*got)->payload, t.payload);
+  EXPECT_EQ(mine->stats().hits, 1u);
+  EXPECT_EQ(mine->stats().pinned_tiles, 1u);
+  for (std::uint32_t i = 1; i < 20; ++i)
+    ASSERT_TRUE(other->put("a", tid(i), make_tile(3000, i)).ok());
+  EXPECT_TRUE(present(*mine, "a", tid(0)));
+  // A miss pins nothing, and a tile already pinned is read without a write.
+  auto miss = mine->get("a", tid(99), true);
+  ASSERT_TRUE(miss.ok());
+  EXPECT_FALSE(miss->has_value());
+  EXPECT_EQ(mine->stats().misses, 1u);
+  const auto writes = mine->stats().write_transactions;
+  auto again = mine->get("a", tid(0), true);
+  ASSERT_TRUE(again.ok() && again->has_value());
+  EXPECT_TRUE((*again)->pinned);
+  EXPECT_EQ(mine->stats().write_transactions, writes);
+  RawDb raw(mine->path());
+  raw.expect_totals_exact();
+}
+
+// Another process evicts the tile at the worst moment: after this one has read it, just before it
+// takes the write lock to pin it (fault::before_write_lock). Read then pinned in two steps, the
+// pin finds no row; get(..., pin = true) is a miss instead, never a tile it could not keep.
+TEST(DiskCache, GetWithPinIsAMissWhenAnotherProcessEvictsTheTileJustBeforeThePin) {
+  TempFolder dir;
+  DiskCacheOptions o = options_for(dir.path(), 10000);
+  o.vfs = fault::register_vfs();
+  auto mine = open_ok(o);
+  auto other = open_ok(options_for(dir.path(), 3000));  // room for one tile: evicts all others
+  ASSERT_TRUE(mine && other);
+  std::uint32_t filler = 1000;
+  const auto evict_before_write_lock = [&] {
+    fault::set_before_write_lock([&] {
+      const std::uint32_t x = filler++;
+      ASSERT_TRUE(other->put("b", tid(x), make_tile(3000, x)).ok());
+    });
+  };
+
+  // The two-step way loses the race (what `vts warm` beside `vts cache serve` did).
+  ASSERT_TRUE(mine->put("a", tid(1), make_tile(3000, 1)).ok());
+  auto read = mine->get("a", tid(1));
+  ASSERT_TRUE(read.ok() && read->has_value());
+  evict_before_write_lock();
+  const Status pinned = mine->set_pinned("a", tid(1), true);
+  ASSERT_FALSE(pinned.ok()) << "the eviction did not fall between the read and the pin";
+  EXPECT_EQ(pinned.error().code, ErrorCode::not_found);
+
+  // In one transaction: a miss, nothing pinned, exact totals.
+  ASSERT_TRUE(mine->put("a", tid(2), make_tile(3000, 2)).ok());
+  evict_before_write_lock();
+  auto got = mine->get("a", tid(2), /*pin=*/true);
+  ASSERT_TRUE(got.ok()) << got.error().to_string();
+  EXPECT_FALSE(got->has_value());
+  EXPECT_EQ(mine->stats().pinned_tiles, 0u);
+  EXPECT_FALSE(present(*mine, "a", tid(2)));
+  fault::set_before_write_lock(nullptr);
+
+  // Evictions after the pin's transaction instead keep the tile.
+  ASSERT_TRUE(mine->put("a", tid(3), make_tile(3000, 3)).ok());
+  auto kept = mine->get("a", tid(3), true);
+  ASSERT_TRUE(kept.ok() && kept->has_value());
+  EXPECT_TRUE((*kept)->pinned);
+  auto third = open_ok(options_for(dir.path(), 6000));  // room for the pinned tile and one more
+  for (std::uint32_t x = 2000; x < 2003; ++x)
+    ASSERT_TRUE(third->put("b", tid(x), make_tile(3000, x)).ok());
+  EXPECT_TRUE(present(*mine, "a", tid(3)));
+  EXPECT_EQ(mine->stats().pinned_tiles, 1u);
+  RawDb raw(mine->path());
+  raw.expect_totals_exact();
+}
+
 TEST(DiskCache, RefusesATileLargerThanTheCap) {
   TempFolder dir;
   auto cache = open_ok(options_for(dir.path(), 10000));

@@ -453,6 +453,53 @@ TEST(TileCache, FailingDiskWritesAreReportedRateLimitedAndTheStateRecovers) {
   ASSERT_TRUE(row.ok() && row->has_value()) << "stored once the disk had room";
 }
 
+// `vts warm` (pinned gets) beside `vts cache serve` on one folder: the other process evicts the
+// tile between this one's disk read and its pin (fault::before_write_lock runs that eviction just
+// before this cache's next write transaction). Read and pinned in two steps, the pin failed with
+// "... is not in cache" (which ends a warm) and the tile was gone from the disk; taken in one
+// transaction, the read is a miss, the tile comes from the source and is stored pinned.
+TEST(TileCache, APinnedGetKeepsTheTileWhenAnotherProcessEvictsItBeforeThePin) {
+  Dir d;
+  const auto archive = build(d.path() / "a.pmtiles");
+  TileCacheOptions o = with_disk(d.path() / "cache");
+  o.ram_bytes = 0;  // as `vts warm`: every get reads the disk
+  o.disk->vfs = fault::register_vfs();
+  ASSERT_NE(o.disk->vfs, "");
+  auto cache = take(TileCache::create(take(open_source(archive.string())), o));
+  const TileId id{2, 1, 1};
+  auto get = [&](bool pin) {
+    Got got;
+    GetOptions go;
+    go.pin = pin;
+    cache->get(id, go, got.callback());
+    EXPECT_TRUE(vts::test::wait_until([&] { return got.size() == 1; }));
+    EXPECT_EQ(got.results[0].kind, PayloadResult::Kind::ok);
+    EXPECT_EQ(got.results[0].tile->payload, stored(archive, id));
+    EXPECT_TRUE(cache->flush().ok());
+  };
+  get(false);  // on disk, not pinned
+  ASSERT_TRUE(cache->disk()->contains(cache->info().key, id).value());
+
+  DiskCacheOptions other_options;
+  other_options.dir = d.path() / "cache";
+  other_options.max_bytes = 1000;  // each put evicts every other unpinned tile
+  auto other = take(DiskCache::open(other_options));
+  CachedTile filler;
+  filler.payload.assign(1000, 0x5a);
+  fault::set_before_write_lock([&] {
+    ASSERT_TRUE(other->put("another tileset", TileId{0, 0, 0}, filler).ok());
+  });
+  get(true);
+  fault::set_before_write_lock(nullptr);
+
+  EXPECT_FALSE(cache->last_disk_error()) << cache->last_disk_error()->to_string();
+  auto row = cache->disk()->get(cache->info().key, id);
+  ASSERT_TRUE(row.ok()) << row.error().to_string();
+  ASSERT_TRUE(row->has_value()) << "the tile was evicted between the read and the pin";
+  EXPECT_TRUE((*row)->pinned);
+  EXPECT_EQ(cache->disk()->stats().pinned_tiles, 1u);
+}
+
 TEST(TileCache, AbsentTilesAreRememberedAndNotAskedForAgain) {
   Dir d;
   // Sparse: only the top-left finest tile exists.

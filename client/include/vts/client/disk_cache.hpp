@@ -100,7 +100,11 @@ class DiskCache {
   // The tile, or nullopt on a miss. Verifies the row's checksum; a mismatching row is deleted
   // (counted in corrupt_dropped) and reported as a miss. A hit records an access time (batched).
   // Errors only when the database cannot be read (busy beyond busy_timeout, I/O error).
-  Result<std::optional<CachedTile>> get(std::string_view tileset, TileId id);
+  // pin = true also pins a hit (the tile comes back with pinned = true), in one write transaction
+  // with the read, so no other process's eviction can fall between them: the tile is either
+  // handed out pinned or a miss. Errors then also when that transaction cannot be written (a full
+  // disk: io); a plain get may still read the tile.
+  Result<std::optional<CachedTile>> get(std::string_view tileset, TileId id, bool pin = false);
   // True when a row is present and its checksum verifies (a bad row is dropped as in get()).
   // Neither counts as a hit or miss nor updates the access time.
   Result<bool> contains(std::string_view tileset, TileId id);
@@ -121,7 +125,8 @@ class DiskCache {
   // fresh_for: the tile's new freshness lifetime (CachedTile::fresh_for).
   Status set_validated(std::string_view tileset, TileId id, std::int64_t validated_unix,
                        std::int64_t fresh_for = -1);
-  // Pins (never evicted) or unpins a cached tile. not_found when the tile is not cached.
+  // Pins (never evicted) or unpins a cached tile. not_found when the tile is not cached (another
+  // process may have evicted it since it was read: to keep a tile that is read, get(..., true)).
   Status set_pinned(std::string_view tileset, TileId id, bool pinned);
   // Deletes the tile if present (absent is not an error).
   Status remove(std::string_view tileset, TileId id);
