@@ -131,6 +131,28 @@ cmp -s "$WORK/p.json" "$WORK/p.orig" || fail "vts merge -o PLAN changed the plan
 diff -r "$WORK/parts" "$WORK/parts.orig" >/dev/null || fail "vts merge -o PART changed the parts"
 expect_ok "$VTS" merge --plan "$WORK/p.json" "$WORK/parts" -o "$WORK/merged.pmtiles" -q
 
+note "reports and recordings refuse an output that is an input: loadtest --report, loadtest merge --report, view --record/--screenshot"
+mkdir -p "$WORK/report"
+ln -f "$WORK/s.pmtiles" "$WORK/report/index.html"
+expect_clean_failure "$VTS" loadtest "$WORK/s.pmtiles" --duration 1 --report "$WORK/report"
+((RC == 2)) && grep -q 'is the input' "$ERR" || { show_output; fail "loadtest --report over its target exited $RC"; }
+expect_clean_failure "$VTS" loadtest merge "$WORK/report/index.html" --report "$WORK/report"
+((RC == 2)) && grep -q 'is the input' "$ERR" || { show_output; fail "loadtest merge --report over a run exited $RC"; }
+if "$VTS" view --help >/dev/null 2>&1; then
+  for opt in --record --screenshot; do
+    expect_clean_failure "$VTS" view "$WORK/s.pmtiles" --headless --frames 1 "$opt" "$WORK/s.pmtiles"
+    ((RC == 2)) && grep -q 'is the input' "$ERR" || { show_output; fail "view $opt over its source exited $RC"; }
+  done
+fi
+cmp -s "$WORK/s.pmtiles" "$WORK/s.copy" || fail "a report or recording changed the archive"
+if "$VTS" bench --help >/dev/null 2>&1; then
+  mkdir -p "$WORK/bench"
+  cp "$EARTH" "$WORK/bench/report.md"
+  expect_clean_failure "$VTS" bench accuracy --input "$WORK/bench/report.md" --report "$WORK/bench" --quick -q
+  ((RC == 2)) && grep -q 'is the input' "$ERR" || { show_output; fail "bench --report over its input exited $RC"; }
+  cmp -s "$EARTH" "$WORK/bench/report.md" || fail "bench --report changed its input"
+fi
+
 note "a FIFO named like a part, an --input-list that is a FIFO or a device: refused at once"
 mv "$WORK/parts/shard-000002.part" "$WORK/shard-000002.part"
 mkfifo "$WORK/parts/shard-000002.part"
