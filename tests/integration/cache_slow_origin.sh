@@ -10,6 +10,9 @@
 #  3. With --upstream-deadline 2, a held tile answers 503 after ~2 s and the origin sees the
 #     request closed; a second client of that tile leaving after 1 s did not end the shared fetch
 #     early (the first client's answer still took the whole deadline).
+#  4. A client that pipelines 16 PNGs of the slow region and closes at once: the daemon notices
+#     (its pipeline full, it reads on), cancels all 16 gets (the origin sees them closed) and
+#     encodes nothing (it made one upstream fetch per abandoned request before).
 # Extra arguments go to every `vts cache serve` (e.g. --upstream-region-cap 0 shows 2 failing).
 # shellcheck source=lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
@@ -146,6 +149,37 @@ for ((i = 0; i < 100; i++)); do
 done
 (($(origin_count aborted) > aborted0)) || fail "the origin's held request was not closed at the deadline"
 expect_fast "5/3/3 after the deadline" "$D/s/5/3/3"
+stop_daemon
+
+note "a client pipelines 16 PNGs of the slow region (a full pipeline) and closes at once: the"
+note "daemon notices although it reads no further request, cancels every fetch, encodes nothing"
+start_daemon "$@"
+slow0=$(origin_count slow) aborted0=$(origin_count aborted)
+python3 - "${D##*:}" <<'PY' || fail "cannot send the pipelined requests"
+import socket, sys
+s = socket.create_connection(("127.0.0.1", int(sys.argv[1])))
+s.sendall(b"".join(b"GET /s/5/%d/6.png HTTP/1.1\r\nHost: d\r\n\r\n" % x for x in range(16, 32)))
+s.close()
+PY
+# daemon_metric NAME: the daemon's unlabelled counter NAME.
+daemon_metric() { curl -s "$DA/metrics" | sed -nE "s/^$1 ([0-9]+)\$/\1/p"; }
+for ((i = 0; i < 200; i++)); do
+  [[ $(daemon_metric vts_cache_cancelled_total) == 16 ]] && break
+  sleep 0.05
+done
+[[ $(daemon_metric vts_http_abandoned_connections_total) == 1 ]] ||
+  fail "the daemon did not count the connection as abandoned ($(daemon_metric vts_http_abandoned_connections_total))"
+cancelled=$(daemon_metric vts_cache_cancelled_total)
+[[ $cancelled == 16 ]] || fail "vts_cache_cancelled_total is '$cancelled' after the client left, expected 16"
+for ((i = 0; i < 100; i++)); do
+  slow=$(($(origin_count slow) - slow0)) aborted=$(($(origin_count aborted) - aborted0))
+  ((aborted == slow)) && break
+  sleep 0.05
+done
+note "origin: $slow requests of the pipelined tiles held, $aborted closed by the daemon"
+((aborted == slow)) || fail "the origin held $slow requests but the daemon closed only $aborted"
+encodes=$(daemon_metric vts_web_encodes_total)
+[[ $encodes == 0 ]] || fail "the daemon encoded $encodes images nobody waited for"
 stop_daemon
 kill -TERM "$PROXY_PID"
 wait "$PROXY_PID" 2>/dev/null || true
