@@ -4,6 +4,7 @@
 #include <cstdio>
 
 #include "commands.hpp"
+#include "vts/protocol/file_io.hpp"
 #include "vts/server/http_server.hpp"
 #include "vts/server/serve_config.hpp"
 
@@ -73,8 +74,9 @@ int run_serve(const ServeArgs& a) {
   if (auto st = registry->load(paths); !st.ok()) return report_error(st.error());
   // Served without them, as a reload would; /health and /metrics list them too.
   for (const auto& skipped : registry->skipped())
-    std::fprintf(stderr, "vts serve: skipped %s: %s\n", skipped.file.c_str(),
-                 skipped.error.message.c_str());
+    std::fprintf(stderr, "vts serve: skipped %s: %s\n",
+                 escape_controls(skipped.file.string()).c_str(),
+                 escape_controls(skipped.error.message).c_str());
   if (auto st = check_access_names(o, *registry); !st.ok()) return report_error(st.error());
 
   const std::string host = o.listen_host, admin_host = o.admin_host;

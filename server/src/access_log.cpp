@@ -5,6 +5,9 @@
 namespace vts::http_detail {
 namespace {
 
+// A JSON string's content: quote and backslash escaped; control bytes (newline, ESC, ...) and
+// every byte outside printable ASCII as \u00XX, so a line is one line of ASCII whatever a client
+// sent (a JSON log cannot use escape_controls' \xHH).
 std::string json_escape(std::string_view s) {
   std::string out;
   out.reserve(s.size() + 2);
@@ -50,10 +53,10 @@ void AccessLog::write(const AccessLogEntry& e) {
   std::strftime(tbuf, sizeof tbuf, "%Y-%m-%dT%H:%M:%SZ", &tm);
   const auto us = std::chrono::duration_cast<std::chrono::microseconds>(e.duration).count();
   const std::string line =
-      std::string("{\"time\":\"") + tbuf + "\",\"remote\":\"" + std::string(e.remote) +
+      std::string("{\"time\":\"") + tbuf + "\",\"remote\":\"" + json_escape(e.remote) +
       "\",\"method\":\"" + json_escape(e.method) + "\",\"target\":\"" + json_escape(e.target) +
       "\",\"status\":" + std::to_string(e.status) + ",\"bytes\":" + std::to_string(e.bytes) +
-      ",\"duration_us\":" + std::to_string(us) + ",\"route\":\"" + std::string(e.route) +
+      ",\"duration_us\":" + std::to_string(us) + ",\"route\":\"" + json_escape(e.route) +
       "\",\"tileset\":\"" + json_escape(e.tileset) + "\"}\n";
   std::lock_guard lock(mutex_);
   std::fwrite(line.data(), 1, line.size(), file_);

@@ -30,7 +30,8 @@ class AccessLog {
   Status open(const std::string& where);
   bool enabled() const { return file_ != nullptr; }
   // Thread-safe. {"time","remote","method","target","status","bytes","duration_us","route",
-  // "tileset"}; strings are JSON-escaped, time is UTC to the second.
+  // "tileset"}; every string is JSON-escaped (controls and non-ASCII bytes as \u00XX: one line,
+  // whatever the request held), time is UTC to the second.
   void write(const AccessLogEntry& e);
 
  private:

@@ -1,5 +1,6 @@
 // The admin listener's routes: /metrics and /health (docs/PROTOCOL.md §10).
 #include "router_internal.hpp"
+#include "vts/protocol/file_io.hpp"
 
 namespace vts {
 
@@ -7,31 +8,16 @@ using namespace router_detail;
 
 namespace {
 
-// `s` with control characters as \xHH: one line of the /health body, whatever a file is named.
-void append_line_safe(std::string& out, std::string_view s) {
-  for (const char c : s) {
-    const auto u = static_cast<unsigned char>(c);
-    if (u < 0x20 || u == 0x7f) {
-      out += "\\x";
-      out += "0123456789abcdef"[u >> 4];
-      out += "0123456789abcdef"[u & 15];
-    } else {
-      out += c;
-    }
-  }
-}
-
 std::string health_text(const AdminState& state) {
-  std::string body = !state.ready             ? std::string("loading\n")
-                     : state.degraded.empty() ? std::string("ok\n")
-                                              : "degraded: " + state.degraded + "\n";
+  std::string body = !state.ready ? std::string("loading\n")
+                     : state.degraded.empty()
+                         ? std::string("ok\n")
+                         : "degraded: " + escape_controls(state.degraded) + "\n";
   if (!state.skipped) return body;
   for (const auto& s : state.skipped()) {
     body += "skipped ";
-    append_line_safe(body, s.file.string());
-    body += ": ";
-    append_line_safe(body, s.error.message);
-    body += '\n';
+    // One line per archive, whatever its file is named.
+    body += escape_controls(s.file.string()) + ": " + escape_controls(s.error.message) + '\n';
   }
   return body;
 }

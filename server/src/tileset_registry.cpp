@@ -2,6 +2,7 @@
 #include "vts/server/tileset_registry.hpp"
 
 #include "tile_tag_memo.hpp"
+#include "vts/protocol/file_io.hpp"
 
 #include <sys/stat.h>
 
@@ -170,10 +171,12 @@ Error duplicate(const std::string& name, const fs::path& first, const fs::path& 
                                                      first.string() + " and " + second.string());
 }
 
-// Every archive refused: load() has nothing to serve.
+// Every archive refused: load() has nothing to serve. One line per archive, whatever its file is
+// named (the names come from a folder listing, not from the user).
 Error nothing_to_serve(const std::vector<SkippedArchive>& skipped) {
   std::string m = "no archive can be served; every one found was refused:";
-  for (const auto& s : skipped) m += "\n  " + s.file.string() + ": " + s.error.message;
+  for (const auto& s : skipped)
+    m += "\n  " + escape_controls(s.file.string()) + ": " + escape_controls(s.error.message);
   return make_error(skipped.front().error.code, std::move(m));
 }
 

@@ -96,6 +96,30 @@ TEST(FileIo, AFifoADeviceOrAFolderIsRefusedAtOnceNamingTheFileAndItsKind) {
   }
 }
 
+// A name, whatever bytes it holds, stays one line and cannot drive a terminal: control bytes (a
+// newline that would forge a line, ESC) and UTF-8-encoded C1 controls become \xHH; text, UTF-8
+// and backslashes pass as they are, so escaping twice changes nothing.
+TEST(EscapeControls, ControlBytesAndC1ControlsBecomeHexAndEverythingElsePasses) {
+  EXPECT_EQ(vts::escape_controls(""), "");
+  EXPECT_EQ(vts::escape_controls("plain/name-1.pmtiles"), "plain/name-1.pmtiles");
+  EXPECT_EQ(vts::escape_controls("a\nb\rc\td"), "a\\x0ab\\x0dc\\x09d");
+  EXPECT_EQ(vts::escape_controls("x\nvts serve: forged"), "x\\x0avts serve: forged");
+  EXPECT_EQ(vts::escape_controls("\x1b[31mred\x1b[0m"), "\\x1b[31mred\\x1b[0m");
+  EXPECT_EQ(vts::escape_controls(std::string_view("a\0b\x7f", 4)), "a\\x00b\\x7f");
+  EXPECT_EQ(vts::escape_controls("\xC2\x9B"
+                                 "2J \xC2\x85"),
+            "\\xc2\\x9b"
+            "2J \\xc2\\x85");
+  EXPECT_EQ(vts::escape_controls("caf\xC3\xA9 \xC2\xA0 \xE2\x80\x94 \xFF \\x41"),
+            "caf\xC3\xA9 \xC2\xA0 \xE2\x80\x94 \xFF \\x41");
+  EXPECT_EQ(vts::escape_controls("\xC2"), "\xC2");  // a lone lead byte at the end
+  for (std::string_view once : {"\x1b\n", "\xC2\x9B", "\xC2\n"}) {
+    const std::string escaped = vts::escape_controls(once);
+    EXPECT_EQ(vts::escape_controls(escaped), escaped);
+    for (const char c : escaped) EXPECT_FALSE(static_cast<unsigned char>(c) < 0x20);
+  }
+}
+
 // The five markup characters become character references, wherever they stand; every other
 // byte (text, UTF-8, even bytes that are not UTF-8) passes as it is.
 TEST(HtmlEscape, TheFiveMarkupCharactersBecomeReferencesAndNothingElseChanges) {

@@ -6,6 +6,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <filesystem>
@@ -249,6 +250,22 @@ TEST(TilesetRegistry, LoadFailsWhenEveryArchiveFoundIsRefused) {
   EXPECT_NE(s.error().message.find("caf\xc3\xa9.pmtiles: tileset name"), std::string::npos)
       << s.error().message;
   EXPECT_EQ(registry.size(), 0u);
+}
+
+// A file name in a served folder is not trusted to be one line: in the error that lists the
+// refused archives, a newline in a name cannot start a line of its own and ESC cannot reach a
+// terminal; both appear as \xHH (escape_controls).
+TEST(TilesetRegistry, LoadFailsListingRefusedArchivesOneLineEachWhateverTheirNames) {
+  RegistryTempDir dir;
+  const std::string crafted = "x\nvts serve: forged line \x1b[2J.pmtiles";
+  write_file(dir.path() / crafted, "not an archive at all");
+  vts::TilesetRegistry registry;
+  auto s = registry.load({dir.path()});
+  ASSERT_FALSE(s.ok());
+  const std::string& m = s.error().message;
+  EXPECT_EQ(m.find('\x1b'), std::string::npos) << m;
+  EXPECT_EQ(std::count(m.begin(), m.end(), '\n'), 1) << "the header line, then one per file: " << m;
+  EXPECT_NE(m.find("x\\x0avts serve: forged line \\x1b[2J.pmtiles: "), std::string::npos) << m;
 }
 
 TEST(TilesetRegistry, ReloadListsTheArchivesItRefusesAsSkipped) {

@@ -1,5 +1,6 @@
 // Whole small files in and out (configs, camera paths, reports), and text helpers for the
-// protocols' case-insensitive tokens and for HTML. Not for archives or tiles: those stream.
+// protocols' case-insensitive tokens, for HTML and for log lines. Not for archives or tiles: those
+// stream.
 #pragma once
 
 #include <filesystem>
@@ -53,5 +54,13 @@ bool istarts_with(std::string_view s, std::string_view prefix) noexcept;
 // & < > " ' as character references (&amp; &lt; &gt; &quot; &#39;); every other byte as it is,
 // so UTF-8 is not checked here (a caller that takes untrusted bytes cleans them first).
 std::string html_escape(std::string_view s);
+
+// Text for one line of a log or of a plain-text body, whatever bytes it came from (a file name, a
+// request target, an error message naming them): every control byte (below 0x20, which includes
+// newline, carriage return and ESC, and 0x7f) and each byte of a UTF-8-encoded C1 control
+// (U+0080..U+009F, which some terminals obey as ESC [ ...) as \xHH (lower-case hex); every other
+// byte as it is, so a UTF-8 name stays readable. The result has no control bytes, so it cannot
+// end a line early or move the cursor, and escaping it again changes nothing.
+std::string escape_controls(std::string_view s);
 
 }  // namespace vts
