@@ -189,10 +189,11 @@ int run_cache_serve(const CacheServeArgs& a) {
   HttpServer& s = **server;
   s.set_ready(true);
   print_listening(a, s, host, admin_host, *name, online);
-  s.run();
+  const Status ran = s.run();
   // The provider's pending work must end before the server goes (http_server.hpp).
   shutdown(**provider);
   server->reset();
+  if (!ran.ok()) return report_error(ran.error());
   std::fprintf(stderr, "vts cache serve: stopped\n");
   return 0;
 }

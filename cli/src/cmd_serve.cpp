@@ -85,7 +85,7 @@ int run_serve(const ServeArgs& a) {
   HttpServer& s = **server;
   s.set_ready(true);
   print_listening(s, host, admin_host, registry->size(), a.print_ports);
-  s.run();
+  if (const Status ran = s.run(); !ran.ok()) return report_error(ran.error());
   std::fprintf(stderr, "vts serve: stopped\n");
   return 0;
 }

@@ -102,8 +102,7 @@ class Fetcher::Impl {
     try {
       thread_ = std::thread([this] { run(); });
     } catch (const std::system_error& e) {
-      return make_error(ErrorCode::internal,
-                        std::string("cannot start fetcher thread: ") + e.what());
+      return make_error(ErrorCode::io, std::string("cannot start fetcher thread: ") + e.what());
     }
     return {};
   }

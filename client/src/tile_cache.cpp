@@ -7,6 +7,7 @@
 #include <map>
 #include <mutex>
 #include <set>
+#include <system_error>
 #include <thread>
 #include <unordered_map>
 #include <vector>
@@ -379,7 +380,6 @@ class TileCache::Impl {
       // The disk cache checked its row checksum; the payload's own is checked too, so that not
       // even a tile stored by an older or buggy writer is handed out unverified.
       if (acceptable(t.payload, "disk")) {
-        if (p->pin && !t.pinned) note_disk(disk_->set_pinned(key_, id, true));
         auto tile = std::make_shared<const CachedTile>(std::move(t));
         stats_.disk_hits.fetch_add(1, std::memory_order_relaxed);
         remember(id, tile, p->pin);
@@ -707,7 +707,13 @@ Result<std::unique_ptr<TileCache>> TileCache::create(std::shared_ptr<TileSource>
     if (!d) return d.error();
     disk = std::move(*d);
   }
-  auto impl = std::make_unique<Impl>(std::move(source), std::move(options), std::move(disk));
+  std::unique_ptr<Impl> impl;
+  try {
+    impl = std::make_unique<Impl>(std::move(source), std::move(options), std::move(disk));
+  } catch (const std::system_error& e) {  // the disk thread, refused by the system
+    return make_error(ErrorCode::io,
+                      std::string("cannot start the disk cache's thread: ") + e.what());
+  }
   return std::unique_ptr<TileCache>(new TileCache(std::move(impl)));
 }
 

@@ -17,6 +17,7 @@
 #include <csignal>
 #include <cstdio>
 #include <mutex>
+#include <system_error>
 #include <thread>
 #include <unordered_map>
 #include <vector>
@@ -97,7 +98,29 @@ class Server final : public HttpServer, public SessionHost {
   }
   void set_ready(bool ready) override { ready_.store(ready); }
 
-  void run() override {
+  Status run() override {
+    // The threads first: a thread the system refuses (a task or address-space limit) ends the
+    // run before anything is accepted, with the threads already started stopped and joined.
+    std::vector<std::thread> threads;
+    Status started = reload_.start();
+    for (std::size_t i = 0; started.ok() && i < workers_.size(); ++i) {
+      auto& w = *workers_[i];
+      guards_.push_back(asio::make_work_guard(w));
+      try {
+        threads.emplace_back([&w] { w.run(); });
+      } catch (const std::system_error& e) {
+        started = make_error(ErrorCode::io, "cannot start serving thread " + std::to_string(i + 2) +
+                                                " of " + std::to_string(workers_.size() + 1) +
+                                                ": " + e.what());
+      }
+    }
+    if (!started.ok()) {
+      guards_.clear();
+      for (auto& w : workers_) w->stop();
+      for (auto& t : threads) t.join();
+      reload_.stop();
+      return started;
+    }
     for (auto& sw : sweepers_) sw->start();
     accept(acceptor_, false);
     if (options_.admin_enabled) accept(admin_acceptor_, true);
@@ -107,15 +130,10 @@ class Server final : public HttpServer, public SessionHost {
       signals_.add(SIGHUP);
       wait_signal();
     }
-    reload_.start();
-    std::vector<std::thread> threads;
-    for (auto& w : workers_) {
-      guards_.push_back(asio::make_work_guard(*w));
-      threads.emplace_back([&w] { w->run(); });
-    }
     ioc_.run();
     for (auto& t : threads) t.join();
     reload_.stop();
+    return {};
   }
 
   void stop() override {
@@ -220,13 +238,17 @@ class Server final : public HttpServer, public SessionHost {
     Sweeper& slot = next_context();
     acc.async_accept(slot.context(), [this, &acc, &slot, admin](error_code ec, tcp::socket socket) {
       if (ec == asio::error::operation_aborted || !acc.is_open()) return;
+      if (ec == asio::error::connection_aborted) {
+        accept(acc, admin);  // that client gave up before we took it; nothing is wrong here
+        return;
+      }
       if (ec) {
-        // EMFILE and friends: back off briefly rather than spin.
-        std::fprintf(stderr, "vts serve: accept: %s\n", ec.message().c_str());
-        auto t = std::make_shared<asio::steady_timer>(ioc_, std::chrono::milliseconds(50));
+        // EMFILE and friends: back off rather than spin; the connections wait in the backlog.
+        auto t = std::make_shared<asio::steady_timer>(ioc_, accept_failed(ec));
         t->async_wait([this, &acc, admin, t](error_code) { accept(acc, admin); });
         return;
       }
+      if (accept_failures_ > 0) accept_recovered();
       if (std::size_t(metrics_.open_connections.load()) >= options_.limits.max_connections) {
         metrics_.refused_connections.fetch_add(1, std::memory_order_relaxed);
         error_code ignored;
@@ -238,6 +260,41 @@ class Server final : public HttpServer, public SessionHost {
       }
       accept(acc, admin);
     });
+  }
+
+  // A failed accept (on ioc_'s thread, like every accept handler): counted, and logged at once
+  // for the first of a spell, then at most every kAcceptReportInterval with the count since the
+  // last line. Returns how long to wait before accepting again: kAcceptBackoffMin, doubling with
+  // each failure in a row up to kAcceptBackoffMax.
+  std::chrono::milliseconds accept_failed(const error_code& ec) {
+    const auto now = std::chrono::steady_clock::now();
+    ++accept_failures_;
+    ++accept_unreported_;
+    if (accept_failures_ == 1) {
+      std::fprintf(stderr,
+                   "vts serve: cannot accept connections: %s; backing off (further failures are "
+                   "counted, one line every %lld s)\n",
+                   ec.message().c_str(), static_cast<long long>(kAcceptReportInterval.count()));
+      accept_unreported_ = 0;
+      accept_reported_at_ = now;
+    } else if (now - accept_reported_at_ >= kAcceptReportInterval) {
+      std::fprintf(stderr,
+                   "vts serve: still cannot accept connections: %s; %llu failed accepts since the "
+                   "last report\n",
+                   ec.message().c_str(), static_cast<unsigned long long>(accept_unreported_));
+      accept_unreported_ = 0;
+      accept_reported_at_ = now;
+    }
+    accept_backoff_ = accept_failures_ == 1 ? kAcceptBackoffMin
+                                            : std::min(accept_backoff_ * 2, kAcceptBackoffMax);
+    return accept_backoff_;
+  }
+
+  void accept_recovered() {
+    std::fprintf(stderr, "vts serve: accepting connections again, after %llu failed accepts\n",
+                 static_cast<unsigned long long>(accept_failures_));
+    accept_failures_ = 0;
+    accept_unreported_ = 0;
   }
 
   void wait_signal() {
@@ -269,6 +326,13 @@ class Server final : public HttpServer, public SessionHost {
   std::vector<std::unique_ptr<asio::io_context>> workers_;
   std::vector<asio::executor_work_guard<asio::io_context::executor_type>> guards_;
   std::size_t next_context_ = 0;  // only touched by accept handlers, which run on ioc_'s thread
+  // Failed accepts (accept_failed()), also only on ioc_'s thread.
+  static constexpr std::chrono::milliseconds kAcceptBackoffMin{50}, kAcceptBackoffMax{1000};
+  static constexpr std::chrono::seconds kAcceptReportInterval{5};
+  std::uint64_t accept_failures_ = 0;    // in a row, since the last accept that worked
+  std::uint64_t accept_unreported_ = 0;  // since the last line
+  std::chrono::steady_clock::time_point accept_reported_at_{};
+  std::chrono::milliseconds accept_backoff_{0};
   tcp::acceptor acceptor_, admin_acceptor_;
   asio::signal_set signals_;
   asio::strand<asio::io_context::executor_type> strand_;
@@ -283,7 +347,13 @@ Result<std::unique_ptr<HttpServer>> HttpServer::create(HttpServerOptions options
   // Every write passes MSG_NOSIGNAL, but a library's may not: like every server, ignore SIGPIPE
   // (a write to a closed connection then fails with EPIPE and only that connection ends).
   ::signal(SIGPIPE, SIG_IGN);
-  auto s = std::make_unique<Server>(std::move(options), std::move(registry));
+  std::unique_ptr<Server> s;
+  try {
+    s = std::make_unique<Server>(std::move(options), std::move(registry));
+  } catch (const std::system_error& e) {  // a worker thread (web encodes) the system refused
+    return make_error(ErrorCode::io,
+                      std::string("cannot start the web image encoding threads: ") + e.what());
+  }
   if (auto st = s->bind(); !st.ok()) return st.error();
   return std::unique_ptr<HttpServer>(std::move(s));
 }

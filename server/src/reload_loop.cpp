@@ -1,11 +1,19 @@
 #include "reload_loop.hpp"
 
 #include <cstdio>
+#include <system_error>
+
+#include "vts/protocol/file_io.hpp"
 
 namespace vts::http_detail {
 
-void ReloadLoop::start() {
-  thread_ = std::thread([this] { run(); });
+Status ReloadLoop::start() {
+  try {
+    thread_ = std::thread([this] { run(); });
+  } catch (const std::system_error& e) {
+    return make_error(ErrorCode::io, std::string("cannot start the reload thread: ") + e.what());
+  }
+  return {};
 }
 
 void ReloadLoop::request(bool force) {
@@ -59,10 +67,29 @@ void ReloadLoop::reload(bool force) {
   if (result.removed > 0)
     std::fprintf(stderr, "vts serve: removed %d tileset(s) whose archive left its folder\n",
                  result.removed);
+  const auto now = std::chrono::steady_clock::now();
+  std::map<std::string, Logged> refusals;
   for (const auto& e : result.failures) {
     metrics_.reloads_refused.fetch_add(1);
-    std::fprintf(stderr, "vts serve: reload refused: %s\n", e.to_string().c_str());
+    // The message names a file found in a served folder: one line, whatever it is named.
+    const std::string line = escape_controls(e.to_string());
+    Logged logged;
+    if (auto it = refusals_.find(line); it != refusals_.end()) logged = it->second;
+    if (logged.at == std::chrono::steady_clock::time_point{} ||
+        now - logged.at >= kRepeatInterval) {
+      if (logged.held_back > 0)
+        std::fprintf(stderr, "vts serve: reload refused: %s (again; %llu more times since)\n",
+                     line.c_str(), static_cast<unsigned long long>(logged.held_back));
+      else
+        std::fprintf(stderr, "vts serve: reload refused: %s\n", line.c_str());
+      logged = Logged{now, 0};
+    } else {
+      ++logged.held_back;
+    }
+    refusals[line] = logged;
   }
+  // A refusal the last reload did not repeat is logged at once if it comes back.
+  refusals_ = std::move(refusals);
 }
 
 }  // namespace vts::http_detail

@@ -4,17 +4,24 @@
 // reload: requests for tiles of an archive being copied in place ask for one each. A file
 // modified in place (or new in a folder) is opened once it has been left unmodified for a whole
 // interval (kMaxSettle at most; kIdleSettle when there is no interval). Swaps,
-// additions, removals and refusals are logged to stderr and counted in the metrics.
+// additions, removals and refusals are logged to stderr (file names with escape_controls: one
+// line each, whatever a file is named) and counted in the metrics. A refusal that every reload
+// repeats (a folder that cannot be listed while the process is out of file descriptors) is
+// logged again only after kRepeatInterval, with the number of times it was not.
 #pragma once
 
 #include <algorithm>
 #include <chrono>
 #include <condition_variable>
+#include <cstdint>
+#include <map>
 #include <memory>
 #include <mutex>
+#include <string>
 #include <thread>
 
 #include "metrics.hpp"
+#include "vts/protocol/result.hpp"
 #include "vts/server/tileset_registry.hpp"
 
 namespace vts::http_detail {
@@ -31,7 +38,9 @@ class ReloadLoop {
   ReloadLoop& operator=(const ReloadLoop&) = delete;
   ~ReloadLoop() { stop(); }
 
-  void start();
+  // Starts the thread. Error io when the system refuses a thread (the loop then does nothing;
+  // stop() is still safe).
+  Status start();
   // Asks for a reload (force: every tileset) and returns at once. Thread-safe.
   void request(bool force);
   // Ends the loop after the reload in progress, if any; returns at once. Thread-safe.
@@ -45,6 +54,14 @@ class ReloadLoop {
 
   static constexpr std::chrono::milliseconds kMinGap{100};
   static constexpr std::chrono::milliseconds kMaxSettle{2000}, kIdleSettle{1000};
+  static constexpr std::chrono::seconds kRepeatInterval{60};
+
+  // Refusals the previous reload logged or held back (only the reload thread touches it).
+  struct Logged {
+    std::chrono::steady_clock::time_point at;  // when its last line was written
+    std::uint64_t held_back = 0;               // repeats since that line
+  };
+  std::map<std::string, Logged> refusals_;
 
   TilesetRegistry& registry_;
   Metrics& metrics_;

@@ -1,5 +1,6 @@
 #include "vts/test/server.hpp"
 
+#include <cstdio>
 #include <stdexcept>
 
 namespace vts::test {
@@ -25,7 +26,10 @@ RunningServer::RunningServer(std::vector<std::filesystem::path> archives, HttpSe
   if (!s) throw std::runtime_error(s.error().to_string());
   server_ = std::move(*s);
   port_ = server_->port();
-  thread_ = std::thread([this] { server_->run(); });
+  thread_ = std::thread([this] {
+    if (const Status ran = server_->run(); !ran.ok())
+      std::fprintf(stderr, "RunningServer: %s\n", ran.error().to_string().c_str());
+  });
 }
 
 RunningServer::~RunningServer() {

@@ -97,8 +97,10 @@ class HttpServer {
 
   // /health answers 503 "loading" until set_ready(true). Thread-safe.
   virtual void set_ready(bool ready) = 0;
-  // Serves on `threads` threads (the caller's included) until stopped and drained.
-  virtual void run() = 0;
+  // Serves on `threads` threads (the caller's included) until stopped and drained. Error io,
+  // before anything is served, when the system refuses a thread (a task or address-space limit);
+  // the threads already started are stopped and joined first.
+  virtual Status run() = 0;
   // Graceful stop; thread-safe and idempotent; returns at once (run() returns when drained).
   virtual void stop() = 0;
   // Asks the reload thread for registry.reload(force); returns at once. Thread-safe.
