@@ -4,9 +4,10 @@
 // Opening costs one range read of bytes 0..16383 (header, root directory and, for our archives,
 // the metadata right after it), plus one more when the metadata lies beyond. A tile then costs
 // one range read of its bytes, preceded by one per leaf directory on its path that is not in the
-// source's small LRU of decoded leaves. Concurrent requests for the same leaf (or the same tile
-// bytes) send identical range requests, which the fetcher merges into one transfer; the first
-// callback to arrive decodes the leaf and the others find it in the LRU.
+// source's cache of decoded leaves (a pmtiles::DirectoryCache of kLeafCacheBytes). Concurrent
+// requests for the same leaf (or the same tile bytes) send identical range requests, which the
+// fetcher merges into one transfer; the first callback to arrive decodes the leaf and the others
+// find it in the LRU.
 //
 // Trust model: the server is hostile. Every section, leaf pointer and tile entry is checked
 // against the header before it is read; lengths are bounded before anything is requested;
@@ -38,8 +39,6 @@
 #include <functional>
 #include <future>
 #include <limits>
-#include <list>
-#include <map>
 #include <mutex>
 #include <thread>
 #include <tuple>
@@ -49,6 +48,7 @@
 #include "fetching_source.hpp"
 #include "image_layout.hpp"
 #include "vts/client/source.hpp"
+#include "vts/protocol/inspect.hpp"
 #include "vts/protocol/pmtiles.hpp"
 
 namespace vts::client {
@@ -59,9 +59,11 @@ constexpr std::uint64_t kMaxMetadataBytes = 16u << 20;   // stored (compressed) 
 constexpr std::size_t kMaxMetadataDecoded = 16u << 20;   // decompressed metadata
 constexpr std::uint64_t kMaxLeafBytes = 16u << 20;       // one stored leaf directory
 constexpr std::size_t kMaxDirectoryDecoded = 64u << 20;  // one decompressed directory
-constexpr std::size_t kLeafCacheEntries = 64;
+// Decoded leaves kept: a leaf of ours (4096 entries) costs 96 KiB, so this holds hundreds; a leaf
+// as large as pmtiles::kMaxDirectoryEntries allows (24 MiB), one.
+constexpr std::size_t kLeafCacheBytes = 32u << 20;
 
-using Directory = std::shared_ptr<const std::vector<pmtiles::Entry>>;
+using pmtiles::Directory;
 
 // True when [offset, offset + length) lies within [0, size); no overflow for any inputs.
 bool within(std::uint64_t offset, std::uint64_t length, std::uint64_t size) {
@@ -108,12 +110,7 @@ Status check_range_result(const FetchResult& r, const std::string& url, const st
 
 Result<Directory> decode_directory(std::span<const std::uint8_t> stored,
                                    pmtiles::Compression compression) {
-  Result<std::vector<std::uint8_t>> raw =
-      pmtiles::decompress(stored, compression, kMaxDirectoryDecoded);
-  if (!raw) return std::move(raw).error();
-  Result<std::vector<pmtiles::Entry>> entries = pmtiles::parse_directory(*raw);
-  if (!entries) return std::move(entries).error();
-  return std::make_shared<const std::vector<pmtiles::Entry>>(std::move(*entries));
+  return pmtiles::decode_directory(stored, compression, kMaxDirectoryDecoded);
 }
 
 struct Opened {
@@ -270,23 +267,7 @@ class RemoteArchiveSource final : public FetchingSource<RemotePending> {
   }
 
   Directory cached_leaf(const pmtiles::Entry& pointer) {
-    std::lock_guard lock(mutex_);
-    auto it = leaf_index_.find({pointer.offset, pointer.length});
-    if (it == leaf_index_.end()) return nullptr;
-    leaf_lru_.splice(leaf_lru_.begin(), leaf_lru_, it->second);
-    return it->second->second;
-  }
-
-  void cache_leaf(const pmtiles::Entry& pointer, Directory leaf) {
-    std::lock_guard lock(mutex_);
-    const LeafKey key{pointer.offset, pointer.length};
-    if (leaf_index_.count(key) != 0) return;
-    leaf_lru_.emplace_front(key, std::move(leaf));
-    leaf_index_.emplace(key, leaf_lru_.begin());
-    if (leaf_lru_.size() > kLeafCacheEntries) {
-      leaf_index_.erase(leaf_lru_.back().first);
-      leaf_lru_.pop_back();
-    }
+    return leaves_.find(pointer.offset, pointer.length);
   }
 
   // Starts a range transfer for request h, unless it was cancelled meanwhile (then finishes it).
@@ -346,8 +327,7 @@ class RemoteArchiveSource final : public FetchingSource<RemotePending> {
                  e.message = url_ + ": " + what + ": " + e.message;
                  return fail(h, std::move(e), true);
                }
-               leaf = std::move(*d);
-               cache_leaf(pointer, leaf);
+               leaf = leaves_.insert(pointer.offset, pointer.length, std::move(*d));
              }
              walk(h, std::move(leaf), depth, true);
            });
@@ -411,12 +391,6 @@ class RemoteArchiveSource final : public FetchingSource<RemotePending> {
     });
   }
 
-  struct LeafKey {
-    std::uint64_t offset;
-    std::uint32_t length;
-    auto operator<=>(const LeafKey&) const = default;
-  };
-
   const std::string url_;
   const pmtiles::Header header_;
   const Directory root_;
@@ -425,9 +399,7 @@ class RemoteArchiveSource final : public FetchingSource<RemotePending> {
   const std::string whole_cache_control_;
   const std::size_t max_tile_bytes_;
 
-  // Guarded by mutex_.
-  std::list<std::pair<LeafKey, Directory>> leaf_lru_;  // most recently used first
-  std::map<LeafKey, std::list<std::pair<LeafKey, Directory>>::iterator> leaf_index_;
+  pmtiles::DirectoryCache leaves_{kLeafCacheBytes};  // thread-safe on its own
 
   CallbackThread deliverer_;  // last: destroyed first, after the fetcher is gone
 };
@@ -596,7 +568,7 @@ Result<std::unique_ptr<TileSource>> open_remote_archive(std::string_view url_vie
                                       "metadata: " + decoded_metadata.error().message));
   }
   std::string metadata_json(decoded_metadata->begin(), decoded_metadata->end());
-  Result<TilesetInfo> info = TilesetInfo::from_json(metadata_json);
+  Result<TilesetInfo> info = archive_tileset(h, metadata_json);
   // A stock archive of standard images (no "vtstream" metadata): an image tileset.
   const bool stock = !info && info.error().code == ErrorCode::unsupported && is_stock_image(h);
   if (!info && !stock) return in_archive(url, std::move(info).error());

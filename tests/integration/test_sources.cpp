@@ -633,6 +633,132 @@ TEST(RemoteArchiveSource, LyingDirectoriesAreErrorsNotCrashes) {
   EXPECT_NE(got[6].error->message.find("too deep"), std::string::npos) << got[6].error->message;
 }
 
+// An archive with syn_archive()'s metadata and its 0/0/0 payload as the only tile data, a gzip
+// root of `root` entries and `leaves` as the leaf section; the header declares tile compression
+// `tiles`.
+fs::path assemble_archive(const std::string& name, const std::vector<vts::pmtiles::Entry>& root,
+                          const std::vector<std::uint8_t>& leaves,
+                          vts::pmtiles::Compression tiles = vts::pmtiles::Compression::zstd) {
+  namespace pm = vts::pmtiles;
+  auto good = pm::Reader::open(syn_archive());
+  EXPECT_TRUE(good.ok());
+  const std::vector<std::uint8_t> tile = (*good)->get({0, 0, 0}).value();
+  const std::vector<std::uint8_t> root_bytes =
+      pm::compress(pm::serialize_directory(root), pm::Compression::gzip).value();
+  const std::vector<std::uint8_t> meta =
+      pm::compress(std::span(reinterpret_cast<const std::uint8_t*>((*good)->metadata_json().data()),
+                             (*good)->metadata_json().size()),
+                   pm::Compression::gzip)
+          .value();
+  pm::Header h = (*good)->header();
+  h.internal_compression = pm::Compression::gzip;
+  h.tile_compression = tiles;
+  h.root_dir_offset = pm::kHeaderSize;
+  h.root_dir_length = root_bytes.size();
+  h.metadata_offset = h.root_dir_offset + h.root_dir_length;
+  h.metadata_length = meta.size();
+  h.leaf_dirs_offset = h.metadata_offset + h.metadata_length;
+  h.leaf_dirs_length = leaves.size();
+  h.tile_data_offset = h.leaf_dirs_offset + h.leaf_dirs_length;
+  h.tile_data_length = tile.size();
+  const auto header = pm::serialize_header(h);
+  const fs::path path = dir() / (name + ".pmtiles");
+  std::ofstream out(path, std::ios::binary);
+  out.write(reinterpret_cast<const char*>(header.data()), std::streamsize(header.size()));
+  out.write(reinterpret_cast<const char*>(root_bytes.data()), std::streamsize(root_bytes.size()));
+  out.write(reinterpret_cast<const char*>(meta.data()), std::streamsize(meta.size()));
+  out.write(reinterpret_cast<const char*>(leaves.data()), std::streamsize(leaves.size()));
+  out.write(reinterpret_cast<const char*>(tile.data()), std::streamsize(tile.size()));
+  return path;
+}
+
+// A gzip leaf of `count` one-tile entries from tile id `first` on, each the archive's one tile.
+std::vector<std::uint8_t> uniform_leaf(std::uint64_t first, std::size_t count,
+                                       std::uint32_t tile_length) {
+  std::vector<vts::pmtiles::Entry> entries(count);
+  for (std::size_t i = 0; i < count; ++i) entries[i] = {first + i, 0, tile_length, 1};
+  return vts::pmtiles::compress(vts::pmtiles::serialize_directory(entries),
+                                vts::pmtiles::Compression::gzip)
+      .value();
+}
+
+std::uint32_t syn_root_tile_length() {
+  return static_cast<std::uint32_t>(
+      vts::pmtiles::Reader::open(syn_archive()).value()->get({0, 0, 0}).value().size());
+}
+
+std::uint64_t resident_kib() {
+  std::ifstream status("/proc/self/status");
+  std::string line;
+  while (std::getline(status, line))
+    if (line.rfind("VmRSS:", 0) == 0) return std::stoull(line.substr(6));
+  return 0;
+}
+
+TEST(RemoteArchiveSource, RefusesALeafOverTheEntryCapAsTooLarge) {
+  namespace pm = vts::pmtiles;
+  // A few KiB of gzip that decode to 2^20 + 1 entries (4M took 96 MiB each before the cap).
+  const std::vector<std::uint8_t> leaf =
+      uniform_leaf(0, pm::kMaxDirectoryEntries + 1, syn_root_tile_length());
+  const fs::path path =
+      assemble_archive("leaf-bomb", {{0, 0, static_cast<std::uint32_t>(leaf.size()), 0}}, leaf);
+  FaultServer& files = static_server(path, "leaf-bomb");
+  auto source = open_ok(files.base_url() + "/leaf-bomb.pmtiles");
+  ASSERT_TRUE(source);
+  const SourceTile t = fetch_one(*source, {0, 0, 0});
+  ASSERT_EQ(t.kind, SourceTile::Kind::error) << describe(t);
+  EXPECT_EQ(t.error->code, vts::ErrorCode::too_large) << t.error->to_string();
+  EXPECT_NE(t.error->message.find("entries per directory"), std::string::npos) << t.error->message;
+}
+
+TEST(RemoteArchiveSource, KeepsDecodedLeavesWithinAByteBudget) {
+  namespace pm = vts::pmtiles;
+  // 24 leaves of 2^20 entries, each 24 MiB decoded: 576 MiB if the source kept them all.
+  const vts::Geometry g =
+      vts::TilesetInfo::from_json(pm::Reader::open(syn_archive()).value()->metadata_json())
+          .value()
+          .geometry;
+  const std::uint32_t length = syn_root_tile_length();
+  std::vector<pm::Entry> root;
+  std::vector<TileId> wanted;
+  std::vector<std::uint8_t> leaves;
+  for (std::uint64_t id = 0; wanted.size() < 24; ++id) {
+    const TileId t = pm::tile_id_to_zxy(id).value();
+    if (!g.exists(t)) continue;
+    const std::vector<std::uint8_t> leaf = uniform_leaf(id, pm::kMaxDirectoryEntries, length);
+    root.push_back({id, leaves.size(), static_cast<std::uint32_t>(leaf.size()), 0});
+    leaves.insert(leaves.end(), leaf.begin(), leaf.end());
+    wanted.push_back(t);
+  }
+  const fs::path path = assemble_archive("big-leaves", root, leaves);
+  FaultServer& files = static_server(path, "big-leaves");
+  auto source = open_ok(files.base_url() + "/big-leaves.pmtiles");
+  ASSERT_TRUE(source);
+  const std::uint64_t before = resident_kib();
+  for (TileId t : wanted) {
+    const SourceTile got = fetch_one(*source, t);
+    ASSERT_EQ(got.kind, SourceTile::Kind::ok) << t.to_string() << ": " << describe(got);
+  }
+  const std::uint64_t grown = resident_kib() - std::min(before, resident_kib());
+  EXPECT_LT(grown, 200u << 10) << "the source holds " << grown << " KiB more after 24 leaves";
+}
+
+TEST(RemoteArchiveSource, RefusesOurArchiveWhoseHeaderDeclaresAnotherTileCompression) {
+  const fs::path path = dir() / "gzip-tiles.pmtiles";
+  fs::copy_file(syn_archive(), path, fs::copy_options::overwrite_existing);
+  {
+    std::fstream f(path, std::ios::binary | std::ios::in | std::ios::out);
+    f.seekp(98);  // tile_compression
+    f.put(2);     // gzip
+  }
+  FaultServer& files = static_server(path, "gzip-tiles");
+  auto source = vts::client::open_source(files.base_url() + "/gzip-tiles.pmtiles", quick_options());
+  ASSERT_FALSE(source.ok());
+  EXPECT_EQ(source.error().code, vts::ErrorCode::corrupt) << source.error().to_string();
+  EXPECT_NE(source.error().message.find("tile_compression is 2"), std::string::npos)
+      << source.error().message;
+}
+
 TEST(RemoteArchiveSource, TruncatedAnswersAreErrors) {
   FaultServer& files = static_server(syn_archive(), "syn");
   const std::string url = files.base_url() + "/fault/truncate/syn.pmtiles";
