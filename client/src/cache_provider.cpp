@@ -1,7 +1,9 @@
 #include "vts/client/cache_provider.hpp"
 
+#include <cstdio>
 #include <optional>
 #include <stop_token>
+#include <system_error>
 
 namespace vts::client {
 
@@ -109,7 +111,16 @@ void ReconnectingSource::go_offline(const std::shared_ptr<TileSource>& failed) {
     current_ = offline_source(info_);
     online_ = false;
     ended = std::move(reconnect_);  // the loop that brought it online has returned (or never ran)
-    reconnect_ = std::thread([this] { reconnect_loop(); });
+    try {
+      reconnect_ = std::thread([this] { reconnect_loop(); });
+    } catch (const std::system_error& e) {
+      // No thread to retry with (a task limit): stay offline, serving what the cache holds,
+      // rather than let the exception end the thread that saw the origin fail.
+      std::fprintf(stderr,
+                   "vts cache: cannot start the reconnect thread (%s); serving the cache "
+                   "only until restarted\n",
+                   e.what());
+    }
   }
   if (ended.joinable()) ended.join();
 }

@@ -7,6 +7,7 @@
 #include <map>
 #include <mutex>
 #include <set>
+#include <system_error>
 #include <thread>
 
 #include "vts/protocol/web_image.hpp"
@@ -20,7 +21,19 @@ class TileClient::Impl {
         options_(std::move(options)),
         spec_(cache_->info().info.tile_spec()) {
     const int n = std::max(1, options_.decode_threads);
-    for (int i = 0; i < n; ++i) workers_.emplace_back([this] { decode_loop(); });
+    try {
+      for (int i = 0; i < n; ++i) workers_.emplace_back([this] { decode_loop(); });
+    } catch (const std::system_error&) {
+      // A thread the system refused: the started ones are stopped and joined (a joinable
+      // std::thread destroyed would abort), then create() reports it.
+      {
+        std::lock_guard lock(mutex_);
+        stop_ = true;
+      }
+      decode_cv_.notify_all();
+      for (auto& w : workers_) w.join();
+      throw;
+    }
   }
 
   ~Impl() {
@@ -242,7 +255,12 @@ Result<std::unique_ptr<TileClient>> TileClient::create(std::shared_ptr<TileSourc
                                                        TileClientOptions options) {
   auto cache = TileCache::create(std::move(source), options.cache);
   if (!cache) return cache.error();
-  auto impl = std::make_unique<Impl>(std::move(*cache), std::move(options));
+  std::unique_ptr<Impl> impl;
+  try {
+    impl = std::make_unique<Impl>(std::move(*cache), std::move(options));
+  } catch (const std::system_error& e) {
+    return make_error(ErrorCode::io, std::string("cannot start a tile decode thread: ") + e.what());
+  }
   return std::unique_ptr<TileClient>(new TileClient(std::move(impl)));
 }
 

@@ -17,6 +17,7 @@
 #include "vts/client/tile_client.hpp"
 #include "vts/protocol/codec.hpp"
 #include "vts/protocol/pmtiles.hpp"
+#include "vts/test/address_space.hpp"
 #include "vts/test/clock.hpp"
 #include "vts/test/forge.hpp"
 #include "vts/test/temp_dir.hpp"
@@ -594,6 +595,25 @@ TEST(TileClient, AncestorsAreFetchedFirstAndEveryTileIsDecodedExactly) {
   EXPECT_EQ(source->held(), 1u);
   // The root is pinned in RAM.
   EXPECT_EQ(client->cache().ram()->stats().pinned_bytes > 0, true);
+}
+
+TEST(TileClient, ADecodeThreadTheSystemRefusesIsAnIoErrorNotAnAbort) {
+  if (vts::test::sanitized()) GTEST_SKIP() << "sanitizers reserve the address space";
+  Dir d;
+  const auto archive = build(d.path() / "a.pmtiles");
+  auto source = held(archive);
+  TileClientOptions o;
+  o.decode_threads = 512;  // some start, then one is refused
+  vts::Result<std::unique_ptr<TileClient>> client = vts::make_error(vts::ErrorCode::internal, "");
+  {
+    vts::test::AddressSpaceLimit limit(48u << 20);
+    ASSERT_TRUE(limit.ok());
+    client = TileClient::create(source, o);
+  }
+  ASSERT_FALSE(client.ok());
+  EXPECT_EQ(client.error().code, vts::ErrorCode::io);
+  EXPECT_NE(client.error().message.find("cannot start a tile decode thread"), std::string::npos)
+      << client.error().message;
 }
 
 TEST(TileClient, DecodedTilesWaitWithinTheirByteBudget) {

@@ -5,10 +5,12 @@
 #include <chrono>
 #include <condition_variable>
 #include <mutex>
+#include <system_error>
 #include <thread>
 #include <vector>
 
 #include "encode_queue.hpp"
+#include "vts/test/address_space.hpp"
 
 namespace {
 
@@ -134,6 +136,26 @@ TEST(EncodeQueue, AfterStopAJobRunsOnTheCallersThread) {
   j.run = [&ran_on] { ran_on = std::this_thread::get_id(); };
   EXPECT_EQ(q.push(std::move(j)), EncodeQueue::Admit::queued);
   EXPECT_EQ(ran_on, caller);
+}
+
+}  // namespace
+
+namespace {
+
+TEST(EncodeQueue, AWorkerTheSystemRefusesIsAnExceptionAfterTheStartedOnesAreJoined) {
+  if (vts::test::sanitized()) GTEST_SKIP() << "sanitizers reserve the address space";
+  bool refused = false;
+  {
+    // Room for a few 8 MiB stacks, not for 512: some start, then one is refused.
+    vts::test::AddressSpaceLimit limit(48u << 20);
+    ASSERT_TRUE(limit.ok());
+    try {
+      EncodeQueue q(512, EncodeLimits{});
+    } catch (const std::system_error&) {
+      refused = true;  // and no std::terminate: the started workers were joined
+    }
+  }
+  EXPECT_TRUE(refused);
 }
 
 }  // namespace
