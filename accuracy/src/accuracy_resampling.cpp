@@ -26,6 +26,7 @@
 #include "vts/accuracy/accuracy.hpp"
 #include "vts/builder/builder.hpp"
 #include "vts/protocol/codec.hpp"
+#include "vts/protocol/inspect.hpp"
 #include "vts/protocol/pmtiles.hpp"
 #include "vts/protocol/tileset.hpp"
 
@@ -125,7 +126,7 @@ Result<WarpError> score_warp(const std::filesystem::path& archive, const Pattern
                              double margin, TexelPoint offset) {
   auto reader = pmtiles::Reader::open(archive);
   if (!reader) return std::move(reader).error();
-  auto info = TilesetInfo::from_json((*reader)->metadata_json());
+  auto info = archive_tileset((*reader)->header(), (*reader)->metadata_json());
   if (!info) return std::move(info).error();
   if (!info->georeference)
     return make_error(ErrorCode::invalid_argument, archive.string() + " is not georeferenced");

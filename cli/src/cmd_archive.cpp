@@ -177,7 +177,7 @@ int run_extract(const ExtractArgs& a) {
     return report_error(s.error());
   auto reader = open_archive(a.archive);
   if (!reader) return report_error(reader.error());
-  auto info = TilesetInfo::from_json((*reader)->metadata_json());
+  auto info = archive_tileset((*reader)->header(), (*reader)->metadata_json());
   if (!info) return report_error(info.error());
   ExtractOptions o;
   o.output = a.output;

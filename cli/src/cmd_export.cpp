@@ -8,6 +8,7 @@
 #include "progress.hpp"
 #include "vts/builder/export.hpp"
 #include "vts/protocol/file_io.hpp"
+#include "vts/protocol/inspect.hpp"
 
 namespace vts::cli {
 
@@ -85,7 +86,7 @@ int run_export(const ExportArgs& a) {
     e.message = "'" + a.archive + "': " + e.message;
     return report_error(e);
   }
-  auto info = TilesetInfo::from_json((*reader)->metadata_json());
+  auto info = archive_tileset((*reader)->header(), (*reader)->metadata_json());
   if (!info) {
     Error e = info.error();
     e.message = "'" + a.archive + "': " + e.message;

@@ -9,6 +9,7 @@
 #include <utility>
 
 #include "vts/client/source.hpp"
+#include "vts/protocol/inspect.hpp"
 #include "vts/protocol/pmtiles.hpp"
 
 namespace vts::client {
@@ -89,7 +90,7 @@ Result<std::unique_ptr<TileSource>> open_local_archive(const std::filesystem::pa
   // Reader errors already name the path.
   Result<std::shared_ptr<pmtiles::Reader>> reader = pmtiles::Reader::open(absolute);
   if (!reader) return std::move(reader).error();
-  Result<TilesetInfo> info = TilesetInfo::from_json((*reader)->metadata_json());
+  Result<TilesetInfo> info = archive_tileset((*reader)->header(), (*reader)->metadata_json());
   if (!info) {
     return make_error(info.error().code, absolute.string() + ": " + info.error().message);
   }

@@ -3,6 +3,7 @@
 
 #include "tile_tag_memo.hpp"
 #include "vts/protocol/file_io.hpp"
+#include "vts/protocol/inspect.hpp"
 
 #include <sys/stat.h>
 
@@ -91,7 +92,7 @@ Result<std::shared_ptr<const Tileset>> open_archive(const fs::path& path) {
     return e;
   }
 
-  auto info = TilesetInfo::from_json((*reader)->metadata_json());
+  auto info = archive_tileset((*reader)->header(), (*reader)->metadata_json());
   if (!info) return info.error();
 
   auto t = std::make_shared<Tileset>();

@@ -41,8 +41,11 @@ done
 
 note "a header declaring gzip tiles is refused, naming the field"
 python3 "$HOSTILE" tile-compression "$WORK/syn.pmtiles" "$WORK/gzip_tiles.pmtiles" 2
-for cmd in info verify; do
-  expect_clean_failure "$VTS" "$cmd" "$WORK/gzip_tiles.pmtiles"
+for cmd in info verify extract serve; do
+  args=("$WORK/gzip_tiles.pmtiles")
+  [[ $cmd == extract ]] && args+=(0/0/0 -o "$WORK/t.png")
+  [[ $cmd == serve ]] && args+=(--listen 127.0.0.1:0 --no-admin)
+  expect_clean_failure "$VTS" "$cmd" "${args[@]}"
   grep -q 'tile_compression' "$ERR" || { show_output; fail "vts $cmd does not name tile_compression"; }
 done
 

@@ -7,6 +7,7 @@
 #include <utility>
 
 #include "vts/protocol/codec.hpp"
+#include "vts/protocol/inspect.hpp"
 #include "vts/protocol/tileset.hpp"
 #include "vts/renderer/footprint.hpp"
 #include "vts/renderer/pyramid.hpp"
@@ -52,7 +53,7 @@ Result<std::unique_ptr<PyramidSampler>> PyramidSampler::open(const std::filesyst
       e.message = quoted(archive) + ": " + e.message;
     return e;
   }
-  auto info = TilesetInfo::from_json((*reader)->metadata_json());
+  auto info = archive_tileset((*reader)->header(), (*reader)->metadata_json());
   if (!info) {
     Error e = std::move(info).error();
     e.message = quoted(archive) + ": metadata: " + e.message;
