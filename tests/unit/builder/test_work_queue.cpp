@@ -1,60 +1,18 @@
 // The builder's thread pool (builder/src/work_queue.hpp): a thread the system refuses to start is
 // an error value, and the threads already started are joined (no std::terminate).
 #include <gtest/gtest.h>
-#include <sys/resource.h>
 
 #include <atomic>
-#include <fstream>
 #include <string>
 
+#include "vts/test/address_space.hpp"
 #include "work_queue.hpp"
 
 namespace vts::detail {
 namespace {
 
-// The process's virtual memory size in bytes (VmSize of /proc/self/status), 0 if unknown.
-std::uint64_t virtual_memory_bytes() {
-  std::ifstream in("/proc/self/status");
-  std::string key;
-  while (in >> key) {
-    if (key == "VmSize:") {
-      std::uint64_t kib = 0;
-      in >> kib;
-      return kib * 1024;
-    }
-    in.ignore(1 << 20, '\n');
-  }
-  return 0;
-}
-
-// Lowers RLIMIT_AS to what the process maps now plus `room` (thread stacks are 8 MiB of it each)
-// for its lifetime: the way `ulimit -v` makes std::thread fail, for root too.
-class AddressSpaceLimit {
- public:
-  explicit AddressSpaceLimit(std::uint64_t room) {
-    getrlimit(RLIMIT_AS, &old_);
-    rlimit limited = old_;
-    limited.rlim_cur = virtual_memory_bytes() + room;
-    ok_ = virtual_memory_bytes() > 0 && setrlimit(RLIMIT_AS, &limited) == 0;
-  }
-  ~AddressSpaceLimit() { setrlimit(RLIMIT_AS, &old_); }
-  bool ok() const { return ok_; }
-
- private:
-  rlimit old_{};
-  bool ok_ = false;
-};
-
-bool sanitized() {
-#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
-  return true;
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer)
-  return true;
-#endif
-#endif
-  return false;
-}
+using test::AddressSpaceLimit;
+using test::sanitized;
 
 TEST(WorkQueue, RunsEverySubmittedJobBeforeItsThreadsAreJoined) {
   auto q = WorkQueue::start(4, 2);
