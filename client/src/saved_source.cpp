@@ -8,6 +8,7 @@
 #include <system_error>
 
 #include "vts/protocol/file_io.hpp"
+#include "vts/protocol/json_input.hpp"
 
 namespace vts::client {
 
@@ -76,10 +77,13 @@ Result<SourceInfo> load_source_info(const fs::path& cache_dir, std::string_view 
     return make_error(ErrorCode::not_found, "the cache in " + cache_dir.string() +
                                                 " holds no description of " +
                                                 std::string(location) + " (" + file.string() + ")");
-  const json j = json::parse(*text, nullptr, false);
   auto bad = [&](const std::string& why) {
     return make_error(ErrorCode::corrupt, file.string() + ": " + why);
   };
+  // Depth-limited: the cache folder may be shared, or damaged.
+  auto parsed = parse_json(*text, file.string());
+  if (!parsed) return std::move(parsed).error();
+  const json& j = *parsed;
   if (!j.is_object() || !j.contains("vtstream_cache_source")) return bad("not a saved source");
   try {
     if (j.at("location").get<std::string>() != location)

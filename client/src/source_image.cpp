@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <utility>
 #include <vector>
@@ -20,6 +21,7 @@
 #include "image_layout.hpp"
 #include "vts/client/source.hpp"
 #include "vts/protocol/file_io.hpp"
+#include "vts/protocol/json_input.hpp"
 #include "vts/protocol/tilejson.hpp"
 
 namespace vts::client {
@@ -212,11 +214,15 @@ bool image_tile_exists(const SourceInfo& info, TileId id) {
 
 Result<ImageLayout> read_image_tilejson(std::span<const std::uint8_t> body, const std::string& url,
                                         const SourceOptions& options) {
-  const auto j = nlohmann::json::parse(body.begin(), body.end(), nullptr, false);
   const auto corrupt = [&](const std::string& why) {
     return make_error(ErrorCode::corrupt, url + " is not TileJSON: " + why);
   };
-  if (j.is_discarded() || !j.is_object()) return corrupt("not a JSON object");
+  // Depth-limited: a third-party server's document; only the keys below are read from it.
+  auto parsed =
+      parse_json(std::string_view(reinterpret_cast<const char*>(body.data()), body.size()), url);
+  if (!parsed) return std::move(parsed).error();
+  const nlohmann::json& j = *parsed;
+  if (!j.is_object()) return corrupt("not a JSON object");
   const auto tiles = j.find("tiles");
   if (tiles == j.end() || !tiles->is_array() || tiles->empty() || !(*tiles)[0].is_string())
     return corrupt("no \"tiles\" array of URL templates");
@@ -294,9 +300,13 @@ Result<SourceInfo> stock_archive_info(const pmtiles::Header& h, const std::strin
                       key + ": its image tiles are compressed again (tile compression " +
                           std::to_string(int(h.tile_compression)) +
                           "); a web map reads them only uncompressed (none)");
-  const auto meta = nlohmann::json::parse(metadata_json, nullptr, false);
-  if (meta.is_object() && meta.contains("tileSize") && meta["tileSize"].is_number_unsigned())
-    l.tile_size = meta["tileSize"].get<std::uint32_t>();
+  // A stock archive's metadata is optional here: only its "tileSize" is read from it.
+  if (auto meta = parse_json(metadata_json, "archive metadata"); meta && meta->is_object()) {
+    const auto size = meta->find("tileSize");
+    if (size != meta->end() && size->is_number_unsigned())  // refused below unless 64..1024
+      l.tile_size = std::uint32_t(std::min<std::uint64_t>(
+          size->get<std::uint64_t>(), std::numeric_limits<std::uint32_t>::max()));
+  }
   l.tiles = key;
   l.min_zoom = options.min_zoom >= 0 ? options.min_zoom : h.min_zoom;
   l.max_zoom = options.max_zoom >= 0 ? options.max_zoom : h.max_zoom;

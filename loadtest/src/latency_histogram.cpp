@@ -66,10 +66,16 @@ Status LatencyHistogram::merge(const LatencyHistogram& other) {
                           " sub-bucket bits into one with " + std::to_string(bits_));
   }
   if (other.count_ == 0) return {};
+  // No bucket holds more than the count, so a count that fits means every bucket's sum fits.
+  std::uint64_t count;
+  if (__builtin_add_overflow(count_, other.count_, &count)) {
+    return make_error(ErrorCode::invalid_argument,
+                      "cannot merge latency histograms whose counts sum past 2^64 - 1");
+  }
   if (other.counts_.size() > counts_.size()) counts_.resize(other.counts_.size(), 0);
   // Indexing (not iterators) keeps merge(*this) correct: it doubles every count.
   for (std::size_t i = 0; i < other.counts_.size(); ++i) counts_[i] += other.counts_[i];
-  count_ += other.count_;
+  count_ = count;
   min_ = std::min(min_, other.min_);
   max_ = std::max(max_, other.max_);
   sum_ += other.sum_;
@@ -145,9 +151,10 @@ Result<LatencyHistogram> LatencyHistogram::from_buckets(int sub_bucket_bits,
       return bad("[" + std::to_string(b.low) + ", " + std::to_string(b.high) + "] is not a bucket");
     if (index < next) return bad("buckets out of order at " + std::to_string(b.low));
     if (b.count == 0) return bad("bucket at " + std::to_string(b.low) + " has count 0");
+    if (__builtin_add_overflow(h.count_, b.count, &h.count_))
+      return bad("the bucket counts sum past 2^64 - 1 (at " + std::to_string(b.low) + ")");
     if (index >= h.counts_.size()) h.counts_.resize(index + 1, 0);
     h.counts_[index] = b.count;
-    h.count_ += b.count;
     next = index + 1;
   }
   if (h.count_ == 0) return h;

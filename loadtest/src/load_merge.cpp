@@ -3,10 +3,13 @@
 // is exact.
 #include <algorithm>
 #include <cstdlib>
+#include <limits>
+#include <tuple>
 #include <type_traits>
 
 #include "vts/loadtest/load_report.hpp"
 #include "vts/protocol/file_io.hpp"
+#include "vts/protocol/json_input.hpp"
 
 namespace vts::client {
 namespace {
@@ -38,6 +41,23 @@ Result<T> field(const json& j, const char* key, const std::string& where) {
   auto var##_r = field<T>(j, key, where); \
   if (!var##_r) return var##_r.error();   \
   const T var = *var##_r
+
+// into += n, or an error naming `name` when the sum would pass 2^64 - 1 (into is then unchanged).
+Status add_count(std::uint64_t& into, std::uint64_t n, const std::string& name) {
+  std::uint64_t sum;
+  if (__builtin_add_overflow(into, n, &sum))
+    return bad(name + ": the counts sum past 2^64 - 1 (" + std::to_string(into) + " + " +
+               std::to_string(n) + ")");
+  into = sum;
+  return {};
+}
+
+#define VTS_ADD(into, n, name) \
+  if (auto st = add_count(into, n, name); !st) return st.error()
+
+// 2200-01-01T00:00:00Z: a start further from 1970 (either way) is no run's, and would overflow
+// the clock's nanoseconds.
+constexpr std::int64_t kMaxStartUnixMs = 7'258'118'400'000;
 
 Result<LatencyHistogram> histogram_from_json(const json& h, const std::string& where) {
   VTS_FIELD(bits, std::uint64_t, h, "sub_bucket_bits", where);
@@ -83,6 +103,12 @@ Status scenario_from_json(const json& j, LoadReport& r) {
   VTS_FIELD(duration, double, j, "duration_s", "");
   if (!j.contains("start_unix_ms") || !j["start_unix_ms"].is_number_integer())
     return bad("start_unix_ms is not an integer");
+  const json& start = j["start_unix_ms"];
+  const bool start_in_range = start.is_number_unsigned()
+                                  ? start.get<std::uint64_t>() <= std::uint64_t(kMaxStartUnixMs)
+                                  : start.get<std::int64_t>() >= -kMaxStartUnixMs &&
+                                        start.get<std::int64_t>() <= kMaxStartUnixMs;
+  if (!start_in_range) return bad("start_unix_ms is beyond the year 2200");
   r.title = title;
   r.target = target;
   r.command_line = command_line;
@@ -117,7 +143,8 @@ Status counts_from_json(const json& j, LoadReport& r) {
   r.tiers = {ram, disk, network, revalidated};
   for (const auto& [code, n] : j["by_status"].items()) {
     VTS_FIELD(v, std::uint64_t, j["by_status"], code.c_str(), "by_status");
-    r.by_status[std::atoi(code.c_str())] += v;
+    // Keys that read as the same status ("200", "0200") add up.
+    VTS_ADD(r.by_status[std::atoi(code.c_str())], v, "by_status." + code);
   }
   for (const auto& [kind, n] : j["errors_by_kind"].items()) {
     VTS_FIELD(v, std::uint64_t, j["errors_by_kind"], kind.c_str(), "errors_by_kind");
@@ -126,6 +153,10 @@ Status counts_from_json(const json& j, LoadReport& r) {
   VTS_FIELD(cancelled, std::uint64_t, j["wasted"], "cancelled", "wasted");
   r.cancelled = cancelled;
   if (!j.contains("seconds") || !j["seconds"].is_array()) return bad("no array seconds");
+  if (j["seconds"].size() > kMaxReportSeconds)
+    return bad("seconds holds " + std::to_string(j["seconds"].size()) + " entries, more than " +
+               std::to_string(kMaxReportSeconds) + " (8 days)");
+  r.seconds.reserve(j["seconds"].size());
   for (const json& s : j["seconds"]) {
     LoadSecond sec;
     std::uint64_t LoadSecond::*members[] = {&LoadSecond::requests, &LoadSecond::bytes,
@@ -141,29 +172,37 @@ Status counts_from_json(const json& j, LoadReport& r) {
   return {};
 }
 
-void add_counts(LoadReport& into, const LoadReport& r) {
-  into.requests += r.requests;
-  into.bytes += r.bytes;
-  into.errors += r.errors;
-  into.camera_moves += r.camera_moves;
-  into.cancelled += r.cancelled;
-  into.tiers.ram += r.tiers.ram;
-  into.tiers.disk += r.tiers.disk;
-  into.tiers.network += r.tiers.network;
-  into.tiers.revalidated += r.tiers.revalidated;
-  for (const auto& [code, n] : r.by_status) into.by_status[code] += n;
-  for (const auto& [kind, n] : r.errors_by_kind) into.errors_by_kind[kind] += n;
+// into += r, count by count; an error names the first count whose sum would pass 2^64 - 1.
+Status add_counts(LoadReport& into, const LoadReport& r) {
+  VTS_ADD(into.requests, r.requests, "totals.requests");
+  VTS_ADD(into.bytes, r.bytes, "totals.bytes");
+  VTS_ADD(into.errors, r.errors, "totals.errors");
+  VTS_ADD(into.camera_moves, r.camera_moves, "totals.camera_moves");
+  VTS_ADD(into.cancelled, r.cancelled, "wasted.cancelled");
+  VTS_ADD(into.tiers.ram, r.tiers.ram, "cache_tiers.ram");
+  VTS_ADD(into.tiers.disk, r.tiers.disk, "cache_tiers.disk");
+  VTS_ADD(into.tiers.network, r.tiers.network, "cache_tiers.network");
+  VTS_ADD(into.tiers.revalidated, r.tiers.revalidated, "cache_tiers.revalidated");
+  for (const auto& [code, n] : r.by_status)
+    VTS_ADD(into.by_status[code], n, "by_status." + std::to_string(code));
+  for (const auto& [kind, n] : r.errors_by_kind)
+    VTS_ADD(into.errors_by_kind[kind], n, "errors_by_kind." + kind);
   if (r.seconds.size() > into.seconds.size()) into.seconds.resize(r.seconds.size());
   for (std::size_t i = 0; i < r.seconds.size(); ++i) {
     LoadSecond& s = into.seconds[i];
     const LoadSecond& o = r.seconds[i];
-    s.requests += o.requests;
-    s.bytes += o.bytes;
-    s.errors += o.errors;
+    const std::string at = "seconds[" + std::to_string(i) + "].";
+    VTS_ADD(s.requests, o.requests, at + "requests");
+    VTS_ADD(s.bytes, o.bytes, at + "bytes");
+    VTS_ADD(s.errors, o.errors, at + "errors");
     s.p50_ns = std::max(s.p50_ns, o.p50_ns);
     s.p90_ns = std::max(s.p90_ns, o.p90_ns);
     s.p99_ns = std::max(s.p99_ns, o.p99_ns);
   }
+  if (r.viewers > std::numeric_limits<std::uint32_t>::max() - into.viewers)
+    return bad("scenario.viewers: the counts sum past 2^32 - 1");
+  into.viewers += r.viewers;
+  return {};
 }
 
 }  // namespace
@@ -197,9 +236,11 @@ Result<LoadReport> report_from_json(const json& j) {
 Result<LoadReport> read_report_file(const std::filesystem::path& file) {
   auto text = read_file(file);  // not_found, io, or a folder, naming the file
   if (!text) return text.error();
-  json j = json::parse(*text, nullptr, false);
-  if (j.is_discarded()) return bad(file.string() + ": not JSON");
-  auto r = report_from_json(j);
+  // Depth-limited, and no array or object past kMaxReportSeconds entries: refused while parsing,
+  // before a hostile file's millions of rows take gigabytes.
+  auto j = parse_json(*text, file.string(), kMaxJsonDepth, kMaxReportSeconds);
+  if (!j) return bad(j.error().message);
+  auto r = report_from_json(*j);
   if (!r) return bad(file.string() + ": " + r.error().message);
   return r;
 }
@@ -209,18 +250,26 @@ Result<LoadReport> merge_reports(const std::vector<LoadReport>& reports) {
   LoadReport out = reports.front();
   for (std::size_t i = 1; i < reports.size(); ++i) {
     const LoadReport& r = reports[i];
-    add_counts(out, r);
-    std::pair<LatencyHistogram*, const LatencyHistogram*> hs[] = {
-        {&out.queue_time, &r.queue_time},
-        {&out.ttfb, &r.ttfb},
-        {&out.total, &r.total},
-        {&out.first_visible, &r.first_visible},
-        {&out.full_resolution, &r.full_resolution}};
-    for (auto& [into, from] : hs)
-      if (auto st = into->merge(*from); !st) return st.error();
+    auto refused = [&](const Error& e) {
+      return bad("cannot merge report " + std::to_string(i + 1) + " of " +
+                 std::to_string(reports.size()) + ": " + e.message);
+    };
+    if (auto st = add_counts(out, r); !st) return refused(st.error());
+    std::tuple<const char*, LatencyHistogram*, const LatencyHistogram*> hs[] = {
+        {"latency_ns.queue_time", &out.queue_time, &r.queue_time},
+        {"latency_ns.ttfb", &out.ttfb, &r.ttfb},
+        {"latency_ns.total", &out.total, &r.total},
+        {"latency_ns.first_visible", &out.first_visible, &r.first_visible},
+        {"latency_ns.full_resolution", &out.full_resolution, &r.full_resolution}};
+    for (auto& [name, into, from] : hs) {
+      if (auto st = into->merge(*from); !st) {
+        Error e = st.error();
+        e.message = std::string(name) + ": " + e.message;
+        return refused(e);
+      }
+    }
     out.start = std::min(out.start, r.start);
     out.duration_s = std::max(out.duration_s, r.duration_s);
-    out.viewers += r.viewers;
     out.rate += r.rate;
   }
   return out;

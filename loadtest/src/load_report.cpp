@@ -153,6 +153,13 @@ double per_second(double amount, double duration_s) {
   return duration_s > 0 ? amount / duration_s : 0.0;
 }
 
+// a + b, or 2^64 - 1 where that would wrap (a report read back never holds such counts; one
+// made in memory might).
+std::uint64_t saturated_sum(std::uint64_t a, std::uint64_t b) {
+  std::uint64_t sum;
+  return __builtin_add_overflow(a, b, &sum) ? std::numeric_limits<std::uint64_t>::max() : sum;
+}
+
 double ratio(std::uint64_t part, std::uint64_t whole) {
   return whole == 0 ? 0.0 : static_cast<double>(part) / static_cast<double>(whole);
 }
@@ -498,7 +505,8 @@ std::vector<std::vector<std::string>> totals_rows(const LoadReport& r) {
 
 std::vector<std::vector<std::string>> tier_rows(const LoadReport& r) {
   const CacheTierCounts& t = r.tiers;
-  const std::uint64_t all = t.ram + t.disk + t.network + t.revalidated;
+  const std::uint64_t all =
+      saturated_sum(saturated_sum(t.ram, t.disk), saturated_sum(t.network, t.revalidated));
   return {{"served from", "requests", "share"},
           {"ram", format_count(t.ram), format_percent(ratio(t.ram, all))},
           {"disk", format_count(t.disk), format_percent(ratio(t.disk, all))},
@@ -509,7 +517,7 @@ std::vector<std::vector<std::string>> tier_rows(const LoadReport& r) {
 
 std::vector<std::vector<std::string>> status_rows(const LoadReport& r) {
   std::uint64_t all = 0;
-  for (const auto& [code, n] : r.by_status) all += n;
+  for (const auto& [code, n] : r.by_status) all = saturated_sum(all, n);
   std::vector<std::vector<std::string>> rows = {{"HTTP status", "responses", "share"}};
   for (const auto& [code, n] : r.by_status) {
     rows.push_back({std::to_string(code), format_count(n), format_percent(ratio(n, all))});
@@ -597,7 +605,7 @@ nlohmann::json to_json(const LoadReport& r) {
   for (const auto& [kind, n] : r.errors_by_kind) {
     // Two kinds that differ only in invalid bytes become one key: add, do not overwrite.
     json& slot = errors[str(kind)];
-    slot = (slot.is_number() ? slot.get<std::uint64_t>() : 0) + n;
+    slot = saturated_sum(slot.is_number() ? slot.get<std::uint64_t>() : 0, n);
   }
   j["errors_by_kind"] = std::move(errors);
   j["wasted"] = {{"cancelled", r.cancelled}};

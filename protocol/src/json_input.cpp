@@ -40,15 +40,24 @@ struct Level {
   std::string key;  // an object's latest key (key_text)
 };
 
-// Where `levels` (containers around a position) put it: "seconds", "keys[].center", "[][]".
+// Where the first `n` of `levels` (the containers around a position) put it: "seconds",
+// "keys[].center", "[][]"; more than three arrays in a row are written "[]x61".
 std::string path_of(const std::vector<Level>& levels, std::size_t n) {
   std::string path;
-  for (std::size_t i = 0; i < n; ++i) {
+  for (std::size_t i = 0; i < n;) {
     if (levels[i].array) {
-      path += "[]";
+      std::size_t run = 1;
+      while (i + run < n && levels[i + run].array) ++run;
+      if (run > 3) {
+        path += "[]x" + std::to_string(run);
+      } else {
+        for (std::size_t k = 0; k < run; ++k) path += "[]";
+      }
+      i += run;
     } else {
       if (!path.empty()) path += '.';
       path += levels[i].key;
+      ++i;
     }
   }
   return path.empty() ? std::string("the top level") : path;

@@ -3,6 +3,7 @@
 #include <nlohmann/json.hpp>
 
 #include "vts/protocol/file_io.hpp"
+#include "vts/protocol/json_input.hpp"
 
 namespace vts {
 namespace {
@@ -10,17 +11,19 @@ namespace {
 using nlohmann::json;
 using nlohmann::ordered_json;
 
-ordered_json vtstream_object(std::string_view metadata_json, const TilesetInfo& info) {
-  const std::string made = metadata_json.empty() ? info.to_json() : std::string();
-  const std::string_view text = metadata_json.empty() ? std::string_view(made) : metadata_json;
-  ordered_json v = ordered_json::object();
-  auto meta = ordered_json::parse(text.begin(), text.end(), nullptr, false);
-  if (meta.is_object()) {
-    auto it = meta.find("vtstream");
-    if (it != meta.end() && it->is_object()) v = *it;
-  }
-  return v;
+// The "vtstream" object of `info`'s metadata: what this build knows of the tileset, never the
+// archive's own metadata (whose other keys, of any size and nesting, are not ours to forward).
+ordered_json vtstream_object(const TilesetInfo& info) {
+  const std::string made = info.to_json();
+  ordered_json meta = ordered_json::parse(made);  // ours: a few levels, valid
+  return std::move(meta.at("vtstream"));
 }
+
+// The keys of the "vtstream" object TilesetInfo::to_json() writes (and from_json() reads).
+constexpr const char* kVtstreamKeys[] = {
+    "format_version", "width",   "height",       "tile_size",    "border",      "max_zoom",
+    "stored_size",    "codec",   "pixel_format", "color_space",  "downsample",  "sparse",
+    "checksum",       "payload", "generator",    "content_hash", "georeference"};
 
 Error not_tilejson(const std::string& url, std::string_view why) {
   return make_error(ErrorCode::corrupt, url + " is not TileJSON (" + std::string(why) + ")");
@@ -46,7 +49,7 @@ Result<std::string> tiles_template(const json& j, const std::string& url) {
 
 std::string write_tilejson(const TileJsonFields& f) {
   const TilesetInfo& info = *f.info;
-  ordered_json v = vtstream_object(f.metadata_json, info);
+  ordered_json v = vtstream_object(info);
   if (!f.archive_url.empty()) v["archive"] = std::string(f.archive_url);
   ordered_json j = {
       {"tilejson", "3.0.0"},
@@ -70,8 +73,12 @@ std::string write_tilejson(const TileJsonFields& f) {
 }
 
 Result<TileJson> read_tilejson(std::span<const std::uint8_t> body, const std::string& url) {
-  const json j = json::parse(body.begin(), body.end(), nullptr, /*allow_exceptions=*/false);
-  if (j.is_discarded() || !j.is_object()) return not_tilejson(url, "not a JSON object");
+  // Depth-limited (any server may answer): the "vtstream" object is then safe to walk.
+  const std::string_view text(reinterpret_cast<const char*>(body.data()), body.size());
+  Result<json> parsed = parse_json(text, url);
+  if (!parsed) return std::move(parsed).error();
+  const json& j = *parsed;
+  if (!j.is_object()) return not_tilejson(url, "not a JSON object");
   TileJson t;
   auto tiles = tiles_template(j, url);
   if (!tiles) return std::move(tiles).error();
@@ -81,13 +88,17 @@ Result<TileJson> read_tilejson(std::span<const std::uint8_t> body, const std::st
     return make_error(ErrorCode::unsupported,
                       url + " is TileJSON but not a vtstream tileset (no \"vtstream\" object)");
   }
-  // The "vtstream" object is the archive metadata's (plus "archive", which from_json ignores);
-  // name and description are TileJSON's own keys.
+  // The metadata TilesetInfo reads, of the keys it knows only: those of the "vtstream" object
+  // (the archive metadata's; "archive" and anything else is left behind) and TileJSON's own name
+  // and description.
   json meta = json::object();
   for (const char* k : {"name", "description"}) {
     if (auto it = j.find(k); it != j.end() && it->is_string()) meta[k] = *it;
   }
-  meta["vtstream"] = *v;
+  json& known = meta["vtstream"] = json::object();
+  for (const char* k : kVtstreamKeys) {
+    if (auto it = v->find(k); it != v->end()) known[k] = *it;
+  }
   Result<TilesetInfo> info =
       TilesetInfo::from_json(meta.dump(-1, ' ', false, json::error_handler_t::replace));
   if (!info) return make_error(info.error().code, url + ": " + info.error().message);

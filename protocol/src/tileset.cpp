@@ -13,6 +13,8 @@
 
 #include "vts/protocol/tileset.hpp"
 
+#include "vts/protocol/json_input.hpp"
+
 namespace vts {
 namespace {
 
@@ -294,12 +296,11 @@ std::string TilesetInfo::to_json() const {
 }
 
 Result<TilesetInfo> TilesetInfo::from_json(const std::string& metadata_json) {
+  // Depth-limited: metadata comes from archives anyone may have written.
+  Result<json> root = parse_json(metadata_json, "tileset metadata");
+  if (!root) return std::move(root).error();
   try {
-    const json root = json::parse(metadata_json);
-    return parse(root);
-  } catch (const json::parse_error& e) {
-    return make_error(ErrorCode::corrupt,
-                      std::string("tileset metadata is not valid JSON: ") + e.what());
+    return parse(*root);
   } catch (const std::exception& e) {
     // Nothing above should throw after parsing; never let it escape as an exception anyway.
     return make_error(ErrorCode::corrupt, std::string("tileset metadata: ") + e.what());

@@ -197,7 +197,6 @@ HttpResponse tilejson_route(const Tileset& t, const std::string& base, bool priv
                             .info = &t.info,
                             .version = t.version,
                             .tiles_url = tiles,
-                            .metadata_json = t.reader->metadata_json(),
                             .archive_url = archive},
                            priv);
 }

@@ -1,6 +1,7 @@
 // Fuzz target: a PMTiles archive from untrusted bytes. Opens the input with Reader::open_bytes and
 // does what a server or `vts info` would: looks up a handful of tile ids (fixed ones and ones the
-// directories name), walks every entry and counts leaf directories. Also feeds the raw bytes to
+// directories name), walks every entry, counts leaf directories, reads the metadata and writes
+// the TileJSON the server would answer with. Also feeds the raw bytes to
 // the header and directory parsers directly. Any crash, sanitizer report or hang is a bug, and so
 // is a tile that is not the bytes its entry points at; errors are the expected outcome for most
 // inputs.
@@ -11,6 +12,8 @@
 #include <vector>
 
 #include "vts/protocol/pmtiles.hpp"
+#include "vts/protocol/tilejson.hpp"
+#include "vts/protocol/tileset.hpp"
 
 namespace {
 
@@ -75,5 +78,11 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   std::uint64_t visits = 0;
   (void)reader.for_each_entry([&](const Entry&) { return ++visits < 100000; });
   (void)reader.leaf_directory_count();
+
+  // What `vts serve` and `vts info` do next: read the metadata; the server then answers
+  // GET /{ts}.json with the TileJSON made from it.
+  if (auto info = vts::TilesetInfo::from_json(reader.metadata_json())) {
+    (void)vts::write_tilejson({.tileset = "t", .info = &*info, .tiles_url = "/t/{z}/{x}/{y}"});
+  }
   return 0;
 }

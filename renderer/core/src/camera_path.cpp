@@ -10,6 +10,8 @@
 #include <sstream>
 #include <string>
 
+#include "vts/protocol/json_input.hpp"
+
 namespace vts::renderer {
 
 namespace {
@@ -67,8 +69,10 @@ auto between(const std::vector<CameraKey>& keys, double frame, F&& mix) {
 }  // namespace
 
 Result<CameraPath> CameraPath::parse(std::string_view json_text, const CameraKey& defaults) {
-  json doc = json::parse(json_text, nullptr, /*allow_exceptions=*/false);
-  if (doc.is_discarded()) return bad("not valid JSON");
+  // Depth-limited: a camera file may come from anywhere.
+  auto parsed = parse_json(json_text, "the document");
+  if (!parsed) return bad(parsed.error().message);
+  const json& doc = *parsed;
   if (!doc.is_object()) return bad("the top level is not a JSON object");
   auto keys_it = doc.find("keys");
   if (keys_it == doc.end()) return bad("no \"keys\" array");

@@ -7,6 +7,7 @@
 #include <numbers>
 
 #include "vts/protocol/file_io.hpp"
+#include "vts/protocol/json_input.hpp"
 
 namespace vts::renderer {
 
@@ -32,18 +33,26 @@ Status parse_scene(const std::string& spec, bool& globe, CameraKey& camera) {
     return make_error(ErrorCode::invalid_argument,
                       "--scene '" + spec + "' is neither plane, globe nor a readable JSON file");
   }
-  auto doc = nlohmann::json::parse(*text, nullptr, false);
   auto bad = [&](const std::string& why) {
     return make_error(ErrorCode::invalid_argument, "--scene " + spec + ": " + why);
   };
-  if (doc.is_discarded() || !doc.is_object()) return bad("not a JSON object");
+  // Depth-limited, and only the camera's known keys are copied (a scene file may come from
+  // anywhere).
+  auto parsed = parse_json(*text, "the file");
+  if (!parsed) return bad(parsed.error().message);
+  const nlohmann::json& doc = *parsed;
+  if (!doc.is_object()) return bad("not a JSON object");
   auto s = doc.find("scene");
   if (s == doc.end() || !s->is_string() || (*s != "plane" && *s != "globe"))
     return bad("\"scene\" must be \"plane\" or \"globe\"");
   globe = *s == "globe";
   if (auto c = doc.find("camera"); c != doc.end()) {
     if (!c->is_object()) return bad("\"camera\" is not a JSON object");
-    nlohmann::json key = *c;
+    nlohmann::json key = nlohmann::json::object();
+    for (const char* k : {"center", "texels_per_pixel", "lon", "lat", "altitude_m", "heading",
+                          "tilt", "fov_y", "move"}) {
+      if (auto it = c->find(k); it != c->end()) key[k] = *it;
+    }
     key["frame"] = 0;
     auto path = CameraPath::parse(nlohmann::json{{"keys", {key}}}.dump(), camera);
     if (!path) {

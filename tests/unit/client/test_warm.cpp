@@ -8,7 +8,10 @@
 #include <atomic>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <optional>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -223,6 +226,38 @@ TEST(Warm, RemembersTheSourceInTheCacheFolderWhenAsked) {
   auto saved = load_source_info(d.path / "cache", "http://example.invalid/dense");
   ASSERT_TRUE(saved.ok()) << saved.error().to_string();
   EXPECT_EQ(saved->key, source->info().key);
+}
+
+TEST(Warm, ASavedSourceNestedDeeperThanAnyWeWriteIsRefusedNamingTheFile) {
+  // The cache folder may be shared or damaged: its metadata was dumped recursively once read, and
+  // 100,000 levels overflowed the stack.
+  Dir d;
+  auto source = open(build(d.path / "dense.pmtiles"));
+  ASSERT_TRUE(source);
+  WarmOptions o = options(source, d.path / "cache");
+  o.remember_as = "http://example.invalid/dense";
+  ASSERT_TRUE(warm_cache(o).ok());
+  std::vector<fs::path> files;
+  for (const auto& e : fs::directory_iterator(d.path / "cache" / "sources")) files.push_back(e);
+  ASSERT_EQ(files.size(), 1u);
+  std::string text;
+  {
+    std::ifstream in(files[0]);
+    text.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  const std::string key = "\"metadata\": {";
+  const std::size_t at = text.find(key);
+  ASSERT_NE(at, std::string::npos) << text;
+  text.insert(at + key.size(),
+              "\"x\": " + std::string(100000, '[') + std::string(100000, ']') + ",");
+  std::ofstream(files[0]) << text;
+  auto saved = load_source_info(d.path / "cache", "http://example.invalid/dense");
+  ASSERT_FALSE(saved.ok());
+  EXPECT_EQ(saved.error().code, vts::ErrorCode::corrupt);
+  EXPECT_NE(saved.error().message.find(files[0].string()), std::string::npos)
+      << saved.error().message;
+  EXPECT_NE(saved.error().message.find("deeper than 64 levels"), std::string::npos)
+      << saved.error().message;
 }
 
 TEST(Warm, ReportsProgressUpToTheTotalOnTheCallingThread) {

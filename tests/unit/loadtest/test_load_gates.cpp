@@ -5,11 +5,14 @@
 
 #include <cmath>
 
+#include <fstream>
+#include <limits>
 #include <random>
 #include <string>
 #include <vector>
 
 #include "vts/loadtest/load_report.hpp"
+#include "vts/test/temp_dir.hpp"
 
 namespace vts::client {
 namespace {
@@ -131,6 +134,123 @@ TEST(LoadMerge, MalformedReportsAreRefusedNamingTheField) {
   ASSERT_FALSE(r);
   EXPECT_NE(r.error().message.find("not a vts loadtest report"), std::string::npos);
   EXPECT_FALSE(merge_reports({}));
+}
+
+void expect_refused(const Result<LoadReport>& r, const std::string& needle) {
+  ASSERT_FALSE(r) << "expected an error mentioning " << needle;
+  EXPECT_NE(r.error().message.find(needle), std::string::npos) << r.error().message;
+}
+
+constexpr std::uint64_t kHalf = std::uint64_t{1} << 63;
+
+TEST(LoadMerge, BucketCountsThatSumPast64BitsAreRefused) {
+  // 2^63 + 2^63 + 1 wraps to 1: the sum once agreed with a count of 1.
+  auto h = LatencyHistogram::from_buckets(7, {{5, 5, kHalf}, {6, 6, kHalf}, {7, 7, 1}}, 5, 7, 6.0);
+  ASSERT_FALSE(h);
+  EXPECT_NE(h.error().message.find("sum past 2^64 - 1"), std::string::npos) << h.error().message;
+  EXPECT_TRUE(LatencyHistogram::from_buckets(7, {{5, 5, kHalf}, {6, 6, kHalf - 1}}, 5, 6, 5.5));
+
+  // In a report: two buckets of 2^63 and a count that matches the wrapped sum.
+  LoadReport both;
+  json j = to_json(random_run(1, both));
+  json& total = j["latency_ns"]["total"];
+  ASSERT_GE(total["buckets"].size(), 3u);
+  std::uint64_t rest = 0;
+  for (std::size_t i = 2; i < total["buckets"].size(); ++i)
+    rest += total["buckets"][i]["count"].get<std::uint64_t>();
+  total["buckets"][0]["count"] = kHalf;
+  total["buckets"][1]["count"] = kHalf;
+  total["count"] = rest;
+  expect_refused(report_from_json(j), "latency_ns.total");
+  expect_refused(report_from_json(j), "sum past 2^64 - 1");
+
+  // Status codes that read as the same number add up, within 64 bits.
+  json k = to_json(random_run(1, both));
+  k["by_status"] = {{"200", kHalf}, {"0200", kHalf}};
+  expect_refused(report_from_json(k), "by_status.");
+}
+
+TEST(LoadMerge, CountsWhoseSumPasses64BitsAreRefusedNamingTheFieldAndTheReport) {
+  LoadReport both;
+  const LoadReport a = random_run(1, both), b = random_run(2, both);
+  auto refused = [&](auto&& change, const std::string& field) {
+    SCOPED_TRACE(field);
+    LoadReport x = a, y = b;
+    change(x);
+    change(y);
+    auto m = merge_reports({x, y});
+    expect_refused(m, field);
+    expect_refused(m, "report 2 of 2");
+  };
+  refused([](LoadReport& r) { r.requests = kHalf; }, "totals.requests: the counts sum past 2^64");
+  refused([](LoadReport& r) { r.bytes = kHalf; }, "totals.bytes");
+  refused([](LoadReport& r) { r.errors = kHalf; }, "totals.errors");
+  refused([](LoadReport& r) { r.camera_moves = kHalf; }, "totals.camera_moves");
+  refused([](LoadReport& r) { r.cancelled = kHalf; }, "wasted.cancelled");
+  refused([](LoadReport& r) { r.tiers.disk = kHalf; }, "cache_tiers.disk");
+  refused([](LoadReport& r) { r.by_status[200] = kHalf; }, "by_status.200");
+  refused([](LoadReport& r) { r.errors_by_kind["http_503"] = kHalf; }, "errors_by_kind.http_503");
+  refused([](LoadReport& r) { r.seconds[1].bytes = kHalf; }, "seconds[1].bytes");
+  refused([](LoadReport& r) { r.viewers = std::numeric_limits<std::uint32_t>::max(); },
+          "scenario.viewers");
+  refused([](LoadReport& r) { r.total.record(1000, kHalf); }, "latency_ns.total");
+  refused([](LoadReport& r) { r.first_visible.record(1000, kHalf); }, "latency_ns.first_visible");
+  // Right up to the limit is fine.
+  LoadReport x = a, y = b;
+  x.requests = kHalf;
+  y.requests = kHalf - 1;
+  auto m = merge_reports({x, y});
+  ASSERT_TRUE(m) << m.error().message;
+  EXPECT_EQ(m->requests, std::numeric_limits<std::uint64_t>::max());
+}
+
+TEST(LoadMerge, AReportWithMoreSecondsThanAnyRunIsRefusedNamingTheFieldAndTheFile) {
+  vts::test::TempDir tmp;
+  LoadReport both;
+  json j = to_json(random_run(1, both));
+  // A row per second of the longest run, and more: refused however small the rows are.
+  j["seconds"] = json::array();
+  for (std::size_t i = 0; i <= kMaxReportSeconds; ++i) j["seconds"].push_back(0);
+  expect_refused(report_from_json(j), "seconds holds " + std::to_string(kMaxReportSeconds + 1) +
+                                          " entries, more than " +
+                                          std::to_string(kMaxReportSeconds));
+  const auto file = tmp / "long.json";
+  std::ofstream(file) << j.dump();
+  // Refused while it is read: the parse stops at the first row too many.
+  expect_refused(read_report_file(file), file.string() + ": seconds holds more than " +
+                                             std::to_string(kMaxReportSeconds) + " entries");
+  // So is any other array that long, even one this build does not read.
+  json b = to_json(random_run(1, both));
+  b["extra"] = json::array();
+  for (std::size_t i = 0; i <= kMaxReportSeconds; ++i) b["extra"].push_back(0);
+  std::ofstream(file) << b.dump();
+  expect_refused(read_report_file(file), file.string() + ": extra holds more than");
+}
+
+TEST(LoadMerge, AReportNestedDeeperThanAnyReportIsRefusedNamingTheFile) {
+  vts::test::TempDir tmp;
+  LoadReport both;
+  std::string text = to_json(random_run(1, both)).dump();
+  text.insert(1, "\"x\": " + std::string(100000, '[') + std::string(100000, ']') + ", ");
+  const auto file = tmp / "deep.json";
+  std::ofstream(file) << text;
+  expect_refused(read_report_file(file), file.string() + " nests objects or arrays deeper than 64");
+  std::ofstream(file) << "{not json";
+  expect_refused(read_report_file(file), file.string() + " is not valid JSON");
+}
+
+TEST(LoadMerge, AStartBeyondTheYear2200IsRefused) {
+  LoadReport both;
+  json j = to_json(random_run(1, both));
+  for (const json& start :
+       {json(std::numeric_limits<std::int64_t>::max()),
+        json(std::numeric_limits<std::int64_t>::min()),
+        json(std::numeric_limits<std::uint64_t>::max()), json(7'258'118'400'001)}) {
+    j["start_unix_ms"] = start;
+    expect_refused(report_from_json(j), "start_unix_ms");
+  }
+  j["start_unix_ms"] = 7'258'118'400'000;
+  EXPECT_TRUE(report_from_json(j));
 }
 
 TEST(LatencyHistogramFromBuckets, RefusesWhatNoHistogramWrites) {

@@ -46,7 +46,6 @@ TEST(TileJson, WhatTheWriterWritesTheReaderReadsBack) {
                       .info = &info,
                       .version = "0123456789abcdef",
                       .tiles_url = "http://h:1/earth@0123456789abcdef/{z}/{x}/{y}",
-                      .metadata_json = info.to_json(),
                       .archive_url = "http://h:1/earth.pmtiles"});
   auto t = read(doc);
   ASSERT_TRUE(t.ok()) << t.error().to_string();
@@ -61,7 +60,6 @@ TEST(TileJson, TheWriterEmitsTileJson3WithTheVtstreamObject) {
                                           .info = &info,
                                           .version = "v1",
                                           .tiles_url = "/earth/{z}/{x}/{y}",
-                                          .metadata_json = "",
                                           .archive_url = "/earth.pmtiles"});
   ASSERT_FALSE(doc.empty());
   EXPECT_EQ(doc.back(), '\n');
@@ -110,16 +108,88 @@ TEST(TileJson, AnUnnamedTilesetIsNamedAfterItsTilesetNameAndCarriesNoArchiveKeyW
   EXPECT_FALSE(j["vtstream"].contains("archive"));
 }
 
-TEST(TileJson, UnknownVtstreamKeysOfTheArchiveMetadataAreCopiedVerbatim) {
-  const TilesetInfo info = sample();
-  json meta = json::parse(info.to_json());
-  meta["vtstream"]["future_key"] = "kept";
-  const json j = json::parse(write_tilejson({.tileset = "earth",
-                                             .info = &info,
-                                             .version = "v",
-                                             .tiles_url = "/t/{z}/{x}/{y}",
-                                             .metadata_json = meta.dump()}));
-  EXPECT_EQ(j["vtstream"]["future_key"], "kept");
+TEST(TileJson, EveryVtstreamKeyTheWriterKnowsReadsBack) {
+  // A georeferenced tileset with a content hash: every key to_json() writes travels.
+  TilesetInfo info;
+  info.geometry = tiling_geometry(Tiling::world_crs84_quad, 3, 256, 4).value();
+  info.georeference = Georeference{Tiling::world_crs84_quad, {-10, 35, 30, 60}, {10, 47.5, 2}};
+  info.content_hash = "0123456789abcdef";
+  info.color_space = "linear";
+  info.downsample = "box";
+  info.generator = "other 1.0";
+  info.name = "n";
+  info.description = "d";
+  auto back = read(write_tilejson({.tileset = "n", .info = &info, .tiles_url = "/n/{z}/{x}/{y}"}));
+  ASSERT_TRUE(back.ok()) << back.error().to_string();
+  EXPECT_EQ(back->info.to_json(), info.to_json());
+}
+
+// Archive metadata whose "vtstream" object has keys this build does not know.
+std::string metadata_with(const TilesetInfo& info, const std::string& where,
+                          const std::string& value_json) {
+  std::string meta = info.to_json();
+  const std::string key = where == "georeference" ? "\"georeference\":{" : "\"vtstream\":{";
+  const std::size_t at = meta.find(key);
+  EXPECT_NE(at, std::string::npos) << meta;
+  return meta.insert(at + key.size(), "\"future_key\":" + value_json + ",");
+}
+
+std::string nested_arrays(int levels) {
+  return std::string(std::size_t(levels), '[') + std::string(std::size_t(levels), ']');
+}
+
+TilesetInfo georeferenced() {
+  TilesetInfo info;
+  info.geometry = tiling_geometry(Tiling::web_mercator_quad, 5, 256, 4).value();
+  info.georeference =
+      Georeference{Tiling::web_mercator_quad, {2.25, 48.75, 2.5, 49}, {2.3, 48.9, 4}};
+  return info;
+}
+
+TEST(TileJson, UnknownVtstreamKeysOfTheArchiveMetadataAreNotCopied) {
+  // What an archive's metadata says beyond what this build knows stays in the archive: the
+  // TileJSON's "vtstream" object is made from the TilesetInfo read from it.
+  for (const char* where : {"vtstream", "georeference"}) {
+    SCOPED_TRACE(where);
+    const TilesetInfo written = georeferenced();
+    auto info = TilesetInfo::from_json(
+        metadata_with(written, where, R"({"kept": [[[["somewhere"]]]], "n": 7})"));
+    ASSERT_TRUE(info.ok()) << info.error().to_string();
+    const std::string doc = write_tilejson({.tileset = "earth",
+                                            .info = &*info,
+                                            .version = "v",
+                                            .tiles_url = "/t/{z}/{x}/{y}",
+                                            .archive_url = "/earth.pmtiles"});
+    EXPECT_EQ(doc.find("future_key"), std::string::npos) << doc;
+    json v = json::parse(doc)["vtstream"];
+    EXPECT_EQ(v["archive"], "/earth.pmtiles");
+    v.erase("archive");
+    EXPECT_EQ(v, json::parse(written.to_json())["vtstream"]);
+  }
+}
+
+TEST(TileJson, ArchiveMetadataNestedAHundredThousandLevelsIsRefusedByName) {
+  // 200 KB, far inside the 16 MiB metadata limit: once read, copying or dumping it recursively
+  // (as the TileJSON writer did) overflows the stack. Refused when the archive is opened.
+  for (const char* where : {"vtstream", "georeference"}) {
+    SCOPED_TRACE(where);
+    for (const std::string& deep : {nested_arrays(100000), nested_arrays(65)}) {
+      auto info = TilesetInfo::from_json(metadata_with(georeferenced(), where, deep));
+      ASSERT_FALSE(info.ok());
+      EXPECT_EQ(info.error().code, ErrorCode::corrupt);
+      EXPECT_NE(info.error().message.find(
+                    "tileset metadata nests objects or arrays deeper than 64 levels"),
+                std::string::npos)
+          << info.error().to_string();
+      EXPECT_NE(info.error().message.find("future_key[]"), std::string::npos)
+          << info.error().to_string();
+    }
+    // As deep as the limit allows is read (and the unknown key ignored).
+    const int allowed = std::string(where) == "georeference" ? 61 : 62;
+    auto info =
+        TilesetInfo::from_json(metadata_with(georeferenced(), where, nested_arrays(allowed)));
+    EXPECT_TRUE(info.ok()) << info.error().to_string();
+  }
 }
 
 TEST(TileJson, RelativeTileUrlsResolveAgainstTheDocumentUrl) {
@@ -136,13 +206,43 @@ TEST(TileJson, RelativeTileUrlsResolveAgainstTheDocumentUrl) {
 }
 
 TEST(TileJson, TheReaderRefusesWhatIsNotTileJson) {
-  expect_error(read("not json"), ErrorCode::corrupt, "not a JSON object");
+  expect_error(read("not json"), ErrorCode::corrupt, "is not valid JSON");
   expect_error(read("[1, 2]"), ErrorCode::corrupt, "not a JSON object");
   expect_error(read("{}"), ErrorCode::corrupt, "no \"tiles\" array");
   expect_error(read(R"({"tiles": []})"), ErrorCode::corrupt, "no \"tiles\" array");
   expect_error(read(R"({"tiles": [""]})"), ErrorCode::corrupt, "no \"tiles\" array");
   expect_error(read(R"({"tiles": [7]})"), ErrorCode::corrupt, "no \"tiles\" array");
   expect_error(read(R"({"tiles": ["/t/{z}/{x}"]})"), ErrorCode::corrupt, "lacks {y}");
+}
+
+TEST(TileJson, TheReaderRefusesDeeplyNestedDocumentsWithoutCrashing) {
+  // A hostile server's TileJSON: the reader once copied "vtstream" recursively (SIGSEGV in
+  // `vts loadtest`, `warm`, `cache serve`, `view`).
+  const TilesetInfo info = georeferenced();
+  const json good =
+      json::parse(write_tilejson({.tileset = "p", .info = &info, .tiles_url = "/p/{z}/{x}/{y}"}));
+  const std::string deep = nested_arrays(100000);
+  const std::string vt = good["vtstream"].dump();
+  const std::string geo = good["vtstream"]["georeference"].dump();
+  const std::string tiles = R"("tiles": ["/p/{z}/{x}/{y}"])";
+  const std::string docs[] = {
+      // an unknown key of "vtstream"
+      "{" + tiles + R"(, "vtstream": {"future_key": )" + deep + "," + vt.substr(1) + "}",
+      // inside "georeference"
+      "{" + tiles + R"(, "vtstream": )" + vt.substr(0, vt.size() - 1) +
+          R"(, "georeference": {"future_key": )" + deep + "," + geo.substr(1) + "}}",
+      // "vtstream" itself, and a key of TileJSON's own
+      "{" + tiles + R"(, "vtstream": )" + deep + "}",
+      "{" + tiles + R"(, "vector_layers": )" + deep + R"(, "vtstream": )" + vt + "}",
+      deep,
+  };
+  for (const std::string& doc : docs) {
+    expect_error(read(doc), ErrorCode::corrupt, "nests objects or arrays deeper than 64 levels");
+  }
+  // The same documents without the deep value are read.
+  auto ok = read("{" + tiles + R"(, "vtstream": {"future_key": [[1]],)" + vt.substr(1) + "}");
+  ASSERT_TRUE(ok.ok()) << ok.error().to_string();
+  EXPECT_EQ(*ok->info.georeference, *info.georeference);
 }
 
 TEST(TileJson, TheReaderRefusesTileJsonThatIsNotAVtstreamTileset) {

@@ -131,6 +131,11 @@ TEST(CameraPath, OneKeyIsAStillCamera) {
 TEST(CameraPath, ErrorsNameWhatIsWrong) {
   EXPECT_NE(parse_error("{not json").find("not valid JSON"), std::string::npos);
   EXPECT_NE(parse_error("[1,2]").find("not a JSON object"), std::string::npos);
+  // A camera file from anywhere: nesting is limited as it is parsed.
+  EXPECT_NE(parse_error(R"({"keys":[{"frame":0,"x":)" + std::string(100000, '[') +
+                        std::string(100000, ']') + "}]}")
+                .find("camera path: the document nests objects or arrays deeper than 64 levels"),
+            std::string::npos);
   EXPECT_NE(parse_error("{}").find("no \"keys\""), std::string::npos);
   EXPECT_NE(parse_error(R"({"keys":3})").find("not an array"), std::string::npos);
   EXPECT_NE(parse_error(R"({"keys":[]})").find("empty"), std::string::npos);

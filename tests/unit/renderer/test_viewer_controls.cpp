@@ -86,6 +86,28 @@ TEST_F(SceneSpec, ErrorsNameTheSpecAndTheProblem) {
   EXPECT_EQ(bad_camera.error().message.find("key 0"), std::string::npos);
 }
 
+TEST_F(SceneSpec, ADeeplyNestedFileIsRefusedAndUnknownCameraKeysAreIgnored) {
+  // The camera object was copied whole, recursively: 100,000 levels overflowed the stack.
+  bool globe = false;
+  CameraKey cam;
+  const std::string deep = std::string(100000, '[') + std::string(100000, ']');
+  auto r =
+      parse_scene(file("deep.json",
+                       R"({"scene": "plane", "camera": {"center": [1, 2], "note": )" + deep + "}}"),
+                  globe, cam);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.error().code, ErrorCode::invalid_argument);
+  EXPECT_NE(r.error().message.find("nests objects or arrays deeper than 64 levels"),
+            std::string::npos)
+      << r.error().message;
+  EXPECT_NE(r.error().message.find("deep.json"), std::string::npos) << r.error().message;
+  r = parse_scene(file("n.json", R"({"scene": "plane", "camera": {"center": [1, 2],
+                                     "note": [[["a"]]], "frame": 9}})"),
+                  globe, cam);
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  EXPECT_DOUBLE_EQ(cam.plane.center_u, 1);
+}
+
 TEST(HudText, ShowsTheStreamingNumbersTheTextureAndThePlaneCamera) {
   HudNumbers n;
   n.resident = 42;

@@ -33,7 +33,8 @@ class LatencyHistogram {
 
   void record(std::uint64_t value, std::uint64_t count = 1);
   // Adds every count of `other` (merge(*this) doubles every count). invalid_argument (and no
-  // change) when the two were made with different sub_bucket_bits, even if `other` is empty.
+  // change) when the two were made with different sub_bucket_bits, even if `other` is empty, or
+  // when their counts sum past 2^64 - 1.
   Status merge(const LatencyHistogram& other);
   void reset();
 
@@ -56,8 +57,8 @@ class LatencyHistogram {
   // The histogram that buckets() (with min(), max() and mean()) describes: the inverse of reading
   // those, so a histogram written to JSON and read back has the same counts, percentiles, min and
   // max, and its mean to double precision. invalid_argument when a bucket is not one of this
-  // sub_bucket_bits' buckets, the buckets are not in increasing order, a count is 0, or min/max
-  // lie outside the first/last bucket.
+  // sub_bucket_bits' buckets, the buckets are not in increasing order, a count is 0, the counts
+  // sum past 2^64 - 1, or min/max lie outside the first/last bucket.
   static Result<LatencyHistogram> from_buckets(int sub_bucket_bits,
                                                const std::vector<Bucket>& buckets,
                                                std::uint64_t min, std::uint64_t max, double mean);

@@ -11,6 +11,7 @@
 #pragma once
 
 #include <chrono>
+#include <cstddef>
 #include <cstdint>
 #include <filesystem>
 #include <map>
@@ -116,12 +117,20 @@ Status write_html_report(const LoadReport& report, const std::filesystem::path& 
 // The page write_html_report() writes, as a string.
 std::string html_report(const LoadReport& report, const LoadReport* baseline = nullptr);
 
+// The most per-second rows a report read back may have: `vts loadtest --duration` runs at most a
+// week; a day more leaves room for requests still completing. No array or object of a report
+// file may hold more entries either (read_report_file), so reading one costs bounded memory.
+inline constexpr std::size_t kMaxReportSeconds = 8 * 24 * 3600;
+
 // The LoadReport a to_json() document describes (the inverse of to_json for every field it
 // writes; the histograms are rebuilt from their buckets, so counts and percentiles are exact).
-// invalid_argument naming the first missing or malformed field, or a document that is not a
-// "vts-loadtest-report" of version 1.
+// invalid_argument naming the first missing or malformed field (more than kMaxReportSeconds
+// seconds, counts that sum past 2^64 - 1, a start_unix_ms beyond the year 2200), or a document
+// that is not a "vts-loadtest-report" of version 1.
 Result<LoadReport> report_from_json(const nlohmann::json& j);
-// report_from_json of a file; errors name the file (not_found, io, invalid_argument for bad JSON).
+// report_from_json of a file; errors name the file (not_found, io, invalid_argument for bad JSON,
+// objects or arrays nested deeper than 64 levels, or one holding more than kMaxReportSeconds
+// entries, refused as they are read).
 Result<LoadReport> read_report_file(const std::filesystem::path& file);
 
 // One report of N load generators that ran at the same time against one target: every count,
@@ -131,7 +140,9 @@ Result<LoadReport> read_report_file(const std::filesystem::path& file);
 // sums; title, target, path, fps and mode are the first report's. Per-second rows add up by
 // index (second i after each run's own start); their p50/p90/p99 are the highest of the runs'
 // (an upper bound of the union's, which the per-second figures cannot give exactly).
-// invalid_argument for no reports or different sub_bucket_bits.
+// invalid_argument for no reports, different sub_bucket_bits, or counts (totals, tiers, statuses,
+// error kinds, a second's requests, bytes or errors, a histogram's) that sum past 2^64 - 1, or
+// viewers past 2^32 - 1: the error names the field and the report (1-based, in the given order).
 Result<LoadReport> merge_reports(const std::vector<LoadReport>& reports);
 
 }  // namespace vts::client

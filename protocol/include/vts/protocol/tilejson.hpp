@@ -23,14 +23,13 @@ struct TileJsonFields {
   const TilesetInfo* info = nullptr;  // required
   std::string_view version;           // the archive version ("" = unknown)
   std::string_view tiles_url;         // the one URL template, with {z}, {x} and {y}
-  // Archive metadata whose "vtstream" object is copied verbatim (so keys this build does not know
-  // travel too); "" = the object made from `info`.
-  std::string_view metadata_json;
-  std::string_view archive_url;  // "" = no "archive" key in the "vtstream" object
+  std::string_view archive_url;       // "" = no "archive" key in the "vtstream" object
 };
 
-// The document, pretty-printed (two-space indent) with a trailing newline. Invalid UTF-8 in
-// strings is replaced, never an error.
+// The document, pretty-printed (two-space indent) with a trailing newline. Its "vtstream" object
+// is the one info.to_json() writes (plus "archive"): made from what this build read of the
+// archive's metadata, never copied from it, so keys it does not know do not travel. Invalid UTF-8
+// in strings is replaced, never an error.
 std::string write_tilejson(const TileJsonFields& fields);
 
 // What a reader takes from a TileJSON document.
@@ -41,9 +40,10 @@ struct TileJson {
 };
 
 // Parses a TileJSON document fetched from `url` (used to resolve a relative "tiles" entry and to
-// name the document in errors). Errors: corrupt (not a JSON object, no "tiles" array of
-// non-empty strings, a template without {z}, {x} or {y}), unsupported (no "vtstream" object),
-// and whatever TilesetInfo::from_json says of the "vtstream" object.
+// name the document in errors). Errors: corrupt (not valid JSON, objects or arrays nested deeper
+// than parse_json() allows, not a JSON object, no "tiles" array of non-empty strings, a template
+// without {z}, {x} or {y}), unsupported (no "vtstream" object), and whatever TilesetInfo says of
+// the "vtstream" object's keys it knows (the others are ignored).
 Result<TileJson> read_tilejson(std::span<const std::uint8_t> body, const std::string& url);
 
 // Resolves a reference against a base URL (RFC 3986 §5.2, for the forms that occur in TileJSON:
