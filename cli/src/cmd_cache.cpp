@@ -5,8 +5,6 @@
 // Offline: whenever the upstream opens, its SourceInfo is saved in the cache folder. When it does
 // not open at start, the daemon serves what the cache holds (the rest: 503) from that saved
 // SourceInfo and keeps trying to reopen the upstream in the background.
-#include <unistd.h>
-
 #include <chrono>
 #include <cstdio>
 #include <string>

@@ -40,17 +40,6 @@ struct LoadArgs {
   GeneratorShare share;  // from `generator`, once parsed
 };
 
-std::string latency_text(std::uint64_t ns) {
-  char b[32];
-  if (ns < 1000000)
-    std::snprintf(b, sizeof b, "%.0f us", double(ns) * 1e-3);
-  else if (ns < 1000000000)
-    std::snprintf(b, sizeof b, "%.1f ms", double(ns) * 1e-6);
-  else
-    std::snprintf(b, sizeof b, "%.2f s", double(ns) * 1e-9);
-  return b;
-}
-
 // One line a second: redrawn in place on a terminal, appended elsewhere (not with --json).
 std::function<void(const client::LoadProgress&)> progress_printer(const LoadArgs& a, bool bar) {
   if (a.quiet) return {};
@@ -62,7 +51,8 @@ std::function<void(const client::LoadProgress&)> progress_printer(const LoadArgs
         "%llu moves at full resolution%s",
         p.elapsed_s, duration, static_cast<unsigned long long>(p.requests), p.requests_per_s,
         static_cast<unsigned long long>(p.errors), static_cast<unsigned long long>(p.in_flight),
-        latency_text(p.p99_ns).c_str(), static_cast<unsigned long long>(p.moves_complete),
+        client::duration_text(double(p.p99_ns)).c_str(),
+        static_cast<unsigned long long>(p.moves_complete),
         p.late_frames ? (", " + std::to_string(p.late_frames) + " late frames").c_str() : "");
     if (bar)
       std::fprintf(stderr, "\r\033[K%s", line);

@@ -45,20 +45,11 @@ Status check_args(const ViewArgs& a) {
     return make_error(ErrorCode::invalid_argument, "--width/--height must be between 1 and 16384");
   if (a.headless && a.frames < 1)
     return make_error(ErrorCode::invalid_argument, "--headless needs --frames N (N >= 1)");
-  // The files written (the camera path recorded, the screenshot) are none of those read.
-  const std::filesystem::path read[] = {a.source, a.camera_path, a.scene};
-  for (const std::string& out : {a.record, a.screenshot})
-    if (!out.empty())
-      if (Status s = check_output_is_not_an_input(out, read); !s) return s;
-  if (!a.record.empty()) {
-    // Known before a long session, not at its end: the folder the file goes to exists.
-    namespace fs = std::filesystem;
-    const fs::path dir = fs::path(a.record).parent_path();
-    std::error_code ec;
-    if (fs::is_directory(a.record, ec) || !fs::is_directory(dir.empty() ? "." : dir, ec))
-      return make_error(ErrorCode::invalid_argument,
-                        "--record " + a.record + ": not a file in an existing folder");
-  }
+  // The files written (the camera path recorded, the screenshot): known good before a long
+  // session, not at its end.
+  for (const auto& [out, option] :
+       {std::pair{a.record, "--record"}, {a.screenshot, "--screenshot"}})
+    if (Status s = check_output_file(out, option, {a.source, a.camera_path, a.scene}); !s) return s;
   return {};
 }
 

@@ -624,6 +624,10 @@ nlohmann::json to_json(const LoadReport& r) {
   return j;
 }
 
+std::string duration_text(double ns) {
+  return format_ns(ns);
+}
+
 std::string summary_table(const LoadReport& r) {
   std::string out;
   out += (r.title.empty() ? std::string("vts loadtest") : terminal_safe(r.title)) + "\n";

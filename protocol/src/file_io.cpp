@@ -100,6 +100,17 @@ Status check_output_is_not_an_input(const fs::path& output, std::span<const fs::
   return {};
 }
 
+Status check_output_file(const fs::path& output, std::string_view option,
+                         std::initializer_list<fs::path> inputs) {
+  if (output.empty()) return {};
+  const fs::path dir = output.parent_path();
+  std::error_code ec;
+  if (fs::is_directory(output, ec) || !fs::is_directory(dir.empty() ? "." : dir, ec))
+    return make_error(ErrorCode::invalid_argument, std::string(option) + " " + output.string() +
+                                                       ": not a file in an existing folder");
+  return check_output_is_not_an_input(output, {inputs.begin(), inputs.size()});
+}
+
 Result<int> open_input_file(const fs::path& path, struct stat* st_out) {
   const auto sys_error = [&](const char* what, int err) {
     return make_error(err == ENOENT ? ErrorCode::not_found : ErrorCode::io,

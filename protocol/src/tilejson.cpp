@@ -75,8 +75,8 @@ std::string write_tilejson(const TileJsonFields& f) {
 Result<TileJson> read_tilejson(std::span<const std::uint8_t> body, const std::string& url) {
   // Depth-limited (any server may answer): the "vtstream" object is then safe to walk.
   const std::string_view text(reinterpret_cast<const char*>(body.data()), body.size());
-  Result<json> parsed = parse_json(text, url);
-  if (!parsed) return std::move(parsed).error();
+  Result<json> parsed = parse_json(text, "its body");
+  if (!parsed) return not_tilejson(url, parsed.error().message);
   const json& j = *parsed;
   if (!j.is_object()) return not_tilejson(url, "not a JSON object");
   TileJson t;

@@ -96,6 +96,10 @@ nlohmann::json to_json(const LoadReport& report);
 // ending in a newline. Durations carry their own unit (ns, us, ms, s).
 std::string summary_table(const LoadReport& report);
 
+// A duration as the summary writes it: "850 ns", "12.3 us", "1.25 ms", "12.0 s", "2.50 min" (three
+// significant digits; "-" when not finite).
+std::string duration_text(double ns);
+
 // Writes dir/index.html: one self-contained page (inline CSS and SVG, no scripts, no external
 // resources) with the run's description, the summary tables and four plots, each an
 // <svg class="plot"> with axes, tick labels and a legend, and with these ids:

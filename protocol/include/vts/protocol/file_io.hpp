@@ -4,6 +4,7 @@
 #pragma once
 
 #include <filesystem>
+#include <initializer_list>
 #include <span>
 #include <string>
 #include <string_view>
@@ -26,6 +27,13 @@ Status write_file_atomically(const std::filesystem::path& path, std::string_view
 // before it writes anything.
 Status check_output_is_not_an_input(const std::filesystem::path& output,
                                     std::span<const std::filesystem::path> inputs);
+
+// What a command checks of a file it will write, before any long work: that `output` is not a
+// folder, that the folder it goes in exists, and check_output_is_not_an_input(output, inputs).
+// invalid_argument naming `option` ("--record") and the file. An empty `output` (none asked for)
+// passes.
+Status check_output_file(const std::filesystem::path& output, std::string_view option,
+                         std::initializer_list<std::filesystem::path> inputs);
 
 // Opens an input file for reading and returns its descriptor (O_CLOEXEC; the caller closes it),
 // with its fstat in `*st` when `st` is given. Opened with O_NONBLOCK, so a FIFO never blocks the
