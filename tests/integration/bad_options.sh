@@ -29,6 +29,11 @@ expect_refused --zstd-level "$VTS" build --synthetic 512x512 --zstd-level 22 -o 
 expect_refused --name "$VTS" build --synthetic 512x512 --name '' -o "$WORK/x.pmtiles"
 [[ ! -e $WORK/x.pmtiles ]] || fail "a refused build wrote its output"
 
+note "vts serve"
+# CR/LF in the Access-Control-Allow-Origin value would end the header and forge the rest.
+expect_refused "cors_origin holds a control character" "$VTS" serve "$WORK/s.pmtiles" \
+  --listen 127.0.0.1:0 --no-admin --cors-origin $'https://a.example\r\nSet-Cookie: x=1'
+
 note "vts verify"
 expect_refused --threads "$VTS" verify "$WORK/s.pmtiles" --threads 100000
 
