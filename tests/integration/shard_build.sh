@@ -145,15 +145,13 @@ expect_ok "$VTS" build --plan "$big" --shard 0 --out-dir "$WORK/big_ref" --threa
 mkdir -p "$WORK/big"
 "$VTS" build --plan "$big" --shard 0 --out-dir "$WORK/big" --threads 1 -q &
 pid=$!
-# Mid-way: once it has spooled tiles (an unlinked file beside the part, seen through /proc),
-# before the part exists.
+# Mid-way: once it has spooled tiles, before the part exists. The spool is an unlinked file
+# beside the part, and its only writes before the part are spooled tiles: /proc/PID/io's wchar
+# tells (some kernels and sandboxes cannot stat an unlinked file through /proc/PID/fd).
 spooled() {
-  local fd
-  for fd in /proc/"$pid"/fd/*; do
-    [[ $(readlink "$fd" 2>/dev/null) == *.spool-* ]] || continue
-    (($(stat -L -c %s "$fd" 2>/dev/null || echo 0) > 0)) && return 0
-  done
-  return 1
+  local written
+  written=$(awk '/^wchar:/ { print $2 }' /proc/"$pid"/io 2>/dev/null)
+  ((${written:-0} > 0))
 }
 deadline=$((SECONDS + 60))
 until spooled; do
