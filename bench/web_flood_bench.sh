@@ -55,16 +55,10 @@ finish() {
 trap finish EXIT
 
 ulimit -n 4096 2>/dev/null || true  # 500 client sockets and as many server ones
-"$VTS" serve "$ARCHIVE" --listen 127.0.0.1:0 --admin 127.0.0.1:0 --threads 2 \
-  >"$T/vts.out" 2>"$T/vts.err" &
-VTS_PID=$!
-for ((i = 0; i < 200; i++)); do
-  grep -q 'listening on' "$T/vts.out" 2>/dev/null && break
-  sleep 0.05
-done
-PORT=$(sed -nE 's|.*listening on http://[^ ]*:([0-9]+) .*|\1|p' "$T/vts.out")
+# start_vts_serve's --no-admin is overridden: the flood's work is read from the admin /metrics.
+start_vts_serve "$ARCHIVE" "$T" 2 --admin 127.0.0.1:0
 ADMIN=$(sed -nE 's|.*\(admin http://[^ ]*:([0-9]+)\).*|\1|p' "$T/vts.out")
-[[ -n $PORT && -n $ADMIN ]] || die "vts serve did not start: $(cat "$T/vts.err")"
+[[ -n $ADMIN ]] || die "vts serve printed no admin port: $(cat "$T/vts.out")"
 
 start_nginx_static "$STATIC" "$T" 2
 python3 "$BENCH_DIR/web_flood.py" --port "$PORT" --admin-port "$ADMIN" --tileset flood_32768 \
