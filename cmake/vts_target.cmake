@@ -48,3 +48,25 @@ function(vts_library name)
   target_include_directories(vts_${name} PUBLIC ${CMAKE_CURRENT_SOURCE_DIR}/include)
   target_link_libraries(vts_${name} PUBLIC ${ARG_PUBLIC} PRIVATE ${ARG_PRIVATE})
 endfunction()
+
+# vts_install_executable(<target>): installs the executable into bin/ stripped, with its debug
+# information kept apart in bin/.debug/<name>.debug and named by a .gnu_debuglink section, where
+# gdb, perf and eu-stack look for it. A build without debug information (Release) installs the
+# stripped executable and a small .debug file of symbols only.
+function(vts_install_executable target)
+  install(TARGETS ${target} RUNTIME DESTINATION bin)
+  if(NOT CMAKE_OBJCOPY)
+    message(FATAL_ERROR "vts_install_executable: no objcopy (binutils) found")
+  endif()
+  set(name "$<TARGET_FILE_NAME:${target}>")
+  install(CODE "
+    set(_bin \"\$ENV{DESTDIR}\${CMAKE_INSTALL_PREFIX}/bin\")
+    file(MAKE_DIRECTORY \"\${_bin}/.debug\")
+    execute_process(COMMAND \"${CMAKE_OBJCOPY}\" --only-keep-debug \"\${_bin}/${name}\"
+                            \"\${_bin}/.debug/${name}.debug\" COMMAND_ERROR_IS_FATAL ANY)
+    execute_process(COMMAND \"${CMAKE_OBJCOPY}\" --strip-debug --strip-unneeded
+                            \"--add-gnu-debuglink=\${_bin}/.debug/${name}.debug\" \"\${_bin}/${name}\"
+                            COMMAND_ERROR_IS_FATAL ANY)
+    message(STATUS \"Stripped: \${_bin}/${name} (debug information: \${_bin}/.debug/${name}.debug)\")
+  ")
+endfunction()

@@ -3,8 +3,9 @@
 #   1. scripts/setup.sh (packages; quick when already installed)
 #   2. clang-format --dry-run --Werror over every tracked *.cpp/*.hpp
 #   3. build/      RelWithDebInfo (line tables only), warnings are errors
-#   4. build-server/ the server-only `vts` (no builder, renderer, tests), which the deploy test
-#                  checks; with ccache (when installed) its library objects come from build/'s
+#   4. build-server/, build-viewer/, build-builder/: the other configurations (server only, which
+#                  the deploy test checks; viewer without the builder; builder without the
+#                  renderer); with ccache (when installed) their objects come from build/'s
 #   5. build/      every ctest (unit, fuzz-corpus replays, lint, integration)
 #   6. build-asan/ ASan + UBSan: only the unit-test executables and fuzz replays (ctest -L unit)
 #   7. build-tsan/ TSan: the unit tests of the multi-threaded libraries (server, client with the
@@ -150,17 +151,30 @@ else
   skip "build build/" "configure failed"
 fi
 
-# --- 4. server-only build: the deployment's `vts` (checked by the deploy test) --------------------
-# The same flags as build/, so ccache serves every library object from the main build.
-if step "configure build-server/" configure build-server -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-  "${RELWITHDEBINFO_FLAGS[@]}" -DVTS_BUILD_RENDERER=OFF -DVTS_BUILD_BUILDER=OFF -DVTS_BUILD_TESTS=OFF -DVTS_BUILD_BENCH=OFF \
-  -DVTS_WERROR=ON; then
-  if step "build build-server/ (vts)" cmake --build build-server -j"$JOBS" --target vts; then
-    export VTS_SERVER_ONLY="$ROOT/build-server/cli/vts"
+# --- 4. the other configurations users build: each must configure and build ----------------------
+# server-only: the deployment's `vts` (checked by the deploy test); viewer without the builder;
+# builder without the renderer. The same flags as build/, so ccache serves every object they share
+# with the main build and only what differs (the CLI's entry points) is compiled.
+# config_build DIR TARGETS CMAKE ARGS...: configure DIR and build TARGETS (comma-separated).
+# shellcheck disable=SC2317  # called through step()
+config_build() {
+  local dir=$1 targets=$2 t
+  shift 2
+  if step "configure $dir/" configure "$dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+    "${RELWITHDEBINFO_FLAGS[@]}" -DVTS_BUILD_TESTS=OFF -DVTS_BUILD_BENCH=OFF -DVTS_WERROR=ON "$@"; then
+    local args=()
+    for t in ${targets//,/ }; do args+=(--target "$t"); done
+    step "build $dir/ ($targets)" cmake --build "$dir" -j"$JOBS" "${args[@]}"
+  else
+    skip "build $dir/ ($targets)" "configure failed"
+    return 1
   fi
-else
-  skip "build build-server/ (vts)" "configure failed"
+}
+if config_build build-server vts -DVTS_BUILD_RENDERER=OFF -DVTS_BUILD_BUILDER=OFF; then
+  export VTS_SERVER_ONLY="$ROOT/build-server/cli/vts"
 fi
+config_build build-viewer vts -DVTS_BUILD_RENDERER=ON -DVTS_BUILD_BUILDER=OFF
+config_build build-builder vts,vts-build -DVTS_BUILD_RENDERER=OFF -DVTS_BUILD_BUILDER=ON
 
 # --- 5. every test of the main build (the deploy test reads VTS_SERVER_ONLY) --------------------
 if ((MAIN_BUILT)); then

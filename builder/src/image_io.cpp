@@ -19,31 +19,6 @@ std::string quoted(const std::filesystem::path& p) {
 
 }  // namespace
 
-Status write_png(const std::filesystem::path& path, int width, int height,
-                 std::span<const std::uint8_t> rgba) {
-  if (width <= 0 || height <= 0 || rgba.size() != std::size_t(width) * std::size_t(height) * 4)
-    return make_error(ErrorCode::invalid_argument, "cannot write " + quoted(path) + ": invalid " +
-                                                       std::to_string(width) + "x" +
-                                                       std::to_string(height) + " image");
-  auto out = OIIO::ImageOutput::create("png");
-  if (!out)
-    return make_error(ErrorCode::unsupported,
-                      "cannot write " + quoted(path) + ": no PNG writer: " + OIIO::geterror());
-  OIIO::ImageSpec spec(width, height, 4, OIIO::TypeDesc::UINT8);
-  spec.attribute("oiio:ColorSpace", "sRGB");
-  spec.attribute("oiio:UnassociatedAlpha", 1);  // straight alpha as given: no un-premultiplying
-  if (!out->open(path.string(), spec))
-    return make_error(ErrorCode::io, "cannot write " + quoted(path) + ": " + out->geterror());
-  if (!out->write_image(OIIO::TypeDesc::UINT8, rgba.data())) {
-    const std::string error = out->geterror();
-    out->close();
-    return make_error(ErrorCode::io, "writing " + quoted(path) + ": " + error);
-  }
-  if (!out->close())
-    return make_error(ErrorCode::io, "writing " + quoted(path) + ": " + out->geterror());
-  return {};
-}
-
 Result<Rgba8Image> read_rgba8(const std::filesystem::path& path) {
   // Not a FIFO or a device: OpenImageIO would wait for a writer, or read /dev/zero forever.
   if (Status s = check_input_file(path); !s) {

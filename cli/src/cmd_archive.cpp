@@ -1,4 +1,4 @@
-// vts info / verify / extract: inspect an archive.
+// vts info / verify: inspect an archive.
 #include <cstdio>
 #include <nlohmann/json.hpp>
 
@@ -6,23 +6,10 @@
 #include "progress.hpp"
 #include "vts/protocol/file_io.hpp"
 #include "vts/protocol/inspect.hpp"
-#ifdef VTS_HAVE_BUILDER
-#include "vts/builder/extract.hpp"
-#endif
 
 namespace vts::cli {
 
 namespace {
-
-Result<std::shared_ptr<pmtiles::Reader>> open_archive(const std::string& path) {
-  auto r = pmtiles::Reader::open(path);
-  if (!r) {
-    Error e = std::move(r).error();
-    e.message = "'" + path + "': " + e.message;
-    return e;
-  }
-  return r;
-}
 
 void print_info_json(const std::string& path, const ArchiveSummary& s) {
   const Geometry& g = s.info.geometry;
@@ -160,47 +147,6 @@ int run_verify(const std::string& path, bool json, unsigned threads) {
   return 0;
 }
 
-#ifdef VTS_HAVE_BUILDER
-struct ExtractArgs {
-  std::string archive, tile, output;
-  int level = -1;
-  bool with_border = false;
-  int channels = 4;
-};
-
-int run_extract(const ExtractArgs& a) {
-  if (a.tile.empty() == (a.level < 0))
-    return report_error(
-        make_error(ErrorCode::invalid_argument, "give exactly one of Z/X/Y or --level Z"));
-  const std::filesystem::path archive = a.archive;
-  if (Status s = check_output_is_not_an_input(a.output, {&archive, 1}); !s)
-    return report_error(s.error());
-  auto reader = open_archive(a.archive);
-  if (!reader) return report_error(reader.error());
-  auto info = archive_tileset((*reader)->header(), (*reader)->metadata_json());
-  if (!info) return report_error(info.error());
-  ExtractOptions o;
-  o.output = a.output;
-  o.with_border = a.with_border;
-  o.channels = a.channels;
-  // SIGINT/SIGTERM stop a level's extraction cleanly (its temporary file removed); a second kills.
-  o.cancel = &install_stop_signals();
-  Status st;
-  if (!a.tile.empty()) {
-    auto id = parse_tile_id(a.tile);
-    if (!id) return report_error(id.error());
-    st = extract_tile(**reader, *info, *id, o);
-  } else {
-    if (a.with_border)
-      return report_error(
-          make_error(ErrorCode::invalid_argument, "--with-border applies to a single tile"));
-    st = extract_level(**reader, *info, a.level, o);
-  }
-  if (!st) return report_error(st.error());
-  return 0;
-}
-#endif
-
 }  // namespace
 
 Runner add_info(CLI::App& app) {
@@ -224,22 +170,5 @@ Runner add_verify(CLI::App& app) {
   c->add_flag("--json", *json, "Print the report as JSON");
   return [path, json, threads] { return run_verify(*path, *json, *threads); };
 }
-
-#ifdef VTS_HAVE_BUILDER
-Runner add_extract(CLI::App& app) {
-  auto a = std::make_shared<ExtractArgs>();
-  CLI::App* c = app.add_subcommand(
-      "extract", "Write one tile, or a whole level stitched together, as an image file");
-  c->add_option("archive", a->archive, "Archive (.pmtiles)")->required();
-  c->add_option("tile", a->tile, "Tile as Z/X/Y");
-  c->add_option("--level", a->level, "Extract the whole level Z");
-  c->add_option("-o,--output", a->output, "Output image; format from the extension")->required();
-  c->add_flag("--with-border", a->with_border, "Include the tile's border texels");
-  c->add_option("--channels", a->channels, "4 = RGBA, 3 = RGB")
-      ->check(CLI::IsMember({3, 4}))
-      ->capture_default_str();
-  return [a] { return run_extract(*a); };
-}
-#endif
 
 }  // namespace vts::cli

@@ -10,11 +10,11 @@
 
 #include "commands.hpp"
 #include "image_target.hpp"
-#include "vts/builder/image_io.hpp"
 #include "vts/client/saved_source.hpp"
 #include "vts/client/source.hpp"
 #include "vts/client/tile_client.hpp"
 #include "vts/protocol/file_io.hpp"
+#include "vts/protocol/web_image.hpp"
 #include "vts/renderer/geo_view.hpp"
 #include "vts/renderer/viewer.hpp"
 

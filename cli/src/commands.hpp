@@ -6,26 +6,30 @@
 #include <atomic>
 #include <cstdint>
 #include <functional>
+#include <memory>
+#include <span>
 #include <string>
 #include <utility>
 
+#include "vts/protocol/pmtiles.hpp"
 #include "vts/protocol/result.hpp"
 
 namespace vts::cli {
 
 using Runner = std::function<int()>;
+using Adder = Runner (*)(CLI::App& app);
 
-#ifdef VTS_HAVE_BUILDER
+// The build tooling's commands (`vts-build`, linked with the builder: OpenImageIO and GDAL).
 Runner add_build(CLI::App& app);
-Runner add_plan(CLI::App& app);   // vts plan (cmd_plan.cpp)
-Runner add_merge(CLI::App& app);  // vts merge (cmd_merge.cpp)
-#endif
+Runner add_plan(CLI::App& app);     // vts plan (cmd_plan.cpp)
+Runner add_merge(CLI::App& app);    // vts merge (cmd_merge.cpp)
+Runner add_extract(CLI::App& app);  // vts extract (cmd_extract.cpp)
+Runner add_export(CLI::App& app);   // vts export (cmd_export.cpp)
+Runner add_bench(CLI::App& app);    // vts bench accuracy (cmd_bench.cpp): only with VTS_BUILD_BENCH
+
+// The runtime's commands (`vts`).
 Runner add_info(CLI::App& app);
 Runner add_verify(CLI::App& app);
-#ifdef VTS_HAVE_BUILDER
-Runner add_extract(CLI::App& app);
-Runner add_export(CLI::App& app);  // vts export (cmd_export.cpp)
-#endif
 Runner add_serve(CLI::App& app);
 Runner add_sign(CLI::App& app);
 Runner add_cache(CLI::App& app);  // vts cache serve (cmd_cache.cpp)
@@ -34,12 +38,19 @@ Runner add_loadtest(CLI::App& app);  // vts loadtest (cmd_loadtest.cpp)
 // vts loadtest compare | merge (cmd_loadtest_tools.cpp): subcommands of `loadtest`; the runner
 // runs the one that was parsed.
 Runner add_loadtest_tools(CLI::App& loadtest);
-#ifdef VTS_HAVE_ACCURACY
-Runner add_bench(CLI::App& app);  // vts bench accuracy (cmd_bench.cpp): only with VTS_BUILD_BENCH
-#endif
-#ifdef VTS_HAVE_VIEWER
 Runner add_view(CLI::App& app);  // vts view (cmd_view.cpp): only when the renderer is built
-#endif
+
+// Registers the subcommands `adders` add to `app` (with --version), parses the command line and
+// runs the subcommand given: the process's exit status (entry.cpp).
+int run_cli(CLI::App& app, std::span<const Adder> adders, int argc, char** argv);
+
+// The handover of build commands from `vts` to `vts-build` (handover.cpp): the build command
+// argv[1] names, else nullptr; the build commands as entries of `vts --help`; and the exec of
+// `vts-build` (beside this executable, else on PATH) with the same arguments, which returns only
+// when neither can be run: the exit status of the error it reports.
+const char* builder_command(int argc, char** argv);
+void list_builder_commands(CLI::App& app);
+int hand_over_to_builder(const char* command, int argc, char** argv);
 
 // The most a --threads option takes (0 is one per core): far above any machine's cores, below
 // what makes thread creation fail.
@@ -73,6 +84,9 @@ std::string unknown_command(CLI::App& app, int argc, char** argv);
 // named with the command it was given to, and the nearest option of that command if near; "" when
 // no extra is an --option.
 std::string unknown_option(CLI::App& app, const std::vector<std::string>& extras);
+
+// Opens the archive an argument names; an error names the path.
+Result<std::shared_ptr<pmtiles::Reader>> open_archive(const std::string& path);
 
 // Prints "vts: error: <message>" to stderr and returns the mapped exit code.
 int report_error(const vts::Error& e);

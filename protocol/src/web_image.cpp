@@ -14,15 +14,10 @@
 #include <cstring>
 #include <string>
 
+#include "vts/protocol/file_io.hpp"
+
 namespace vts {
 namespace {
-
-bool iequals(std::string_view a, std::string_view b) {
-  return std::equal(a.begin(), a.end(), b.begin(), b.end(), [](char x, char y) {
-    return std::tolower(static_cast<unsigned char>(x)) ==
-           std::tolower(static_cast<unsigned char>(y));
-  });
-}
 
 Error bad(std::string message) {
   return make_error(ErrorCode::invalid_argument, std::move(message));
@@ -46,9 +41,11 @@ void png_flush_nothing(png_structp) {}
 }
 void png_ignore_warning(png_structp, png_const_charp) {}
 
-// Writes `rows` (RGB or RGBA, 8 bits) as PNG into `out`; false with `message` set on failure.
+// Writes `rows` (RGB or RGBA, 8 bits) as PNG into `out`, with an sRGB chunk when `srgb`; false
+// with `message` set on failure.
 bool write_png(const std::uint8_t* pixels, std::uint32_t width, std::uint32_t height,
-               bool has_alpha, int level, std::vector<std::uint8_t>* out, PngMessage* message) {
+               bool has_alpha, int level, bool srgb, std::vector<std::uint8_t>* out,
+               PngMessage* message) {
   png_structp png =
       png_create_write_struct(PNG_LIBPNG_VER_STRING, message, png_fail, png_ignore_warning);
   if (png == nullptr) return false;
@@ -61,6 +58,7 @@ bool write_png(const std::uint8_t* pixels, std::uint32_t width, std::uint32_t he
   png_set_compression_level(png, level);
   png_set_IHDR(png, info, width, height, 8, has_alpha ? PNG_COLOR_TYPE_RGBA : PNG_COLOR_TYPE_RGB,
                PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
+  if (srgb) png_set_sRGB(png, info, PNG_sRGB_INTENT_PERCEPTUAL);
   png_write_info(png, info);
   const std::size_t stride = std::size_t(width) * (has_alpha ? 4 : 3);
   for (std::uint32_t y = 0; y < height; ++y)
@@ -84,9 +82,9 @@ Result<std::vector<std::uint8_t>> encode_png(const TileImage& rgba, int level) {
     std::vector<std::uint8_t> rgb(std::size_t(rgba.width) * rgba.height * 3);
     for (std::size_t i = 0, j = 0; i < rgba.pixels.size(); i += 4, j += 3)
       std::memcpy(&rgb[j], &rgba.pixels[i], 3);
-    ok = write_png(rgb.data(), rgba.width, rgba.height, false, level, &out, &message);
+    ok = write_png(rgb.data(), rgba.width, rgba.height, false, level, false, &out, &message);
   } else {
-    ok = write_png(rgba.pixels.data(), rgba.width, rgba.height, true, level, &out, &message);
+    ok = write_png(rgba.pixels.data(), rgba.width, rgba.height, true, level, false, &out, &message);
   }
   if (!ok) return make_error(ErrorCode::io, std::string("PNG encoding failed: ") + message.text);
   return out;
@@ -324,6 +322,27 @@ Result<TileImage> tile_content(const TileImage& stored, const Geometry& geometry
                 &rgba->pixels[(std::size_t(y + b) * s + b) * 4], row);
   }
   return out;
+}
+
+Status write_png(const std::filesystem::path& path, int width, int height,
+                 std::span<const std::uint8_t> rgba, int level) {
+  const std::string where = "cannot write '" + path.string() + "': ";
+  if (width <= 0 || height <= 0 || width > (1 << 20) || height > (1 << 20) ||
+      rgba.size() != std::size_t(width) * std::size_t(height) * 4)
+    return bad(where + "invalid " + std::to_string(width) + "x" + std::to_string(height) +
+               " image of " + std::to_string(rgba.size()) + " bytes");
+  if (level < 0 || level > 9) return bad(where + "PNG level " + std::to_string(level));
+  std::vector<std::uint8_t> bytes;
+  PngMessage message;
+  if (!write_png(rgba.data(), std::uint32_t(width), std::uint32_t(height), true, level, true,
+                 &bytes, &message))
+    return make_error(ErrorCode::io, where + "PNG encoding failed: " + message.text);
+  Status written = write_file_atomically(
+      path, std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
+  if (written) return written;
+  Error e = std::move(written).error();  // names the temporary file: name the target as well
+  e.message = where + e.message;
+  return e;
 }
 
 }  // namespace vts

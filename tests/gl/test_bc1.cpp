@@ -20,12 +20,12 @@
 
 #include "gl_fixture.hpp"
 #include "vts/builder/builder.hpp"
-#include "vts/builder/image_io.hpp"
 #include "vts/client/source.hpp"
 #include "vts/client/tile_client.hpp"
 #include "vts/protocol/codec.hpp"
 #include "vts/protocol/pmtiles.hpp"
 #include "vts/protocol/tileset.hpp"
+#include "vts/protocol/web_image.hpp"
 #include "vts/renderer/camera.hpp"
 #include "vts/renderer/gl_program.hpp"
 #include "vts/renderer/globe.hpp"

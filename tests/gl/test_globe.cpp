@@ -14,9 +14,9 @@
 
 #include "gl_fixture.hpp"
 #include "vts/builder/builder.hpp"
-#include "vts/builder/image_io.hpp"
 #include "vts/client/source.hpp"
 #include "vts/client/tile_client.hpp"
+#include "vts/protocol/web_image.hpp"
 #include "vts/renderer/geo_view.hpp"
 #include "vts/renderer/gl_context.hpp"
 #include "vts/renderer/globe.hpp"

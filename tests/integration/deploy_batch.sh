@@ -188,7 +188,9 @@ note "k8s/*.yaml, build.sbatch, finish.sbatch, run-shards.sh: consistent (one pe
 consistency "$BATCH" >"$LOGS/consistency.log" 2>&1 ||
   { cat "$LOGS/consistency.log" >&2; fail "deploy/batch is inconsistent (above)"; }
 
-note "the builder image's runtime packages: the libraries of the vts under test"
+note "the builder image's runtime packages: the libraries of the vts and vts-build under test"
+VTS_BUILD_EXE=$(dirname "$VTS")/vts-build
+[[ -x $VTS_BUILD_EXE ]] || fail "no vts-build beside $VTS (vts hands the build commands to it)"
 needed=()
 while read -r lib; do
   path=$(ldconfig -p | awk -v l="$lib" '$1 == l && !p { print $NF; p = 1 }')
@@ -199,7 +201,7 @@ while read -r lib; do
   [[ -n $pkg ]] || fail "no Debian package owns $real ($lib)"
   case $pkg in libc6 | libgcc-s1 | libglfw3 | libepoxy0) continue ;; esac # base image / viewer only
   [[ " ${needed[*]} " == *" $pkg "* ]] || needed+=("$pkg")
-done < <(readelf -d "$VTS" | sed -nE 's/.*\(NEEDED\).*\[(.*)\]/\1/p')
+done < <(readelf -d "$VTS" "$VTS_BUILD_EXE" | sed -nE 's/.*\(NEEDED\).*\[(.*)\]/\1/p' | sort -u)
 # missing_pkgs DOCKERFILE: prints the packages of $needed its runtime stage does not install.
 missing_pkgs() {
   local runtime pkg
@@ -209,7 +211,7 @@ missing_pkgs() {
   done
 }
 miss=$(missing_pkgs "$BATCH/Dockerfile")
-[[ -z $miss ]] || fail "deploy/batch/Dockerfile's runtime stage lacks ${miss//$'\n'/ } (vts needs them: readelf -d)"
+[[ -z $miss ]] || fail "deploy/batch/Dockerfile's runtime stage lacks ${miss//$'\n'/ } (vts or vts-build needs them: readelf -d)"
 note "${needed[*]}"
 
 # ---- docs/PLANET.md's arithmetic -------------------------------------------------------------------

@@ -21,6 +21,7 @@
 #include "vts/accuracy/accuracy.hpp"
 #include "vts/builder/builder.hpp"
 #include "vts/builder/image_io.hpp"
+#include "vts/protocol/web_image.hpp"
 #include "vts/renderer/reference.hpp"
 
 namespace fs = std::filesystem;

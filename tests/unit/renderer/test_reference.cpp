@@ -18,6 +18,7 @@
 #include "vts/builder/builder.hpp"
 #include "vts/builder/image_io.hpp"
 #include "vts/builder/synthetic.hpp"
+#include "vts/protocol/web_image.hpp"
 
 namespace fs = std::filesystem;
 

@@ -1,5 +1,5 @@
-// Image files as 8-bit RGBA through OpenImageIO: the PNG writer of screenshots and accuracy
-// plots, and the reader of any 8-bit image OpenImageIO opens. Straight alpha both ways.
+// Image files as 8-bit RGBA through OpenImageIO: the reader of any 8-bit image OpenImageIO opens,
+// straight alpha. (PNG files are written by vts/protocol/web_image.hpp's write_png.)
 #pragma once
 
 #include <cstdint>
@@ -16,11 +16,6 @@ struct Rgba8Image {
   int width = 0, height = 0;
   std::vector<std::uint8_t> rgba;
 };
-
-// Writes an 8-bit RGBA PNG (whatever the extension), tagged sRGB. invalid_argument when `rgba`
-// does not hold width * height * 4 bytes; io when the file cannot be written.
-Status write_png(const std::filesystem::path& path, int width, int height,
-                 std::span<const std::uint8_t> rgba);
 
 // Reads an image file (PNG, or any 8-bit format OpenImageIO reads) as RGBA8: grey is replicated,
 // a missing alpha channel becomes 255. not_found when the file does not exist; corrupt when it

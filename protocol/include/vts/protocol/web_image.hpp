@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <filesystem>
 #include <span>
 #include <string_view>
 #include <vector>
@@ -47,5 +48,13 @@ Result<TileImage> decode_web_image(std::span<const std::uint8_t> bytes);
 // first): the border cropped, texels beyond the level's image edge transparent (0, 0, 0, 0).
 // invalid_argument when `stored` is not the geometry's stored size or `id` does not exist.
 Result<TileImage> tile_content(const TileImage& stored, const Geometry& geometry, TileId id);
+
+// Writes an 8-bit RGBA PNG file (whatever the extension) of width x height pixels, rows top to
+// bottom, straight alpha, tagged sRGB, through write_file_atomically: the one PNG writer of
+// screenshots, plots and references. invalid_argument when `rgba` does not hold
+// width * height * 4 bytes or `level` is not a zlib level 0..9; io when the file cannot be
+// written.
+Status write_png(const std::filesystem::path& path, int width, int height,
+                 std::span<const std::uint8_t> rgba, int level = 6);
 
 }  // namespace vts
