@@ -14,9 +14,9 @@
 #include <sstream>
 
 #include "vts/accuracy/accuracy.hpp"
+#include "vts/base/file_io.hpp"
 #include "vts/builder/builder.hpp"
 #include "vts/plot/svg_plot.hpp"
-#include "vts/protocol/file_io.hpp"
 
 #ifdef VTS_ACCURACY_HAVE_GL
 #include "vts/renderer/gl_context.hpp"
@@ -333,8 +333,8 @@ std::string to_markdown(const AccuracyReport& r, const std::string& plot_prefix)
 }
 
 std::string plot_svg(const TablePlot& p) {
-  using client::svg::Axis;
-  using namespace client::svg;
+  using plot::Axis;
+  using namespace vts::plot;
   Plot plot;
   plot.id = p.id;
   plot.title = p.title;

@@ -9,8 +9,8 @@
 #include <vector>
 
 #include "vts/accuracy/accuracy.hpp"
+#include "vts/archive/pmtiles.hpp"
 #include "vts/protocol/codec.hpp"
-#include "vts/protocol/pmtiles.hpp"
 #include "vts/protocol/tileset.hpp"
 
 #ifdef VTS_ACCURACY_HAVE_GL
@@ -74,10 +74,10 @@ std::vector<Setting> settings(bool quick) {
 // taken evenly over the archive's tile order (every level contributes its share).
 Result<std::vector<TileImage>> source_tiles(const std::filesystem::path& archive,
                                             std::size_t limit) {
-  auto reader = pmtiles::Reader::open(archive);
+  auto reader = archive::Reader::open(archive);
   if (!reader) return reader.error();
   std::vector<std::uint64_t> ids;
-  Status visit = (*reader)->for_each_entry([&](const pmtiles::Entry& e) {
+  Status visit = (*reader)->for_each_entry([&](const archive::Entry& e) {
     ids.push_back(e.tile_id);
     return true;
   });

@@ -21,10 +21,10 @@
 #include <vector>
 
 #include "vts/accuracy/accuracy.hpp"
+#include "vts/archive/pmtiles.hpp"
 #include "vts/builder/builder.hpp"
 #include "vts/builder/downsample.hpp"
 #include "vts/protocol/codec.hpp"
-#include "vts/protocol/pmtiles.hpp"
 #include "vts/protocol/tileset.hpp"
 
 namespace vts::accuracy {
@@ -44,7 +44,7 @@ struct Rgba {
 };
 
 // Level z of an archive, stitched from its tiles' contents.
-Result<Rgba> read_level(const pmtiles::Reader& reader, const Geometry& g, int z,
+Result<Rgba> read_level(const archive::Reader& reader, const Geometry& g, int z,
                         std::uint64_t* payload_bytes) {
   Rgba out{g.level_width(z), g.level_height(z), {}};
   out.px.resize(out.w * out.h * 4);
@@ -247,7 +247,7 @@ Result<AccuracyTable> make_table(const AccuracyContext& ctx) {
     o.output = ctx.work_dir / ("downsample_" + name + "_levels.pmtiles");
     auto built = build_pyramid(o);
     if (!built) return std::move(built).error();
-    auto reader = pmtiles::Reader::open(o.output);
+    auto reader = archive::Reader::open(o.output);
     if (!reader) return std::move(reader).error();
     const Geometry& g = built->info.geometry;
     const int maxz = g.max_zoom();

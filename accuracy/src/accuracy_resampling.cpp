@@ -24,10 +24,10 @@
 
 #include "resampling_detail.hpp"
 #include "vts/accuracy/accuracy.hpp"
+#include "vts/archive/inspect.hpp"
+#include "vts/archive/pmtiles.hpp"
 #include "vts/builder/builder.hpp"
 #include "vts/protocol/codec.hpp"
-#include "vts/protocol/inspect.hpp"
-#include "vts/protocol/pmtiles.hpp"
 #include "vts/protocol/tileset.hpp"
 
 namespace vts::accuracy {
@@ -124,9 +124,9 @@ double WarpError::psnr() const noexcept {
 
 Result<WarpError> score_warp(const std::filesystem::path& archive, const PatternRaster& r,
                              double margin, TexelPoint offset) {
-  auto reader = pmtiles::Reader::open(archive);
+  auto reader = archive::Reader::open(archive);
   if (!reader) return std::move(reader).error();
-  auto info = archive_tileset((*reader)->header(), (*reader)->metadata_json());
+  auto info = archive::archive_tileset((*reader)->header(), (*reader)->metadata_json());
   if (!info) return std::move(info).error();
   if (!info->georeference)
     return make_error(ErrorCode::invalid_argument, archive.string() + " is not georeferenced");

@@ -6,7 +6,7 @@
 #include <cstdint>
 #include <filesystem>
 
-#include "vts/protocol/result.hpp"
+#include "vts/base/result.hpp"
 #include "vts/protocol/tiling.hpp"
 
 namespace vts::accuracy::detail {

@@ -44,7 +44,7 @@ std::vector<TileRect> build_emit_rects(const PreparedBuild& p);
 // The metadata and header options the archive at `output` gets.
 TilesetInfo build_tileset_info(const BuildOptions& o, const PreparedBuild& p,
                                const std::filesystem::path& output, std::uint64_t content_sum);
-pmtiles::WriterOptions build_writer_options(const PreparedBuild& p,
+archive::WriterOptions build_writer_options(const PreparedBuild& p,
                                             const std::filesystem::path& output);
 std::string content_hash_text(std::uint64_t content_sum);
 
@@ -60,7 +60,7 @@ struct BuildRun {
   std::filesystem::path scratch_dir;
   const Geometry* geometry = nullptr;
   const Codec* codec = nullptr;
-  pmtiles::TileSink* sink = nullptr;
+  archive::TileSink* sink = nullptr;
   unsigned threads = 0;
   const BuildPlan* plan = nullptr;
   std::vector<WindowReader> readers;

@@ -11,9 +11,9 @@
 #include <filesystem>
 #include <vector>
 
+#include "vts/base/result.hpp"
 #include "vts/builder/downsample.hpp"
 #include "vts/protocol/geometry.hpp"
-#include "vts/protocol/result.hpp"
 #include "vts/protocol/tiling.hpp"
 
 namespace vts::detail {

@@ -18,9 +18,9 @@
 #include "cascade.hpp"
 #include "gdal_source.hpp"
 #include "image_source.hpp"
+#include "vts/base/file_io.hpp"
 #include "vts/builder/downsample.hpp"
 #include "vts/builder/synthetic.hpp"
-#include "vts/protocol/file_io.hpp"
 #include "work_queue.hpp"
 
 namespace vts {
@@ -40,7 +40,7 @@ double seconds_since(Clock::time_point t0) {
 struct Shared {
   const Codec* codec = nullptr;
   EncodeOptions encode;
-  pmtiles::TileSink* sink = nullptr;
+  archive::TileSink* sink = nullptr;
   // A shard's level-A tiles, kept lossless for the apex (shard.hpp).
   std::optional<detail::BuildRun::Keep> keep;
   std::mutex kept_mutex;
@@ -79,7 +79,7 @@ struct Shared {
       kept[{id.y, id.x}] = std::move(exact).value();
     }
     if (auto header = parse_tile_header(*payload)) {
-      const std::uint64_t key[2] = {pmtiles::zxy_to_tile_id(id.z, id.x, id.y), header->checksum};
+      const std::uint64_t key[2] = {archive::zxy_to_tile_id(id.z, id.x, id.y), header->checksum};
       content_sum += XXH3_64bits(key, sizeof key);
     }
     bytes += payload->size();
@@ -465,11 +465,11 @@ TilesetInfo build_tileset_info(const BuildOptions& o, const PreparedBuild& p,
   return info;
 }
 
-pmtiles::WriterOptions build_writer_options(const PreparedBuild& p,
+archive::WriterOptions build_writer_options(const PreparedBuild& p,
                                             const std::filesystem::path& output) {
-  pmtiles::WriterOptions wo;
+  archive::WriterOptions wo;
   if (p.georeference)
-    wo.bounds = pmtiles::georeferenced_bounds(p.georeference->bounds, p.georeference->center);
+    wo.bounds = archive::georeferenced_bounds(p.georeference->bounds, p.georeference->center);
   wo.path = output;
   wo.min_zoom = 0;
   wo.max_zoom = static_cast<std::uint8_t>(p.geometry->max_zoom());
@@ -629,7 +629,7 @@ Result<BuildReport> build_pyramid(const BuildOptions& o) {
     plan = std::move(bp).value();
   }
 
-  auto writer = pmtiles::Writer::create(detail::build_writer_options(p, o.output));
+  auto writer = archive::Writer::create(detail::build_writer_options(p, o.output));
   if (!writer) return std::move(writer).error();
   detail::BuildRun run;
   run.options = &o;

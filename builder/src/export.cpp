@@ -15,8 +15,8 @@
 #include <nlohmann/json.hpp>
 #include <thread>
 
+#include "vts/imaging/web_mercator.hpp"
 #include "vts/protocol/json_input.hpp"
-#include "vts/protocol/web_mercator.hpp"
 #include "work_queue.hpp"
 
 namespace vts {
@@ -32,26 +32,26 @@ class TileSink {
   virtual ~TileSink() = default;
   // Thread-safe.
   virtual Status put(TileId id, std::span<const std::uint8_t> bytes) = 0;
-  virtual Result<pmtiles::WriterStats> finish(const std::string& metadata_json) = 0;
+  virtual Result<archive::WriterStats> finish(const std::string& metadata_json) = 0;
 };
 
 class ArchiveSink final : public TileSink {
  public:
-  explicit ArchiveSink(std::unique_ptr<pmtiles::Writer> w) : writer_(std::move(w)) {}
+  explicit ArchiveSink(std::unique_ptr<archive::Writer> w) : writer_(std::move(w)) {}
   ~ArchiveSink() override {
     if (writer_) writer_->abort();
   }
   Status put(TileId id, std::span<const std::uint8_t> bytes) override {
     return writer_->add_tile(id, bytes);
   }
-  Result<pmtiles::WriterStats> finish(const std::string& metadata_json) override {
+  Result<archive::WriterStats> finish(const std::string& metadata_json) override {
     auto stats = writer_->finish(metadata_json);
     if (stats) writer_.reset();
     return stats;
   }
 
  private:
-  std::unique_ptr<pmtiles::Writer> writer_;
+  std::unique_ptr<archive::Writer> writer_;
 };
 
 Status io_error(const std::string& what, const fs::path& p, int err) {
@@ -80,7 +80,7 @@ Status write_file(const fs::path& p, std::span<const std::uint8_t> bytes) {
 // {z}/{x}/{y}.ext under a temporary folder beside the output, renamed to it by finish().
 class FolderSink final : public TileSink {
  public:
-  static Result<std::unique_ptr<FolderSink>> create(const fs::path& out, WebFormat f) {
+  static Result<std::unique_ptr<FolderSink>> create(const fs::path& out, imaging::WebFormat f) {
     std::error_code ec;
     if (fs::exists(out, ec) && !(fs::is_directory(out, ec) && fs::is_empty(out, ec)))
       return make_error(ErrorCode::invalid_argument,
@@ -107,7 +107,7 @@ class FolderSink final : public TileSink {
     std::error_code perm_ec;
     fs::permissions(tmpl, fs::perms(0755), perm_ec);
     s->dest_ = dest;
-    s->ext_ = web_format_extension(f);
+    s->ext_ = imaging::web_format_extension(f);
     return s;
   }
   ~FolderSink() override {
@@ -131,7 +131,7 @@ class FolderSink final : public TileSink {
     stats_.tile_bytes += bytes.size();
     return {};
   }
-  Result<pmtiles::WriterStats> finish(const std::string& metadata_json) override {
+  Result<archive::WriterStats> finish(const std::string& metadata_json) override {
     const std::string& m = metadata_json;
     if (Status s = write_file(tmp_ / "metadata.json",
                               {reinterpret_cast<const std::uint8_t*>(m.data()), m.size()});
@@ -171,7 +171,7 @@ class FolderSink final : public TileSink {
   fs::path dest_, tmp_;
   std::string_view ext_;
   std::mutex mutex_;
-  pmtiles::WriterStats stats_;
+  archive::WriterStats stats_;
 };
 
 bool wholly_transparent(const TileImage& img) {
@@ -180,16 +180,16 @@ bool wholly_transparent(const TileImage& img) {
   return true;
 }
 
-pmtiles::TileType tile_type(WebFormat f) {
+archive::TileType tile_type(imaging::WebFormat f) {
   switch (f) {
-    case WebFormat::png:
-      return pmtiles::TileType::png;
-    case WebFormat::jpeg:
-      return pmtiles::TileType::jpeg;
-    case WebFormat::webp:
-      return pmtiles::TileType::webp;
+    case imaging::WebFormat::png:
+      return archive::TileType::png;
+    case imaging::WebFormat::jpeg:
+      return archive::TileType::jpeg;
+    case imaging::WebFormat::webp:
+      return archive::TileType::webp;
   }
-  return pmtiles::TileType::unknown;
+  return archive::TileType::unknown;
 }
 
 LonLatLevel export_center(const TilesetInfo& info, const LonLatBounds& b) {
@@ -234,27 +234,27 @@ struct Counters {
 // (tiles of one run with the same clipped content size give the same output: encoded once).
 class EntryJob {
  public:
-  EntryJob(const pmtiles::Reader& r, const TilesetInfo& info, const ExportOptions& o, TileSink& s,
+  EntryJob(const archive::Reader& r, const TilesetInfo& info, const ExportOptions& o, TileSink& s,
            Counters& c)
       : reader_(r), info_(info), options_(o), sink_(s), counters_(c) {}
 
-  Status run(const pmtiles::Entry& e) const {
+  Status run(const archive::Entry& e) const {
     auto stored = load(e);
     if (!stored) return stored.error();
     std::optional<std::pair<std::uint64_t, std::uint64_t>> last_size;
     std::optional<std::vector<std::uint8_t>> last_bytes;  // nullopt: transparent
     for (std::uint32_t i = 0; i < e.run_length; ++i) {
-      auto id = pmtiles::tile_id_to_zxy(e.tile_id + i);
+      auto id = archive::tile_id_to_zxy(e.tile_id + i);
       if (!id) return id.error();
       const TexelRect r = info_.geometry.content_rect(*id);
       const std::pair size{r.width(), r.height()};
       if (last_size != size) {
-        auto content = tile_content(*stored, info_.geometry, *id);
+        auto content = imaging::tile_content(*stored, info_.geometry, *id);
         if (!content) return with_tile(content.error(), *id);
         last_size = size;
         last_bytes.reset();
         if (!wholly_transparent(*content)) {
-          auto bytes = encode_web_image(*content, options_.format, options_.encode);
+          auto bytes = imaging::encode_web_image(*content, options_.format, options_.encode);
           if (!bytes) return with_tile(bytes.error(), *id);
           last_bytes = std::move(bytes).value();
         }
@@ -275,11 +275,11 @@ class EntryJob {
     e.message = "tile " + id.to_string() + ": " + e.message;
     return e;
   }
-  Result<TileImage> load(const pmtiles::Entry& e) const {
+  Result<TileImage> load(const archive::Entry& e) const {
     std::vector<std::uint8_t> bytes(e.length);
     if (Status s = reader_.read(reader_.header().tile_data_offset + e.offset, bytes); !s)
       return s.error();
-    auto first = pmtiles::tile_id_to_zxy(e.tile_id);
+    auto first = archive::tile_id_to_zxy(e.tile_id);
     if (!first) return first.error();
     auto img = decode_tile(bytes, info_.tile_spec());
     if (img && img->format == PixelFormat::bc1) img = bc1_to_rgba8(*img);
@@ -287,7 +287,7 @@ class EntryJob {
     return img;
   }
 
-  const pmtiles::Reader& reader_;
+  const archive::Reader& reader_;
   const TilesetInfo& info_;
   const ExportOptions& options_;
   TileSink& sink_;
@@ -295,7 +295,7 @@ class EntryJob {
 };
 
 // Decoded stored texels of a source tile as rgba8; nullopt when the archive lacks it.
-Result<std::optional<TileImage>> load_stored(const pmtiles::Reader& reader, const TilesetInfo& info,
+Result<std::optional<TileImage>> load_stored(const archive::Reader& reader, const TilesetInfo& info,
                                              TileId id) {
   auto bytes = reader.get(id);
   if (!bytes && bytes.error().code == ErrorCode::not_found) return std::optional<TileImage>{};
@@ -316,14 +316,14 @@ Result<std::optional<TileImage>> load_stored(const pmtiles::Reader& reader, cons
 // tiles of two output tiles are held.
 class ColumnJob {
  public:
-  ColumnJob(const pmtiles::Reader& r, const TilesetInfo& info, const ExportOptions& o, TileSink& s,
+  ColumnJob(const archive::Reader& r, const TilesetInfo& info, const ExportOptions& o, TileSink& s,
             Counters& c)
       : reader_(r), info_(info), options_(o), sink_(s), counters_(c) {}
 
   Status run(int z, std::uint32_t x, std::uint32_t y0, std::uint32_t y1) const {
     using Cache = std::map<std::uint64_t, std::optional<TileImage>>;
     Cache previous, current;
-    const FetchStoredTile fetch = [&](TileId id) -> Result<std::optional<TileImage>> {
+    const imaging::FetchStoredTile fetch = [&](TileId id) -> Result<std::optional<TileImage>> {
       const std::uint64_t key = tile_key(id);
       if (auto it = current.find(key); it != current.end()) return it->second;
       if (auto it = previous.find(key); it != previous.end())
@@ -345,9 +345,10 @@ class ColumnJob {
   }
 
  private:
-  Status render(int z, std::uint32_t x, std::uint32_t y, const FetchStoredTile& fetch) const {
+  Status render(int z, std::uint32_t x, std::uint32_t y,
+                const imaging::FetchStoredTile& fetch) const {
     const TileId id{static_cast<std::uint8_t>(z), x, y};
-    auto tile = render_web_mercator_tile(info_, z, x, y, fetch);
+    auto tile = imaging::render_web_mercator_tile(info_, z, x, y, fetch);
     if (!tile) {
       Error e = std::move(tile).error();
       e.message = "WebMercatorQuad tile " + id.to_string() + ": " + e.message;
@@ -357,14 +358,14 @@ class ColumnJob {
       counters_.skipped.fetch_add(1);
       return {};
     }
-    auto bytes = encode_web_image(**tile, options_.format, options_.encode);
+    auto bytes = imaging::encode_web_image(**tile, options_.format, options_.encode);
     if (!bytes) return bytes.error();
     if (Status s = sink_.put(id, *bytes); !s) return s;
     counters_.written.fetch_add(1);
     return {};
   }
 
-  const pmtiles::Reader& reader_;
+  const archive::Reader& reader_;
   const TilesetInfo& info_;
   const ExportOptions& options_;
   TileSink& sink_;
@@ -399,7 +400,7 @@ Result<Plan> make_plan(const TilesetInfo& info, Tiling wanted) {
   p.bounds = export_bounds(info);
   if (wanted == Tiling::web_mercator_quad &&
       info.georeference->tiling == Tiling::world_crs84_quad) {
-    auto range = web_mercator_range(info);
+    auto range = imaging::web_mercator_range(info);
     if (!range) return range.error();
     p = {range->min_zoom, range->max_zoom, range->bounds, true};
   }
@@ -413,15 +414,15 @@ Result<std::unique_ptr<TileSink>> open_sink(const TilesetInfo& info, const Expor
     if (!s) return s.error();
     return std::unique_ptr<TileSink>(std::move(s).value());
   }
-  pmtiles::WriterOptions w;
+  archive::WriterOptions w;
   w.path = o.output;
-  w.internal_compression = pmtiles::Compression::gzip;
-  w.tile_compression = pmtiles::Compression::none;
+  w.internal_compression = archive::Compression::gzip;
+  w.tile_compression = archive::Compression::none;
   w.tile_type = tile_type(o.format);
   w.min_zoom = static_cast<std::uint8_t>(plan.min_zoom);
   w.max_zoom = static_cast<std::uint8_t>(plan.max_zoom);
-  w.bounds = pmtiles::georeferenced_bounds(plan.bounds, export_center(info, plan.bounds));
-  auto writer = pmtiles::Writer::create(std::move(w));
+  w.bounds = archive::georeferenced_bounds(plan.bounds, export_center(info, plan.bounds));
+  auto writer = archive::Writer::create(std::move(w));
   if (!writer) {
     Error e = std::move(writer).error();
     e.message = "'" + o.output.string() + "': " + e.message;
@@ -484,17 +485,17 @@ class Feeder {
 };
 
 // The archive's own grid: walks the source directory, one job per entry.
-Status walk_entries(const pmtiles::Reader& reader, const TilesetInfo& info, const ExportOptions& o,
+Status walk_entries(const archive::Reader& reader, const TilesetInfo& info, const ExportOptions& o,
                     TileSink& sink, Counters& counters) {
   EntryJob job(reader, info, o, sink, counters);
   Feeder feeder(o, counters, reader.header().addressed_tiles);
   Status walked = reader.for_each_entry(
-      [&](const pmtiles::Entry& e) { return feeder.submit([&job, e] { return job.run(e); }); });
+      [&](const archive::Entry& e) { return feeder.submit([&job, e] { return job.run(e); }); });
   return feeder.finish(walked);
 }
 
 // WebMercatorQuad from WorldCRS84Quad: every zoom's tiles over the bounds, one job per column.
-Status walk_reprojected(const pmtiles::Reader& reader, const TilesetInfo& info,
+Status walk_reprojected(const archive::Reader& reader, const TilesetInfo& info,
                         const ExportOptions& o, const Plan& plan, TileSink& sink,
                         Counters& counters) {
   auto web =
@@ -528,7 +529,7 @@ LonLatBounds export_bounds(const TilesetInfo& info) {
 
 std::string export_metadata_json(const TilesetInfo& info, const std::string& source_metadata,
                                  const std::string& source_name, const std::string& source_version,
-                                 WebFormat format, const LonLatBounds& b, int min_zoom,
+                                 imaging::WebFormat format, const LonLatBounds& b, int min_zoom,
                                  int max_zoom, Tiling grid) {
   const LonLatLevel c = export_center(info, b);
   nlohmann::json j;
@@ -541,7 +542,7 @@ std::string export_metadata_json(const TilesetInfo& info, const std::string& sou
     if (it != src->end() && it->is_string()) j["attribution"] = it->get<std::string>();
   }
   j["type"] = "baselayer";
-  j["format"] = std::string(web_format_extension(format));
+  j["format"] = std::string(imaging::web_format_extension(format));
   j["bounds"] = {b.west, b.south, b.east, b.north};
   j["center"] = {c.lon, c.lat, c.level};
   j["minzoom"] = min_zoom;
@@ -561,7 +562,7 @@ std::string export_metadata_json(const TilesetInfo& info, const std::string& sou
   return j.dump();
 }
 
-Result<ExportReport> export_web_tiles(const pmtiles::Reader& reader, const TilesetInfo& info,
+Result<ExportReport> export_web_tiles(const archive::Reader& reader, const TilesetInfo& info,
                                       const ExportOptions& o) {
   const auto t0 = Clock::now();
   if (Status s = validate(o.encode); !s) return s.error();

@@ -10,7 +10,7 @@ namespace OIIO = OIIO_NAMESPACE;
 
 namespace {
 
-Result<TileImage> load_tile(const pmtiles::Reader& reader, const TilesetInfo& info, TileId id) {
+Result<TileImage> load_tile(const archive::Reader& reader, const TilesetInfo& info, TileId id) {
   auto bytes = reader.get(id);
   if (!bytes) {
     Error e = std::move(bytes).error();
@@ -111,7 +111,7 @@ class Output {
 
 }  // namespace
 
-Status extract_tile(const pmtiles::Reader& reader, const TilesetInfo& info, TileId id,
+Status extract_tile(const archive::Reader& reader, const TilesetInfo& info, TileId id,
                     const ExtractOptions& o) {
   const Geometry& g = info.geometry;
   if (!g.exists(id))
@@ -136,7 +136,7 @@ Status extract_tile(const pmtiles::Reader& reader, const TilesetInfo& info, Tile
   return out->finish();
 }
 
-Status extract_level(const pmtiles::Reader& reader, const TilesetInfo& info, int z,
+Status extract_level(const archive::Reader& reader, const TilesetInfo& info, int z,
                      const ExtractOptions& o) {
   const Geometry& g = info.geometry;
   if (!g.valid_level(z))

@@ -15,7 +15,7 @@
 #include <gdal_utils.h>
 #include <ogr_srs_api.h>
 
-#include "vts/protocol/file_io.hpp"
+#include "vts/base/file_io.hpp"
 
 namespace vts {
 

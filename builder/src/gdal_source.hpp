@@ -13,9 +13,9 @@
 #include <utility>
 #include <vector>
 
+#include "vts/base/result.hpp"
 #include "vts/builder/builder.hpp"
 #include "vts/protocol/geometry.hpp"
-#include "vts/protocol/result.hpp"
 #include "vts/protocol/tiling.hpp"
 
 namespace vts::detail {

@@ -5,7 +5,7 @@
 #include <string>
 
 #include "image_source.hpp"
-#include "vts/protocol/file_io.hpp"
+#include "vts/base/file_io.hpp"
 
 namespace vts {
 

@@ -7,8 +7,8 @@
 #include <cstring>
 #include <string_view>
 
+#include "vts/base/file_io.hpp"
 #include "vts/builder/downsample.hpp"
-#include "vts/protocol/file_io.hpp"
 
 namespace vts::detail {
 

@@ -9,8 +9,8 @@
 #include "build_core.hpp"
 #include "shard_geo.hpp"
 #include "shard_internal.hpp"
+#include "vts/base/file_io.hpp"
 #include "vts/builder/shard.hpp"
-#include "vts/protocol/file_io.hpp"
 #include "vts/protocol/json_input.hpp"
 
 namespace vts {
@@ -158,7 +158,7 @@ std::vector<TileId> select_shards(const std::vector<TileRect>& emit, int L) {
         }
     }
   std::sort(shards.begin(), shards.end(), [](TileId a, TileId b) {
-    return pmtiles::zxy_to_tile_id(a.z, a.x, a.y) < pmtiles::zxy_to_tile_id(b.z, b.x, b.y);
+    return archive::zxy_to_tile_id(a.z, a.x, a.y) < archive::zxy_to_tile_id(b.z, b.x, b.y);
   });
   return shards;
 }

@@ -9,8 +9,8 @@
 #include "cascade.hpp"
 #include "shard_geo.hpp"
 #include "shard_internal.hpp"
+#include "vts/base/file_io.hpp"
 #include "vts/builder/shard.hpp"
-#include "vts/protocol/file_io.hpp"
 #include "vts/protocol/json_input.hpp"
 
 namespace vts {
@@ -45,7 +45,7 @@ Status check_part_file(const std::filesystem::path& path) {
 }
 
 // The part's manifest, checked against the plan (its build, the inputs it read): its content sum.
-Result<std::uint64_t> check_manifest(const ShardPlan& plan, const pmtiles::PartInfo& info) {
+Result<std::uint64_t> check_manifest(const ShardPlan& plan, const archive::PartInfo& info) {
   auto parsed = parse_json(info.manifest_json, "part " + info.path.string() + "'s manifest");
   if (!parsed) return std::move(parsed).error();
   try {
@@ -58,10 +58,10 @@ Result<std::uint64_t> check_manifest(const ShardPlan& plan, const pmtiles::PartI
   }
 }
 
-Result<pmtiles::PartInfo> open_part(const ShardPlan& plan, const std::filesystem::path& path,
+Result<archive::PartInfo> open_part(const ShardPlan& plan, const std::filesystem::path& path,
                                     std::uint64_t* content_sum) {
   if (Status st = check_part_file(path); !st) return st.error();
-  auto info = pmtiles::read_part_info(path);
+  auto info = archive::read_part_info(path);
   if (!info)
     return make_error(info.error().code, "part " + path.string() + ": " + info.error().message);
   auto sum = check_manifest(plan, *info);
@@ -109,7 +109,7 @@ Result<ShardReport> write_part(const ShardPlan& plan, detail::BuildRun& run,
   if (Status st = check_output_is_not_an_input(path, read); !st) return st.error();
   std::error_code ec;
   std::filesystem::create_directories(path.parent_path(), ec);
-  auto part = pmtiles::PartWriter::create(path);
+  auto part = archive::PartWriter::create(path);
   if (!part) return std::move(part).error();
   run.sink = part->get();
   auto result = detail::run_build(run);
@@ -365,12 +365,12 @@ Result<ShardReport> build_apex(const ShardPlan& plan, const ShardBuildOptions& s
 
 Result<MergeReport> merge_plan(const ShardPlan& plan, const std::filesystem::path& parts_dir,
                                const std::filesystem::path& output,
-                               const std::function<void(const pmtiles::MergeProgress&)>& progress,
+                               const std::function<void(const archive::MergeProgress&)>& progress,
                                const std::atomic<bool>* cancel, bool verify) {
   const auto t0 = Clock::now();
   auto geometry = detail::plan_geometry(plan);
   if (!geometry) return std::move(geometry).error();
-  pmtiles::MergeOptions mo;
+  archive::MergeOptions mo;
   if (plan.apex_level > 0) mo.parts.push_back(parts_dir / kApexPartName);
   for (std::size_t i = 0; i < plan.shards.size(); ++i)
     mo.parts.push_back(parts_dir / shard_part_name(i));
@@ -386,7 +386,7 @@ Result<MergeReport> merge_plan(const ShardPlan& plan, const std::filesystem::pat
   std::uint64_t content_sum = 0;
   std::vector<std::uint64_t> attachments;  // each shard's, for the apex
   std::optional<json> apex;
-  mo.check_part = [&](const pmtiles::PartInfo& info) -> Status {
+  mo.check_part = [&](const archive::PartInfo& info) -> Status {
     auto sum = check_manifest(plan, info);
     if (!sum) return sum.error();
     content_sum += *sum;
@@ -412,7 +412,7 @@ Result<MergeReport> merge_plan(const ShardPlan& plan, const std::filesystem::pat
   mo.on_progress = progress;
   mo.cancel = cancel;
   mo.verify = verify;
-  auto stats = pmtiles::merge_parts(mo);
+  auto stats = archive::merge_parts(mo);
   if (!stats) return std::move(stats).error();
   report.stats = *stats;
   report.parts = mo.parts.size();

@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-#include "vts/protocol/pmtiles_part.hpp"
+#include "vts/archive/pmtiles_part.hpp"
 
 #include "vts/builder/shard.hpp"
 

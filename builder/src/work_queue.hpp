@@ -17,7 +17,7 @@
 #include <thread>
 #include <vector>
 
-#include "vts/protocol/result.hpp"
+#include "vts/base/result.hpp"
 
 namespace vts::detail {
 

@@ -7,8 +7,8 @@
 #include <vector>
 
 #include "build_geo.hpp"
+#include "vts/base/result.hpp"
 #include "vts/builder/builder.hpp"
-#include "vts/protocol/result.hpp"
 
 namespace vts::cli {
 

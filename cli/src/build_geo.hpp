@@ -7,8 +7,8 @@
 #include <utility>
 #include <vector>
 
+#include "vts/base/result.hpp"
 #include "vts/builder/builder.hpp"
-#include "vts/protocol/result.hpp"
 
 namespace vts::cli {
 

@@ -7,7 +7,7 @@
 #include <string_view>
 #include <system_error>
 
-#include "vts/protocol/file_io.hpp"
+#include "vts/base/file_io.hpp"
 
 namespace vts::cli {
 

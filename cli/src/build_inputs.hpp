@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-#include "vts/protocol/result.hpp"
+#include "vts/base/result.hpp"
 
 namespace vts::cli {
 

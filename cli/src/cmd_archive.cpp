@@ -4,14 +4,14 @@
 
 #include "commands.hpp"
 #include "progress.hpp"
-#include "vts/protocol/file_io.hpp"
-#include "vts/protocol/inspect.hpp"
+#include "vts/archive/inspect.hpp"
+#include "vts/base/file_io.hpp"
 
 namespace vts::cli {
 
 namespace {
 
-void print_info_json(const std::string& path, const ArchiveSummary& s) {
+void print_info_json(const std::string& path, const archive::ArchiveSummary& s) {
   const Geometry& g = s.info.geometry;
   nlohmann::json j;
   j["path"] = path;
@@ -58,7 +58,7 @@ void print_info_json(const std::string& path, const ArchiveSummary& s) {
   std::printf("%s\n", j.dump(2).c_str());
 }
 
-void print_info_text(const std::string& path, const ArchiveSummary& s) {
+void print_info_text(const std::string& path, const archive::ArchiveSummary& s) {
   const Geometry& g = s.info.geometry;
   std::printf("%s\n", path.c_str());
   std::printf("  name         %s\n", s.info.name.c_str());
@@ -94,7 +94,7 @@ void print_info_text(const std::string& path, const ArchiveSummary& s) {
 int run_info(const std::string& path, bool json) {
   auto reader = open_archive(path);
   if (!reader) return report_error(reader.error());
-  auto summary = summarize_archive(**reader);
+  auto summary = archive::summarize_archive(**reader);
   if (!summary) {
     Error e = summary.error();
     e.message = "'" + path + "': " + e.message;
@@ -111,7 +111,7 @@ int run_verify(const std::string& path, bool json, unsigned threads) {
   auto reader = open_archive(path);
   if (!reader) return report_error(reader.error());
   ProgressBar bar("verify", "payloads", !json);
-  auto report = verify_archive(
+  auto report = archive::verify_archive(
       **reader, threads, [&](std::uint64_t done, std::uint64_t total) { bar.update(done, total); });
   bar.finish();
   if (!report) {
@@ -119,7 +119,7 @@ int run_verify(const std::string& path, bool json, unsigned threads) {
     e.message = "'" + path + "': " + e.message;
     return report_error(e);
   }
-  const VerifyReport& r = *report;
+  const archive::VerifyReport& r = *report;
   if (json) {
     nlohmann::json j{{"path", path},
                      {"ok", r.ok()},

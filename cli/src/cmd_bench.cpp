@@ -8,7 +8,7 @@
 
 #include "commands.hpp"
 #include "vts/accuracy/accuracy.hpp"
-#include "vts/protocol/file_io.hpp"
+#include "vts/base/file_io.hpp"
 
 namespace vts::cli {
 namespace {

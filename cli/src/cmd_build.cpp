@@ -10,8 +10,8 @@
 #include "commands.hpp"
 #include "plan_build.hpp"
 #include "progress.hpp"
+#include "vts/base/file_io.hpp"
 #include "vts/builder/builder.hpp"
-#include "vts/protocol/file_io.hpp"
 
 namespace vts::cli {
 

@@ -6,9 +6,9 @@
 
 #include "commands.hpp"
 #include "progress.hpp"
+#include "vts/archive/inspect.hpp"
+#include "vts/base/file_io.hpp"
 #include "vts/builder/export.hpp"
-#include "vts/protocol/file_io.hpp"
-#include "vts/protocol/inspect.hpp"
 
 namespace vts::cli {
 
@@ -23,14 +23,14 @@ struct ExportArgs {
 
 Result<ExportOptions> export_options(const ExportArgs& a) {
   ExportOptions o;
-  auto format = parse_web_format(a.format);
+  auto format = imaging::parse_web_format(a.format);
   if (!format) return Error{ErrorCode::invalid_argument, "--format: " + format.error().message};
   o.format = *format;
   if (a.quality) {
-    if (o.format == WebFormat::png)
+    if (o.format == imaging::WebFormat::png)
       return make_error(ErrorCode::invalid_argument,
                         "--quality applies to webp and jpg; png is lossless (leave it out)");
-    const int lo = o.format == WebFormat::jpeg ? 1 : 0;
+    const int lo = o.format == imaging::WebFormat::jpeg ? 1 : 0;
     if (*a.quality < lo || *a.quality > 100)
       return make_error(ErrorCode::invalid_argument, "--quality " + std::to_string(*a.quality) +
                                                          " is outside " + std::to_string(lo) +
@@ -80,13 +80,13 @@ int run_export(const ExportArgs& a) {
   const std::filesystem::path archive = a.archive;
   if (Status s = check_output_is_not_an_input(a.output, {&archive, 1}); !s)
     return report_error(s.error());
-  auto reader = pmtiles::Reader::open(a.archive);
+  auto reader = archive::Reader::open(a.archive);
   if (!reader) {
     Error e = std::move(reader).error();
     e.message = "'" + a.archive + "': " + e.message;
     return report_error(e);
   }
-  auto info = archive_tileset((*reader)->header(), (*reader)->metadata_json());
+  auto info = archive::archive_tileset((*reader)->header(), (*reader)->metadata_json());
   if (!info) {
     Error e = info.error();
     e.message = "'" + a.archive + "': " + e.message;

@@ -4,9 +4,9 @@
 #include <string>
 
 #include "commands.hpp"
+#include "vts/archive/inspect.hpp"
+#include "vts/base/file_io.hpp"
 #include "vts/builder/extract.hpp"
-#include "vts/protocol/file_io.hpp"
-#include "vts/protocol/inspect.hpp"
 
 namespace vts::cli {
 
@@ -28,7 +28,7 @@ int run_extract(const ExtractArgs& a) {
     return report_error(s.error());
   auto reader = open_archive(a.archive);
   if (!reader) return report_error(reader.error());
-  auto info = archive_tileset((*reader)->header(), (*reader)->metadata_json());
+  auto info = archive::archive_tileset((*reader)->header(), (*reader)->metadata_json());
   if (!info) return report_error(info.error());
   ExtractOptions o;
   o.output = a.output;

@@ -16,10 +16,10 @@
 #include "image_target.hpp"
 #include "loadtest_gates.hpp"
 #include "progress.hpp"
+#include "vts/base/file_io.hpp"
 #include "vts/loadtest/load_report.hpp"
 #include "vts/loadtest/load_test.hpp"
 #include "vts/loadtest/scenario.hpp"
-#include "vts/protocol/file_io.hpp"
 
 namespace vts::cli {
 
@@ -41,9 +41,9 @@ struct LoadArgs {
 };
 
 // One line a second: redrawn in place on a terminal, appended elsewhere (not with --json).
-std::function<void(const client::LoadProgress&)> progress_printer(const LoadArgs& a, bool bar) {
+std::function<void(const loadtest::LoadProgress&)> progress_printer(const LoadArgs& a, bool bar) {
   if (a.quiet) return {};
-  return [bar, json = a.json, duration = a.duration](const client::LoadProgress& p) {
+  return [bar, json = a.json, duration = a.duration](const loadtest::LoadProgress& p) {
     char line[256];
     std::snprintf(
         line, sizeof line,
@@ -51,7 +51,7 @@ std::function<void(const client::LoadProgress&)> progress_printer(const LoadArgs
         "%llu moves at full resolution%s",
         p.elapsed_s, duration, static_cast<unsigned long long>(p.requests), p.requests_per_s,
         static_cast<unsigned long long>(p.errors), static_cast<unsigned long long>(p.in_flight),
-        client::duration_text(double(p.p99_ns)).c_str(),
+        loadtest::duration_text(double(p.p99_ns)).c_str(),
         static_cast<unsigned long long>(p.moves_complete),
         p.late_frames ? (", " + std::to_string(p.late_frames) + " late frames").c_str() : "");
     if (bar)
@@ -61,8 +61,8 @@ std::function<void(const client::LoadProgress&)> progress_printer(const LoadArgs
   };
 }
 
-client::CameraDemandOptions camera_options(const LoadArgs& a) {
-  client::CameraDemandOptions c;
+loadtest::CameraDemandOptions camera_options(const LoadArgs& a) {
+  loadtest::CameraDemandOptions c;
   c.path = a.path;
   c.viewers = a.share.viewers;
   c.first_viewer = a.share.first_viewer;
@@ -77,9 +77,9 @@ client::CameraDemandOptions camera_options(const LoadArgs& a) {
   return c;
 }
 
-Result<client::LoadTestOptions> load_options(const LoadArgs& a) {
-  client::LoadTestOptions o;
-  if (auto st = client::apply_target({a.url, a.cache, a.cache_dir, a.daemon}, o); !st)
+Result<loadtest::LoadTestOptions> load_options(const LoadArgs& a) {
+  loadtest::LoadTestOptions o;
+  if (auto st = loadtest::apply_target({a.url, a.cache, a.cache_dir, a.daemon}, o); !st)
     return st.error();
   if (auto st = apply_image_target(a.image, o.source); !st) return st.error();
   o.decode = a.decode;
@@ -98,20 +98,20 @@ Result<client::LoadTestOptions> load_options(const LoadArgs& a) {
 }
 
 // Prints the results (JSON or tables) with the gates' verdict; returns check_gates()'s code.
-int print_result(const LoadArgs& a, const client::LoadTestResult& result,
-                 const std::vector<client::Gate>& gates) {
+int print_result(const LoadArgs& a, const loadtest::LoadTestResult& result,
+                 const std::vector<loadtest::Gate>& gates) {
   const std::string report_file = (std::filesystem::path(a.report) / "index.html").string();
   if (a.json) {
-    nlohmann::json j = client::to_json(result.report);
-    j["simulation"] = client::simulation_json(result.run, camera_options(a), a.cache, a.retries);
+    nlohmann::json j = loadtest::to_json(result.report);
+    j["simulation"] = loadtest::simulation_json(result.run, camera_options(a), a.cache, a.retries);
     if (a.share.generators > 1) j["generator"] = generator_json(a.share);
     if (!a.report.empty()) j["report"] = report_file;
     const int code = check_gates(result.report, gates, &j);
     std::printf("%s\n", j.dump(2).c_str());
     return code;
   }
-  std::fputs(client::summary_table(result.report).c_str(), stdout);
-  std::fputs(client::simulation_line(result.run, a.rate > 0).c_str(), stdout);
+  std::fputs(loadtest::summary_table(result.report).c_str(), stdout);
+  std::fputs(loadtest::simulation_line(result.run, a.rate > 0).c_str(), stdout);
   if (!a.report.empty()) std::printf("report: %s\n", report_file.c_str());
   std::fflush(stdout);
   return check_gates(result.report, gates, nullptr);
@@ -131,9 +131,9 @@ int run(LoadArgs& a) {
   auto share = generator_share(a.generator, a.viewers, a.seed, a.rate);
   if (!share) return report_error(share.error());
   a.share = *share;
-  std::optional<client::LoadReport> baseline;
+  std::optional<loadtest::LoadReport> baseline;
   if (!a.baseline.empty()) {
-    auto b = client::read_report_file(a.baseline);
+    auto b = loadtest::read_report_file(a.baseline);
     if (!b) return report_error(b.error());
     baseline = std::move(*b);
   }
@@ -141,20 +141,20 @@ int run(LoadArgs& a) {
   auto o = load_options(a);
   if (!o) return report_error(o.error());
   o->stop = &stop;
-  auto geometry = client::target_geometry(*o);
+  auto geometry = loadtest::target_geometry(*o);
   if (!geometry) return report_error(geometry.error());
-  auto cameras = client::camera_demand(*geometry, camera_options(a));
+  auto cameras = loadtest::camera_demand(*geometry, camera_options(a));
   if (!cameras) return report_error(cameras.error());
   o->path_name = cameras->path_name;
   const bool bar = !a.quiet && !a.json && ProgressBar::stderr_is_terminal();
   o->progress = progress_printer(a, bar);
-  auto result = client::run_load_test(*o, cameras->demand);
+  auto result = loadtest::run_load_test(*o, cameras->demand);
   if (bar) std::fprintf(stderr, "\r\033[K");
   if (!result) return report_error(result.error());
   result->report.target = a.url;
-  const client::LoadReport* base = baseline ? &*baseline : nullptr;
+  const loadtest::LoadReport* base = baseline ? &*baseline : nullptr;
   if (!a.report.empty())
-    if (auto st = client::write_html_report(result->report, a.report, base); !st)
+    if (auto st = loadtest::write_html_report(result->report, a.report, base); !st)
       return report_error(st.error());
   const int code = print_result(a, *result, *gates);
   return stop.load() ? 130 : code;

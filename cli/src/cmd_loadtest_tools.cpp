@@ -10,9 +10,9 @@
 
 #include "commands.hpp"
 #include "loadtest_gates.hpp"
+#include "vts/base/file_io.hpp"
 #include "vts/loadtest/load_gates.hpp"
 #include "vts/loadtest/load_report.hpp"
-#include "vts/protocol/file_io.hpp"
 
 namespace vts::cli {
 
@@ -24,16 +24,16 @@ struct CompareArgs {
 };
 
 int run_compare(const CompareArgs& c) {
-  auto threshold = client::parse_fraction(c.threshold);
+  auto threshold = loadtest::parse_fraction(c.threshold);
   if (!threshold)
     return report_error(
         make_error(ErrorCode::invalid_argument, "--threshold " + threshold.error().message));
-  auto a = client::read_report_file(c.a);
+  auto a = loadtest::read_report_file(c.a);
   if (!a) return report_error(a.error());
-  auto b = client::read_report_file(c.b);
+  auto b = loadtest::read_report_file(c.b);
   if (!b) return report_error(b.error());
-  const auto changes = client::compare_reports(*a, *b, *threshold);
-  const nlohmann::json j = client::compare_json(changes, *threshold);
+  const auto changes = loadtest::compare_reports(*a, *b, *threshold);
+  const nlohmann::json j = loadtest::compare_json(changes, *threshold);
   if (c.json) {
     nlohmann::json out = j;
     out["a"] = c.a;
@@ -41,7 +41,7 @@ int run_compare(const CompareArgs& c) {
     std::printf("%s\n", out.dump(2).c_str());
   } else {
     std::printf("A: %s\nB: %s\n\n%s", c.a.c_str(), c.b.c_str(),
-                client::compare_table(changes).c_str());
+                loadtest::compare_table(changes).c_str());
     std::printf("\n%d regression(s) (worse by more than %s)\n", j["regressions"].get<int>(),
                 c.threshold.c_str());
   }
@@ -65,27 +65,27 @@ int run_merge(const MergeArgs& m) {
         !st)
       return report_error(st.error());
   }
-  std::vector<client::LoadReport> reports;
+  std::vector<loadtest::LoadReport> reports;
   for (const std::string& f : m.files) {
-    auto r = client::read_report_file(f);
+    auto r = loadtest::read_report_file(f);
     if (!r) return report_error(r.error());
     reports.push_back(std::move(*r));
   }
-  auto merged = client::merge_reports(reports);
+  auto merged = loadtest::merge_reports(reports);
   if (!merged) return report_error(merged.error());
   merged->command_line = command_line();
   if (!m.title.empty()) merged->title = m.title;
   if (!m.report.empty())
-    if (auto st = client::write_html_report(*merged, m.report); !st)
+    if (auto st = loadtest::write_html_report(*merged, m.report); !st)
       return report_error(st.error());
   if (m.json) {
-    nlohmann::json j = client::to_json(*merged);
+    nlohmann::json j = loadtest::to_json(*merged);
     j["merged"] = m.files;
     const int code = check_gates(*merged, *gates, &j);
     std::printf("%s\n", j.dump(2).c_str());
     return code;
   }
-  std::fputs(client::summary_table(*merged).c_str(), stdout);
+  std::fputs(loadtest::summary_table(*merged).c_str(), stdout);
   std::printf("merged %zu runs\n", m.files.size());
   std::fflush(stdout);
   return check_gates(*merged, *gates, nullptr);

@@ -4,8 +4,8 @@
 
 #include "commands.hpp"
 #include "progress.hpp"
+#include "vts/base/file_io.hpp"
 #include "vts/builder/shard.hpp"
-#include "vts/protocol/file_io.hpp"
 
 namespace vts::cli {
 
@@ -45,7 +45,7 @@ int run_merge(const MergeArgs& a) {
   auto plan = load_plan(a.plan);
   if (!plan) return report_error(plan.error());
   ProgressBar bar("merge", "tiles", !a.quiet && !a.json);
-  auto progress = [&](const pmtiles::MergeProgress& p) {
+  auto progress = [&](const archive::MergeProgress& p) {
     if (p.copying)
       bar.update(p.bytes_copied, p.bytes_total, "copying " + human_bytes(p.bytes_copied));
     else

@@ -6,8 +6,8 @@
 #include "build_args.hpp"
 #include "build_inputs.hpp"
 #include "commands.hpp"
+#include "vts/base/file_io.hpp"
 #include "vts/builder/shard.hpp"
-#include "vts/protocol/file_io.hpp"
 
 namespace vts::cli {
 

@@ -4,7 +4,7 @@
 #include <filesystem>
 
 #include "commands.hpp"
-#include "vts/protocol/file_io.hpp"
+#include "vts/base/file_io.hpp"
 #include "vts/server/router.hpp"
 
 namespace vts::cli {

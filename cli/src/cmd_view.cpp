@@ -10,11 +10,11 @@
 
 #include "commands.hpp"
 #include "image_target.hpp"
+#include "vts/base/file_io.hpp"
 #include "vts/client/saved_source.hpp"
 #include "vts/client/source.hpp"
 #include "vts/client/tile_client.hpp"
-#include "vts/protocol/file_io.hpp"
-#include "vts/protocol/web_image.hpp"
+#include "vts/imaging/web_image.hpp"
 #include "vts/renderer/geo_view.hpp"
 #include "vts/renderer/viewer.hpp"
 
@@ -120,7 +120,7 @@ ViewerOptions viewer_options(const ViewArgs& a) {
 int write_screenshot(const Viewer& viewer, const std::string& path) {
   auto img = viewer.screenshot();
   if (!img) return report_error(img.error());
-  if (auto w = write_png(path, img->width, img->height, img->rgba); !w)
+  if (auto w = imaging::write_png(path, img->width, img->height, img->rgba); !w)
     return report_error(w.error());
   return 0;
 }

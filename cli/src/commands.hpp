@@ -11,8 +11,8 @@
 #include <string>
 #include <utility>
 
-#include "vts/protocol/pmtiles.hpp"
-#include "vts/protocol/result.hpp"
+#include "vts/archive/pmtiles.hpp"
+#include "vts/base/result.hpp"
 
 namespace vts::cli {
 
@@ -86,7 +86,7 @@ std::string unknown_command(CLI::App& app, int argc, char** argv);
 std::string unknown_option(CLI::App& app, const std::vector<std::string>& extras);
 
 // Opens the archive an argument names; an error names the path.
-Result<std::shared_ptr<pmtiles::Reader>> open_archive(const std::string& path);
+Result<std::shared_ptr<archive::Reader>> open_archive(const std::string& path);
 
 // Prints "vts: error: <message>" to stderr and returns the mapped exit code.
 int report_error(const vts::Error& e);

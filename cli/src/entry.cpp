@@ -62,8 +62,8 @@ const std::atomic<bool>& install_stop_signals() {
   return g_stop;
 }
 
-Result<std::shared_ptr<pmtiles::Reader>> open_archive(const std::string& path) {
-  auto r = pmtiles::Reader::open(path);
+Result<std::shared_ptr<archive::Reader>> open_archive(const std::string& path) {
+  auto r = archive::Reader::open(path);
   if (!r) {
     Error e = std::move(r).error();
     e.message = "'" + path + "': " + e.message;

@@ -9,8 +9,8 @@
 
 #include <CLI/CLI.hpp>
 
+#include "vts/base/result.hpp"
 #include "vts/client/source.hpp"
-#include "vts/protocol/result.hpp"
 
 namespace vts::cli {
 

@@ -17,27 +17,27 @@ void add_gate_options(CLI::App* c, GateArgs& g) {
                 "'requests_per_s>=500' (repeatable; OP < <= > >=; see docs/LOADTEST.md)");
 }
 
-Result<std::vector<client::Gate>> parse_gates(const GateArgs& g) {
-  std::vector<client::Gate> gates;
+Result<std::vector<loadtest::Gate>> parse_gates(const GateArgs& g) {
+  std::vector<loadtest::Gate> gates;
   for (const std::string& text : g.slo) {
-    auto gate = client::parse_slo(text);
+    auto gate = loadtest::parse_slo(text);
     if (!gate) return gate.error();
     gates.push_back(*gate);
   }
-  double rate = client::kDefaultMaxErrorRate;
+  double rate = loadtest::kDefaultMaxErrorRate;
   if (!g.max_error_rate.empty()) {
-    auto r = client::parse_fraction(g.max_error_rate);
+    auto r = loadtest::parse_fraction(g.max_error_rate);
     if (!r) return make_error(ErrorCode::invalid_argument, "--max-error-rate " + r.error().message);
     rate = *r;
   }
-  gates.push_back(client::max_error_rate_gate(rate));
+  gates.push_back(loadtest::max_error_rate_gate(rate));
   return gates;
 }
 
-int check_gates(const client::LoadReport& report, const std::vector<client::Gate>& gates,
+int check_gates(const loadtest::LoadReport& report, const std::vector<loadtest::Gate>& gates,
                 nlohmann::json* json) {
-  const auto results = client::evaluate_gates(report, gates);
-  const std::string failure = client::gate_failure_line(results);
+  const auto results = loadtest::evaluate_gates(report, gates);
+  const std::string failure = loadtest::gate_failure_line(results);
   if (json) (*json)["gates"] = {{"passed", failure.empty()}, {"results", gates_json(results)}};
   if (failure.empty()) return 0;
   std::fprintf(stderr, "vts: %s\n", failure.c_str());

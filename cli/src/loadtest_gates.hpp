@@ -9,23 +9,23 @@
 #include <string>
 #include <vector>
 
+#include "vts/base/result.hpp"
 #include "vts/loadtest/load_gates.hpp"
-#include "vts/protocol/result.hpp"
 
 namespace vts::cli {
 
 struct GateArgs {
-  std::string max_error_rate;  // empty: client::kDefaultMaxErrorRate
+  std::string max_error_rate;  // empty: loadtest::kDefaultMaxErrorRate
   std::vector<std::string> slo;
 };
 
 void add_gate_options(CLI::App* c, GateArgs& g);
 // The gates to check: --slo in order, then the error rate gate. invalid_argument (exit 2) for a
 // malformed --slo or --max-error-rate.
-Result<std::vector<client::Gate>> parse_gates(const GateArgs& g);
+Result<std::vector<loadtest::Gate>> parse_gates(const GateArgs& g);
 // Checks the gates, adds "gates" {passed, results} to *json when given, prints the one-line
 // reason to stderr when one failed. Returns 0, or 1 when a gate failed.
-int check_gates(const client::LoadReport& report, const std::vector<client::Gate>& gates,
+int check_gates(const loadtest::LoadReport& report, const std::vector<loadtest::Gate>& gates,
                 nlohmann::json* json);
 
 struct GeneratorArgs {

@@ -7,8 +7,8 @@
 
 #include "commands.hpp"
 #include "progress.hpp"
+#include "vts/base/file_io.hpp"
 #include "vts/builder/shard.hpp"
-#include "vts/protocol/file_io.hpp"
 
 namespace vts::cli {
 

@@ -12,8 +12,8 @@
 #include <utility>
 #include <vector>
 
+#include "vts/base/result.hpp"
 #include "vts/protocol/geometry.hpp"
-#include "vts/protocol/result.hpp"
 
 namespace vts::cli {
 

@@ -27,7 +27,7 @@
 #include <tuple>
 #include <unordered_map>
 
-#include "vts/protocol/file_io.hpp"
+#include "vts/base/file_io.hpp"
 
 namespace vts::client {
 

@@ -5,9 +5,9 @@
 #include <span>
 #include <string>
 
+#include "vts/archive/pmtiles.hpp"
+#include "vts/base/result.hpp"
 #include "vts/client/source.hpp"
-#include "vts/protocol/pmtiles.hpp"
-#include "vts/protocol/result.hpp"
 
 namespace vts::client {
 
@@ -24,7 +24,7 @@ std::string format_from_suffix(const std::string& url_template);
 // A stock PMTiles archive of standard images (tile type png, jpeg or webp; no "vtstream"
 // metadata) as an image tileset: zoom range and bounds from the header (options override them),
 // tile size from the metadata's "tileSize" (default 256). unsupported for another tile type.
-Result<SourceInfo> stock_archive_info(const pmtiles::Header& header,
+Result<SourceInfo> stock_archive_info(const archive::Header& header,
                                       const std::string& metadata_json, std::string key,
                                       const SourceOptions& options);
 

@@ -7,7 +7,7 @@
 #include <nlohmann/json.hpp>
 #include <system_error>
 
-#include "vts/protocol/file_io.hpp"
+#include "vts/base/file_io.hpp"
 #include "vts/protocol/json_input.hpp"
 
 namespace vts::client {

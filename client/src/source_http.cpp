@@ -21,8 +21,8 @@
 
 #include "fetching_source.hpp"
 #include "image_layout.hpp"
+#include "vts/base/file_io.hpp"
 #include "vts/client/source.hpp"
-#include "vts/protocol/file_io.hpp"
 #include "vts/protocol/tilejson.hpp"
 
 namespace vts::client {

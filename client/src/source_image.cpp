@@ -19,8 +19,8 @@
 #include "deliverer.hpp"
 #include "fetching_source.hpp"
 #include "image_layout.hpp"
+#include "vts/base/file_io.hpp"
 #include "vts/client/source.hpp"
-#include "vts/protocol/file_io.hpp"
 #include "vts/protocol/json_input.hpp"
 #include "vts/protocol/tilejson.hpp"
 
@@ -274,17 +274,17 @@ Result<ImageLayout> read_image_tilejson(std::span<const std::uint8_t> body, cons
   return l;
 }
 
-Result<SourceInfo> stock_archive_info(const pmtiles::Header& h, const std::string& metadata_json,
+Result<SourceInfo> stock_archive_info(const archive::Header& h, const std::string& metadata_json,
                                       std::string key, const SourceOptions& options) {
   ImageLayout l;
   switch (h.tile_type) {
-    case pmtiles::TileType::png:
+    case archive::TileType::png:
       l.format = "png";
       break;
-    case pmtiles::TileType::jpeg:
+    case archive::TileType::jpeg:
       l.format = "jpeg";
       break;
-    case pmtiles::TileType::webp:
+    case archive::TileType::webp:
       l.format = "webp";
       break;
     default:
@@ -294,8 +294,8 @@ Result<SourceInfo> stock_archive_info(const pmtiles::Header& h, const std::strin
                             "of png, jpeg or webp tiles (tile type " +
                             std::to_string(int(h.tile_type)) + ")");
   }
-  if (h.tile_compression != pmtiles::Compression::none &&
-      h.tile_compression != pmtiles::Compression::unknown)
+  if (h.tile_compression != archive::Compression::none &&
+      h.tile_compression != archive::Compression::unknown)
     return make_error(ErrorCode::unsupported,
                       key + ": its image tiles are compressed again (tile compression " +
                           std::to_string(int(h.tile_compression)) +

@@ -1,4 +1,4 @@
-// The local-archive source: a pmtiles::Reader over the file. Every fetch is answered
+// The local-archive source: a archive::Reader over the file. Every fetch is answered
 // synchronously, inside fetch(), with the reader's copy of the stored payload (an archive modified
 // in place since it was opened answers with ErrorCode::changed, never with mixed bytes). The
 // answers mirror what `vts serve` would send for the same archive (docs/PROTOCOL.md §3): the same
@@ -8,16 +8,16 @@
 #include <system_error>
 #include <utility>
 
+#include "vts/archive/inspect.hpp"
+#include "vts/archive/pmtiles.hpp"
 #include "vts/client/source.hpp"
-#include "vts/protocol/inspect.hpp"
-#include "vts/protocol/pmtiles.hpp"
 
 namespace vts::client {
 namespace {
 
 class LocalSource final : public TileSource {
  public:
-  LocalSource(std::shared_ptr<pmtiles::Reader> reader, SourceInfo info, std::string path)
+  LocalSource(std::shared_ptr<archive::Reader> reader, SourceInfo info, std::string path)
       : reader_(std::move(reader)), info_(std::move(info)), path_(std::move(path)) {}
 
   const SourceInfo& info() const override { return info_; }
@@ -69,7 +69,7 @@ class LocalSource final : public TileSource {
     return t;
   }
 
-  std::shared_ptr<pmtiles::Reader> reader_;
+  std::shared_ptr<archive::Reader> reader_;
   SourceInfo info_;
   std::string path_;
   std::atomic<Handle> next_handle_{0};
@@ -88,9 +88,10 @@ Result<std::unique_ptr<TileSource>> open_local_archive(const std::filesystem::pa
   absolute = absolute.lexically_normal();
 
   // Reader errors already name the path.
-  Result<std::shared_ptr<pmtiles::Reader>> reader = pmtiles::Reader::open(absolute);
+  Result<std::shared_ptr<archive::Reader>> reader = archive::Reader::open(absolute);
   if (!reader) return std::move(reader).error();
-  Result<TilesetInfo> info = archive_tileset((*reader)->header(), (*reader)->metadata_json());
+  Result<TilesetInfo> info =
+      archive::archive_tileset((*reader)->header(), (*reader)->metadata_json());
   if (!info) {
     return make_error(info.error().code, absolute.string() + ": " + info.error().message);
   }

@@ -8,9 +8,9 @@
 #include <nlohmann/json.hpp>
 
 #include "image_layout.hpp"
+#include "vts/base/file_io.hpp"
 #include "vts/client/source.hpp"
 #include "vts/protocol/codec.hpp"
-#include "vts/protocol/file_io.hpp"
 
 namespace vts::client {
 namespace {

@@ -4,7 +4,7 @@
 // Opening costs one range read of bytes 0..16383 (header, root directory and, for our archives,
 // the metadata right after it), plus one more when the metadata lies beyond. A tile then costs
 // one range read of its bytes, preceded by one per leaf directory on its path that is not in the
-// source's cache of decoded leaves (a pmtiles::DirectoryCache of kLeafCacheBytes). Concurrent
+// source's cache of decoded leaves (a archive::DirectoryCache of kLeafCacheBytes). Concurrent
 // requests for the same leaf (or the same tile bytes) send identical range requests, which the
 // fetcher merges into one transfer; the first callback to arrive decodes the leaf and the others
 // find it in the LRU.
@@ -12,7 +12,7 @@
 // Trust model: the server is hostile. Every section, leaf pointer and tile entry is checked
 // against the header before it is read; lengths are bounded before anything is requested;
 // directories are decompressed under a size limit and parsed with the protocol's checked parser;
-// directory chains are cut at pmtiles::kMaxDirectoryDepth; a short body is an error. The archive's
+// directory chains are cut at archive::kMaxDirectoryDepth; a short body is an error. The archive's
 // total size is not known (the fetcher does not report Content-Range totals), so a section that
 // lies past the end of the file shows up as a short read (truncated) when it is read.
 //
@@ -47,9 +47,9 @@
 #include "deliverer.hpp"
 #include "fetching_source.hpp"
 #include "image_layout.hpp"
+#include "vts/archive/inspect.hpp"
+#include "vts/archive/pmtiles.hpp"
 #include "vts/client/source.hpp"
-#include "vts/protocol/inspect.hpp"
-#include "vts/protocol/pmtiles.hpp"
 
 namespace vts::client {
 namespace {
@@ -60,10 +60,10 @@ constexpr std::size_t kMaxMetadataDecoded = 16u << 20;   // decompressed metadat
 constexpr std::uint64_t kMaxLeafBytes = 16u << 20;       // one stored leaf directory
 constexpr std::size_t kMaxDirectoryDecoded = 64u << 20;  // one decompressed directory
 // Decoded leaves kept: a leaf of ours (4096 entries) costs 96 KiB, so this holds hundreds; a leaf
-// as large as pmtiles::kMaxDirectoryEntries allows (24 MiB), one.
+// as large as archive::kMaxDirectoryEntries allows (24 MiB), one.
 constexpr std::size_t kLeafCacheBytes = 32u << 20;
 
-using pmtiles::Directory;
+using archive::Directory;
 
 // True when [offset, offset + length) lies within [0, size); no overflow for any inputs.
 bool within(std::uint64_t offset, std::uint64_t length, std::uint64_t size) {
@@ -109,12 +109,12 @@ Status check_range_result(const FetchResult& r, const std::string& url, const st
 }
 
 Result<Directory> decode_directory(std::span<const std::uint8_t> stored,
-                                   pmtiles::Compression compression) {
-  return pmtiles::decode_directory(stored, compression, kMaxDirectoryDecoded);
+                                   archive::Compression compression) {
+  return archive::decode_directory(stored, compression, kMaxDirectoryDecoded);
 }
 
 struct Opened {
-  pmtiles::Header header;
+  archive::Header header;
   Directory root;
   SourceInfo info;
   // The whole archive, when the host ignored Range and sent it all; null otherwise. Then the
@@ -165,7 +165,7 @@ class RemoteArchiveSource final : public FetchingSource<RemotePending> {
       post_kind(h, SourceTile::Kind::absent);
       return h;
     }
-    p->tile_id = pmtiles::zxy_to_tile_id(id.z, id.x, id.y);
+    p->tile_id = archive::zxy_to_tile_id(id.z, id.x, id.y);
     walk(h, root_, 0, /*on_fetcher_thread=*/false);
     return h;
   }
@@ -219,13 +219,13 @@ class RemoteArchiveSource final : public FetchingSource<RemotePending> {
       // The last entry with tile_id <= the wanted id is the only one that can hold it.
       const auto it = std::upper_bound(
           dir->begin(), dir->end(), tile_id,
-          [](std::uint64_t id, const pmtiles::Entry& e) { return id < e.tile_id; });
+          [](std::uint64_t id, const archive::Entry& e) { return id < e.tile_id; });
       if (it == dir->begin()) {
         SourceTile t;
         t.kind = SourceTile::Kind::absent;
         return deliver(h, std::move(t), on_fetcher_thread);
       }
-      const pmtiles::Entry e = *(it - 1);
+      const archive::Entry e = *(it - 1);
       if (e.run_length > 0) {
         if (tile_id - e.tile_id >= e.run_length) {
           SourceTile t;
@@ -234,12 +234,12 @@ class RemoteArchiveSource final : public FetchingSource<RemotePending> {
         }
         return read_tile(h, e, on_fetcher_thread);
       }
-      if (depth + 1 >= pmtiles::kMaxDirectoryDepth) {
+      if (depth + 1 >= archive::kMaxDirectoryDepth) {
         return fail(h,
                     make_error(ErrorCode::corrupt,
                                url_ + ": directory cycle or too deep: tile " + tile_name(h) +
                                    " still leads to a leaf directory after " +
-                                   std::to_string(pmtiles::kMaxDirectoryDepth) + " levels"),
+                                   std::to_string(archive::kMaxDirectoryDepth) + " levels"),
                     on_fetcher_thread);
       }
       const std::string where = url_ + ": leaf directory at offset " + std::to_string(e.offset) +
@@ -266,7 +266,7 @@ class RemoteArchiveSource final : public FetchingSource<RemotePending> {
     }
   }
 
-  Directory cached_leaf(const pmtiles::Entry& pointer) {
+  Directory cached_leaf(const archive::Entry& pointer) {
     return leaves_.find(pointer.offset, pointer.length);
   }
 
@@ -305,7 +305,7 @@ class RemoteArchiveSource final : public FetchingSource<RemotePending> {
     p->fetch = fetcher_->submit(std::move(r), std::move(callback));
   }
 
-  void read_leaf(Handle h, const pmtiles::Entry& pointer, int depth, bool on_fetcher_thread) {
+  void read_leaf(Handle h, const archive::Entry& pointer, int depth, bool on_fetcher_thread) {
     const std::uint64_t offset = header_.leaf_dirs_offset + pointer.offset;
     submit(h, offset, pointer.length, on_fetcher_thread,
            [this, h, pointer, offset, depth](FetchResult&& r) {
@@ -333,7 +333,7 @@ class RemoteArchiveSource final : public FetchingSource<RemotePending> {
            });
   }
 
-  void read_tile(Handle h, const pmtiles::Entry& e, bool on_fetcher_thread) {
+  void read_tile(Handle h, const archive::Entry& e, bool on_fetcher_thread) {
     const std::string name = tile_name(h);
     if (e.length == 0 || !within(e.offset, e.length, header_.tile_data_length)) {
       return fail(h,
@@ -392,24 +392,24 @@ class RemoteArchiveSource final : public FetchingSource<RemotePending> {
   }
 
   const std::string url_;
-  const pmtiles::Header header_;
+  const archive::Header header_;
   const Directory root_;
   const SourceInfo info_;
   const std::shared_ptr<const std::vector<std::uint8_t>> whole_;  // see Opened::whole
   const std::string whole_cache_control_;
   const std::size_t max_tile_bytes_;
 
-  pmtiles::DirectoryCache leaves_{kLeafCacheBytes};  // thread-safe on its own
+  archive::DirectoryCache leaves_{kLeafCacheBytes};  // thread-safe on its own
 
   CallbackThread deliverer_;  // last: destroyed first, after the fetcher is gone
 };
 
 // Checks the header's sections are well-formed and lie where we can read them.
-Status check_header(const pmtiles::Header& h, std::uint64_t first_read_size) {
+Status check_header(const archive::Header& h, std::uint64_t first_read_size) {
   switch (h.internal_compression) {
-    case pmtiles::Compression::none:
-    case pmtiles::Compression::gzip:
-    case pmtiles::Compression::zstd:
+    case archive::Compression::none:
+    case archive::Compression::gzip:
+    case archive::Compression::zstd:
       break;
     default:
       return make_error(ErrorCode::unsupported,
@@ -430,7 +430,7 @@ Status check_header(const pmtiles::Header& h, std::uint64_t first_read_size) {
                                                 std::to_string(s.offset) + ", length " +
                                                 std::to_string(s.length) + ") overflows");
     }
-    if (s.length > 0 && s.offset < pmtiles::kHeaderSize) {
+    if (s.length > 0 && s.offset < archive::kHeaderSize) {
       return make_error(ErrorCode::corrupt, std::string(s.name) + " section (offset " +
                                                 std::to_string(s.offset) +
                                                 ") overlaps the 127-byte header");
@@ -474,9 +474,9 @@ Error ignores_range(const std::string& url, std::int64_t size, std::uint64_t max
 }
 
 // Raster tile types a stock archive may hold (image tilesets, image_layout.hpp).
-bool is_stock_image(const pmtiles::Header& h) {
-  return h.tile_type == pmtiles::TileType::png || h.tile_type == pmtiles::TileType::jpeg ||
-         h.tile_type == pmtiles::TileType::webp;
+bool is_stock_image(const archive::Header& h) {
+  return h.tile_type == archive::TileType::png || h.tile_type == archive::TileType::jpeg ||
+         h.tile_type == archive::TileType::webp;
 }
 
 Error in_archive(const std::string& url, Error e) {
@@ -523,12 +523,12 @@ Result<std::unique_ptr<TileSource>> open_remote_archive(std::string_view url_vie
     whole = std::make_shared<const std::vector<std::uint8_t>>(std::move(head.body));
   }
   const std::span<const std::uint8_t> bytes(whole ? *whole : head.body);
-  Result<pmtiles::Header> header = pmtiles::parse_header(bytes);
+  Result<archive::Header> header = archive::parse_header(bytes);
   if (!header) {
     return make_error(ErrorCode::corrupt,
                       url + " is not a PMTiles v3 archive (" + header.error().message + ")");
   }
-  const pmtiles::Header& h = *header;
+  const archive::Header& h = *header;
   if (Status s = check_header(h, std::min<std::uint64_t>(bytes.size(), kFirstRead)); !s) {
     return in_archive(url, s.error());
   }
@@ -562,13 +562,13 @@ Result<std::unique_ptr<TileSource>> open_remote_archive(std::string_view url_vie
     stored_metadata = std::move(m.body);
   }
   Result<std::vector<std::uint8_t>> decoded_metadata =
-      pmtiles::decompress(stored_metadata, h.internal_compression, kMaxMetadataDecoded);
+      archive::decompress(stored_metadata, h.internal_compression, kMaxMetadataDecoded);
   if (!decoded_metadata) {
     return in_archive(url, make_error(decoded_metadata.error().code,
                                       "metadata: " + decoded_metadata.error().message));
   }
   std::string metadata_json(decoded_metadata->begin(), decoded_metadata->end());
-  Result<TilesetInfo> info = archive_tileset(h, metadata_json);
+  Result<TilesetInfo> info = archive::archive_tileset(h, metadata_json);
   // A stock archive of standard images (no "vtstream" metadata): an image tileset.
   const bool stock = !info && info.error().code == ErrorCode::unsupported && is_stock_image(h);
   if (!info && !stock) return in_archive(url, std::move(info).error());
@@ -586,7 +586,7 @@ Result<std::unique_ptr<TileSource>> open_remote_archive(std::string_view url_vie
     opened.info.description_json = std::move(metadata_json);
   }
   opened.info.version =
-      pmtiles::archive_version(bytes.first(pmtiles::kHeaderSize), root_bytes, stored_metadata);
+      archive::archive_version(bytes.first(archive::kHeaderSize), root_bytes, stored_metadata);
   opened.whole = std::move(whole);
   if (opened.whole) opened.whole_cache_control = head.cache_control;
   return std::unique_ptr<TileSource>(std::make_unique<RemoteArchiveSource>(

@@ -10,7 +10,7 @@
 #include <system_error>
 #include <thread>
 
-#include "vts/protocol/web_image.hpp"
+#include "vts/imaging/web_image.hpp"
 
 namespace vts::client {
 
@@ -225,7 +225,7 @@ class TileClient::Impl {
   // image tileset's PNG/JPEG/WebP tiles must decode to its stored size (T x T, no border).
   Result<TileImage> decode(std::span<const std::uint8_t> payload) const {
     if (!image_) return decode_tile(payload, spec_);
-    auto image = decode_web_image(payload);
+    auto image = imaging::decode_web_image(payload);
     if (image && (image->width != spec_.width || image->height != spec_.height))
       return make_error(ErrorCode::corrupt, "image tile of " + std::to_string(image->width) + "x" +
                                                 std::to_string(image->height) +

@@ -9,7 +9,7 @@
 #include <cmath>
 #include <string>
 
-namespace vts::client {
+namespace vts::loadtest {
 namespace {
 
 constexpr int kMinBits = 1;
@@ -168,4 +168,4 @@ Result<LatencyHistogram> LatencyHistogram::from_buckets(int sub_bucket_bits,
   return h;
 }
 
-}  // namespace vts::client
+}  // namespace vts::loadtest

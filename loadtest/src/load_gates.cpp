@@ -7,9 +7,9 @@
 #include <cstdio>
 #include <limits>
 
-#include "vts/protocol/file_io.hpp"
+#include "vts/base/file_io.hpp"
 
-namespace vts::client {
+namespace vts::loadtest {
 namespace {
 
 using nlohmann::json;
@@ -303,4 +303,4 @@ std::string compare_table(const std::vector<MetricChange>& changes) {
   return out;
 }
 
-}  // namespace vts::client
+}  // namespace vts::loadtest

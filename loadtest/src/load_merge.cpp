@@ -7,11 +7,11 @@
 #include <tuple>
 #include <type_traits>
 
+#include "vts/base/file_io.hpp"
 #include "vts/loadtest/load_report.hpp"
-#include "vts/protocol/file_io.hpp"
 #include "vts/protocol/json_input.hpp"
 
-namespace vts::client {
+namespace vts::loadtest {
 namespace {
 
 using nlohmann::json;
@@ -275,4 +275,4 @@ Result<LoadReport> merge_reports(const std::vector<LoadReport>& reports) {
   return out;
 }
 
-}  // namespace vts::client
+}  // namespace vts::loadtest

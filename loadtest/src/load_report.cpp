@@ -14,28 +14,28 @@
 #include <string_view>
 #include <utility>
 
+#include "vts/base/file_io.hpp"
 #include "vts/loadtest/load_gates.hpp"
 #include "vts/plot/svg_plot.hpp"
-#include "vts/protocol/file_io.hpp"
 
-namespace vts::client {
+namespace vts::loadtest {
 namespace {
 
 using nlohmann::json;
-using svg::Axis;
-using svg::AxisSet;
-using svg::display_width;
-using svg::html_escape;
-using svg::kMarginBottom;
-using svg::kMarginLeft;
-using svg::kMarginTop;
-using svg::kPlotHeight;
-using svg::kPlotWidth;
-using svg::Plot;
-using svg::px;
-using svg::render_plot;
-using svg::Series;
-using svg::valid_utf8;
+using plot::Axis;
+using plot::AxisSet;
+using plot::display_width;
+using plot::html_escape;
+using plot::kMarginBottom;
+using plot::kMarginLeft;
+using plot::kMarginTop;
+using plot::kPlotHeight;
+using plot::kPlotWidth;
+using plot::Plot;
+using plot::px;
+using plot::render_plot;
+using plot::Series;
+using plot::valid_utf8;
 namespace fs = std::filesystem;
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
@@ -722,4 +722,4 @@ Status write_html_report(const LoadReport& report, const fs::path& dir,
   return write_file_atomically(dir / "index.html", html_report(report, baseline));
 }
 
-}  // namespace vts::client
+}  // namespace vts::loadtest

@@ -14,9 +14,9 @@
 #include <utility>
 
 #include "vts/client/tile_cache.hpp"
-#include "vts/protocol/web_image.hpp"
+#include "vts/imaging/web_image.hpp"
 
-namespace vts::client {
+namespace vts::loadtest {
 
 namespace {
 
@@ -35,7 +35,7 @@ double thread_cpu_ms() {
 }
 
 // The kind an error is counted under: the HTTP status when one came, else what the fetcher said.
-std::string error_kind(const PayloadResult& r) {
+std::string error_kind(const client::PayloadResult& r) {
   if (r.transfer && r.transfer->status >= 400) return "http_" + std::to_string(r.transfer->status);
   if (!r.error) return "unknown";
   const std::string& m = r.error->message;
@@ -55,13 +55,13 @@ class Metrics {
   explicit Metrics(Clock::time_point start) : start_(start) {}
 
   // `kind`: the error's kind when the engine judged it (undecodable), else from r.
-  void request_done(const PayloadResult& r, Clock::time_point intended, Clock::time_point sent,
-                    Clock::time_point done, const char* kind = nullptr) {
+  void request_done(const client::PayloadResult& r, Clock::time_point intended,
+                    Clock::time_point sent, Clock::time_point done, const char* kind = nullptr) {
     const Ns lag = sent - intended;
     const std::uint64_t total = ns(done - intended);
     std::uint64_t bytes = 0;
-    if (r.kind == PayloadResult::Kind::ok && r.tile) bytes = r.tile->payload.size();
-    const bool error = r.kind == PayloadResult::Kind::error || kind != nullptr;
+    if (r.kind == client::PayloadResult::Kind::ok && r.tile) bytes = r.tile->payload.size();
+    const bool error = r.kind == client::PayloadResult::Kind::error || kind != nullptr;
     std::lock_guard lock(mutex_);
     ++requests_;
     report_.total.record(total);
@@ -72,15 +72,15 @@ class Metrics {
     } else {
       report_.queue_time.record(ns(lag));
     }
-    if (!error && r.kind == PayloadResult::Kind::ok) {  // an undecodable tile is an error
+    if (!error && r.kind == client::PayloadResult::Kind::ok) {  // an undecodable tile is an error
       switch (r.from) {
-        case PayloadResult::From::ram:
+        case client::PayloadResult::From::ram:
           ++report_.tiers.ram;
           break;
-        case PayloadResult::From::disk:
+        case client::PayloadResult::From::disk:
           ++report_.tiers.disk;
           break;
-        case PayloadResult::From::network:
+        case client::PayloadResult::From::network:
           ++report_.tiers.network;
           break;
       }
@@ -163,7 +163,7 @@ struct Request {
   TileId id;
   std::uint64_t key = 0;
   Clock::time_point intended{}, sent{};
-  TileCache::Handle handle = 0;
+  client::TileCache::Handle handle = 0;
   bool issued = false;  // handed to the cache (under the viewer's lock)
   // Dropped by the view (or at the end of the run). Set under the viewer's lock, read by the
   // dispatcher under the queue's. Once set, the request is counted as cancelled or abandoned,
@@ -176,11 +176,11 @@ class Engine;
 // One simulated viewer: its client stack, what it holds and what it waits for.
 class Viewer {
  public:
-  Viewer(Engine& engine, std::uint32_t index, std::unique_ptr<TileCache> cache)
+  Viewer(Engine& engine, std::uint32_t index, std::unique_ptr<client::TileCache> cache)
       : engine_(engine), index_(index), cache_(std::move(cache)) {}
 
   std::uint32_t index() const { return index_; }
-  TileCache& cache() { return *cache_; }
+  client::TileCache& cache() { return *cache_; }
 
   // One frame (driver thread). Returns the demand function's error, if any.
   Status frame(std::uint64_t f, Clock::time_point due);
@@ -213,12 +213,12 @@ class Viewer {
  private:
   // Hands the request to the cache unless the view dropped it first (then false).
   bool issue(const std::shared_ptr<Request>& req);
-  void done(const std::shared_ptr<Request>& req, PayloadResult&& r);
+  void done(const std::shared_ptr<Request>& req, client::PayloadResult&& r);
   void evict(std::uint64_t frame);
 
   Engine& engine_;
   std::uint32_t index_;
-  std::unique_ptr<TileCache> cache_;
+  std::unique_ptr<client::TileCache> cache_;
 
   std::mutex mutex_;  // guards arrived_ and inflight_ (callbacks run on the cache's threads)
   std::unordered_map<std::uint64_t, Clock::time_point> arrived_;  // resident (or absent) tiles
@@ -286,7 +286,7 @@ Status Viewer::frame(std::uint64_t f, Clock::time_point due) {
   std::unordered_set<std::uint64_t> wanted;
   wanted.reserve(d->tiles.size() * 2);
   std::vector<std::shared_ptr<Request>> to_issue;
-  std::vector<TileCache::Handle> to_cancel;
+  std::vector<client::TileCache::Handle> to_cancel;
   std::size_t cancelled = 0;  // issued requests dropped (wasted)
   std::size_t direct = 0, resolved = 0, fresh = 0;
   Clock::time_point first{Clock::time_point::max()}, last{Clock::time_point::min()};
@@ -331,7 +331,7 @@ Status Viewer::frame(std::uint64_t f, Clock::time_point due) {
       it = inflight_.erase(it);
     }
   }
-  for (TileCache::Handle h : to_cancel) cache_->cancel(h);
+  for (client::TileCache::Handle h : to_cancel) cache_->cancel(h);
   if (cancelled) engine_.metrics.cancelled(cancelled);
 
   if (move_open_) {
@@ -369,10 +369,10 @@ bool Viewer::issue(const std::shared_ptr<Request>& req) {
     req->issued = true;
     req->sent = Clock::now();
   }
-  GetOptions o;
+  client::GetOptions o;
   o.level = req->id.z;
-  const TileCache::Handle h =
-      cache_->get(req->id, o, [this, req](PayloadResult&& r) { done(req, std::move(r)); });
+  const client::TileCache::Handle h =
+      cache_->get(req->id, o, [this, req](client::PayloadResult&& r) { done(req, std::move(r)); });
   std::lock_guard lock(mutex_);
   req->handle = h;
   return true;
@@ -383,14 +383,14 @@ bool Viewer::send(const std::shared_ptr<Request>& req, Clock::time_point slot) {
   return issue(req);
 }
 
-void Viewer::done(const std::shared_ptr<Request>& req, PayloadResult&& r) {
-  if (r.kind == PayloadResult::Kind::cancelled) return;
+void Viewer::done(const std::shared_ptr<Request>& req, client::PayloadResult&& r) {
+  if (r.kind == client::PayloadResult::Kind::cancelled) return;
   const auto now = Clock::now();  // the answer's arrival: --decode's time is not the server's
   // --decode: an image tile that does not decode shows nothing; it is an error, not resident.
   const char* kind = nullptr;
-  if (engine_.options.decode && r.kind == PayloadResult::Kind::ok && r.tile &&
-      r.from == PayloadResult::From::network && !cache_->info().image_format.empty() &&
-      !decode_web_image(r.tile->payload))
+  if (engine_.options.decode && r.kind == client::PayloadResult::Kind::ok && r.tile &&
+      r.from == client::PayloadResult::From::network && !cache_->info().image_format.empty() &&
+      !imaging::decode_web_image(r.tile->payload))
     kind = "undecodable";
   bool counted = false;
   {
@@ -399,7 +399,8 @@ void Viewer::done(const std::shared_ptr<Request>& req, PayloadResult&& r) {
     if (it != inflight_.end() && it->second == req) inflight_.erase(it);
     // Dropped while its answer was on its way: already counted as cancelled or abandoned.
     counted = !req->cancelled;
-    if (!kind && (r.kind == PayloadResult::Kind::ok || r.kind == PayloadResult::Kind::absent)) {
+    if (!kind && (r.kind == client::PayloadResult::Kind::ok ||
+                  r.kind == client::PayloadResult::Kind::absent)) {
       arrived_[req->key] = now;
       backoff_.erase(req->key);
     } else {
@@ -431,7 +432,7 @@ void Viewer::evict(std::uint64_t frame) {
 }
 
 std::size_t Viewer::cancel_all() {
-  std::vector<TileCache::Handle> handles;
+  std::vector<client::TileCache::Handle> handles;
   std::size_t n = 0;  // issued: on their way
   {
     std::lock_guard lock(mutex_);
@@ -465,17 +466,19 @@ Result<LoadTestResult> run_load_test(const LoadTestOptions& options, const Deman
   if (auto st = check(options); !st) return st.error();
 
   // Every viewer's client stack first: opening is not part of the measured run.
-  std::vector<std::unique_ptr<TileCache>> caches;
+  std::vector<std::unique_ptr<client::TileCache>> caches;
   for (std::uint32_t v = 0; v < options.viewers; ++v) {
     if (options.stop && options.stop->load())
       return make_error(ErrorCode::cancelled, "load test interrupted while opening viewers");
-    auto src = open_source(options.target, options.source);
+    auto src = client::open_source(options.target, options.source);
     if (!src) return src.error();
-    TileCacheOptions co;
+    client::TileCacheOptions co;
     co.ram_bytes = options.cache == CacheMode::none ? 0 : options.ram_bytes;
     if (options.cache == CacheMode::disk)
-      co.disk = DiskCacheOptions{.dir = options.cache_dir / ("viewer-" + std::to_string(v))};
-    auto cache = TileCache::create(std::shared_ptr<TileSource>(std::move(*src)), co);
+      co.disk =
+          client::DiskCacheOptions{.dir = options.cache_dir / ("viewer-" + std::to_string(v))};
+    auto cache =
+        client::TileCache::create(std::shared_ptr<client::TileSource>(std::move(*src)), co);
     if (!cache) return cache.error();
     caches.push_back(std::move(*cache));
   }
@@ -639,4 +642,4 @@ Result<LoadTestResult> run_load_test(const LoadTestOptions& options, const Deman
   return result;
 }
 
-}  // namespace vts::client
+}  // namespace vts::loadtest

@@ -9,13 +9,13 @@
 #include <variant>
 #include <vector>
 
-#include "vts/protocol/file_io.hpp"
+#include "vts/base/file_io.hpp"
 #include "vts/renderer/camera_path.hpp"
 #include "vts/renderer/demand.hpp"
 #include "vts/renderer/globe.hpp"
 #include "vts/renderer/scene.hpp"
 
-namespace vts::client {
+namespace vts::loadtest {
 
 namespace {
 
@@ -131,7 +131,7 @@ Status apply_target(const LoadTarget& t, LoadTestOptions& o) {
 }
 
 Result<Geometry> target_geometry(const LoadTestOptions& o) {
-  auto probe = open_source(o.target, o.source);
+  auto probe = client::open_source(o.target, o.source);
   if (!probe) return probe.error();
   return (*probe)->info().info.geometry;
 }
@@ -200,4 +200,4 @@ std::string simulation_line(const LoadRunStats& run, bool open_loop) {
   return line;
 }
 
-}  // namespace vts::client
+}  // namespace vts::loadtest

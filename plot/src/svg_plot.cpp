@@ -2,9 +2,9 @@
 
 #include <cstdio>
 
-#include "vts/protocol/file_io.hpp"
+#include "vts/base/file_io.hpp"
 
-namespace vts::client::svg {
+namespace vts::plot {
 namespace {
 
 std::string buf_printf(double v) {
@@ -197,4 +197,4 @@ std::string render_plot(const Plot& plot, const AxisSet* axes) {
   return s;
 }
 
-}  // namespace vts::client::svg
+}  // namespace vts::plot

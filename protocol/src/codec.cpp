@@ -32,7 +32,7 @@
 #include "codec_internal.hpp"
 #include "vts/protocol/codec.hpp"
 
-namespace vts {
+namespace vts::inline protocol {
 namespace {
 
 constexpr std::size_t kFrameBytes = TileHeader::kFrameBytes;
@@ -580,4 +580,4 @@ Result<TileImage> decode_lossless_body(const TileHeader& header,
 }
 
 }  // namespace detail
-}  // namespace vts
+}  // namespace vts::inline protocol

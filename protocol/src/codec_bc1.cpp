@@ -26,7 +26,7 @@
 #include "codec_internal.hpp"
 #include "vts/protocol/codec.hpp"
 
-namespace vts {
+namespace vts::inline protocol {
 namespace {
 
 constexpr std::size_t kBlockBytes = 8;
@@ -175,4 +175,4 @@ Result<TileImage> bc1_to_rgba8(const TileImage& image) {
   return out;
 }
 
-}  // namespace vts
+}  // namespace vts::inline protocol

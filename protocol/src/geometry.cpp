@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <charconv>
 
-namespace vts {
+namespace vts::inline protocol {
 
 namespace {
 std::uint64_t ceil_shift(std::uint64_t v, int shift) {
@@ -172,4 +172,4 @@ TexelRect Geometry::map_rect(int from_z, const TexelRect& rect, int to_z) const 
   return r;
 }
 
-}  // namespace vts
+}  // namespace vts::inline protocol

@@ -2,10 +2,10 @@
 
 #include <nlohmann/json.hpp>
 
-#include "vts/protocol/file_io.hpp"
+#include "vts/base/file_io.hpp"
 #include "vts/protocol/json_input.hpp"
 
-namespace vts {
+namespace vts::inline protocol {
 namespace {
 
 using nlohmann::json;
@@ -120,4 +120,4 @@ std::string resolve_url(const std::string& base, const std::string& ref) {
   return path.substr(0, path.rfind('/') + 1) + ref;
 }
 
-}  // namespace vts
+}  // namespace vts::inline protocol

@@ -15,7 +15,7 @@
 
 #include "vts/protocol/json_input.hpp"
 
-namespace vts {
+namespace vts::inline protocol {
 namespace {
 
 using nlohmann::json;
@@ -357,4 +357,4 @@ std::string tileset_name_problem(std::string_view name) {
   return {};
 }
 
-}  // namespace vts
+}  // namespace vts::inline protocol

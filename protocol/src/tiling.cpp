@@ -7,9 +7,9 @@
 #include <cmath>
 #include <numbers>
 
-#include "vts/protocol/file_io.hpp"
+#include "vts/base/file_io.hpp"
 
-namespace vts {
+namespace vts::inline protocol {
 namespace {
 
 using nlohmann::ordered_json;
@@ -260,4 +260,4 @@ std::string tile_matrix_set_json(Tiling t, const Geometry& g, const LonLatBounds
   return j.dump(2) + "\n";
 }
 
-}  // namespace vts
+}  // namespace vts::inline protocol

@@ -9,7 +9,7 @@
 #include <string>
 #include <string_view>
 
-#include "vts/protocol/result.hpp"
+#include "vts/base/result.hpp"
 
 namespace vts::http_detail {
 

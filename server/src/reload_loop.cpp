@@ -3,7 +3,7 @@
 #include <cstdio>
 #include <system_error>
 
-#include "vts/protocol/file_io.hpp"
+#include "vts/base/file_io.hpp"
 
 namespace vts::http_detail {
 

@@ -21,7 +21,7 @@
 #include <thread>
 
 #include "metrics.hpp"
-#include "vts/protocol/result.hpp"
+#include "vts/base/result.hpp"
 #include "vts/server/tileset_registry.hpp"
 
 namespace vts::http_detail {

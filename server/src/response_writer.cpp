@@ -10,7 +10,7 @@
 #include <cerrno>
 #include <ctime>
 
-#include "vts/protocol/pmtiles.hpp"
+#include "vts/archive/pmtiles.hpp"
 #include "vts/server/tileset_registry.hpp"
 
 namespace vts::http_detail {

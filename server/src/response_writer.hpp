@@ -2,7 +2,7 @@
 // tile read from its archive, `response.owned`, a provided tile) goes out with the header in one
 // gathered write. A region of an archive file (`/{ts}.pmtiles`) is read into a buffer a chunk at
 // a time as the socket takes it, each chunk checked against the archive being modified in place
-// before any of it is sent (pmtiles::Reader::read): a changed archive ends the connection, so a
+// before any of it is sent (archive::Reader::read): a changed archive ends the connection, so a
 // client never receives a body that mixes two archives. (Never sendfile(2): the kernel may read
 // the file after the check, or put pages on the wire that a writer modifies afterwards.)
 #pragma once
@@ -17,7 +17,7 @@
 #include <vector>
 
 #include "deadline_sweeper.hpp"
-#include "vts/protocol/pmtiles.hpp"
+#include "vts/archive/pmtiles.hpp"
 #include "vts/server/router.hpp"
 
 namespace vts::http_detail {
@@ -31,7 +31,7 @@ struct Outgoing {
   std::span<const char> body;  // in memory; empty for HEAD, 204 and 304, and for a file body
   // Non-null: the body is bytes [file_offset, file_offset + body_size) of this archive (held by
   // response.hold), read a chunk at a time into `chunk`, which starts at body byte chunk_start.
-  const pmtiles::Reader* file = nullptr;
+  const archive::Reader* file = nullptr;
   std::uint64_t file_offset = 0;
   std::uint64_t body_size = 0;  // bytes of body to send
   std::vector<char> chunk;

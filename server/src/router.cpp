@@ -1,5 +1,5 @@
 // The HTTP semantics of `vts serve` (docs/PROTOCOL.md): routing, tile and archive answers,
-// TileJSON and the index. Pure but for reading tiles from their archive (pmtiles::Reader: a copy
+// TileJSON and the index. Pure but for reading tiles from their archive (archive::Reader: a copy
 // per tile, kept by the response); archive bodies are a file region the network layer reads. The
 // target is checked in router_target.cpp, ranges in router_conditional.cpp, credentials in
 // router_access.cpp, the admin listener in router_admin.cpp.
@@ -14,8 +14,8 @@
 
 #include "router_internal.hpp"
 #include "tile_tag_memo.hpp"
+#include "vts/base/file_io.hpp"
 #include "vts/protocol/codec.hpp"
-#include "vts/protocol/file_io.hpp"
 #include "vts/protocol/tilejson.hpp"
 #include "vts/protocol/tiling.hpp"
 #include "web_tile_cache.hpp"
@@ -322,7 +322,7 @@ HttpResponse tile_route(const HttpRequest& request, std::shared_ptr<const Tilese
 
   const std::string cc = version.empty() ? cache_control(priv, config.max_age_seconds, false)
                                          : cache_control(priv, kImmutableMaxAge, true);
-  const std::uint64_t tile_id = pmtiles::zxy_to_tile_id(id.z, id.x, id.y);
+  const std::uint64_t tile_id = archive::zxy_to_tile_id(id.z, id.x, id.y);
   http_detail::TileTagMemo* memo = t->tags.get();
   if (!request.if_none_match.empty() && memo) {
     // A tag read before from this file answers without touching it.
@@ -417,8 +417,8 @@ struct Address {
   std::string_view name;
   std::string_view version;
   std::vector<std::string_view> segments;
-  std::optional<WebFormat> web;  // /{ts}/{z}/{x}/{y}.{ext}: a web image (router_web.cpp)
-  bool web_mercator = false;     // /{ts}/WebMercatorQuad/{z}/{x}/{y}.{ext}
+  std::optional<imaging::WebFormat> web;  // /{ts}/{z}/{x}/{y}.{ext}: a web image (router_web.cpp)
+  bool web_mercator = false;              // /{ts}/WebMercatorQuad/{z}/{x}/{y}.{ext}
   std::span<const std::string_view> zxy() const {
     return std::span<const std::string_view>(segments).subspan(1);
   }
@@ -468,9 +468,9 @@ std::optional<HttpResponse> parse_address(std::string_view path, Address& a) {
   if (const std::size_t dot = a.segments[3].find('.'); dot != std::string_view::npos) {
     const std::string_view ext = a.segments[3].substr(dot + 1);
     a.segments[3] = a.segments[3].substr(0, dot);
-    if (ext == "png") a.web = WebFormat::png;
-    if (ext == "webp") a.web = WebFormat::webp;
-    if (ext == "jpg" || ext == "jpeg") a.web = WebFormat::jpeg;
+    if (ext == "png") a.web = imaging::WebFormat::png;
+    if (ext == "webp") a.web = imaging::WebFormat::webp;
+    if (ext == "jpg" || ext == "jpeg") a.web = imaging::WebFormat::jpeg;
     if (!a.web) {
       return error(400, "unknown tile image extension \"." + std::string(ext) +
                             "\"; use .png, .webp or .jpg (or no extension for the native tile)");

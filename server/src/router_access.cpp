@@ -8,7 +8,7 @@
 #include <span>
 
 #include "router_internal.hpp"
-#include "vts/protocol/file_io.hpp"
+#include "vts/base/file_io.hpp"
 
 namespace vts {
 namespace {

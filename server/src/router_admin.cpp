@@ -1,6 +1,6 @@
 // The admin listener's routes: /metrics and /health (docs/PROTOCOL.md §10).
 #include "router_internal.hpp"
-#include "vts/protocol/file_io.hpp"
+#include "vts/base/file_io.hpp"
 
 namespace vts {
 

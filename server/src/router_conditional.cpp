@@ -2,7 +2,7 @@
 #include <limits>
 
 #include "router_internal.hpp"
-#include "vts/protocol/file_io.hpp"
+#include "vts/base/file_io.hpp"
 
 namespace vts::router_detail {
 

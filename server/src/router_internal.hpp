@@ -101,19 +101,20 @@ std::optional<TileId> web_tile_id(std::span<const std::string_view> zxy, const G
 // the web tile cache (single flight) or encoded now. `zxy` are validated decimals.
 HttpResponse web_tile_route(const HttpRequest& request, std::shared_ptr<const Tileset> t,
                             std::string_view version, std::span<const std::string_view> zxy,
-                            WebFormat format, const RouterConfig& config, bool priv);
+                            imaging::WebFormat format, const RouterConfig& config, bool priv);
 // GET /{ts}[@{version}]/WebMercatorQuad/{z}/{x}/{y}.{ext} of a WorldCRS84Quad tileset: the tile
 // resampled to Web Mercator (render_web_mercator_tile), as an image.
 HttpResponse web_mercator_tile_route(const HttpRequest& request, std::shared_ptr<const Tileset> t,
                                      std::string_view version,
-                                     std::span<const std::string_view> zxy, WebFormat format,
-                                     const RouterConfig& config, bool priv);
+                                     std::span<const std::string_view> zxy,
+                                     imaging::WebFormat format, const RouterConfig& config,
+                                     bool priv);
 // The answer to a provided tile (vts cache serve) wanted as a web image, once it has arrived:
 // `payload` (null: absent from a sparse origin, the transparent filler).
 HttpResponse provided_web_image(const DeferredTile& d, const std::vector<std::uint8_t>* payload);
 // The transparent filler of a tile with nothing to show (T x T texels), asked for on connection
 // `owner` (HttpRequest::connection).
-HttpResponse web_filler(std::uint32_t tile_size, WebFormat f, const RouterConfig& config,
+HttpResponse web_filler(std::uint32_t tile_size, imaging::WebFormat f, const RouterConfig& config,
                         std::string_view if_none_match, const std::string& cc, std::uint64_t owner);
 // GET /{ts}.json?format=...[&tiling=...]: the TileJSON stock web maps read; 400 for an unknown
 // format or a tiling this tileset cannot be served in.

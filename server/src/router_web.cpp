@@ -9,10 +9,10 @@
 
 #include "router_internal.hpp"
 #include "tile_tag_memo.hpp"
+#include "vts/imaging/web_mercator.hpp"
 #include "vts/protocol/codec.hpp"
 #include "vts/protocol/tilejson.hpp"
 #include "vts/protocol/tiling.hpp"
-#include "vts/protocol/web_mercator.hpp"
 #include "web_tile_cache.hpp"
 
 namespace vts::router_detail {
@@ -24,15 +24,15 @@ using http_detail::WebTilePtr;
 
 // What the encoding options change in the bytes of `f`: part of the ETag and the cache key, so
 // a server restarted with other options never answers a stale client copy with 304.
-std::string options_tag(WebFormat f, const WebEncodeOptions& o) {
+std::string options_tag(imaging::WebFormat f, const imaging::WebEncodeOptions& o) {
   switch (f) {
-    case WebFormat::png:
+    case imaging::WebFormat::png:
       return "png" + std::to_string(o.png_level);
-    case WebFormat::webp:
+    case imaging::WebFormat::webp:
       return o.webp_lossless
                  ? "webpll" + std::to_string(o.webp_method)
                  : "webp" + std::to_string(o.webp_quality) + "m" + std::to_string(o.webp_method);
-    case WebFormat::jpeg:
+    case imaging::WebFormat::jpeg:
       return "jpg" + std::to_string(o.jpeg_quality);
   }
   return "";
@@ -161,7 +161,7 @@ HttpResponse encoded(const RouterConfig& config, const std::string& key, std::st
 // fully transparent T x T image, 200, cacheable like a tile. For .jpg (no alpha in JPEG) it is a
 // PNG, with Content-Type image/png: browsers decode images by their bytes, and a black square
 // would hide what lies under the layer.
-HttpResponse empty_tile(const Tileset& t, WebFormat f, const RouterConfig& config,
+HttpResponse empty_tile(const Tileset& t, imaging::WebFormat f, const RouterConfig& config,
                         const HttpRequest& request, const std::string& cc) {
   return web_filler(t.info.geometry.tile_size(), f, config, request.if_none_match, cc,
                     request.connection);
@@ -169,19 +169,20 @@ HttpResponse empty_tile(const Tileset& t, WebFormat f, const RouterConfig& confi
 
 }  // namespace
 
-HttpResponse web_filler(std::uint32_t size, WebFormat f, const RouterConfig& config,
+HttpResponse web_filler(std::uint32_t size, imaging::WebFormat f, const RouterConfig& config,
                         std::string_view if_none_match, const std::string& cc,
                         std::uint64_t owner) {
   const std::string tag = options_tag(f, config.web.encode);
-  const WebFormat as = f == WebFormat::jpeg ? WebFormat::png : f;
+  const imaging::WebFormat as = f == imaging::WebFormat::jpeg ? imaging::WebFormat::png : f;
   Encoder encode = [size, as, options = config.web.encode] {
     const TileImage clear{size, size, PixelFormat::rgba8,
                           std::vector<std::uint8_t>(std::size_t(size) * size * 4, 0)};
-    return encode_web_image(clear, as, options);
+    return imaging::encode_web_image(clear, as, options);
   };
   const std::string key = "empty/" + std::to_string(size) + "/" + tag;
   return encoded(config, key, "\"empty-" + std::to_string(size) + "-" + tag + "\"",
-                 web_format_content_type(as).data(), std::move(encode), if_none_match, cc, owner);
+                 imaging::web_format_content_type(as).data(), std::move(encode), if_none_match, cc,
+                 owner);
 }
 
 std::optional<TileId> web_tile_id(std::span<const std::string_view> zxy, const Geometry& g,
@@ -202,7 +203,7 @@ std::optional<TileId> web_tile_id(std::span<const std::string_view> zxy, const G
 
 HttpResponse web_tile_route(const HttpRequest& request, std::shared_ptr<const Tileset> t,
                             std::string_view version, std::span<const std::string_view> zxy,
-                            WebFormat format, const RouterConfig& config, bool priv) {
+                            imaging::WebFormat format, const RouterConfig& config, bool priv) {
   if (!version.empty() && version != t->version) return not_current(version, t->name, t->version);
   const Geometry& g = t->info.geometry;
   std::optional<HttpResponse> rejection;
@@ -225,7 +226,7 @@ HttpResponse web_tile_route(const HttpRequest& request, std::shared_ptr<const Ti
   auto etag_of = [&tag](std::uint64_t checksum) {
     return "\"" + hex16(checksum) + "-" + tag + "\"";
   };
-  const std::uint64_t tile_id = pmtiles::zxy_to_tile_id(id.z, id.x, id.y);
+  const std::uint64_t tile_id = archive::zxy_to_tile_id(id.z, id.x, id.y);
   const std::string key = t->name + "@" + t->version + "/" + std::to_string(tile_id) + "/" + tag;
   if (config.web.cache) {
     // A cached image answers without reading the archive (its key names the archive's version).
@@ -276,26 +277,27 @@ HttpResponse web_tile_route(const HttpRequest& request, std::shared_ptr<const Ti
                     options = config.web.encode]() -> Result<std::vector<std::uint8_t>> {
     auto stored = decode_tile(*stored_payload);
     if (!stored) return stored.error();
-    auto content = tile_content(*stored, tileset->info.geometry, id);
+    auto content = imaging::tile_content(*stored, tileset->info.geometry, id);
     if (!content) return content.error();
-    return encode_web_image(*content, format, options);
+    return imaging::encode_web_image(*content, format, options);
   };
   return finish(encoded(config, key, etag_of(header->checksum),
-                        web_format_content_type(format).data(), std::move(encode),
+                        imaging::web_format_content_type(format).data(), std::move(encode),
                         request.if_none_match, cc, request.connection));
 }
 
 HttpResponse web_mercator_tile_route(const HttpRequest& request, std::shared_ptr<const Tileset> t,
                                      std::string_view version,
-                                     std::span<const std::string_view> zxy, WebFormat format,
-                                     const RouterConfig& config, bool priv) {
+                                     std::span<const std::string_view> zxy,
+                                     imaging::WebFormat format, const RouterConfig& config,
+                                     bool priv) {
   if (!version.empty() && version != t->version) return not_current(version, t->name, t->version);
   const std::uint32_t z = *parse_u32(zxy[0]), x = *parse_u32(zxy[1]), y = *parse_u32(zxy[2]);
-  auto range = web_mercator_range(t->info);
+  auto range = imaging::web_mercator_range(t->info);
   if (!range) {
     return tile_error(404, "tileset \"" + t->name + "\" has no WebMercatorQuad tiles (" +
                                range.error().message + "); use /" + t->name + "/{z}/{x}/{y}." +
-                               std::string(web_format_extension(format)));
+                               std::string(imaging::web_format_extension(format)));
   }
   if (z > std::uint32_t(range->max_zoom) || x >= (std::uint32_t(1) << z) ||
       y >= (std::uint32_t(1) << z)) {
@@ -334,7 +336,8 @@ HttpResponse web_mercator_tile_route(const HttpRequest& request, std::shared_ptr
   } else {
     Encoder encode = [tileset = t, z, x, y, format,
                       options = config.web.encode]() -> Result<std::vector<std::uint8_t>> {
-      const FetchStoredTile fetch = [&tileset](TileId id) -> Result<std::optional<TileImage>> {
+      const imaging::FetchStoredTile fetch =
+          [&tileset](TileId id) -> Result<std::optional<TileImage>> {
         auto payload = tileset->reader->get(id);
         if (!payload) {
           if (http_status(payload.error().code) == 404) return std::optional<TileImage>();
@@ -349,18 +352,18 @@ HttpResponse web_mercator_tile_route(const HttpRequest& request, std::shared_ptr
         }
         return std::optional<TileImage>(std::move(*stored));
       };
-      auto tile = render_web_mercator_tile(tileset->info, int(z), x, y, fetch);
+      auto tile = imaging::render_web_mercator_tile(tileset->info, int(z), x, y, fetch);
       if (!tile) return tile.error();
       if (!*tile) {  // only an edge shared with the footprint: nothing to draw
         const std::uint32_t s = tileset->info.geometry.tile_size();
         *tile =
             TileImage{s, s, PixelFormat::rgba8, std::vector<std::uint8_t>(std::size_t(s) * s * 4)};
       }
-      return encode_web_image(**tile, format, options);
+      return imaging::encode_web_image(**tile, format, options);
     };
     r = encoded(config, t->name + "@" + t->version + "/wmq/" + zxy_text + "/" + tag, etag,
-                web_format_content_type(format).data(), std::move(encode), request.if_none_match,
-                cc, request.connection);
+                imaging::web_format_content_type(format).data(), std::move(encode),
+                request.if_none_match, cc, request.connection);
   }
   r.hold = std::move(t);
   return r;
@@ -398,21 +401,21 @@ HttpResponse provided_web_image(const DeferredTile& d, const std::vector<std::ui
                     options = d.web_options]() -> Result<std::vector<std::uint8_t>> {
     auto stored = decode_tile(*stored_payload);
     if (!stored) return stored.error();
-    auto content = tile_content(*stored, tileset->info.geometry, id);
+    auto content = imaging::tile_content(*stored, tileset->info.geometry, id);
     if (!content) return content.error();
-    return encode_web_image(*content, format, options);
+    return imaging::encode_web_image(*content, format, options);
   };
-  return encoded(config, key, etag, web_format_content_type(*d.web).data(), std::move(encode),
-                 d.if_none_match, d.cache_control, d.connection);
+  return encoded(config, key, etag, imaging::web_format_content_type(*d.web).data(),
+                 std::move(encode), d.if_none_match, d.cache_control, d.connection);
 }
 
 namespace {
 
 // The TileJSON of a WorldCRS84Quad tileset served as WebMercatorQuad (web_mercator_tile_route).
 HttpResponse web_mercator_tilejson(const std::string& name, const TilesetInfo& info,
-                                   const std::string& version, bool versioned, WebFormat format,
-                                   const std::string& base, bool priv) {
-  auto range = web_mercator_range(info);
+                                   const std::string& version, bool versioned,
+                                   imaging::WebFormat format, const std::string& base, bool priv) {
+  auto range = imaging::web_mercator_range(info);
   if (!range) {
     HttpResponse r = error(400, "tileset \"" + name + "\": " + range.error().message);
     r.route = Route::tilejson;
@@ -420,7 +423,7 @@ HttpResponse web_mercator_tilejson(const std::string& name, const TilesetInfo& i
   }
   const std::string tiles = base + "/" + name + (versioned ? "@" + version : std::string()) +
                             "/WebMercatorQuad/{z}/{x}/{y}." +
-                            std::string(web_format_extension(format));
+                            std::string(imaging::web_format_extension(format));
   auto j = nlohmann::ordered_json::parse(
       write_tilejson({.tileset = name, .info = &info, .version = version, .tiles_url = tiles}));
   j.erase("vtstream");
@@ -449,7 +452,7 @@ HttpResponse web_tilejson_route(const std::string& name, const TilesetInfo& info
     r.route = Route::tilejson;
     return r;
   };
-  auto format = parse_web_format(*q.format);
+  auto format = imaging::parse_web_format(*q.format);
   if (!format) return fail("format: " + format.error().message);
   const Tiling native = info.georeference ? info.georeference->tiling : Tiling::none;
   if (q.tiling) {
@@ -468,7 +471,7 @@ HttpResponse web_tilejson_route(const std::string& name, const TilesetInfo& info
                   "tilesets");
     }
   }
-  const std::string ext(web_format_extension(*format));
+  const std::string ext(imaging::web_format_extension(*format));
   const std::string tiles =
       base + "/" + name + (versioned ? "@" + version : std::string()) + "/{z}/{x}/{y}." + ext;
   auto j = nlohmann::ordered_json::parse(

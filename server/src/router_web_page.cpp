@@ -8,7 +8,7 @@
 #include <map>
 
 #include "router_internal.hpp"
-#include "vts/protocol/file_io.hpp"
+#include "vts/base/file_io.hpp"
 #include "vts/protocol/tileset.hpp"
 
 namespace vts::router_detail {

@@ -6,7 +6,7 @@
 #include <stdexcept>
 #include <type_traits>
 
-#include "vts/protocol/file_io.hpp"
+#include "vts/base/file_io.hpp"
 #include "vts/protocol/json_input.hpp"
 
 namespace vts {

@@ -2,8 +2,8 @@
 #include "vts/server/tileset_registry.hpp"
 
 #include "tile_tag_memo.hpp"
-#include "vts/protocol/file_io.hpp"
-#include "vts/protocol/inspect.hpp"
+#include "vts/archive/inspect.hpp"
+#include "vts/base/file_io.hpp"
 
 #include <sys/stat.h>
 
@@ -82,9 +82,9 @@ Result<std::shared_ptr<const Tileset>> open_archive(const fs::path& path) {
   auto id = identify(path);
   if (!id) return id.error();
 
-  pmtiles::ReaderOptions options;
+  archive::ReaderOptions options;
   options.leaf_cache_entries = 4096;
-  auto reader = pmtiles::Reader::open(path, options);
+  auto reader = archive::Reader::open(path, options);
   if (!reader) {  // the reader names the file first, "<file>: <reason>"
     Error e = reader.error();
     const std::string named = path.string() + ": ";
@@ -92,7 +92,7 @@ Result<std::shared_ptr<const Tileset>> open_archive(const fs::path& path) {
     return e;
   }
 
-  auto info = archive_tileset((*reader)->header(), (*reader)->metadata_json());
+  auto info = archive::archive_tileset((*reader)->header(), (*reader)->metadata_json());
   if (!info) return info.error();
 
   auto t = std::make_shared<Tileset>();

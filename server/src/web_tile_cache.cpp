@@ -138,10 +138,11 @@ std::string web_metrics_text(const WebTileCache& c) {
   std::string s;
   s += "# HELP vts_web_tile_requests_total Web image tile requests (PNG/WebP/JPEG) by format.\n";
   s += "# TYPE vts_web_tile_requests_total counter\n";
-  constexpr WebFormat kFormats[] = {WebFormat::png, WebFormat::webp, WebFormat::jpeg};
-  for (WebFormat f : kFormats) {
-    s += "vts_web_tile_requests_total{format=\"" + std::string(web_format_extension(f)) + "\"} " +
-         v(c.requests_by_format[static_cast<std::size_t>(f)]) + "\n";
+  constexpr imaging::WebFormat kFormats[] = {imaging::WebFormat::png, imaging::WebFormat::webp,
+                                             imaging::WebFormat::jpeg};
+  for (imaging::WebFormat f : kFormats) {
+    s += "vts_web_tile_requests_total{format=\"" + std::string(imaging::web_format_extension(f)) +
+         "\"} " + v(c.requests_by_format[static_cast<std::size_t>(f)]) + "\n";
   }
   auto counter = [&](const char* name, const char* help, const std::atomic<std::uint64_t>& a,
                      const char* type = "counter") {

@@ -25,7 +25,7 @@
 #include <vector>
 
 #include "encode_queue.hpp"
-#include "vts/protocol/web_image.hpp"
+#include "vts/imaging/web_image.hpp"
 
 namespace vts::http_detail {
 

@@ -11,14 +11,14 @@
 #include <span>
 #include <vector>
 
-#include "vts/protocol/pmtiles.hpp"
+#include "vts/archive/pmtiles.hpp"
 #include "vts/protocol/tilejson.hpp"
 #include "vts/protocol/tileset.hpp"
 
 namespace {
 
-using vts::pmtiles::Entry;
-using vts::pmtiles::Reader;
+using vts::archive::Entry;
+using vts::archive::Reader;
 
 // A returned tile must be a copy of the bytes its directory entry points at, inside the input.
 void check_tile(const Reader& reader, std::span<const std::uint8_t> all, std::uint64_t id,
@@ -37,11 +37,11 @@ void check_tile(const Reader& reader, std::span<const std::uint8_t> all, std::ui
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   const std::span<const std::uint8_t> bytes(data, size);
 
-  (void)vts::pmtiles::parse_header(bytes);
-  (void)vts::pmtiles::parse_directory(bytes, 1u << 16);
+  (void)vts::archive::parse_header(bytes);
+  (void)vts::archive::parse_directory(bytes, 1u << 16);
 
   // Small limits keep each input fast; the limits themselves are exercised by the unit tests.
-  vts::pmtiles::ReaderOptions options;
+  vts::archive::ReaderOptions options;
   options.max_directory_bytes = 1u << 20;
   options.max_metadata_bytes = 1u << 20;
   options.leaf_cache_entries = 2;  // small, so eviction runs too
@@ -56,7 +56,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
        {vts::TileId{0, 0, 0}, vts::TileId{1, 1, 0}, vts::TileId{3, 7, 7},
         vts::TileId{31, 0x7fffffff, 0}, vts::TileId{2, 4, 0}, vts::TileId{40, 0, 0}}) {
     if (auto tile = reader.get(t)) {
-      check_tile(reader, bytes, vts::pmtiles::zxy_to_tile_id(t.z, t.x, t.y), *tile);
+      check_tile(reader, bytes, vts::archive::zxy_to_tile_id(t.z, t.x, t.y), *tile);
     }
   }
 

@@ -19,13 +19,13 @@
 #include <vector>
 
 #include "gl_fixture.hpp"
+#include "vts/archive/pmtiles.hpp"
 #include "vts/builder/builder.hpp"
 #include "vts/client/source.hpp"
 #include "vts/client/tile_client.hpp"
+#include "vts/imaging/web_image.hpp"
 #include "vts/protocol/codec.hpp"
-#include "vts/protocol/pmtiles.hpp"
 #include "vts/protocol/tileset.hpp"
-#include "vts/protocol/web_image.hpp"
 #include "vts/renderer/camera.hpp"
 #include "vts/renderer/gl_program.hpp"
 #include "vts/renderer/globe.hpp"
@@ -113,8 +113,10 @@ class Bc1Test : public vts::test::VirtualTextureFixture {
   static ImageDiff compare(const Image& got, const Image& ref, const std::string& name) {
     // VTS_TEST_KEEP_IMAGES=DIR keeps both images for a look.
     if (const char* keep = std::getenv("VTS_TEST_KEEP_IMAGES")) {
-      (void)vts::write_png(fs::path(keep) / (name + "-gpu.png"), got.width, got.height, got.rgba);
-      (void)vts::write_png(fs::path(keep) / (name + "-ref.png"), ref.width, ref.height, ref.rgba);
+      (void)vts::imaging::write_png(fs::path(keep) / (name + "-gpu.png"), got.width, got.height,
+                                    got.rgba);
+      (void)vts::imaging::write_png(fs::path(keep) / (name + "-ref.png"), ref.width, ref.height,
+                                    ref.rgba);
     }
     auto d = compare_images(got, ref);
     EXPECT_TRUE(d.ok()) << d.error().to_string();
@@ -278,7 +280,7 @@ TEST_F(Bc1Test, DebugViewsWork) {
 // colours open; the bound is one code.
 TEST_F(Bc1Test, GpuBlockDecodeMatchesBc1ToRgba8) {
   const fs::path path = bc1_archive();
-  auto reader = vts::pmtiles::Reader::open(path);
+  auto reader = vts::archive::Reader::open(path);
   ASSERT_TRUE(reader.ok()) << reader.error().to_string();
   auto info = vts::TilesetInfo::from_json((*reader)->metadata_json());
   ASSERT_TRUE(info.ok()) << info.error().to_string();

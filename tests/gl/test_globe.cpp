@@ -16,7 +16,7 @@
 #include "vts/builder/builder.hpp"
 #include "vts/client/source.hpp"
 #include "vts/client/tile_client.hpp"
-#include "vts/protocol/web_image.hpp"
+#include "vts/imaging/web_image.hpp"
 #include "vts/renderer/geo_view.hpp"
 #include "vts/renderer/gl_context.hpp"
 #include "vts/renderer/globe.hpp"
@@ -73,8 +73,8 @@ class GlobeTest : public vts::test::VirtualTextureFixture {
 
   static ImageDiff compare(const Image& a, const Image& b, const std::string& name) {
     if (const char* keep = std::getenv("VTS_TEST_KEEP_IMAGES")) {
-      (void)vts::write_png(fs::path(keep) / (name + "-a.png"), a.width, a.height, a.rgba);
-      (void)vts::write_png(fs::path(keep) / (name + "-b.png"), b.width, b.height, b.rgba);
+      (void)vts::imaging::write_png(fs::path(keep) / (name + "-a.png"), a.width, a.height, a.rgba);
+      (void)vts::imaging::write_png(fs::path(keep) / (name + "-b.png"), b.width, b.height, b.rgba);
     }
     auto d = compare_images(a, b);
     EXPECT_TRUE(d.ok()) << d.error().to_string();

@@ -18,7 +18,7 @@
 #include "vts/builder/builder.hpp"
 #include "vts/client/source.hpp"
 #include "vts/client/tile_client.hpp"
-#include "vts/protocol/web_image.hpp"
+#include "vts/imaging/web_image.hpp"
 #include "vts/renderer/camera.hpp"
 #include "vts/renderer/gl_context.hpp"
 #include "vts/renderer/page_table.hpp"
@@ -60,10 +60,10 @@ class VirtualTextureTest : public vts::test::VirtualTextureFixture {
     if (!save_as.empty()) {
       // VTS_TEST_KEEP_IMAGES=DIR keeps both images for a look.
       if (const char* keep = std::getenv("VTS_TEST_KEEP_IMAGES")) {
-        (void)vts::write_png(fs::path(keep) / (save_as + "-gpu.png"), got.width, got.height,
-                             got.rgba);
-        (void)vts::write_png(fs::path(keep) / (save_as + "-ref.png"), ref.width, ref.height,
-                             ref.rgba);
+        (void)vts::imaging::write_png(fs::path(keep) / (save_as + "-gpu.png"), got.width,
+                                      got.height, got.rgba);
+        (void)vts::imaging::write_png(fs::path(keep) / (save_as + "-ref.png"), ref.width,
+                                      ref.height, ref.rgba);
       }
     }
     auto diff = compare_images(got, ref);
@@ -108,7 +108,7 @@ TEST_F(VirtualTextureTest, AlphaIsCompositedOverTheBlackBackground) {
     }
   }
   const fs::path png = *dir_ / "alpha.png", path = *dir_ / "alpha.pmtiles";
-  ASSERT_TRUE(vts::write_png(png, W, H, rgba).ok());
+  ASSERT_TRUE(vts::imaging::write_png(png, W, H, rgba).ok());
   vts::BuildOptions o;
   o.inputs = {png};
   o.output = path;

@@ -26,8 +26,8 @@
 #include <string_view>
 #include <vector>
 
+#include "vts/base/result.hpp"
 #include "vts/client/disk_cache.hpp"
-#include "vts/protocol/result.hpp"
 
 namespace {
 

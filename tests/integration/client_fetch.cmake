@@ -7,7 +7,7 @@
 add_library(fault_server_lib STATIC ${CMAKE_CURRENT_LIST_DIR}/fault_server.cpp)
 vts_configure_target(fault_server_lib)
 target_include_directories(fault_server_lib PUBLIC ${CMAKE_CURRENT_LIST_DIR})
-target_link_libraries(fault_server_lib PUBLIC vts::protocol
+target_link_libraries(fault_server_lib PUBLIC vts::archive
                                        PRIVATE PkgConfig::XXHASH nlohmann_json::nlohmann_json
                                                Threads::Threads)
 

@@ -58,7 +58,7 @@
 #include <memory>
 #include <string>
 
-#include "vts/protocol/result.hpp"
+#include "vts/base/result.hpp"
 
 namespace vts::test {
 

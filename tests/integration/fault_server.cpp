@@ -25,7 +25,7 @@
 #include <thread>
 #include <vector>
 
-#include "vts/protocol/pmtiles.hpp"
+#include "vts/archive/pmtiles.hpp"
 
 namespace vts::test {
 
@@ -172,7 +172,7 @@ bool etag_matches(std::string_view header, std::string_view etag) {
   return false;
 }
 
-std::vector<std::uint8_t> whole_archive(const pmtiles::Reader& reader) {
+std::vector<std::uint8_t> whole_archive(const archive::Reader& reader) {
   std::vector<std::uint8_t> bytes(reader.size());
   if (Status s = reader.read(0, bytes); !s) throw std::runtime_error(s.error().to_string());
   return bytes;
@@ -182,7 +182,7 @@ std::vector<std::uint8_t> whole_archive(const pmtiles::Reader& reader) {
 
 class FaultServer::Impl {
  public:
-  Impl(std::shared_ptr<pmtiles::Reader> reader, std::string name)
+  Impl(std::shared_ptr<archive::Reader> reader, std::string name)
       : reader_(std::move(reader)),
         archive_bytes_(whole_archive(*reader_)),
         name_(std::move(name)) {}
@@ -609,7 +609,7 @@ class FaultServer::Impl {
     return r;
   }
 
-  std::shared_ptr<pmtiles::Reader> reader_;
+  std::shared_ptr<archive::Reader> reader_;
   const std::vector<std::uint8_t> archive_bytes_;  // the whole file, served for range requests
   std::string name_;
   int listen_fd_ = -1;
@@ -630,7 +630,7 @@ class FaultServer::Impl {
 
 Result<std::unique_ptr<FaultServer>> FaultServer::start(const std::filesystem::path& archive,
                                                         std::string name, std::uint16_t port) {
-  auto reader = pmtiles::Reader::open(archive);
+  auto reader = archive::Reader::open(archive);
   if (!reader) return reader.error();
   auto impl = std::make_unique<Impl>(std::move(*reader), std::move(name));
   if (Status st = impl->listen(port); !st.ok()) return st.error();

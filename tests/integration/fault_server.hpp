@@ -32,13 +32,13 @@
 #include <string>
 #include <string_view>
 
-#include "vts/protocol/result.hpp"
+#include "vts/base/result.hpp"
 
 namespace vts::test {
 
 class FaultServer {
  public:
-  // Opens the archive with pmtiles::Reader and listens on 127.0.0.1:port (0: any free port).
+  // Opens the archive with archive::Reader and listens on 127.0.0.1:port (0: any free port).
   static Result<std::unique_ptr<FaultServer>> start(const std::filesystem::path& archive,
                                                     std::string name, std::uint16_t port = 0);
   ~FaultServer();  // closes every connection (stalled ones included) and joins all threads

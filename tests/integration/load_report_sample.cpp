@@ -18,16 +18,16 @@
 
 namespace {
 
-using vts::client::LatencyHistogram;
-using vts::client::LoadReport;
-using vts::client::LoadSecond;
+using vts::loadtest::LatencyHistogram;
+using vts::loadtest::LoadReport;
+using vts::loadtest::LoadSecond;
 
 void synthesize(LoadReport& r) {
   std::mt19937_64 rng(20261123);
   r.viewers = 24;
   r.path = "orbit-zoom";
   r.fps = 60;
-  r.mode = vts::client::LoopMode::open;
+  r.mode = vts::loadtest::LoopMode::open;
   r.rate = 400;
   r.rate_unit = "req/s";
   r.duration_s = 90;
@@ -148,11 +148,11 @@ int main(int argc, char** argv) {
     }
   }
   if (!empty) synthesize(r);
-  if (!json_path.empty() && !write_file(json_path, vts::client::to_json(r).dump(2) + "\n")) {
+  if (!json_path.empty() && !write_file(json_path, vts::loadtest::to_json(r).dump(2) + "\n")) {
     return 1;
   }
-  if (!summary_path.empty() && !write_file(summary_path, vts::client::summary_table(r))) return 1;
-  const vts::Status s = vts::client::write_html_report(r, argv[1]);
+  if (!summary_path.empty() && !write_file(summary_path, vts::loadtest::summary_table(r))) return 1;
+  const vts::Status s = vts::loadtest::write_html_report(r, argv[1]);
   if (!s.ok()) {
     std::fprintf(stderr, "load_report_sample: %s\n", s.error().to_string().c_str());
     return 1;

@@ -4,7 +4,7 @@
 // sub-pyramids under every tile of a split level, plus the apex.
 //
 //   part_fixture parts DIR N SPLIT [LEAF]    writes DIR/apex.part, DIR/shard-*.part, DIR/tiles (N)
-//   part_fixture single OUT N [LEAF]         the same tiles through pmtiles::Writer
+//   part_fixture single OUT N [LEAF]         the same tiles through archive::Writer
 //   part_fixture merge DIR OUT [LEAF]        merge_parts() of DIR/*.part in a child process;
 //                                            prints {"seconds":…, "max_rss_kib":…, "tiles":…}
 #include <sys/resource.h>
@@ -19,8 +19,8 @@
 #include <string>
 #include <vector>
 
-#include "vts/protocol/pmtiles.hpp"
-#include "vts/protocol/pmtiles_part.hpp"
+#include "vts/archive/pmtiles.hpp"
+#include "vts/archive/pmtiles_part.hpp"
 
 namespace {
 
@@ -51,19 +51,19 @@ void check(const Status& s) {
   if (!s) die(s.error().message);
 }
 
-pmtiles::WriterOptions archive(const fs::path& out, std::uint64_t n, std::size_t leaf) {
-  pmtiles::WriterOptions o;
+archive::WriterOptions writer_options(const fs::path& out, std::uint64_t n, std::size_t leaf) {
+  archive::WriterOptions o;
   o.path = out;
-  o.max_zoom = pmtiles::tile_id_to_zxy(n - 1).value().z;
+  o.max_zoom = archive::tile_id_to_zxy(n - 1).value().z;
   o.leaf_entries = leaf;
   return o;
 }
 
-void add(pmtiles::TileSink& sink, std::uint64_t id) {
+void add(archive::TileSink& sink, std::uint64_t id) {
   const std::uint64_t v = payload_of(id);
   std::uint8_t b[8];
   std::memcpy(b, &v, 8);
-  check(sink.add_tile(pmtiles::tile_id_to_zxy(id).value(), b));
+  check(sink.add_tile(archive::tile_id_to_zxy(id).value(), b));
 }
 
 void write_parts(const fs::path& dir, std::uint64_t n, int split) {
@@ -75,26 +75,26 @@ void write_parts(const fs::path& dir, std::uint64_t n, int split) {
   } else {
     die("cannot write " + (dir / "tiles").string());
   }
-  const auto finish = [](pmtiles::PartWriter& w) {
+  const auto finish = [](archive::PartWriter& w) {
     auto r = w.finish({}, "{}");
     if (!r) die(r.error().message);
   };
-  const pmtiles::TileIdRange apex_range{
-      0, pmtiles::subtree_tile_ids({0, 0, 0}, static_cast<std::uint8_t>(split)).first - 1};
+  const archive::TileIdRange apex_range{
+      0, archive::subtree_tile_ids({0, 0, 0}, static_cast<std::uint8_t>(split)).first - 1};
   if (split > 0) {
-    auto w = pmtiles::PartWriter::create(dir / "apex.part").value();
+    auto w = archive::PartWriter::create(dir / "apex.part").value();
     for (std::uint64_t id = 0; id <= apex_range.last && id < n; ++id) add(*w, id);
     finish(*w);
   }
   const std::uint32_t side = 1u << split;
-  const int max_z = pmtiles::tile_id_to_zxy(n - 1).value().z;
+  const int max_z = archive::tile_id_to_zxy(n - 1).value().z;
   for (std::uint32_t y = 0; y < side; ++y)
     for (std::uint32_t x = 0; x < side; ++x) {
-      auto w = pmtiles::PartWriter::create(
+      auto w = archive::PartWriter::create(
                    dir / ("shard-" + std::to_string(x) + "-" + std::to_string(y) + ".part"))
                    .value();
       for (int z = split; z <= max_z; ++z) {
-        const auto r = pmtiles::subtree_tile_ids({static_cast<std::uint8_t>(split), x, y},
+        const auto r = archive::subtree_tile_ids({static_cast<std::uint8_t>(split), x, y},
                                                  static_cast<std::uint8_t>(z));
         for (std::uint64_t id = r.first; id <= r.last && id < n; ++id) add(*w, id);
       }
@@ -107,16 +107,16 @@ int merge(const fs::path& dir, const fs::path& out, std::size_t leaf) {
   const pid_t pid = ::fork();
   if (pid < 0) die("fork failed");
   if (pid == 0) {
-    pmtiles::MergeOptions m;
+    archive::MergeOptions m;
     for (const auto& e : fs::directory_iterator(dir))
       if (e.path().extension() == ".part") m.parts.push_back(e.path());
     unsigned long long tiles = 0;
     std::FILE* f = std::fopen((dir / "tiles").c_str(), "r");
     if (!f || std::fscanf(f, "%llu", &tiles) != 1) die("no tile count in " + dir.string());
     std::fclose(f);
-    m.archive = archive(out, tiles, leaf);
+    m.archive = writer_options(out, tiles, leaf);
     m.metadata_json = "{}";
-    auto r = pmtiles::merge_parts(m);
+    auto r = archive::merge_parts(m);
     if (!r) {
       std::fprintf(stderr, "part_fixture: %s\n", r.error().message.c_str());
       ::_exit(1);
@@ -129,7 +129,7 @@ int merge(const fs::path& dir, const fs::path& out, std::size_t leaf) {
   ::getrusage(RUSAGE_CHILDREN, &ru);
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) return 1;
-  auto reader = pmtiles::Reader::open(out).value();
+  auto reader = archive::Reader::open(out).value();
   std::printf("{\"seconds\":%.3f,\"max_rss_kib\":%ld,\"tiles\":%llu,\"leaves\":%llu}\n", s,
               ru.ru_maxrss, static_cast<unsigned long long>(reader->header().addressed_tiles),
               static_cast<unsigned long long>(reader->leaf_directory_count().value()));
@@ -141,7 +141,7 @@ int merge(const fs::path& dir, const fs::path& out, std::size_t leaf) {
 int main(int argc, char** argv) {
   const std::vector<std::string> a(argv + 1, argv + argc);
   const auto leaf = [&](std::size_t i) {
-    return a.size() > i ? std::stoul(a[i]) : pmtiles::kLeafEntries;
+    return a.size() > i ? std::stoul(a[i]) : archive::kLeafEntries;
   };
   if (a.size() >= 4 && a[0] == "parts") {
     write_parts(a[1], std::stoull(a[2]), std::stoi(a[3]));
@@ -149,7 +149,7 @@ int main(int argc, char** argv) {
   }
   if (a.size() >= 3 && a[0] == "single") {
     const std::uint64_t n = std::stoull(a[2]);
-    auto w = pmtiles::Writer::create(archive(a[1], n, leaf(3))).value();
+    auto w = archive::Writer::create(writer_options(a[1], n, leaf(3))).value();
     for (std::uint64_t id = 0; id < n; ++id) add(*w, id);
     auto r = w->finish("{}");
     if (!r) die(r.error().message);

@@ -1,4 +1,4 @@
-// pmtiles_dump: prints what our own PMTiles reader (vts::pmtiles::Reader) sees in an archive, in a
+// pmtiles_dump: prints what our own PMTiles reader (vts::archive::Reader) sees in an archive, in a
 // line format that tests/integration/pmtiles_js/dump.mjs reproduces with the npm `pmtiles`
 // library. The integration tests compare the two outputs byte for byte.
 //
@@ -21,7 +21,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "vts/protocol/pmtiles.hpp"
+#include "vts/archive/pmtiles.hpp"
 
 namespace {
 
@@ -45,7 +45,7 @@ int usage() {
   return 2;
 }
 
-int dump_header(const vts::pmtiles::Reader& reader) {
+int dump_header(const vts::archive::Reader& reader) {
   const auto& h = reader.header();
   std::printf("spec_version=3\n");
   std::printf("min_zoom=%u\n", unsigned(h.min_zoom));
@@ -86,9 +86,9 @@ int dump_header(const vts::pmtiles::Reader& reader) {
   return 0;
 }
 
-int dump_tiles(const vts::pmtiles::Reader& reader, bool offsets) {
-  std::vector<vts::pmtiles::Entry> entries;
-  if (auto st = reader.for_each_entry([&](const vts::pmtiles::Entry& e) {
+int dump_tiles(const vts::archive::Reader& reader, bool offsets) {
+  std::vector<vts::archive::Entry> entries;
+  if (auto st = reader.for_each_entry([&](const vts::archive::Entry& e) {
         entries.push_back(e);
         return true;
       });
@@ -98,7 +98,7 @@ int dump_tiles(const vts::pmtiles::Reader& reader, bool offsets) {
   for (const auto& e : entries) {
     for (std::uint64_t i = 0; i < e.run_length; ++i) {
       const std::uint64_t id = e.tile_id + i;
-      auto zxy = vts::pmtiles::tile_id_to_zxy(id);
+      auto zxy = vts::archive::tile_id_to_zxy(id);
       if (!zxy) return fail(zxy.error(), "tile id");
       auto payload = reader.get_by_tile_id(id);
       if (!payload) return fail(payload.error(), ("tile " + zxy->to_string()).c_str());
@@ -123,7 +123,7 @@ int main(int argc, char** argv) {
   const std::string_view mode = argv[1];
   if (mode != "tiles" && mode != "header" && mode != "offsets") return usage();
 
-  auto reader = vts::pmtiles::Reader::open(argv[2]);
+  auto reader = vts::archive::Reader::open(argv[2]);
   if (!reader) return fail(reader.error(), argv[2]);
 
   const int rc = mode == "header" ? dump_header(**reader) : dump_tiles(**reader, mode == "offsets");

@@ -31,8 +31,8 @@
 #include <thread>
 #include <vector>
 
+#include "vts/archive/pmtiles.hpp"
 #include "vts/builder/builder.hpp"
-#include "vts/protocol/pmtiles.hpp"
 #include "vts/server/http_server.hpp"
 #include "vts/test/archive.hpp"
 #include "vts/test/server.hpp"

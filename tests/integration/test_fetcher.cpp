@@ -1,7 +1,7 @@
 // The client's Fetcher against FaultServer on loopback: byte-exact tiles and ranges, priority
 // order, merging, cancellation, retries and their limits, load, shutdown and bad input. The archive
 // comes from the real builder, in process, and every body is compared
-// with what pmtiles::Reader returns. Faults are chosen by URL (see fault_server.hpp).
+// with what archive::Reader returns. Faults are chosen by URL (see fault_server.hpp).
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -19,8 +19,8 @@
 #include <vector>
 
 #include "fault_server.hpp"
+#include "vts/archive/pmtiles.hpp"
 #include "vts/client/fetcher.hpp"
-#include "vts/protocol/pmtiles.hpp"
 #include "vts/test/archive.hpp"
 #include "vts/test/temp_dir.hpp"
 

@@ -1,6 +1,6 @@
 // The HTTP server under load and abuse, in process: a real HttpServer on 127.0.0.1 port 0 (stopped
 // by a scope guard), real libcurl clients and raw sockets. The archive comes from the real
-// builder in process; every tile body is compared with what pmtiles::Reader returns.
+// builder in process; every tile body is compared with what archive::Reader returns.
 #include <arpa/inet.h>
 #include <curl/curl.h>
 #include <gtest/gtest.h>
@@ -19,7 +19,7 @@
 #include <thread>
 #include <vector>
 
-#include "vts/protocol/pmtiles.hpp"
+#include "vts/archive/pmtiles.hpp"
 #include "vts/server/http_server.hpp"
 #include "vts/test/archive.hpp"
 #include "vts/test/server.hpp"

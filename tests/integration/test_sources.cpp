@@ -18,10 +18,10 @@
 #include <vector>
 
 #include "fault_server.hpp"
+#include "vts/archive/pmtiles.hpp"
 #include "vts/builder/builder.hpp"
 #include "vts/client/source.hpp"
 #include "vts/client/tile_cache.hpp"
-#include "vts/protocol/pmtiles.hpp"
 #include "vts/server/http_server.hpp"
 #include "vts/test/archive.hpp"
 #include "vts/test/server.hpp"
@@ -454,7 +454,7 @@ TEST(RemoteArchiveSource, IfNoneMatchWithTheCurrentEtagIsNotModified) {
 }
 
 TEST(RemoteArchiveSource, ReadsThroughLeafDirectoriesByteExact) {
-  auto reader = vts::pmtiles::Reader::open(leafy_archive());
+  auto reader = vts::archive::Reader::open(leafy_archive());
   ASSERT_TRUE(reader.ok());
   auto leaves = (*reader)->leaf_directory_count();
   ASSERT_TRUE(leaves.ok());
@@ -464,11 +464,11 @@ TEST(RemoteArchiveSource, ReadsThroughLeafDirectoriesByteExact) {
   std::vector<SourceRequest> requests;
   std::uint64_t n = 0;
   ASSERT_TRUE((*reader)
-                  ->for_each_entry([&](const vts::pmtiles::Entry& e) {
+                  ->for_each_entry([&](const vts::archive::Entry& e) {
                     for (std::uint64_t id : {e.tile_id, e.tile_id + e.run_length - 1}) {
                       if (n++ % 8 != 0) continue;
                       SourceRequest r;
-                      r.id = *vts::pmtiles::tile_id_to_zxy(id);
+                      r.id = *vts::archive::tile_id_to_zxy(id);
                       requests.push_back(r);
                     }
                     return true;
@@ -548,7 +548,7 @@ TEST(RemoteArchiveSource, SurvivesAServerThatCorruptsEveryResponse) {
 // FaultServer's own reader, serves it) but whose directory entries lie: tile and leaf pointers past
 // their sections, a leaf of garbage, a leaf that points to itself, a tile that is not a tile.
 TEST(RemoteArchiveSource, LyingDirectoriesAreErrorsNotCrashes) {
-  namespace pm = vts::pmtiles;
+  namespace pm = vts::archive;
   auto good = pm::Reader::open(syn_archive());
   ASSERT_TRUE(good.ok());
   auto root_tile = (*good)->get({0, 0, 0});
@@ -636,10 +636,10 @@ TEST(RemoteArchiveSource, LyingDirectoriesAreErrorsNotCrashes) {
 // An archive with syn_archive()'s metadata and its 0/0/0 payload as the only tile data, a gzip
 // root of `root` entries and `leaves` as the leaf section; the header declares tile compression
 // `tiles`.
-fs::path assemble_archive(const std::string& name, const std::vector<vts::pmtiles::Entry>& root,
+fs::path assemble_archive(const std::string& name, const std::vector<vts::archive::Entry>& root,
                           const std::vector<std::uint8_t>& leaves,
-                          vts::pmtiles::Compression tiles = vts::pmtiles::Compression::zstd) {
-  namespace pm = vts::pmtiles;
+                          vts::archive::Compression tiles = vts::archive::Compression::zstd) {
+  namespace pm = vts::archive;
   auto good = pm::Reader::open(syn_archive());
   EXPECT_TRUE(good.ok());
   const std::vector<std::uint8_t> tile = (*good)->get({0, 0, 0}).value();
@@ -675,16 +675,16 @@ fs::path assemble_archive(const std::string& name, const std::vector<vts::pmtile
 // A gzip leaf of `count` one-tile entries from tile id `first` on, each the archive's one tile.
 std::vector<std::uint8_t> uniform_leaf(std::uint64_t first, std::size_t count,
                                        std::uint32_t tile_length) {
-  std::vector<vts::pmtiles::Entry> entries(count);
+  std::vector<vts::archive::Entry> entries(count);
   for (std::size_t i = 0; i < count; ++i) entries[i] = {first + i, 0, tile_length, 1};
-  return vts::pmtiles::compress(vts::pmtiles::serialize_directory(entries),
-                                vts::pmtiles::Compression::gzip)
+  return vts::archive::compress(vts::archive::serialize_directory(entries),
+                                vts::archive::Compression::gzip)
       .value();
 }
 
 std::uint32_t syn_root_tile_length() {
   return static_cast<std::uint32_t>(
-      vts::pmtiles::Reader::open(syn_archive()).value()->get({0, 0, 0}).value().size());
+      vts::archive::Reader::open(syn_archive()).value()->get({0, 0, 0}).value().size());
 }
 
 std::uint64_t resident_kib() {
@@ -696,7 +696,7 @@ std::uint64_t resident_kib() {
 }
 
 TEST(RemoteArchiveSource, RefusesALeafOverTheEntryCapAsTooLarge) {
-  namespace pm = vts::pmtiles;
+  namespace pm = vts::archive;
   // A few KiB of gzip that decode to 2^20 + 1 entries (4M took 96 MiB each before the cap).
   const std::vector<std::uint8_t> leaf =
       uniform_leaf(0, pm::kMaxDirectoryEntries + 1, syn_root_tile_length());
@@ -712,7 +712,7 @@ TEST(RemoteArchiveSource, RefusesALeafOverTheEntryCapAsTooLarge) {
 }
 
 TEST(RemoteArchiveSource, KeepsDecodedLeavesWithinAByteBudget) {
-  namespace pm = vts::pmtiles;
+  namespace pm = vts::archive;
   // 24 leaves of 2^20 entries, each 24 MiB decoded: 576 MiB if the source kept them all.
   const vts::Geometry g =
       vts::TilesetInfo::from_json(pm::Reader::open(syn_archive()).value()->metadata_json())
@@ -839,7 +839,7 @@ TEST(OpenSource, AllThreeSourcesAgreeOnTheTilesetVersion) {
 
 TEST(ClientStackOverFaults, TransientFaultsAreRetriedAndBadTilesAreNeverCachedOrDelivered) {
   FaultServer& faults = static_server(syn_archive(), "syn");
-  auto reader = vts::pmtiles::Reader::open(syn_archive());
+  auto reader = vts::archive::Reader::open(syn_archive());
   ASSERT_TRUE(reader.ok());
   struct Case {
     std::string spec;

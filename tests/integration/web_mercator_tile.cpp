@@ -12,11 +12,11 @@
 #include <string>
 #include <string_view>
 
+#include "vts/archive/pmtiles.hpp"
+#include "vts/base/file_io.hpp"
+#include "vts/imaging/web_mercator.hpp"
 #include "vts/protocol/codec.hpp"
-#include "vts/protocol/file_io.hpp"
-#include "vts/protocol/pmtiles.hpp"
 #include "vts/protocol/tileset.hpp"
-#include "vts/protocol/web_mercator.hpp"
 
 namespace {
 
@@ -32,12 +32,12 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "usage: web_mercator_tile ARCHIVE Z X Y OUT.rgba [codes]\n");
     return 2;
   }
-  auto reader = vts::pmtiles::Reader::open(argv[1]);
+  auto reader = vts::archive::Reader::open(argv[1]);
   if (!reader) return fail(reader.error());
   auto info = vts::TilesetInfo::from_json((*reader)->metadata_json());
   if (!info) return fail(info.error());
   int fetched = 0;
-  const vts::FetchStoredTile fetch =
+  const vts::imaging::FetchStoredTile fetch =
       [&](vts::TileId id) -> vts::Result<std::optional<vts::TileImage>> {
     ++fetched;
     auto payload = (*reader)->get(id);
@@ -53,9 +53,9 @@ int main(int argc, char** argv) {
   const int z = std::atoi(argv[2]);
   const auto x = static_cast<std::uint32_t>(std::strtoul(argv[3], nullptr, 10));
   const auto y = static_cast<std::uint32_t>(std::strtoul(argv[4], nullptr, 10));
-  vts::WebMercatorOptions options;
+  vts::imaging::WebMercatorOptions options;
   options.linear_light = argc == 6;
-  auto tile = vts::render_web_mercator_tile(*info, z, x, y, fetch, options);
+  auto tile = vts::imaging::render_web_mercator_tile(*info, z, x, y, fetch, options);
   if (!tile) return fail(tile.error());
   if (!tile->has_value()) return 3;
   if (vts::Status s = vts::write_file_atomically(
@@ -63,6 +63,7 @@ int main(int argc, char** argv) {
                                     (*tile)->pixels.size()));
       !s)
     return fail(s.error());
-  std::printf("level %d fetched %d\n", vts::web_mercator_source_level(info->geometry, z), fetched);
+  std::printf("level %d fetched %d\n", vts::imaging::web_mercator_source_level(info->geometry, z),
+              fetched);
   return 0;
 }

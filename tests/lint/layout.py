@@ -17,25 +17,33 @@ import sys
 
 # folder -> (include name under vts/, libraries whose headers it may include)
 LIBRARIES = {
-    "protocol": ("protocol", set()),
-    "builder": ("builder", {"protocol"}),
-    "server": ("server", {"protocol"}),
-    "client": ("client", {"protocol"}),
-    "renderer/core": ("renderer", {"protocol"}),
-    "renderer/gl": ("renderer", {"protocol", "client"}),
-    "plot": ("plot", {"protocol"}),
-    "loadtest": ("loadtest", {"protocol", "client", "plot", "renderer"}),
-    "accuracy": ("accuracy", {"protocol", "builder", "client", "plot", "renderer"}),
+    "base": ("base", set()),
+    "protocol": ("protocol", {"base"}),
+    "archive": ("archive", {"base", "protocol"}),
+    "imaging": ("imaging", {"base", "protocol"}),
+    "builder": ("builder", {"base", "protocol", "archive", "imaging"}),
+    "server": ("server", {"base", "protocol", "archive", "imaging"}),
+    "client": ("client", {"base", "protocol", "archive", "imaging"}),
+    "renderer/core": ("renderer", {"base", "protocol", "archive", "imaging"}),
+    "renderer/gl": ("renderer", {"base", "protocol", "archive", "imaging", "client"}),
+    "plot": ("plot", {"base", "protocol"}),
+    "loadtest": ("loadtest", {"base", "protocol", "archive", "imaging", "client", "plot", "renderer"}),
+    "accuracy": ("accuracy", {"base", "protocol", "archive", "imaging", "builder", "client", "plot",
+                              "renderer"}),
 }
+_NO_HEAVY = ["GLFW/", "epoxy/", "OpenImageIO/", "gdal", "boost/", "curl/", "sqlite3.h"]
 FORBIDDEN = {  # folder -> include prefixes it must not use
-    "protocol": ["GLFW/", "epoxy/", "OpenImageIO/", "boost/", "curl/", "sqlite3.h"],
+    "base": _NO_HEAVY + ["png.h", "webp/", "turbojpeg.h", "zstd.h"],
+    "protocol": _NO_HEAVY + ["png.h", "webp/", "turbojpeg.h"],
+    "archive": _NO_HEAVY + ["png.h", "webp/", "turbojpeg.h"],
+    "imaging": _NO_HEAVY,
     "builder": ["GLFW/", "epoxy/", "boost/", "curl/", "sqlite3.h"],
-    "server": ["GLFW/", "epoxy/", "OpenImageIO/", "curl/", "sqlite3.h"],
-    "client": ["GLFW/", "epoxy/", "OpenImageIO/", "boost/"],
-    "renderer/core": ["GLFW/", "epoxy/", "OpenImageIO/", "boost/", "curl/", "sqlite3.h"],
-    "renderer/gl": ["OpenImageIO/", "boost/", "curl/", "sqlite3.h"],
-    "plot": ["GLFW/", "epoxy/", "OpenImageIO/", "boost/", "curl/", "sqlite3.h"],
-    "loadtest": ["GLFW/", "epoxy/", "OpenImageIO/", "boost/", "sqlite3.h"],
+    "server": ["GLFW/", "epoxy/", "OpenImageIO/", "gdal", "curl/", "sqlite3.h"],
+    "client": ["GLFW/", "epoxy/", "OpenImageIO/", "gdal", "boost/"],
+    "renderer/core": _NO_HEAVY,
+    "renderer/gl": ["OpenImageIO/", "gdal", "boost/", "curl/", "sqlite3.h"],
+    "plot": _NO_HEAVY,
+    "loadtest": ["GLFW/", "epoxy/", "OpenImageIO/", "gdal", "boost/", "sqlite3.h"],
 }
 INCLUDE = re.compile(r'^\s*#\s*include\s*[<"]([^>"]+)[>"]', re.M)
 

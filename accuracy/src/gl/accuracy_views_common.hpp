@@ -25,10 +25,10 @@
 #include <utility>
 #include <vector>
 
+#include "vts/base/result.hpp"
 #include "vts/client/source.hpp"
 #include "vts/client/tile_client.hpp"
 #include "vts/protocol/geometry.hpp"
-#include "vts/protocol/result.hpp"
 #include "vts/renderer/camera.hpp"
 #include "vts/renderer/globe.hpp"
 #include "vts/renderer/reference.hpp"

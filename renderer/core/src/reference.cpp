@@ -6,8 +6,8 @@
 #include <optional>
 #include <utility>
 
+#include "vts/archive/inspect.hpp"
 #include "vts/protocol/codec.hpp"
-#include "vts/protocol/inspect.hpp"
 #include "vts/protocol/tileset.hpp"
 #include "vts/renderer/footprint.hpp"
 #include "vts/renderer/pyramid.hpp"
@@ -34,7 +34,7 @@ const std::array<double, 256>& decode_table() {
 
 // ---- PyramidSampler --------------------------------------------------------------------------
 
-PyramidSampler::PyramidSampler(std::filesystem::path path, std::shared_ptr<pmtiles::Reader> reader,
+PyramidSampler::PyramidSampler(std::filesystem::path path, std::shared_ptr<archive::Reader> reader,
                                Geometry geometry, PixelFormat format, TileSpec spec,
                                std::size_t cache_tiles)
     : path_(std::move(path)),
@@ -46,14 +46,14 @@ PyramidSampler::PyramidSampler(std::filesystem::path path, std::shared_ptr<pmtil
 
 Result<std::unique_ptr<PyramidSampler>> PyramidSampler::open(const std::filesystem::path& archive,
                                                              std::size_t cache_tiles) {
-  auto reader = pmtiles::Reader::open(archive);
+  auto reader = archive::Reader::open(archive);
   if (!reader) {
     Error e = std::move(reader).error();
     if (e.message.find(archive.string()) == std::string::npos)
       e.message = quoted(archive) + ": " + e.message;
     return e;
   }
-  auto info = archive_tileset((*reader)->header(), (*reader)->metadata_json());
+  auto info = archive::archive_tileset((*reader)->header(), (*reader)->metadata_json());
   if (!info) {
     Error e = std::move(info).error();
     e.message = quoted(archive) + ": metadata: " + e.message;

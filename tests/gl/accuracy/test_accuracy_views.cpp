@@ -21,7 +21,7 @@
 #include "vts/accuracy/accuracy.hpp"
 #include "vts/builder/builder.hpp"
 #include "vts/builder/image_io.hpp"
-#include "vts/protocol/web_image.hpp"
+#include "vts/imaging/web_image.hpp"
 #include "vts/renderer/reference.hpp"
 
 namespace fs = std::filesystem;
@@ -57,7 +57,7 @@ class AccuracyViews : public ::testing::Test {
       }
     }
     const fs::path input = *dir_ / "earth512.png";
-    if (auto s = vts::write_png(input, small.width, small.height, small.rgba); !s.ok()) {
+    if (auto s = vts::imaging::write_png(input, small.width, small.height, small.rgba); !s.ok()) {
       setup_error_ = s.error().to_string();
       return;
     }

@@ -26,19 +26,19 @@ BuildReport build_archive(const BuildOptions& options) {
 OpenedArchive open_archive(const std::filesystem::path& path) {
   OpenedArchive a;
   a.path = path;
-  auto reader = pmtiles::Reader::open(path);
+  auto reader = archive::Reader::open(path);
   if (!reader) throw std::runtime_error(path.string() + ": " + reader.error().to_string());
   a.reader = *reader;
-  auto st = a.reader->for_each_entry([&](const pmtiles::Entry& e) {
+  auto st = a.reader->for_each_entry([&](const archive::Entry& e) {
     for (std::uint32_t i = 0; i < e.run_length; ++i)
-      a.tiles.push_back(*pmtiles::tile_id_to_zxy(e.tile_id + i));
+      a.tiles.push_back(*archive::tile_id_to_zxy(e.tile_id + i));
     return true;
   });
   if (!st.ok()) throw std::runtime_error(path.string() + ": " + st.error().to_string());
   return a;
 }
 
-std::vector<std::uint8_t> read_all(const pmtiles::Reader& reader) {
+std::vector<std::uint8_t> read_all(const archive::Reader& reader) {
   std::vector<std::uint8_t> bytes(reader.size());
   if (Status s = reader.read(0, bytes); !s) throw std::runtime_error(s.error().to_string());
   return bytes;

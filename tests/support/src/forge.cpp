@@ -4,8 +4,8 @@
 
 #include <stdexcept>
 
+#include "vts/archive/pmtiles.hpp"
 #include "vts/protocol/codec.hpp"
-#include "vts/protocol/pmtiles.hpp"
 
 namespace vts::test {
 
@@ -53,19 +53,19 @@ std::vector<std::uint8_t> flat_tile(std::uint32_t width, std::uint32_t height, s
 
 void copy_archive_replacing(const std::filesystem::path& from, const std::filesystem::path& to,
                             const std::map<TileId, std::vector<std::uint8_t>>& replace) {
-  auto reader = pmtiles::Reader::open(from);
+  auto reader = archive::Reader::open(from);
   if (!reader) throw std::runtime_error(from.string() + ": " + reader.error().to_string());
-  const pmtiles::Reader& r = **reader;
-  pmtiles::WriterOptions o;
+  const archive::Reader& r = **reader;
+  archive::WriterOptions o;
   o.path = to;
   o.min_zoom = r.header().min_zoom;
   o.max_zoom = r.header().max_zoom;
-  auto w = pmtiles::Writer::create(o);
+  auto w = archive::Writer::create(o);
   if (!w) throw std::runtime_error(to.string() + ": " + w.error().to_string());
   std::map<TileId, std::vector<std::uint8_t>> tiles = replace;
-  Status walk = r.for_each_entry([&](const pmtiles::Entry& e) {
+  Status walk = r.for_each_entry([&](const archive::Entry& e) {
     for (std::uint32_t i = 0; i < e.run_length; ++i) {
-      const TileId id = *pmtiles::tile_id_to_zxy(e.tile_id + i);
+      const TileId id = *archive::tile_id_to_zxy(e.tile_id + i);
       if (tiles.count(id)) continue;
       auto bytes = r.get_by_tile_id(e.tile_id + i);
       if (!bytes) throw std::runtime_error(from.string() + ": " + bytes.error().to_string());

@@ -8,10 +8,10 @@
 #include <fstream>
 #include <random>
 
+#include "vts/archive/pmtiles.hpp"
 #include "vts/builder/downsample.hpp"
 #include "vts/builder/extract.hpp"
 #include "vts/builder/synthetic.hpp"
-#include "vts/protocol/pmtiles.hpp"
 #include "vts/test/temp_dir.hpp"
 
 namespace vts {
@@ -73,11 +73,11 @@ std::vector<std::uint8_t> noise(std::size_t n, unsigned seed) {
 }
 
 struct Archive {
-  std::shared_ptr<pmtiles::Reader> reader;
+  std::shared_ptr<archive::Reader> reader;
   TilesetInfo info;
 
   static Archive open(const fs::path& p) {
-    auto r = pmtiles::Reader::open(p);
+    auto r = archive::Reader::open(p);
     EXPECT_TRUE(r.ok()) << (r.ok() ? "" : r.error().to_string());
     auto info = TilesetInfo::from_json((*r)->metadata_json());
     EXPECT_TRUE(info.ok()) << (info.ok() ? "" : info.error().to_string());

@@ -15,10 +15,10 @@
 #include <numbers>
 #include <random>
 
+#include "vts/archive/pmtiles.hpp"
 #include "vts/builder/builder.hpp"
 #include "vts/builder/downsample.hpp"
 #include "vts/protocol/codec.hpp"
-#include "vts/protocol/pmtiles.hpp"
 #include "vts/protocol/tileset.hpp"
 #include "vts/test/temp_dir.hpp"
 
@@ -319,7 +319,7 @@ TEST(DownsampleFilter, BuilderCascadeEqualsTheWholeImageReduction) {
     o.threads = 2;
     auto report = build_pyramid(o);
     ASSERT_TRUE(report.ok()) << report.error().to_string();
-    auto reader = pmtiles::Reader::open(o.output);
+    auto reader = archive::Reader::open(o.output);
     ASSERT_TRUE(reader.ok());
     auto info = TilesetInfo::from_json((*reader)->metadata_json());
     ASSERT_TRUE(info.ok());

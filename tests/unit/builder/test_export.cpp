@@ -9,9 +9,9 @@
 #include <nlohmann/json.hpp>
 #include <set>
 
+#include "vts/archive/pmtiles.hpp"
+#include "vts/imaging/web_mercator.hpp"
 #include "vts/protocol/codec.hpp"
-#include "vts/protocol/pmtiles.hpp"
-#include "vts/protocol/web_mercator.hpp"
 #include "vts/test/temp_dir.hpp"
 
 namespace vts {
@@ -42,7 +42,7 @@ TileImage stored_tile(const Geometry& g, TileId id) {
 struct Source {
   TilesetInfo info;
   fs::path path;
-  std::shared_ptr<pmtiles::Reader> reader;
+  std::shared_ptr<archive::Reader> reader;
 };
 
 // Writes the archive with our own writer and codec: what `vts build` would have written.
@@ -55,9 +55,9 @@ Source make_source(const TempDir& dir, std::optional<Georeference> geo = {}, std
   s.info.sparse = true;
   s.info.georeference = geo;
   s.path = dir / "src.pmtiles";
-  pmtiles::WriterOptions o;
+  archive::WriterOptions o;
   o.path = s.path;
-  auto writer = pmtiles::Writer::create(o).value();
+  auto writer = archive::Writer::create(o).value();
   const Geometry& g = s.info.geometry;
   for (int z = 0; z <= g.max_zoom(); ++z)
     for (std::uint32_t y = 0; y < g.tiles_y(z); ++y)
@@ -68,7 +68,7 @@ Source make_source(const TempDir& dir, std::optional<Georeference> geo = {}, std
         EXPECT_TRUE(writer->add_tile(id, payload));
       }
   EXPECT_TRUE(writer->finish(s.info.to_json()));
-  s.reader = pmtiles::Reader::open(s.path).value();
+  s.reader = archive::Reader::open(s.path).value();
   return s;
 }
 
@@ -84,7 +84,7 @@ TEST(Export, PngArchiveHoldsEveryVisibleTileEqualToItsContentAndSkipsClearOnes) 
   Source src = make_source(dir);
   ExportOptions o;
   o.output = dir / "web.pmtiles";
-  o.format = WebFormat::png;
+  o.format = imaging::WebFormat::png;
   o.threads = 3;
   o.source_name = "src.pmtiles";
   auto r = export_web_tiles(*src.reader, src.info, o);
@@ -94,11 +94,11 @@ TEST(Export, PngArchiveHoldsEveryVisibleTileEqualToItsContentAndSkipsClearOnes) 
   EXPECT_EQ(r->tiles_skipped, 1u);
   EXPECT_EQ(r->unique_tiles, 6u);  // the twins are stored once
 
-  auto out = pmtiles::Reader::open(o.output).value();
-  const pmtiles::Header& h = out->header();
-  EXPECT_EQ(h.tile_type, pmtiles::TileType::png);
-  EXPECT_EQ(h.tile_compression, pmtiles::Compression::none);
-  EXPECT_EQ(h.internal_compression, pmtiles::Compression::gzip);
+  auto out = archive::Reader::open(o.output).value();
+  const archive::Header& h = out->header();
+  EXPECT_EQ(h.tile_type, archive::TileType::png);
+  EXPECT_EQ(h.tile_compression, archive::Compression::none);
+  EXPECT_EQ(h.internal_compression, archive::Compression::gzip);
   EXPECT_EQ(h.min_zoom, 0);
   EXPECT_EQ(h.max_zoom, 2);
   EXPECT_EQ(h.addressed_tiles, 7u);
@@ -122,8 +122,8 @@ TEST(Export, PngArchiveHoldsEveryVisibleTileEqualToItsContentAndSkipsClearOnes) 
           continue;
         }
         ASSERT_TRUE(bytes) << id.to_string();
-        auto decoded = decode_web_image(*bytes).value();
-        auto want = tile_content(stored_tile(g, id), g, id).value();
+        auto decoded = imaging::decode_web_image(*bytes).value();
+        auto want = imaging::tile_content(stored_tile(g, id), g, id).value();
         EXPECT_EQ(decoded.width, 256u);
         EXPECT_EQ(decoded.pixels, want.pixels) << id.to_string();
       }
@@ -142,7 +142,7 @@ TEST(Export, XyzFolderHoldsTheSameTilesAsTheArchive) {
   TempDir dir;
   Source src = make_source(dir);
   ExportOptions o;
-  o.format = WebFormat::webp;
+  o.format = imaging::WebFormat::webp;
   o.output = dir / "web.pmtiles";
   ASSERT_TRUE(export_web_tiles(*src.reader, src.info, o));
   o.layout = ExportLayout::xyz;
@@ -156,11 +156,11 @@ TEST(Export, XyzFolderHoldsTheSameTilesAsTheArchive) {
   ASSERT_TRUE(r) << r.error().message;
   EXPECT_EQ(listing(dir / "www" / "maps" / "site"), listing(dir / "site"));
   fs::remove_all(dir / "www");
-  auto archive = pmtiles::Reader::open(dir / "web.pmtiles").value();
+  auto archive = archive::Reader::open(dir / "web.pmtiles").value();
   std::set<std::string> from_archive{"metadata.json"};
-  ASSERT_TRUE(archive->for_each_entry([&](const pmtiles::Entry& e) {
+  ASSERT_TRUE(archive->for_each_entry([&](const archive::Entry& e) {
     for (std::uint32_t i = 0; i < e.run_length; ++i) {
-      const TileId id = pmtiles::tile_id_to_zxy(e.tile_id + i).value();
+      const TileId id = archive::tile_id_to_zxy(e.tile_id + i).value();
       from_archive.insert(std::to_string(id.z));
       from_archive.insert(std::to_string(id.z) + "/" + std::to_string(id.x));
       const std::string f = id.to_string() + ".webp";
@@ -227,13 +227,13 @@ TEST(Export, DamagedSourceTileFailsNamingItAndLeavesNothing) {
   TempDir dir;
   TilesetInfo info;
   info.geometry = Geometry::create(600, 300, 256, 4).value();
-  pmtiles::WriterOptions wo;
+  archive::WriterOptions wo;
   wo.path = dir / "src.pmtiles";
-  auto writer = pmtiles::Writer::create(wo).value();
+  auto writer = archive::Writer::create(wo).value();
   const std::vector<std::uint8_t> junk(100, 0x5a);
   ASSERT_TRUE(writer->add_tile({0, 0, 0}, junk));
   ASSERT_TRUE(writer->finish(info.to_json()));
-  auto reader = pmtiles::Reader::open(wo.path).value();
+  auto reader = archive::Reader::open(wo.path).value();
   ExportOptions o;
   o.output = dir / "web.pmtiles";
   auto r = export_web_tiles(*reader, info, o);
@@ -252,7 +252,7 @@ TEST(Export, GeoreferencedBoundsAndTilings) {
   auto r = export_web_tiles(*src.reader, src.info, o);
   ASSERT_TRUE(r) << r.error().message;
   EXPECT_EQ(r->bounds, web.bounds);
-  auto out = pmtiles::Reader::open(o.output).value();
+  auto out = archive::Reader::open(o.output).value();
   EXPECT_EQ(out->header().min_lon_e7, -200000000);
   EXPECT_EQ(out->header().max_lat_e7, 400000000);
   EXPECT_EQ(out->header().center_zoom, 1);
@@ -267,21 +267,21 @@ TEST(Export, ReprojectsWorldCrs84QuadToWebMercatorQuad) {
   Source src = make_source(dir, crs84, 1024, 512);  // our levels 0..2, 2/1/0 absent
   ExportOptions o;
   o.output = dir / "web.pmtiles";
-  o.format = WebFormat::png;
+  o.format = imaging::WebFormat::png;
   o.tiling = Tiling::web_mercator_quad;
   o.threads = 2;
   auto r = export_web_tiles(*src.reader, src.info, o);
   ASSERT_TRUE(r) << r.error().message;
-  const WebMercatorRange range = web_mercator_range(src.info).value();
+  const imaging::WebMercatorRange range = imaging::web_mercator_range(src.info).value();
   EXPECT_EQ(r->bounds, range.bounds);
   EXPECT_LT(range.bounds.north, 85.06);  // clipped to Web Mercator
-  auto out = pmtiles::Reader::open(o.output).value();
+  auto out = archive::Reader::open(o.output).value();
   EXPECT_EQ(out->header().min_zoom, range.min_zoom);
   EXPECT_EQ(out->header().max_zoom, range.max_zoom);
-  EXPECT_EQ(out->header().tile_type, pmtiles::TileType::png);
+  EXPECT_EQ(out->header().tile_type, archive::TileType::png);
   EXPECT_EQ(nlohmann::json::parse(out->metadata_json())["tiling"], "WebMercatorQuad");
 
-  const FetchStoredTile fetch = [&](TileId id) -> Result<std::optional<TileImage>> {
+  const imaging::FetchStoredTile fetch = [&](TileId id) -> Result<std::optional<TileImage>> {
     auto bytes = src.reader->get(id);
     if (!bytes) return std::optional<TileImage>{};
     return std::optional<TileImage>(decode_tile(*bytes).value());
@@ -291,7 +291,7 @@ TEST(Export, ReprojectsWorldCrs84QuadToWebMercatorQuad) {
     for (std::uint32_t y = 0; y < (1u << z); ++y)
       for (std::uint32_t x = 0; x < (1u << z); ++x) {
         const TileId id{static_cast<std::uint8_t>(z), x, y};
-        auto want = render_web_mercator_tile(src.info, z, x, y, fetch).value();
+        auto want = imaging::render_web_mercator_tile(src.info, z, x, y, fetch).value();
         bool visible = false;
         if (want)
           for (std::size_t i = 3; i < want->pixels.size(); i += 4) visible |= want->pixels[i] != 0;
@@ -299,7 +299,7 @@ TEST(Export, ReprojectsWorldCrs84QuadToWebMercatorQuad) {
         ASSERT_EQ(bool(got), visible) << id.to_string();
         if (!visible) continue;
         ++expected;
-        EXPECT_EQ(decode_web_image(*got).value().pixels, want->pixels) << id.to_string();
+        EXPECT_EQ(imaging::decode_web_image(*got).value().pixels, want->pixels) << id.to_string();
       }
   EXPECT_GT(expected, 5u);
   EXPECT_EQ(r->tiles_written, expected);
@@ -310,7 +310,7 @@ TEST(Export, MetadataCarriesTheSourceAttribution) {
   info.name = "earth";
   const std::string json =
       export_metadata_json(info, R"({"attribution":"(c) NASA"})", "a.pmtiles", "0123456789abcdef",
-                           WebFormat::jpeg, {-10, -5, 10, 5}, 0, 3, Tiling::none);
+                           imaging::WebFormat::jpeg, {-10, -5, 10, 5}, 0, 3, Tiling::none);
   auto j = nlohmann::json::parse(json);
   EXPECT_EQ(j["attribution"], "(c) NASA");
   EXPECT_EQ(j["format"], "jpg");

@@ -12,7 +12,7 @@
 
 #include "cascade.hpp"
 #include "shard_geo.hpp"
-#include "vts/protocol/pmtiles.hpp"
+#include "vts/archive/pmtiles.hpp"
 #include "vts/test/temp_dir.hpp"
 
 namespace vts {
@@ -75,7 +75,7 @@ TEST(ShardPlan, ShardsAreTheSplitLevelTilesInHilbertOrder) {
   ASSERT_EQ(plan->shards.size(), 24u);
   for (std::size_t i = 1; i < plan->shards.size(); ++i) {
     const TileId a = plan->shards[i - 1], b = plan->shards[i];
-    EXPECT_LT(pmtiles::zxy_to_tile_id(a.z, a.x, a.y), pmtiles::zxy_to_tile_id(b.z, b.x, b.y));
+    EXPECT_LT(archive::zxy_to_tile_id(a.z, a.x, a.y), archive::zxy_to_tile_id(b.z, b.x, b.y));
   }
   // Not row-major: the Hilbert curve starts down the first column.
   EXPECT_EQ(plan->shards[1].x, 0u);
@@ -189,7 +189,7 @@ TEST(ShardPlan, ShardReadsItsCorePlusTheHaloOfItsLevels) {
       EXPECT_EQ(r->core_texels, 1024u * 1024u);
       EXPECT_EQ(r->texels_read, (1024u + halo) * 1024u);
       // Its attachment: its level-A tiles, 4^(A - 1) of them (2^(A - 1) square, the left half).
-      auto info = pmtiles::read_part_info(r->part);
+      auto info = archive::read_part_info(r->part);
       ASSERT_TRUE(info) << info.error().to_string();
       auto tiles = decode_apex_tiles(info->attachment);
       ASSERT_TRUE(tiles) << tiles.error().to_string();

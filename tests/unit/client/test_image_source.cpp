@@ -105,16 +105,16 @@ TEST(ImageTileset, AHostileTileJsonIsRefusedNamingTheField) {
 // A stock archive whose PNG/JPEG/WebP tiles are compressed again (gzip) is no web map's: refused
 // at open, not a decode error on every tile.
 TEST(ImageTileset, AStockArchiveOfRecompressedImagesIsUnsupported) {
-  vts::pmtiles::Header h;
-  h.tile_type = vts::pmtiles::TileType::png;
+  vts::archive::Header h;
+  h.tile_type = vts::archive::TileType::png;
   h.max_zoom = 3;
   h.min_lon_e7 = -1800000000;
   h.max_lon_e7 = 1800000000;
   h.min_lat_e7 = -800000000;
   h.max_lat_e7 = 800000000;
-  h.tile_compression = vts::pmtiles::Compression::none;
+  h.tile_compression = vts::archive::Compression::none;
   EXPECT_TRUE(vts::client::stock_archive_info(h, "{}", "a.pmtiles", {}));
-  h.tile_compression = vts::pmtiles::Compression::gzip;
+  h.tile_compression = vts::archive::Compression::gzip;
   auto gz = vts::client::stock_archive_info(h, "{}", "a.pmtiles", {});
   ASSERT_FALSE(gz);
   EXPECT_EQ(gz.error().code, ErrorCode::unsupported);

@@ -1,5 +1,5 @@
 // The local-archive source and open_source()'s dispatch: the same bytes and ETags as
-// pmtiles::Reader and `vts serve`, absent tiles, and errors that name the path.
+// archive::Reader and `vts serve`, absent tiles, and errors that name the path.
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -9,10 +9,10 @@
 #include <regex>
 #include <string>
 
+#include "vts/archive/pmtiles.hpp"
 #include "vts/builder/builder.hpp"
 #include "vts/client/source.hpp"
 #include "vts/protocol/codec.hpp"
-#include "vts/protocol/pmtiles.hpp"
 #include "vts/server/tileset_registry.hpp"
 #include "vts/test/temp_dir.hpp"
 
@@ -73,8 +73,8 @@ std::string expected_etag(std::span<const std::uint8_t> payload) {
   return buf;
 }
 
-std::shared_ptr<vts::pmtiles::Reader> reader(const fs::path& p) {
-  auto r = vts::pmtiles::Reader::open(p);
+std::shared_ptr<vts::archive::Reader> reader(const fs::path& p) {
+  auto r = vts::archive::Reader::open(p);
   EXPECT_TRUE(r.ok()) << r.error().to_string();
   return r.ok() ? *r : nullptr;
 }
@@ -250,9 +250,9 @@ TEST_F(SourceLocal, FileThatIsNotAnArchiveErrorNamesThePath) {
 
 TEST_F(SourceLocal, ArchiveOfAnotherToolIsRefusedNamingThePath) {
   const fs::path foreign = *dir_ / "foreign.pmtiles";
-  vts::pmtiles::WriterOptions o;
+  vts::archive::WriterOptions o;
   o.path = foreign;
-  auto w = vts::pmtiles::Writer::create(o);
+  auto w = vts::archive::Writer::create(o);
   ASSERT_TRUE(w.ok()) << w.error().to_string();
   const std::vector<std::uint8_t> tile(100, 7);
   ASSERT_TRUE((*w)->add_tile({0, 0, 0}, tile).ok());
@@ -269,10 +269,10 @@ TEST_F(SourceLocal, TileWithoutAValidHeaderIsAnErrorNotACrash) {
   auto good = vts::open_tileset(path("dense"));
   ASSERT_TRUE(good.ok());
   const fs::path damaged = *dir_ / "damaged.pmtiles";
-  vts::pmtiles::WriterOptions o;
+  vts::archive::WriterOptions o;
   o.path = damaged;
   o.max_zoom = static_cast<std::uint8_t>((*good)->info.geometry.max_zoom());
-  auto w = vts::pmtiles::Writer::create(o);
+  auto w = vts::archive::Writer::create(o);
   ASSERT_TRUE(w.ok()) << w.error().to_string();
   const std::vector<std::uint8_t> junk(64, 0xAB);
   ASSERT_TRUE((*w)->add_tile({0, 0, 0}, junk).ok());

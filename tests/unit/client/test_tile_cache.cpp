@@ -13,10 +13,10 @@
 #include <mutex>
 #include <thread>
 
+#include "vts/archive/pmtiles.hpp"
 #include "vts/builder/builder.hpp"
 #include "vts/client/tile_client.hpp"
 #include "vts/protocol/codec.hpp"
-#include "vts/protocol/pmtiles.hpp"
 #include "vts/test/address_space.hpp"
 #include "vts/test/clock.hpp"
 #include "vts/test/forge.hpp"
@@ -139,7 +139,7 @@ std::shared_ptr<HeldSource> held(const fs::path& archive) {
 }
 
 std::vector<std::uint8_t> stored(const fs::path& archive, TileId id) {
-  auto r = vts::pmtiles::Reader::open(archive);
+  auto r = vts::archive::Reader::open(archive);
   auto p = (*r)->get(id);
   return {p->begin(), p->end()};
 }
@@ -185,12 +185,12 @@ TileCacheOptions with_disk(const fs::path& dir) {
 TEST(TileCache, EveryTileComesByteExactFromTheSourceThenDiskThenRam) {
   Dir d;
   const auto archive = build(d.path() / "a.pmtiles");
-  auto reader = vts::pmtiles::Reader::open(archive);
+  auto reader = vts::archive::Reader::open(archive);
   std::vector<TileId> ids;
   ASSERT_TRUE((*reader)
-                  ->for_each_entry([&](const vts::pmtiles::Entry& e) {
+                  ->for_each_entry([&](const vts::archive::Entry& e) {
                     for (std::uint64_t i = 0; i < e.run_length; ++i)
-                      ids.push_back(*vts::pmtiles::tile_id_to_zxy(e.tile_id + i));
+                      ids.push_back(*vts::archive::tile_id_to_zxy(e.tile_id + i));
                     return true;
                   })
                   .ok());

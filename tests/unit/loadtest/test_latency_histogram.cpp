@@ -10,7 +10,7 @@
 #include <string>
 #include <vector>
 
-namespace vts::client {
+namespace vts::loadtest {
 namespace {
 
 constexpr std::uint64_t kMax = std::numeric_limits<std::uint64_t>::max();
@@ -336,4 +336,4 @@ TEST(LatencyHistogram, SubBucketBitsOutOfRangeAreClamped) {
 }
 
 }  // namespace
-}  // namespace vts::client
+}  // namespace vts::loadtest

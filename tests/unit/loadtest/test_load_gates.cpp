@@ -14,7 +14,7 @@
 #include "vts/loadtest/load_report.hpp"
 #include "vts/test/temp_dir.hpp"
 
-namespace vts::client {
+namespace vts::loadtest {
 namespace {
 
 using nlohmann::json;
@@ -387,4 +387,4 @@ TEST(LoadReportBaseline, TheHtmlOverlaysTheBaseline) {
 }
 
 }  // namespace
-}  // namespace vts::client
+}  // namespace vts::loadtest

@@ -12,7 +12,7 @@
 #include <string>
 #include <vector>
 
-namespace vts::client {
+namespace vts::loadtest {
 namespace {
 
 namespace fs = std::filesystem;
@@ -425,4 +425,4 @@ TEST(LoadReport, WriteIntoAFileFailsWithIoAndWritesNothing) {
 }
 
 }  // namespace
-}  // namespace vts::client
+}  // namespace vts::loadtest

@@ -19,8 +19,8 @@
 #include <thread>
 #include <vector>
 
+#include "vts/archive/pmtiles.hpp"
 #include "vts/builder/builder.hpp"
-#include "vts/protocol/pmtiles.hpp"
 #include "vts/server/http_server.hpp"
 #include "vts/server/tileset_registry.hpp"
 #include "vts/test/archive.hpp"
@@ -30,6 +30,7 @@
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 using namespace vts::client;
+using namespace vts::loadtest;
 using vts::TileId;
 
 namespace {
@@ -366,9 +367,9 @@ TEST(LoadTest, AFailingTileIsRetriedAfterABackoffNotEveryFrame) {
   const fs::path bad = dir() / "bitflip.pmtiles";
   std::uint64_t offset = 0, length = 0;
   {
-    auto reader = vts::pmtiles::Reader::open(archive());
+    auto reader = vts::archive::Reader::open(archive());
     ASSERT_TRUE(reader.ok()) << reader.error().to_string();
-    auto entry = (*reader)->find_entry(vts::pmtiles::zxy_to_tile_id(1, 0, 0));
+    auto entry = (*reader)->find_entry(vts::archive::zxy_to_tile_id(1, 0, 0));
     ASSERT_TRUE(entry.ok()) << entry.error().to_string();
     offset = (*reader)->header().tile_data_offset + entry->offset;
     length = entry->length;

@@ -13,6 +13,7 @@
 
 namespace fs = std::filesystem;
 using namespace vts::client;
+using namespace vts::loadtest;
 
 namespace {
 

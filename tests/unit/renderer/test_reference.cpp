@@ -18,7 +18,7 @@
 #include "vts/builder/builder.hpp"
 #include "vts/builder/image_io.hpp"
 #include "vts/builder/synthetic.hpp"
-#include "vts/protocol/web_image.hpp"
+#include "vts/imaging/web_image.hpp"
 
 namespace fs = std::filesystem;
 
@@ -422,7 +422,7 @@ TEST(ImageIo, PngRoundTripsExactlyAndErrorsNameThePath) {
   for (std::size_t i = 0; i < img.rgba.size(); ++i)
     img.rgba[i] = static_cast<std::uint8_t>((i * 89 + 7) ^ (i >> 3));
   const fs::path p = dir / "round.png";
-  Status w = write_png(p, img.width, img.height, img.rgba);
+  Status w = imaging::write_png(p, img.width, img.height, img.rgba);
   ASSERT_TRUE(w.ok()) << w.error().to_string();
   auto back = read_rgba8(p);
   ASSERT_TRUE(back.ok()) << back.error().to_string();
@@ -431,7 +431,7 @@ TEST(ImageIo, PngRoundTripsExactlyAndErrorsNameThePath) {
   EXPECT_EQ(back->rgba, img.rgba);
 
   const fs::path nowhere = dir / "no-such-dir" / "x.png";
-  Status bad = write_png(nowhere, img.width, img.height, img.rgba);
+  Status bad = imaging::write_png(nowhere, img.width, img.height, img.rgba);
   ASSERT_FALSE(bad.ok());
   EXPECT_NE(bad.error().message.find(nowhere.string()), std::string::npos) << bad.error().message;
   auto missing = read_rgba8(nowhere);

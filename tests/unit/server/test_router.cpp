@@ -12,10 +12,10 @@
 
 #include "router_internal.hpp"
 #include "tile_tag_memo.hpp"
+#include "vts/archive/pmtiles.hpp"
+#include "vts/base/file_io.hpp"
 #include "vts/builder/builder.hpp"
 #include "vts/protocol/codec.hpp"
-#include "vts/protocol/file_io.hpp"
-#include "vts/protocol/pmtiles.hpp"
 #include "vts/test/temp_dir.hpp"
 
 namespace fs = std::filesystem;
@@ -787,9 +787,9 @@ TEST(RouterDamage, ADamagedTileHeaderAnswers500NamingTheTileAndOtherTilesStillSe
   // Overwrite the magic of tile 2/1/0's header frame in the file itself.
   std::uint64_t offset = 0;
   {
-    auto reader = vts::pmtiles::Reader::open(o.output);
+    auto reader = vts::archive::Reader::open(o.output);
     ASSERT_TRUE(reader.ok());
-    auto entry = (*reader)->find_entry(vts::pmtiles::zxy_to_tile_id(2, 1, 0));
+    auto entry = (*reader)->find_entry(vts::archive::zxy_to_tile_id(2, 1, 0));
     ASSERT_TRUE(entry.ok());
     offset = (*reader)->header().tile_data_offset + entry->offset;
   }

@@ -14,8 +14,8 @@
 
 #include "busy_worker.hpp"
 #include "vts/builder/builder.hpp"
+#include "vts/imaging/web_image.hpp"
 #include "vts/protocol/codec.hpp"
-#include "vts/protocol/web_image.hpp"
 #include "vts/server/router.hpp"
 #include "vts/server/serve_config.hpp"
 #include "vts/test/temp_dir.hpp"
@@ -80,7 +80,7 @@ std::string body(const vts::HttpResponse& r) {
   return {reinterpret_cast<const char*>(r.view.data()), r.view.size()};
 }
 vts::TileImage decoded(const vts::HttpResponse& r) {
-  auto img = vts::decode_web_image(r.view);
+  auto img = vts::imaging::decode_web_image(r.view);
   EXPECT_TRUE(img.ok()) << img.error().to_string();
   return img.ok() ? *img : vts::TileImage{};
 }
@@ -99,7 +99,7 @@ TEST_F(RouterWeb, PngIsTheTileContentExactly) {
     ASSERT_TRUE(payload.ok());
     auto stored = vts::decode_tile(*payload);
     ASSERT_TRUE(stored.ok());
-    auto want = vts::tile_content(*stored, t0->info.geometry, id);
+    auto want = vts::imaging::tile_content(*stored, t0->info.geometry, id);
     ASSERT_TRUE(want.ok());
     const auto got = decoded(r);
     EXPECT_EQ(got.width, 256u);
@@ -272,7 +272,7 @@ TEST_F(RouterWeb, AMissWhileAnotherEncodesWaitsForThatFlight) {
   // Lead the flight of the image as the router keys it, as if another request were encoding it.
   const auto t = registry_->find("dense");
   const std::string key =
-      "dense@" + t->version + "/" + std::to_string(vts::pmtiles::zxy_to_tile_id(1, 1, 0)) + "/png6";
+      "dense@" + t->version + "/" + std::to_string(vts::archive::zxy_to_tile_id(1, 1, 0)) + "/png6";
   auto lead = c->acquire(key);
   ASSERT_TRUE(lead.lead);
   auto marker = get("/dense/1/1/0.png");

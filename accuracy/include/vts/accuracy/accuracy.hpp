@@ -28,7 +28,7 @@
 #include <variant>
 #include <vector>
 
-#include "vts/protocol/result.hpp"
+#include "vts/base/result.hpp"
 
 namespace vts::accuracy {
 

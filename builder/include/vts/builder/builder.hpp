@@ -32,11 +32,11 @@
 #include <utility>
 #include <vector>
 
+#include "vts/archive/pmtiles.hpp"
+#include "vts/base/result.hpp"
 #include "vts/builder/downsample.hpp"
 #include "vts/protocol/codec.hpp"
 #include "vts/protocol/geometry.hpp"
-#include "vts/protocol/pmtiles.hpp"
-#include "vts/protocol/result.hpp"
 #include "vts/protocol/tileset.hpp"
 
 namespace vts {
@@ -143,7 +143,7 @@ struct LevelReport {
 
 struct BuildReport {
   TilesetInfo info;
-  pmtiles::WriterStats stats;
+  archive::WriterStats stats;
   std::vector<LevelReport> levels;
   double seconds = 0;
   std::string input_description;  // "earth.jpg 2048x1024 3ch uint8" / "synthetic 3000x1700"

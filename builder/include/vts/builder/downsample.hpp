@@ -22,7 +22,7 @@
 #include <string_view>
 #include <vector>
 
-#include "vts/protocol/srgb.hpp"
+#include "vts/base/srgb.hpp"
 
 namespace vts {
 

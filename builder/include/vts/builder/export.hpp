@@ -4,7 +4,7 @@
 //
 // Each output tile is the T x T content of one stored tile (web_image.hpp: tile_content), texels
 // beyond the image's edge transparent. Tiles wholly transparent (or absent from a sparse archive)
-// are not written; identical output tiles are stored once in an archive (pmtiles::Writer dedups
+// are not written; identical output tiles are stored once in an archive (archive::Writer dedups
 // by payload hash). Source tiles sharing one payload in a run of the directory are decoded once.
 //
 // Streaming: the source directory is walked in tile-id order by the calling thread, which feeds a
@@ -15,7 +15,7 @@
 // independent of the image's size in texels (T = 256, 2 threads: under 10 MiB of tile buffers).
 //
 // Atomic: an archive is written under a temporary name beside the output and renamed at the end
-// (pmtiles::Writer); a folder is filled under the hidden ".<DIR>.partial-XXXXXX" beside it and
+// (archive::Writer); a folder is filled under the hidden ".<DIR>.partial-XXXXXX" beside it and
 // renamed to DIR at the end. A failed or cancelled export leaves nothing under the output name and
 // removes its temporary. One killed outright (SIGKILL, a second SIGTERM) leaves its hidden partial
 // folder, which the next xyz export to the same DIR removes: a partial folder whose export still
@@ -30,11 +30,11 @@
 #include <optional>
 #include <string>
 
-#include "vts/protocol/pmtiles.hpp"
-#include "vts/protocol/result.hpp"
+#include "vts/archive/pmtiles.hpp"
+#include "vts/base/result.hpp"
+#include "vts/imaging/web_image.hpp"
 #include "vts/protocol/tileset.hpp"
 #include "vts/protocol/tiling.hpp"
-#include "vts/protocol/web_image.hpp"
 
 namespace vts {
 
@@ -45,8 +45,8 @@ struct ExportOptions {
   // folders are created, as mkdir -p does).
   std::filesystem::path output;
   ExportLayout layout = ExportLayout::pmtiles;
-  WebFormat format = WebFormat::webp;
-  WebEncodeOptions encode;
+  imaging::WebFormat format = imaging::WebFormat::webp;
+  imaging::WebEncodeOptions encode;
   // none: the archive's own grid (our z/x/y). web_mercator_quad: the Web Mercator grid; native for
   // a WebMercatorQuad archive, reprojected from a WorldCRS84Quad one (web_mercator.hpp: zooms and
   // bounds of web_mercator_range(), tiles of render_web_mercator_tile()), refused for a plain
@@ -82,8 +82,8 @@ LonLatBounds export_bounds(const TilesetInfo& info);
 // (none for a plain image's own grid).
 std::string export_metadata_json(const TilesetInfo& info, const std::string& source_metadata,
                                  const std::string& source_name, const std::string& source_version,
-                                 WebFormat format, const LonLatBounds& bounds, int min_zoom,
-                                 int max_zoom, Tiling grid);
+                                 imaging::WebFormat format, const LonLatBounds& bounds,
+                                 int min_zoom, int max_zoom, Tiling grid);
 
 // Exports `reader` (whose metadata is `info`). Errors: invalid_argument for bad options (an
 // encoder setting out of range, a tiling the archive cannot give, a non-empty output folder),
@@ -93,7 +93,7 @@ std::string export_metadata_json(const TilesetInfo& info, const std::string& sou
 // Reprojection walks each zoom's tiles over the bounds one column per job; a job keeps the
 // decoded source tiles of its previous output tile only, so the bound above holds with "tile in
 // flight" meaning the source tiles of two output tiles (a few stored tiles).
-Result<ExportReport> export_web_tiles(const pmtiles::Reader& reader, const TilesetInfo& info,
+Result<ExportReport> export_web_tiles(const archive::Reader& reader, const TilesetInfo& info,
                                       const ExportOptions& options);
 
 }  // namespace vts

@@ -5,7 +5,7 @@
 #include <atomic>
 #include <filesystem>
 
-#include "vts/protocol/pmtiles.hpp"
+#include "vts/archive/pmtiles.hpp"
 #include "vts/protocol/tileset.hpp"
 
 namespace vts {
@@ -25,12 +25,12 @@ struct ExtractOptions {
 
 // Writes tile `id`'s content (clipped to the image at its level) or, with_border, the stored
 // tile. not_found when the archive lacks the tile.
-Status extract_tile(const pmtiles::Reader& reader, const TilesetInfo& info, TileId id,
+Status extract_tile(const archive::Reader& reader, const TilesetInfo& info, TileId id,
                     const ExtractOptions& options);
 
 // Writes level z (level_width x level_height texels), one row of tiles at a time so memory stays
 // at about level_width * T * 4 bytes. Tiles absent from a sparse archive come out transparent.
-Status extract_level(const pmtiles::Reader& reader, const TilesetInfo& info, int z,
+Status extract_level(const archive::Reader& reader, const TilesetInfo& info, int z,
                      const ExtractOptions& options);
 
 }  // namespace vts

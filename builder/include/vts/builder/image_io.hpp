@@ -1,5 +1,5 @@
 // Image files as 8-bit RGBA through OpenImageIO: the reader of any 8-bit image OpenImageIO opens,
-// straight alpha. (PNG files are written by vts/protocol/web_image.hpp's write_png.)
+// straight alpha. (PNG files are written by vts/imaging/web_image.hpp's write_png.)
 #pragma once
 
 #include <cstdint>
@@ -7,7 +7,7 @@
 #include <span>
 #include <vector>
 
-#include "vts/protocol/result.hpp"
+#include "vts/base/result.hpp"
 
 namespace vts {
 

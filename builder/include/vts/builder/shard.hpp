@@ -1,9 +1,9 @@
 // Sharded builds (`vts plan`, `vts build --plan`, `vts merge`; docs/PLANET.md, "Plans, shards and
 // parts"): a plan fixes a whole build once (options, inputs with their fingerprints, geometry) and
 // cuts its pyramid at a split level L: the sub-pyramid under each level-L tile that has tiles to
-// build is a shard (one contiguous tile-id range per level, pmtiles::subtree_tile_ids). A shard
+// build is a shard (one contiguous tile-id range per level, archive::subtree_tile_ids). A shard
 // stops at the apex level A = min(L + k, max zoom) (k: the apex levels, 2 by default): it writes
-// its levels >= A to one part (pmtiles::PartWriter) and keeps its level-A tiles lossless as the
+// its levels >= A to one part (archive::PartWriter) and keeps its level-A tiles lossless as the
 // part's attachment (encode_apex_tiles); the apex builds the levels < A from those, so it equals a
 // whole build's levels < A for every codec; merge_parts() then writes the archive a single
 // `vts build` of the same options writes, byte for byte.
@@ -17,8 +17,8 @@
 #include <string>
 #include <vector>
 
+#include "vts/archive/pmtiles_part.hpp"
 #include "vts/builder/builder.hpp"
-#include "vts/protocol/pmtiles_part.hpp"
 
 namespace vts {
 
@@ -123,7 +123,7 @@ struct ShardReport {
   std::uint64_t content_sum = 0;
   // The inputs the shard opened: those whose extent meets its window (all, for plain images).
   std::size_t inputs_opened = 0;
-  pmtiles::PartStats stats;
+  archive::PartStats stats;
   double seconds = 0;
 };
 
@@ -166,16 +166,16 @@ Result<PlanUpdate> update_shard_plan(const ShardPlan& old,
 
 struct MergeReport {
   TilesetInfo info;
-  pmtiles::WriterStats stats;
+  archive::WriterStats stats;
   std::size_t parts = 0;
   double seconds = 0;
 };
 
 // Merges the plan's parts in `parts_dir` into `output`: the archive `vts build` writes.
-// verify: pmtiles::MergeOptions::verify (check every payload, or copy in the kernel).
+// verify: archive::MergeOptions::verify (check every payload, or copy in the kernel).
 Result<MergeReport> merge_plan(const ShardPlan& plan, const std::filesystem::path& parts_dir,
                                const std::filesystem::path& output,
-                               const std::function<void(const pmtiles::MergeProgress&)>& progress,
+                               const std::function<void(const archive::MergeProgress&)>& progress,
                                const std::atomic<bool>* cancel, bool verify = true);
 
 }  // namespace vts

@@ -37,9 +37,9 @@
 #include <string>
 #include <string_view>
 
+#include "vts/base/result.hpp"
 #include "vts/client/ram_cache.hpp"
 #include "vts/protocol/geometry.hpp"
-#include "vts/protocol/result.hpp"
 
 struct sqlite3_stmt;
 

@@ -30,7 +30,7 @@
 #include <utility>
 #include <vector>
 
-#include "vts/protocol/result.hpp"
+#include "vts/base/result.hpp"
 
 namespace vts::client {
 

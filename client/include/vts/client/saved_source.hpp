@@ -7,8 +7,8 @@
 #include <filesystem>
 #include <string_view>
 
+#include "vts/base/result.hpp"
 #include "vts/client/source.hpp"
-#include "vts/protocol/result.hpp"
 
 namespace vts::client {
 

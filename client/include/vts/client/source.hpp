@@ -16,9 +16,9 @@
 #include <string_view>
 #include <vector>
 
+#include "vts/base/result.hpp"
 #include "vts/client/fetcher.hpp"
 #include "vts/protocol/geometry.hpp"
-#include "vts/protocol/result.hpp"
 #include "vts/protocol/tileset.hpp"
 #include "vts/protocol/tiling.hpp"
 

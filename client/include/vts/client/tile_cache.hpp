@@ -30,10 +30,10 @@
 #include <optional>
 #include <string>
 
+#include "vts/base/result.hpp"
 #include "vts/client/disk_cache.hpp"
 #include "vts/client/ram_cache.hpp"
 #include "vts/client/source.hpp"
-#include "vts/protocol/result.hpp"
 
 namespace vts::client {
 

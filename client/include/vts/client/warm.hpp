@@ -17,10 +17,10 @@
 #include <string>
 #include <vector>
 
+#include "vts/base/result.hpp"
 #include "vts/client/disk_cache.hpp"
 #include "vts/client/source.hpp"
 #include "vts/protocol/geometry.hpp"
-#include "vts/protocol/result.hpp"
 #include "vts/protocol/tileset.hpp"
 #include "vts/protocol/tiling.hpp"
 

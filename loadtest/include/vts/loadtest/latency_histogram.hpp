@@ -21,9 +21,9 @@
 #include <utility>
 #include <vector>
 
-#include "vts/protocol/result.hpp"
+#include "vts/base/result.hpp"
 
-namespace vts::client {
+namespace vts::loadtest {
 
 class LatencyHistogram {
  public:
@@ -71,4 +71,4 @@ class LatencyHistogram {
   long double sum_ = 0;
 };
 
-}  // namespace vts::client
+}  // namespace vts::loadtest

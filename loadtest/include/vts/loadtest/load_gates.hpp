@@ -18,10 +18,10 @@
 
 #include <nlohmann/json.hpp>
 
+#include "vts/base/result.hpp"
 #include "vts/loadtest/load_report.hpp"
-#include "vts/protocol/result.hpp"
 
-namespace vts::client {
+namespace vts::loadtest {
 
 enum class MetricKind : std::uint8_t { latency, ratio, rate, count };
 
@@ -92,4 +92,4 @@ nlohmann::json compare_json(const std::vector<MetricChange>& changes, double thr
 // An aligned table: metric, A, B, change, relative, and "REGRESSION" in a last column.
 std::string compare_table(const std::vector<MetricChange>& changes);
 
-}  // namespace vts::client
+}  // namespace vts::loadtest

@@ -20,10 +20,10 @@
 
 #include <nlohmann/json.hpp>
 
+#include "vts/base/result.hpp"
 #include "vts/loadtest/latency_histogram.hpp"
-#include "vts/protocol/result.hpp"
 
-namespace vts::client {
+namespace vts::loadtest {
 
 // One second of the run: element i of LoadReport::seconds covers [i, i + 1) s after the start.
 // Requests count when they complete (with a tile or an error); the percentiles are those of the
@@ -149,4 +149,4 @@ Result<LoadReport> read_report_file(const std::filesystem::path& file);
 // viewers past 2^32 - 1: the error names the field and the report (1-based, in the given order).
 Result<LoadReport> merge_reports(const std::vector<LoadReport>& reports);
 
-}  // namespace vts::client
+}  // namespace vts::loadtest

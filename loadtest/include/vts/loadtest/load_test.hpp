@@ -53,12 +53,12 @@
 #include <string>
 #include <vector>
 
+#include "vts/base/result.hpp"
 #include "vts/client/source.hpp"
 #include "vts/loadtest/load_report.hpp"
 #include "vts/protocol/geometry.hpp"
-#include "vts/protocol/result.hpp"
 
-namespace vts::client {
+namespace vts::loadtest {
 
 struct DemandTile {
   TileId id;
@@ -92,7 +92,7 @@ struct LoadProgress {
 
 struct LoadTestOptions {
   std::string target;  // any location open_source() accepts
-  SourceOptions source;
+  client::SourceOptions source;
   std::uint32_t viewers = 8;
   double fps = 30;
   double duration_s = 30;
@@ -135,4 +135,4 @@ struct LoadTestResult {
 // demand function (the run stops and reports it).
 Result<LoadTestResult> run_load_test(const LoadTestOptions& options, const DemandFn& demand);
 
-}  // namespace vts::client
+}  // namespace vts::loadtest

@@ -8,11 +8,11 @@
 
 #include <nlohmann/json.hpp>
 
+#include "vts/base/result.hpp"
 #include "vts/loadtest/load_test.hpp"
 #include "vts/protocol/geometry.hpp"
-#include "vts/protocol/result.hpp"
 
-namespace vts::client {
+namespace vts::loadtest {
 
 // Where requests go and which caches the viewers have, as `vts loadtest` names them.
 struct LoadTarget {
@@ -63,4 +63,4 @@ nlohmann::json simulation_json(const LoadRunStats& run, const CameraDemandOption
 // newline.
 std::string simulation_line(const LoadRunStats& run, bool open_loop);
 
-}  // namespace vts::client
+}  // namespace vts::loadtest

@@ -14,7 +14,7 @@
 #include <utility>
 #include <vector>
 
-namespace vts::client::svg {
+namespace vts::plot {
 
 // `s` with every invalid UTF-8 sequence replaced by U+FFFD; with control_to_replacement, C0
 // controls other than tab and newline, and DEL, too.
@@ -125,4 +125,4 @@ std::string svg_text(double x, double y, const std::string& text, const char* an
 // The <svg> element for `plot`; `axes` is null when there is nothing to draw ("no data").
 std::string render_plot(const Plot& plot, const AxisSet* axes);
 
-}  // namespace vts::client::svg
+}  // namespace vts::plot

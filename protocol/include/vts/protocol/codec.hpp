@@ -19,9 +19,9 @@
 #include <string_view>
 #include <vector>
 
-#include "vts/protocol/result.hpp"
+#include "vts/base/result.hpp"
 
-namespace vts {
+namespace vts::inline protocol {
 
 enum class CodecId : std::uint8_t { lossless = 0, bc1 = 1 };
 enum class PixelFormat : std::uint8_t { rgba8 = 0, bc1 = 1 };
@@ -134,4 +134,4 @@ Result<TileImage> decode_tile(std::span<const std::uint8_t> payload);
 // texels, then decodes it as above.
 Result<TileImage> decode_tile(std::span<const std::uint8_t> payload, const TileSpec& spec);
 
-}  // namespace vts
+}  // namespace vts::inline protocol

@@ -18,9 +18,9 @@
 #include <string>
 #include <vector>
 
-#include "vts/protocol/result.hpp"
+#include "vts/base/result.hpp"
 
-namespace vts {
+namespace vts::inline protocol {
 
 struct TileId {
   std::uint8_t z = 0;
@@ -126,7 +126,7 @@ class Geometry {
   int max_zoom_ = 0;
 };
 
-}  // namespace vts
+}  // namespace vts::inline protocol
 
 // Tiles as keys of unordered containers.
 template <>

@@ -11,9 +11,9 @@
 #include <nlohmann/json_fwd.hpp>
 #include <string_view>
 
-#include "vts/protocol/result.hpp"
+#include "vts/base/result.hpp"
 
-namespace vts {
+namespace vts::inline protocol {
 
 // Far deeper than anything we write or read (our metadata nests 3 levels, reports 5), far
 // shallower than any stack.
@@ -39,4 +39,4 @@ Result<nlohmann::ordered_json> parse_ordered_json(std::string_view text, std::st
                                                   int max_depth = kMaxJsonDepth,
                                                   std::size_t max_entries = kUnlimitedJsonEntries);
 
-}  // namespace vts
+}  // namespace vts::inline protocol

@@ -8,12 +8,12 @@
 #include <string>
 #include <string_view>
 
+#include "vts/base/result.hpp"
 #include "vts/protocol/codec.hpp"
 #include "vts/protocol/geometry.hpp"
-#include "vts/protocol/result.hpp"
 #include "vts/protocol/tiling.hpp"
 
-namespace vts {
+namespace vts::inline protocol {
 
 // Where a georeferenced tileset sits on the Earth (docs/FORMAT.md "Georeference"). Stored in the
 // metadata as the object "vtstream.georeference"; absent for plain images.
@@ -68,4 +68,4 @@ std::string tileset_name_problem(std::string_view name);
 inline constexpr std::string_view kTilesetNameRule =
     "names are [A-Za-z0-9._-], at most 128 characters, no leading dot";
 
-}  // namespace vts
+}  // namespace vts::inline protocol

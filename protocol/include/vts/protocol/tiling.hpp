@@ -19,10 +19,10 @@
 #include <string_view>
 #include <vector>
 
+#include "vts/base/result.hpp"
 #include "vts/protocol/geometry.hpp"
-#include "vts/protocol/result.hpp"
 
-namespace vts {
+namespace vts::inline protocol {
 
 enum class Tiling { none, world_crs84_quad, web_mercator_quad };
 
@@ -127,4 +127,4 @@ LonLatLevel default_center(Tiling t, const Geometry& g, const LonLatBounds& b) n
 // check_tiling_geometry().
 std::string tile_matrix_set_json(Tiling t, const Geometry& g, const LonLatBounds& footprint);
 
-}  // namespace vts
+}  // namespace vts::inline protocol

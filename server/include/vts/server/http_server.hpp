@@ -42,7 +42,7 @@
 #include <memory>
 #include <string>
 
-#include "vts/protocol/result.hpp"
+#include "vts/base/result.hpp"
 #include "vts/server/router.hpp"
 #include "vts/server/tileset_registry.hpp"
 

@@ -17,10 +17,10 @@
 #include <string_view>
 #include <vector>
 
+#include "vts/imaging/web_image.hpp"
 #include "vts/protocol/geometry.hpp"
 #include "vts/protocol/tile_provider.hpp"
 #include "vts/protocol/tileset.hpp"
-#include "vts/protocol/web_image.hpp"
 #include "vts/server/tileset_registry.hpp"
 
 namespace vts {
@@ -33,7 +33,7 @@ struct WebTile;
 
 // Web images of tiles (/{ts}/{z}/{x}/{y}.png|.webp|.jpg; docs/PROTOCOL.md §12).
 struct WebTileConfig {
-  WebEncodeOptions encode;
+  imaging::WebEncodeOptions encode;
   std::size_t cache_bytes = std::size_t(64) << 20;  // "cache_mib" (default 64 MiB; 0 = no cache)
   // Admission to the encode workers (docs/PROTOCOL.md §12): at most this many encodes wait, in
   // all ("max_queued_encodes") and from one connection ("max_queued_encodes_per_connection");
@@ -97,8 +97,8 @@ struct DeferredTile {
   std::string if_none_match;
   std::string cache_control;
   // A web image of the tile (/{ts}/{z}/{x}/{y}.{ext}): encoded once the tile arrives.
-  std::optional<WebFormat> web;
-  WebEncodeOptions web_options;
+  std::optional<imaging::WebFormat> web;
+  imaging::WebEncodeOptions web_options;
   std::shared_ptr<http_detail::WebTileCache> web_cache;
   std::uint64_t connection = 0;  // HttpRequest::connection
 };

@@ -19,7 +19,7 @@
 #include <string_view>
 #include <utility>
 
-#include "vts/protocol/result.hpp"
+#include "vts/base/result.hpp"
 #include "vts/server/http_server.hpp"
 #include "vts/server/tileset_registry.hpp"
 

@@ -16,8 +16,8 @@
 #include <string>
 #include <vector>
 
-#include "vts/protocol/pmtiles.hpp"
-#include "vts/protocol/result.hpp"
+#include "vts/archive/pmtiles.hpp"
+#include "vts/base/result.hpp"
 #include "vts/protocol/tileset.hpp"
 
 namespace vts {
@@ -29,7 +29,7 @@ class TileTagMemo;
 struct Tileset {
   std::string name;
   std::filesystem::path path;
-  std::shared_ptr<pmtiles::Reader> reader;
+  std::shared_ptr<archive::Reader> reader;
   TilesetInfo info;
   // 16 lowercase hex digits identifying the archive's content (XXH3-64 of its header, root
   // directory and metadata bytes). Versioned URLs carry it; a rebuilt archive gets a new one.

@@ -27,7 +27,7 @@
 #include <string_view>
 #include <vector>
 
-#include "vts/protocol/result.hpp"
+#include "vts/base/result.hpp"
 #include "vts/renderer/camera.hpp"
 #include "vts/renderer/globe.hpp"
 

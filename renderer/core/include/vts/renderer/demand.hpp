@@ -17,8 +17,8 @@
 #include <cstdint>
 #include <vector>
 
+#include "vts/base/result.hpp"
 #include "vts/protocol/geometry.hpp"
-#include "vts/protocol/result.hpp"
 #include "vts/renderer/feedback.hpp"
 #include "vts/renderer/pyramid.hpp"
 #include "vts/renderer/scene.hpp"

@@ -12,8 +12,8 @@
 #include <string>
 #include <utility>
 
+#include "vts/base/result.hpp"
 #include "vts/protocol/geometry.hpp"
-#include "vts/protocol/result.hpp"
 #include "vts/protocol/tileset.hpp"
 #include "vts/protocol/tiling.hpp"
 #include "vts/renderer/camera.hpp"

@@ -24,7 +24,7 @@
 #include <unordered_map>
 #include <vector>
 
-#include "vts/protocol/result.hpp"
+#include "vts/base/result.hpp"
 #include "vts/renderer/pyramid.hpp"
 
 namespace vts::renderer {

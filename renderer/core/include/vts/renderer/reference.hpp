@@ -17,11 +17,11 @@
 #include <unordered_map>
 #include <vector>
 
+#include "vts/archive/pmtiles.hpp"
+#include "vts/base/result.hpp"
+#include "vts/base/srgb.hpp"
 #include "vts/protocol/codec.hpp"
 #include "vts/protocol/geometry.hpp"
-#include "vts/protocol/pmtiles.hpp"
-#include "vts/protocol/result.hpp"
-#include "vts/protocol/srgb.hpp"
 #include "vts/renderer/camera.hpp"
 #include "vts/renderer/footprint.hpp"
 #include "vts/renderer/scene.hpp"
@@ -80,13 +80,13 @@ class PyramidSampler {
     std::list<std::uint64_t>::iterator lru;
   };
 
-  PyramidSampler(std::filesystem::path path, std::shared_ptr<pmtiles::Reader> reader,
+  PyramidSampler(std::filesystem::path path, std::shared_ptr<archive::Reader> reader,
                  Geometry geometry, PixelFormat format, TileSpec spec, std::size_t cache_tiles);
   // The decoded stored tile, or null when the archive does not have it.
   Result<const std::vector<std::uint8_t>*> tile(TileId id);
 
   std::filesystem::path path_;
-  std::shared_ptr<pmtiles::Reader> reader_;
+  std::shared_ptr<archive::Reader> reader_;
   Geometry geometry_;
   PixelFormat format_;  // what the archive's tiles decode to (bc1 is then widened to rgba8)
   TileSpec spec_;       // what every tile's header must say (refused before decoding otherwise)

@@ -10,8 +10,8 @@
 #include <utility>
 #include <vector>
 
+#include "vts/base/result.hpp"
 #include "vts/protocol/geometry.hpp"
-#include "vts/protocol/result.hpp"
 #include "vts/renderer/camera.hpp"
 #include "vts/renderer/camera_path.hpp"
 #include "vts/renderer/globe.hpp"

@@ -7,7 +7,7 @@
 #include <memory>
 #include <string>
 
-#include "vts/protocol/result.hpp"
+#include "vts/base/result.hpp"
 
 struct GLFWwindow;
 

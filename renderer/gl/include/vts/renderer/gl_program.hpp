@@ -6,7 +6,7 @@
 
 #include <string>
 
-#include "vts/protocol/result.hpp"
+#include "vts/base/result.hpp"
 #include "vts/renderer/gl_handle.hpp"
 
 namespace vts::renderer {

@@ -16,7 +16,7 @@
 #include <string>
 #include <vector>
 
-#include "vts/protocol/result.hpp"
+#include "vts/base/result.hpp"
 #include "vts/renderer/reference.hpp"
 
 namespace vts::renderer {

@@ -14,9 +14,9 @@
 #include <string>
 #include <vector>
 
+#include "vts/base/result.hpp"
 #include "vts/client/tile_client.hpp"
 #include "vts/protocol/geometry.hpp"
-#include "vts/protocol/result.hpp"
 #include "vts/protocol/tiling.hpp"
 #include "vts/renderer/camera_path.hpp"
 #include "vts/renderer/gl_context.hpp"

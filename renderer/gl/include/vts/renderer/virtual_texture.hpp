@@ -12,10 +12,10 @@
 #include <memory>
 #include <vector>
 
+#include "vts/base/result.hpp"
 #include "vts/client/tile_client.hpp"
 #include "vts/protocol/codec.hpp"
 #include "vts/protocol/geometry.hpp"
-#include "vts/protocol/result.hpp"
 #include "vts/renderer/camera.hpp"
 #include "vts/renderer/feedback.hpp"
 #include "vts/renderer/mip_bias.hpp"

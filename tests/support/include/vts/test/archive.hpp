@@ -8,8 +8,8 @@
 #include <optional>
 #include <vector>
 
+#include "vts/archive/pmtiles.hpp"
 #include "vts/builder/builder.hpp"
-#include "vts/protocol/pmtiles.hpp"
 
 namespace vts::test {
 
@@ -25,13 +25,13 @@ BuildReport build_archive(const BuildOptions& options);
 // An archive opened for reading, with every stored tile listed in directory order.
 struct OpenedArchive {
   std::filesystem::path path;
-  std::shared_ptr<pmtiles::Reader> reader;
+  std::shared_ptr<archive::Reader> reader;
   std::vector<TileId> tiles;
 };
 OpenedArchive open_archive(const std::filesystem::path& path);
 
 // Every byte of the archive `reader` opened (test archives are small); throws on a read error.
-std::vector<std::uint8_t> read_all(const pmtiles::Reader& reader);
+std::vector<std::uint8_t> read_all(const archive::Reader& reader);
 
 // build_archive() then open_archive().
 OpenedArchive build_and_open(const BuildOptions& options);
