@@ -161,7 +161,7 @@ config_build() {
   local dir=$1 targets=$2 t
   shift 2
   if step "configure $dir/" configure "$dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-    "${RELWITHDEBINFO_FLAGS[@]}" -DVTS_BUILD_TESTS=OFF -DVTS_BUILD_BENCH=OFF -DVTS_WERROR=ON "$@"; then
+    "${RELWITHDEBINFO_FLAGS[@]}" -DVTS_BUILD_TESTS=OFF -DVTS_WERROR=ON "$@"; then
     local args=()
     for t in ${targets//,/ }; do args+=(--target "$t"); done
     step "build $dir/ ($targets)" cmake --build "$dir" -j"$JOBS" "${args[@]}"
@@ -170,10 +170,10 @@ config_build() {
     return 1
   fi
 }
-if config_build build-server vts -DVTS_BUILD_RENDERER=OFF -DVTS_BUILD_BUILDER=OFF; then
+if config_build build-server vts -DVTS_BUILD_RENDERER=OFF -DVTS_BUILD_BUILDER=OFF -DVTS_BUILD_BENCH=OFF; then
   export VTS_SERVER_ONLY="$ROOT/build-server/cli/vts"
 fi
-config_build build-viewer vts -DVTS_BUILD_RENDERER=ON -DVTS_BUILD_BUILDER=OFF
+config_build build-viewer vts -DVTS_BUILD_RENDERER=ON -DVTS_BUILD_BUILDER=OFF -DVTS_BUILD_BENCH=OFF
 config_build build-builder vts,vts-build -DVTS_BUILD_RENDERER=OFF -DVTS_BUILD_BUILDER=ON
 
 # --- 5. every test of the main build (the deploy test reads VTS_SERVER_ONLY) --------------------
