@@ -10,7 +10,8 @@
 #include <cstring>
 #include <random>
 
-namespace vts::inline base {
+namespace vts {
+inline namespace base {
 
 namespace fs = std::filesystem;
 
@@ -230,4 +231,5 @@ std::string escape_controls(std::string_view s) {
   return out;
 }
 
-}  // namespace vts::inline base
+}  // namespace base
+}  // namespace vts

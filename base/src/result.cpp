@@ -1,6 +1,7 @@
 #include "vts/base/result.hpp"
 
-namespace vts::inline base {
+namespace vts {
+inline namespace base {
 
 const char* error_code_name(ErrorCode code) noexcept {
   switch (code) {
@@ -86,4 +87,5 @@ std::string Error::to_string() const {
   return std::string(error_code_name(code)) + ": " + message;
 }
 
-}  // namespace vts::inline base
+}  // namespace base
+}  // namespace vts

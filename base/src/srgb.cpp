@@ -4,7 +4,8 @@
 #include <array>
 #include <cmath>
 
-namespace vts::inline base {
+namespace vts {
+inline namespace base {
 
 double srgb_to_linear(double v) {
   return v <= 0.04045 ? v / 12.92 : std::pow((v + 0.055) / 1.055, 2.4);
@@ -39,4 +40,5 @@ std::uint8_t encode_srgb8_exact(double linear) {
   return static_cast<std::uint8_t>(std::lround(e * 255.0));
 }
 
-}  // namespace vts::inline base
+}  // namespace base
+}  // namespace vts

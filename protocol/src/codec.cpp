@@ -32,7 +32,8 @@
 #include "codec_internal.hpp"
 #include "vts/protocol/codec.hpp"
 
-namespace vts::inline protocol {
+namespace vts {
+inline namespace protocol {
 namespace {
 
 constexpr std::size_t kFrameBytes = TileHeader::kFrameBytes;
@@ -580,4 +581,5 @@ Result<TileImage> decode_lossless_body(const TileHeader& header,
 }
 
 }  // namespace detail
-}  // namespace vts::inline protocol
+}  // namespace protocol
+}  // namespace vts

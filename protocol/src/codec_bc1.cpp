@@ -26,7 +26,8 @@
 #include "codec_internal.hpp"
 #include "vts/protocol/codec.hpp"
 
-namespace vts::inline protocol {
+namespace vts {
+inline namespace protocol {
 namespace {
 
 constexpr std::size_t kBlockBytes = 8;
@@ -175,4 +176,5 @@ Result<TileImage> bc1_to_rgba8(const TileImage& image) {
   return out;
 }
 
-}  // namespace vts::inline protocol
+}  // namespace protocol
+}  // namespace vts

@@ -15,7 +15,9 @@
 #define VTS_FILTER_SSE2 1
 #endif
 
-namespace vts::inline protocol::detail {
+namespace vts {
+inline namespace protocol {
+namespace detail {
 namespace {
 
 // Neighbours outside the image are 0: the row above the first row is this zero row.
@@ -202,4 +204,6 @@ void gradient_unfilter(const std::uint8_t* planes, std::uint32_t width, std::uin
   }
 }
 
-}  // namespace vts::inline protocol::detail
+}  // namespace detail
+}  // namespace protocol
+}  // namespace vts

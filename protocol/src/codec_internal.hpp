@@ -10,7 +10,9 @@
 #include "vts/base/result.hpp"
 #include "vts/protocol/codec.hpp"
 
-namespace vts::inline protocol::detail {
+namespace vts {
+inline namespace protocol {
+namespace detail {
 
 // Gradient prediction filter (Filter::gradient). `rgba` holds width*height interleaved RGBA8
 // texels; `planes` receives width*height*4 bytes: the R plane, then G, B and A, each row-major.
@@ -58,4 +60,6 @@ Status decompress_body(const TileHeader& header, std::span<const std::uint8_t> b
 // The bc1 codec singleton (codec_bc1.cpp).
 const Codec& bc1_codec();
 
-}  // namespace vts::inline protocol::detail
+}  // namespace detail
+}  // namespace protocol
+}  // namespace vts

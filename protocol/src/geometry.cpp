@@ -3,7 +3,8 @@
 #include <algorithm>
 #include <charconv>
 
-namespace vts::inline protocol {
+namespace vts {
+inline namespace protocol {
 
 namespace {
 std::uint64_t ceil_shift(std::uint64_t v, int shift) {
@@ -172,4 +173,5 @@ TexelRect Geometry::map_rect(int from_z, const TexelRect& rect, int to_z) const 
   return r;
 }
 
-}  // namespace vts::inline protocol
+}  // namespace protocol
+}  // namespace vts

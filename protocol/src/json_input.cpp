@@ -6,7 +6,8 @@
 #include <string>
 #include <vector>
 
-namespace vts::inline protocol {
+namespace vts {
+inline namespace protocol {
 namespace {
 
 // A limit passed: thrown out of the parser's callback, which stops the parse there (nlohmann
@@ -125,4 +126,5 @@ Result<nlohmann::ordered_json> parse_ordered_json(std::string_view text, std::st
   return parse_limited<nlohmann::ordered_json>(text, what, max_depth, max_entries);
 }
 
-}  // namespace vts::inline protocol
+}  // namespace protocol
+}  // namespace vts

@@ -5,7 +5,8 @@
 #include "vts/base/file_io.hpp"
 #include "vts/protocol/json_input.hpp"
 
-namespace vts::inline protocol {
+namespace vts {
+inline namespace protocol {
 namespace {
 
 using nlohmann::json;
@@ -120,4 +121,5 @@ std::string resolve_url(const std::string& base, const std::string& ref) {
   return path.substr(0, path.rfind('/') + 1) + ref;
 }
 
-}  // namespace vts::inline protocol
+}  // namespace protocol
+}  // namespace vts

@@ -15,7 +15,8 @@
 
 #include "vts/protocol/json_input.hpp"
 
-namespace vts::inline protocol {
+namespace vts {
+inline namespace protocol {
 namespace {
 
 using nlohmann::json;
@@ -357,4 +358,5 @@ std::string tileset_name_problem(std::string_view name) {
   return {};
 }
 
-}  // namespace vts::inline protocol
+}  // namespace protocol
+}  // namespace vts

@@ -9,7 +9,8 @@
 
 #include "vts/base/file_io.hpp"
 
-namespace vts::inline protocol {
+namespace vts {
+inline namespace protocol {
 namespace {
 
 using nlohmann::ordered_json;
@@ -260,4 +261,5 @@ std::string tile_matrix_set_json(Tiling t, const Geometry& g, const LonLatBounds
   return j.dump(2) + "\n";
 }
 
-}  // namespace vts::inline protocol
+}  // namespace protocol
+}  // namespace vts

@@ -45,7 +45,7 @@ double psnr_rgb(const TileImage& a, const TileImage& b) {
   return n == 0 || se == 0 ? 99.0 : 10 * std::log10(255.0 * 255.0 / (se / double(n)));
 }
 
-TileImage round_trip(const TileImage& img, imaging::WebFormat f,
+TileImage round_trip(const TileImage& img, vts::imaging::WebFormat f,
                      const vts::imaging::WebEncodeOptions& o = {}) {
   auto bytes = vts::imaging::encode_web_image(img, f, o);
   EXPECT_TRUE(bytes.ok()) << bytes.error().to_string();
@@ -60,7 +60,7 @@ TileImage round_trip(const TileImage& img, imaging::WebFormat f,
 TEST(WebImage, PngIsExactWithAndWithoutAlpha) {
   for (bool band : {false, true}) {
     const TileImage img = sample(256, 256, band);
-    const TileImage back = round_trip(img, imaging::WebFormat::png);
+    const TileImage back = round_trip(img, vts::imaging::WebFormat::png);
     EXPECT_EQ(back.width, 256u);
     EXPECT_EQ(back.height, 256u);
     EXPECT_EQ(back.pixels, img.pixels) << "transparent band: " << band;
@@ -71,10 +71,10 @@ TEST(WebImage, WebpLosslessIsExactAndLossyKeepsAlphaAndColour) {
   vts::imaging::WebEncodeOptions lossless;
   lossless.webp_lossless = true;
   const TileImage opaque = sample(256, 256, false);
-  EXPECT_EQ(round_trip(opaque, imaging::WebFormat::webp, lossless).pixels, opaque.pixels);
+  EXPECT_EQ(round_trip(opaque, vts::imaging::WebFormat::webp, lossless).pixels, opaque.pixels);
 
   const TileImage band = sample(256, 256, true);
-  const TileImage back = round_trip(band, imaging::WebFormat::webp);
+  const TileImage back = round_trip(band, vts::imaging::WebFormat::webp);
   ASSERT_EQ(back.pixels.size(), band.pixels.size());
   EXPECT_GT(psnr_rgb(band, back), 27.0);                 // 29 dB measured: 1-texel blue lines
   EXPECT_EQ(back.pixels[3], 255);                        // opaque stays opaque
@@ -83,7 +83,7 @@ TEST(WebImage, WebpLosslessIsExactAndLossyKeepsAlphaAndColour) {
 
 TEST(WebImage, JpegKeepsColourAndCompositesTransparencyOverBlack) {
   const TileImage band = sample(256, 256, true);
-  const TileImage back = round_trip(band, imaging::WebFormat::jpeg);
+  const TileImage back = round_trip(band, vts::imaging::WebFormat::jpeg);
   ASSERT_EQ(back.pixels.size(), band.pixels.size());
   EXPECT_GT(psnr_rgb(band, back), 27.0);                          // 29 dB measured (4:2:0 chroma)
   const std::uint8_t* far = &back.pixels[(250 * 256 + 100) * 4];  // inside the transparent band
@@ -96,7 +96,7 @@ TEST(WebImage, QualityTradesBytes) {
   vts::imaging::WebEncodeOptions low, high;
   low.jpeg_quality = low.webp_quality = 30;
   high.jpeg_quality = high.webp_quality = 95;
-  for (imaging::WebFormat f : {imaging::WebFormat::jpeg, imaging::WebFormat::webp}) {
+  for (vts::imaging::WebFormat f : {vts::imaging::WebFormat::jpeg, vts::imaging::WebFormat::webp}) {
     EXPECT_LT(vts::imaging::encode_web_image(img, f, low)->size(),
               vts::imaging::encode_web_image(img, f, high)->size())
         << vts::imaging::web_format_extension(f);
@@ -105,8 +105,8 @@ TEST(WebImage, QualityTradesBytes) {
 
 TEST(WebImage, DamagedOrForeignBytesAreCorruptNeverAnImage) {
   const TileImage img = sample(128, 128, false);
-  for (imaging::WebFormat f :
-       {imaging::WebFormat::png, imaging::WebFormat::webp, imaging::WebFormat::jpeg}) {
+  for (vts::imaging::WebFormat f : {vts::imaging::WebFormat::png, vts::imaging::WebFormat::webp,
+                                    vts::imaging::WebFormat::jpeg}) {
     auto bytes = vts::imaging::encode_web_image(img, f);
     ASSERT_TRUE(bytes.ok());
     const std::vector<std::uint8_t> half(bytes->begin(), bytes->begin() + bytes->size() / 2);
@@ -124,23 +124,23 @@ TEST(WebImage, DamagedOrForeignBytesAreCorruptNeverAnImage) {
 TEST(WebImage, OptionsAndFormatsAreCheckedByName) {
   vts::imaging::WebEncodeOptions o;
   o.jpeg_quality = 0;
-  auto s = vts::validate(o);
+  auto s = vts::imaging::validate(o);
   ASSERT_FALSE(s.ok());
   EXPECT_NE(s.error().message.find("jpeg_quality"), std::string::npos);
   o = {};
   o.png_level = 10;
   EXPECT_FALSE(
-      vts::imaging::encode_web_image(sample(8, 8, false), imaging::WebFormat::png, o).ok());
-  EXPECT_FALSE(vts::imaging::encode_web_image(TileImage{}, imaging::WebFormat::png).ok());
+      vts::imaging::encode_web_image(sample(8, 8, false), vts::imaging::WebFormat::png, o).ok());
+  EXPECT_FALSE(vts::imaging::encode_web_image(TileImage{}, vts::imaging::WebFormat::png).ok());
 
-  EXPECT_EQ(*vts::imaging::parse_web_format("JPEG"), imaging::WebFormat::jpeg);
-  EXPECT_EQ(*vts::imaging::parse_web_format("jpg"), imaging::WebFormat::jpeg);
-  EXPECT_EQ(*vts::imaging::parse_web_format("webp"), imaging::WebFormat::webp);
+  EXPECT_EQ(*vts::imaging::parse_web_format("JPEG"), vts::imaging::WebFormat::jpeg);
+  EXPECT_EQ(*vts::imaging::parse_web_format("jpg"), vts::imaging::WebFormat::jpeg);
+  EXPECT_EQ(*vts::imaging::parse_web_format("webp"), vts::imaging::WebFormat::webp);
   auto bad = vts::imaging::parse_web_format("gif");
   ASSERT_FALSE(bad.ok());
   EXPECT_NE(bad.error().message.find("png, webp, jpg"), std::string::npos);
-  EXPECT_EQ(vts::imaging::web_format_content_type(imaging::WebFormat::webp), "image/webp");
-  EXPECT_EQ(vts::imaging::web_format_extension(imaging::WebFormat::jpeg), "jpg");
+  EXPECT_EQ(vts::imaging::web_format_content_type(vts::imaging::WebFormat::webp), "image/webp");
+  EXPECT_EQ(vts::imaging::web_format_extension(vts::imaging::WebFormat::jpeg), "jpg");
 }
 
 TEST(WebImage, TileContentCropsTheBorderAndIsTransparentBeyondTheEdge) {

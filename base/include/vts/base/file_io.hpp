@@ -13,7 +13,8 @@
 
 struct stat;
 
-namespace vts::inline base {
+namespace vts {
+inline namespace base {
 
 // Replaces `path` with `bytes` atomically: a reader (or a crash) sees either the old file or the
 // whole new one, never a part. Writes a uniquely named temporary beside `path` (created with
@@ -71,4 +72,5 @@ std::string html_escape(std::string_view s);
 // end a line early or move the cursor, and escaping it again changes nothing.
 std::string escape_controls(std::string_view s);
 
-}  // namespace vts::inline base
+}  // namespace base
+}  // namespace vts

@@ -10,7 +10,8 @@
 #include <utility>
 #include <variant>
 
-namespace vts::inline base {
+namespace vts {
+inline namespace base {
 
 enum class ErrorCode : std::uint8_t {
   ok = 0,
@@ -109,4 +110,5 @@ class [[nodiscard]] Status {
   bool ok_ = true;
 };
 
-}  // namespace vts::inline base
+}  // namespace base
+}  // namespace vts

@@ -6,7 +6,8 @@
 #include <array>
 #include <cstdint>
 
-namespace vts::inline base {
+namespace vts {
+inline namespace base {
 
 // Exact transfer functions on [0, 1], in double precision (references).
 double srgb_to_linear(double encoded);
@@ -50,4 +51,5 @@ inline float decode_srgb8(std::uint8_t code) {
   return srgb8_tables().decode(code);
 }
 
-}  // namespace vts::inline base
+}  // namespace base
+}  // namespace vts

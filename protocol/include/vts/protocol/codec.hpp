@@ -21,7 +21,8 @@
 
 #include "vts/base/result.hpp"
 
-namespace vts::inline protocol {
+namespace vts {
+inline namespace protocol {
 
 enum class CodecId : std::uint8_t { lossless = 0, bc1 = 1 };
 enum class PixelFormat : std::uint8_t { rgba8 = 0, bc1 = 1 };
@@ -134,4 +135,5 @@ Result<TileImage> decode_tile(std::span<const std::uint8_t> payload);
 // texels, then decodes it as above.
 Result<TileImage> decode_tile(std::span<const std::uint8_t> payload, const TileSpec& spec);
 
-}  // namespace vts::inline protocol
+}  // namespace protocol
+}  // namespace vts

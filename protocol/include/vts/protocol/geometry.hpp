@@ -20,7 +20,8 @@
 
 #include "vts/base/result.hpp"
 
-namespace vts::inline protocol {
+namespace vts {
+inline namespace protocol {
 
 struct TileId {
   std::uint8_t z = 0;
@@ -126,7 +127,8 @@ class Geometry {
   int max_zoom_ = 0;
 };
 
-}  // namespace vts::inline protocol
+}  // namespace protocol
+}  // namespace vts
 
 // Tiles as keys of unordered containers.
 template <>

@@ -13,7 +13,8 @@
 
 #include "vts/base/result.hpp"
 
-namespace vts::inline protocol {
+namespace vts {
+inline namespace protocol {
 
 // Far deeper than anything we write or read (our metadata nests 3 levels, reports 5), far
 // shallower than any stack.
@@ -39,4 +40,5 @@ Result<nlohmann::ordered_json> parse_ordered_json(std::string_view text, std::st
                                                   int max_depth = kMaxJsonDepth,
                                                   std::size_t max_entries = kUnlimitedJsonEntries);
 
-}  // namespace vts::inline protocol
+}  // namespace protocol
+}  // namespace vts

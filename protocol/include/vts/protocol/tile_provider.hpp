@@ -16,7 +16,8 @@
 #include "vts/protocol/geometry.hpp"
 #include "vts/protocol/tileset.hpp"
 
-namespace vts::inline protocol {
+namespace vts {
+inline namespace protocol {
 
 // A server may host, besides the archives of its registry, tilesets whose tiles come from
 // elsewhere, asynchronously: an AsyncTileProvider. The router answers everything it can for them
@@ -80,4 +81,5 @@ class AsyncTileProvider {
   virtual std::string health_problem() const { return {}; }
 };
 
-}  // namespace vts::inline protocol
+}  // namespace protocol
+}  // namespace vts

@@ -10,7 +10,8 @@
 #include "vts/base/result.hpp"
 #include "vts/protocol/tileset.hpp"
 
-namespace vts::inline protocol {
+namespace vts {
+inline namespace protocol {
 
 // A 404 for a versioned tile URL whose version is no longer current carries this header and
 // value (the body keeps a human message): the client then refetches the TileJSON.
@@ -50,4 +51,5 @@ Result<TileJson> read_tilejson(std::span<const std::uint8_t> body, const std::st
 // absolute, scheme-relative, absolute-path and relative-path references).
 std::string resolve_url(const std::string& base, const std::string& ref);
 
-}  // namespace vts::inline protocol
+}  // namespace protocol
+}  // namespace vts

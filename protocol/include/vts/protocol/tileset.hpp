@@ -13,7 +13,8 @@
 #include "vts/protocol/geometry.hpp"
 #include "vts/protocol/tiling.hpp"
 
-namespace vts::inline protocol {
+namespace vts {
+inline namespace protocol {
 
 // Where a georeferenced tileset sits on the Earth (docs/FORMAT.md "Georeference"). Stored in the
 // metadata as the object "vtstream.georeference"; absent for plain images.
@@ -68,4 +69,5 @@ std::string tileset_name_problem(std::string_view name);
 inline constexpr std::string_view kTilesetNameRule =
     "names are [A-Za-z0-9._-], at most 128 characters, no leading dot";
 
-}  // namespace vts::inline protocol
+}  // namespace protocol
+}  // namespace vts

@@ -22,7 +22,8 @@
 #include "vts/base/result.hpp"
 #include "vts/protocol/geometry.hpp"
 
-namespace vts::inline protocol {
+namespace vts {
+inline namespace protocol {
 
 enum class Tiling { none, world_crs84_quad, web_mercator_quad };
 
@@ -127,4 +128,5 @@ LonLatLevel default_center(Tiling t, const Geometry& g, const LonLatBounds& b) n
 // check_tiling_geometry().
 std::string tile_matrix_set_json(Tiling t, const Geometry& g, const LonLatBounds& footprint);
 
-}  // namespace vts::inline protocol
+}  // namespace protocol
+}  // namespace vts
