@@ -263,3 +263,16 @@ CONF
   done
   die "nginx did not start: $(cat "$dir/stderr")"
 }
+
+# emit_report: prints the caller's report() (the Markdown table) and, with JSON=1, its json() on
+# stdout with the table on stderr; OUT_FILE, when set, receives a copy of the table.
+emit_report() {
+  if ((JSON)); then
+    if [[ -n $OUT_FILE ]]; then report | tee "$OUT_FILE" >&2; else report >&2; fi
+    json
+  elif [[ -n $OUT_FILE ]]; then
+    report | tee "$OUT_FILE"
+  else
+    report
+  fi
+}

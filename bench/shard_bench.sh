@@ -239,13 +239,6 @@ json() {
     "$S_CPU" "$S_RSS" "$S_TILES" "$S_BYTES" "$S_SHA" "$runs"
 }
 
-if ((JSON)); then
-  if [[ -n $OUT_FILE ]]; then report | tee "$OUT_FILE" >&2; else report >&2; fi
-  json
-elif [[ -n $OUT_FILE ]]; then
-  report | tee "$OUT_FILE"
-else
-  report
-fi
+emit_report
 ((${#MISMATCH[@]} == 0)) || die "merged archive differs from the single build for N = ${MISMATCH[*]}"
 cleanup_out "$WORK/single"

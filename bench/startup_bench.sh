@@ -173,11 +173,4 @@ json() {
     "$LIBS" "$(IFS=,; echo "${heavy[*]}")" "$(jbool "$HEAVY_MARK")"
 }
 
-if ((JSON)); then
-  if [[ -n $OUT_FILE ]]; then report | tee "$OUT_FILE" >&2; else report >&2; fi
-  json
-elif [[ -n $OUT_FILE ]]; then
-  report | tee "$OUT_FILE"
-else
-  report
-fi
+emit_report
