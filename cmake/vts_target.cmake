@@ -8,6 +8,12 @@ function(vts_configure_target target)
   if(VTS_WERROR)
     target_compile_options(${target} PRIVATE -Werror)
   endif()
+  if(CMAKE_UNITY_BUILD AND CMAKE_CXX_COMPILER_ID STREQUAL "GNU")
+    # In a unity source each .cpp is an included file, and GCC then warns about a class that
+    # uses its own file's anonymous namespace (a Pimpl holding a file-local type, a test fixture):
+    # harmless, and silent when the same file is compiled alone.
+    target_compile_options(${target} PRIVATE -Wno-subobject-linkage)
+  endif()
 endfunction()
 
 # vts_enable_sanitizers(<OFF|ON|address|thread>): applied globally (before any target) so that

@@ -104,6 +104,10 @@ ctest_step() {
 }
 
 # configure DIR CMAKE ARGS...: cmake -G Ninja, starting afresh if DIR was made by another generator.
+# Every build is a unity build (CMake compiles each target's sources eight to a file): the
+# headers every file includes (Boost.Beast, nlohmann/json, GoogleTest) are parsed and their
+# templates instantiated once per eight files, which more than halves the compile time on two
+# cores. VTS_UNITY_BUILD=OFF builds file by file.
 # shellcheck disable=SC2317  # called through step()
 configure() {
   local dir=$1
@@ -112,7 +116,7 @@ configure() {
     echo "$dir was configured with another generator; reconfiguring from scratch"
     rm -rf "$dir/CMakeCache.txt" "$dir/CMakeFiles"
   fi
-  cmake -S "$ROOT" -B "$dir" -G Ninja "${LAUNCHER[@]}" "$@"
+  cmake -S "$ROOT" -B "$dir" -G Ninja "${LAUNCHER[@]}" -DCMAKE_UNITY_BUILD="${VTS_UNITY_BUILD:-ON}" "$@"
 }
 
 # ccache, when installed, lets builds with the same flags share objects (build/ and build-server/).

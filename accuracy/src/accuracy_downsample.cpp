@@ -34,7 +34,6 @@ namespace {
 namespace fs = std::filesystem;
 namespace OIIO = OIIO_NAMESPACE;
 
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr const char* kReferenceFilters[] = {"lanczos3", "blackman-harris"};
 constexpr int kReferences = 2;
 
@@ -123,7 +122,7 @@ struct Diff {
   std::uint64_t samples = 0;
   int max_error = 0;
   double psnr() const {
-    if (samples == 0) return kNaN;
+    if (samples == 0) return kNotMeasured;
     if (sum_sq == 0) return std::numeric_limits<double>::infinity();
     return 10 * std::log10(255.0 * 255.0 / (sum_sq / double(samples)));
   }
@@ -167,7 +166,7 @@ Result<fs::path> quick_input(const AccuracyContext& ctx) {
   return out;
 }
 
-Result<AccuracyTable> make_table(const AccuracyContext& ctx) {
+Result<AccuracyTable> measure_downsampling(const AccuracyContext& ctx) {
   std::error_code ec;
   if (!fs::is_regular_file(ctx.input, ec))
     return make_error(ErrorCode::not_found, "input image " + ctx.input.string() + " not found");
@@ -297,10 +296,10 @@ Result<AccuracyTable> make_table(const AccuracyContext& ctx) {
       }
       row.push_back(double(bytes));
       level_bytes_sum += bytes;
-      row.push_back(kNaN);
-      row.push_back(kNaN);
-      row.push_back(kNaN);
-      row.push_back(kNaN);
+      row.push_back(kNotMeasured);
+      row.push_back(kNotMeasured);
+      row.push_back(kNotMeasured);
+      row.push_back(kNotMeasured);
       t.rows.push_back(std::move(row));
       ++compared;
     }
@@ -309,16 +308,16 @@ Result<AccuracyTable> make_table(const AccuracyContext& ctx) {
     for (int r = 0; r < kReferences; ++r) {
       // PSNR of the levels' mean squared error, each level weighted alike (a plain mean of dB
       // would be infinite as soon as one level is exact).
-      const double mse = compared ? mse_sum[r] / compared : kNaN;
+      const double mse = compared ? mse_sum[r] / compared : kNotMeasured;
       all.push_back(mse > 0    ? 10 * std::log10(255.0 * 255.0 / mse)
                     : mse == 0 ? std::numeric_limits<double>::infinity()
-                               : kNaN);
-      all.push_back(compared ? double(worst[r]) : kNaN);
+                               : kNotMeasured);
+      all.push_back(compared ? double(worst[r]) : kNotMeasured);
     }
     all.push_back(double(level_bytes_sum));
     all.push_back(reduce_ns);
     all.push_back(best);
-    all.push_back(best > 0 ? double(timed.stats.addressed_tiles) / best : kNaN);
+    all.push_back(best > 0 ? double(timed.stats.addressed_tiles) / best : kNotMeasured);
     all.push_back(double(timed.stats.file_bytes));
     t.rows.push_back(std::move(all));
   }
@@ -372,7 +371,7 @@ Result<AccuracyTable> make_table(const AccuracyContext& ctx) {
 
 Result<AccuracyTable> downsample_table(const AccuracyContext& ctx) {
   try {
-    return make_table(ctx);
+    return measure_downsampling(ctx);
   } catch (const std::bad_alloc&) {
     return make_error(ErrorCode::too_large,
                       "downsample table: out of memory for " + ctx.input.string());

@@ -223,7 +223,7 @@ double median(std::vector<double> v) {
                  : (v[n / 2 - 1] + v[n / 2]) / 2;
 }
 
-Result<AccuracyTable> make_table(const AccuracyContext& ctx) {
+Result<AccuracyTable> measure_resampling(const AccuracyContext& ctx) {
   std::error_code ec;
   if (!fs::is_directory(ctx.work_dir, ec))
     return make_error(ErrorCode::not_found,
@@ -372,7 +372,7 @@ Result<AccuracyTable> make_table(const AccuracyContext& ctx) {
 
 Result<AccuracyTable> resampling_table(const AccuracyContext& ctx) {
   try {
-    return make_table(ctx);
+    return measure_resampling(ctx);
   } catch (const std::bad_alloc&) {
     return make_error(ErrorCode::too_large, "resampling table: out of memory");
   } catch (const std::exception& e) {

@@ -60,7 +60,7 @@ double per_s(double n, double seconds) {
   return seconds > 0 ? n / seconds : 0.0;
 }
 
-std::string printf_string(const char* format, double v) {
+std::string number_text(const char* format, double v) {
   char b[64];
   std::snprintf(b, sizeof b, format, v);
   return b;
@@ -116,16 +116,16 @@ Result<MetricValue> metric_value(const LoadReport& r, std::string_view name) {
 std::string format_metric(double v, MetricKind kind) {
   switch (kind) {
     case MetricKind::latency:
-      if (v < 1e3) return printf_string("%.0f ns", v);
-      if (v < 1e6) return printf_string("%.3g us", v / 1e3);
-      if (v < 1e9) return printf_string("%.3g ms", v / 1e6);
-      return printf_string("%.3g s", v / 1e9);
+      if (v < 1e3) return number_text("%.0f ns", v);
+      if (v < 1e6) return number_text("%.3g us", v / 1e3);
+      if (v < 1e9) return number_text("%.3g ms", v / 1e6);
+      return number_text("%.3g s", v / 1e9);
     case MetricKind::ratio:
-      return printf_string("%.3g%%", v * 100);
+      return number_text("%.3g%%", v * 100);
     case MetricKind::rate:
-      return printf_string("%.1f/s", v);
+      return number_text("%.1f/s", v);
     case MetricKind::count:
-      return printf_string("%.0f", v);
+      return number_text("%.0f", v);
   }
   return "";
 }
@@ -286,7 +286,7 @@ std::string compare_table(const std::vector<MetricChange>& changes) {
     const std::string sign = c.absolute > 0 ? "+" : c.absolute < 0 ? "-" : "";
     rows.push_back({c.name, format_metric(c.a, c.kind), format_metric(c.b, c.kind),
                     sign + format_metric(std::fabs(c.absolute), c.kind),
-                    std::isnan(c.relative) ? "-" : printf_string("%+.1f%%", c.relative * 100),
+                    std::isnan(c.relative) ? "-" : number_text("%+.1f%%", c.relative * 100),
                     c.regression ? "REGRESSION" : ""});
   }
   std::vector<std::size_t> width(6, 0);

@@ -329,7 +329,7 @@ std::vector<std::pair<std::string, PlaneView>> views_for(double size) {
 // still moves with the load); the variants alternate so that a busy machine slows both alike.
 std::array<double, 2> pass_ms(GlState& gl, const PlaneView& view, double size, int runs,
                               int draws) {
-  using Clock = std::chrono::steady_clock;
+  using SteadyClock = std::chrono::steady_clock;
   std::array<std::vector<double>, 2> t;
   for (int v = 0; v < 2; ++v) {
     set_uniforms(gl, Variant(v), view, size);
@@ -339,10 +339,11 @@ std::array<double, 2> pass_ms(GlState& gl, const PlaneView& view, double size, i
   }
   for (int r = 0; r < runs; ++r) {
     for (int v = 0; v < 2; ++v) {
-      const auto t0 = Clock::now();
+      const auto t0 = SteadyClock::now();
       for (int i = 0; i < draws; ++i) draw(gl, Variant(v));
       glFinish();
-      t[v].push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count() / draws);
+      t[v].push_back(std::chrono::duration<double, std::milli>(SteadyClock::now() - t0).count() /
+                     draws);
     }
   }
   return {*std::min_element(t[0].begin(), t[0].end()), *std::min_element(t[1].begin(), t[1].end())};

@@ -33,12 +33,11 @@ using namespace vts::renderer;
 using views::Clock;
 
 constexpr int kDivisors[] = {1, 2, 4, 8, 16};
-constexpr int kModes = 5;
+constexpr int kFeedbackModes = 5;
 constexpr double kFramePeriodMs = 1000.0 / 60.0;
 constexpr double kInf = std::numeric_limits<double>::infinity();
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
-Error fail(const Error& e, const std::string& what) {
+Error feedback_fail(const Error& e, const std::string& what) {
   return Error{e.code, "feedback table: " + what + ": " + e.message};
 }
 
@@ -77,10 +76,10 @@ Result<AccuracyTable> feedback_table(const AccuracyContext& ctx) {
   }
   if (Status s = views::need_gl_context("feedback table"); !s) return s.error();
   auto geometry = views::archive_geometry(ctx.archive);
-  if (!geometry) return fail(geometry.error(), "cannot read " + ctx.archive.string());
+  if (!geometry) return feedback_fail(geometry.error(), "cannot read " + ctx.archive.string());
   const Geometry g = *geometry;
   auto pyramid = Pyramid::from_geometry(g);
-  if (!pyramid) return fail(pyramid.error(), "the archive's pyramid");
+  if (!pyramid) return feedback_fail(pyramid.error(), "the archive's pyramid");
 
   const int sim_views = ctx.quick ? 20 : 40;
   const int jumps = ctx.quick ? 5 : 10;
@@ -89,7 +88,7 @@ Result<AccuracyTable> feedback_table(const AccuracyContext& ctx) {
   const int settle_frames = 8;  // frames after `complete` to wait for the 1/1 image
 
   // 1. Tiles found, from the demand simulator.
-  FoundStats found[kModes];
+  FoundStats found[kFeedbackModes];
   {
     views::Rng rng{0xfeedbac5ull};
     for (int i = 0; i < sim_views; ++i) {
@@ -100,10 +99,10 @@ Result<AccuracyTable> feedback_table(const AccuracyContext& ctx) {
       }
       std::unordered_set<std::uint64_t> needed;  // 1/1 direct tiles
       std::vector<std::uint64_t> pixel_tiles;    // the tile of each textured 1/1 pixel
-      for (int m = 0; m < kModes; ++m) {
+      for (int m = 0; m < kFeedbackModes; ++m) {
         const int k = kDivisors[m];
         auto buffer = simulate_feedback(*view.scene, g, w, h, DemandOptions{k, 1});
-        if (!buffer) return fail(buffer.error(), "simulated feedback of " + view.name);
+        if (!buffer) return feedback_fail(buffer.error(), "simulated feedback of " + view.name);
         FeedbackProcessor processor(*pyramid);
         Result<std::vector<TileRequest>> requests = std::vector<TileRequest>{};
         double best = kInf;
@@ -111,7 +110,8 @@ Result<AccuracyTable> feedback_table(const AccuracyContext& ctx) {
           const auto t0 = Clock::now();
           requests = processor.process(*buffer, 0);
           best = std::min(best, views::ms_since(t0));
-          if (!requests) return fail(requests.error(), "feedback reduction of " + view.name);
+          if (!requests)
+            return feedback_fail(requests.error(), "feedback reduction of " + view.name);
         }
         if (k == 1) {
           for (const TileRequest& r : *requests)
@@ -159,16 +159,17 @@ Result<AccuracyTable> feedback_table(const AccuracyContext& ctx) {
 
   std::vector<Image> full(
       static_cast<std::size_t>(jumps));  // the 1/1 complete frame of each target
-  JumpStats runs[kModes];
+  JumpStats runs[kFeedbackModes];
   std::vector<std::unique_ptr<VirtualTexture>> textures;  // one per divisor, kept for the timing
-  for (int m = 0; m < kModes; ++m) {
+  for (int m = 0; m < kFeedbackModes; ++m) {
     const int k = kDivisors[m];
     JumpStats& run = runs[m];
     VirtualTextureOptions o;
     o.feedback_divisor = k;
     auto opened = views::open_vt(ctx.archive, o);
     if (!opened) {
-      return fail(opened.error(), "cannot open a virtual texture on " + ctx.archive.string());
+      return feedback_fail(opened.error(),
+                           "cannot open a virtual texture on " + ctx.archive.string());
     }
     textures.push_back(std::move(*opened));
     VirtualTexture* vt = textures.back().get();
@@ -239,7 +240,7 @@ Result<AccuracyTable> feedback_table(const AccuracyContext& ctx) {
     const Scene& scene = *targets[std::size_t(j)].scene;
     for (auto& vt : textures) (void)views::converge(*vt, scene, w, h, max_frames);
     for (int i = 0; i < steady_frames; ++i) {
-      for (int m = 0; m < kModes; ++m) {
+      for (int m = 0; m < kFeedbackModes; ++m) {
         const auto [st, ms] = views::timed_frame(*textures[std::size_t(m)], scene, w, h);
         runs[m].frame_ms.push_back(ms);
         if (st.feedback_frames > 0 && st.uploads == 0) runs[m].cpu_ms.push_back(st.vt_cpu_ms);
@@ -270,9 +271,10 @@ Result<AccuracyTable> feedback_table(const AccuracyContext& ctx) {
       {"tiles_requested", "tiles requested", 1},
       {"upload_mb", "uploaded in the jumps (MB)", 2},
   };
-  std::vector<double> cpu_by_mode(kModes), found_by_mode(kModes), pixels_by_mode(kModes);
-  std::vector<double> frames_complete(kModes), frames_full(kModes);
-  for (int m = 0; m < kModes; ++m) {
+  std::vector<double> cpu_by_mode(kFeedbackModes), found_by_mode(kFeedbackModes),
+      pixels_by_mode(kFeedbackModes);
+  std::vector<double> frames_complete(kFeedbackModes), frames_full(kFeedbackModes);
+  for (int m = 0; m < kFeedbackModes; ++m) {
     const int k = kDivisors[m];
     const FoundStats& f = found[m];
     const JumpStats& r = runs[m];
@@ -291,7 +293,7 @@ Result<AccuracyTable> feedback_table(const AccuracyContext& ctx) {
         std::to_string(fw) + "x" + std::to_string(fh),
         double(readback_bytes(w, h, k)),
         found_by_mode[std::size_t(m)],
-        f.tiles_found.empty() ? kNaN
+        f.tiles_found.empty() ? kNotMeasured
                               : *std::min_element(f.tiles_found.begin(), f.tiles_found.end()),
         pixels_by_mode[std::size_t(m)],
         frames_complete[std::size_t(m)],
@@ -361,7 +363,7 @@ Result<AccuracyTable> feedback_table(const AccuracyContext& ctx) {
           "copied into the physical texture during the jumps (FrameStats::upload_bytes), the "
           "start view's excluded.",
   };
-  for (int m = 0; m < kModes; ++m) {
+  for (int m = 0; m < kFeedbackModes; ++m) {
     if (runs[m].max_bias > 0) {
       t.notes.push_back("1/" + std::to_string(kDivisors[m]) + ": the mip bias rose to " +
                         views::fixed(runs[m].max_bias, 1) +
@@ -375,7 +377,7 @@ Result<AccuracyTable> feedback_table(const AccuracyContext& ctx) {
   found_plot.x_label = "VT CPU per frame (ms)";
   found_plot.y_label = "share found (against 1/1)";
   PlotSeries tiles{"needed tiles found", {}}, pixels{"pixels at full resolution", {}};
-  for (int m = 0; m < kModes; ++m) {
+  for (int m = 0; m < kFeedbackModes; ++m) {
     const double x = cpu_by_mode[std::size_t(m)];
     if (!std::isfinite(x)) continue;
     tiles.points.emplace_back(x, found_by_mode[std::size_t(m)]);
@@ -392,7 +394,7 @@ Result<AccuracyTable> feedback_table(const AccuracyContext& ctx) {
   conv_plot.y_label = "frames (60 Hz)";
   conv_plot.log_x = true;
   PlotSeries complete{"frames to complete", {}}, to_full{"frames to the 1/1 image", {}};
-  for (int m = 0; m < kModes; ++m) {
+  for (int m = 0; m < kFeedbackModes; ++m) {
     const double x = kDivisors[m];
     if (std::isfinite(frames_complete[std::size_t(m)]))
       complete.points.emplace_back(x, frames_complete[std::size_t(m)]);

@@ -20,7 +20,6 @@ namespace {
 using namespace vts::renderer;
 using views::Clock;
 
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr int kSuperFactor = 4;  // 4 x 4 = 16 samples per pixel
 // The oblique view is also judged against 8 x 8 = 64 samples per pixel: a 16-sample truth takes
 // 4 samples along the footprint's long axis, as 4 anisotropic taps do, so it cannot rank more
@@ -40,7 +39,7 @@ constexpr Mode kModes[] = {{"bilinear", false, 1},
 constexpr int kModeCount = 5;
 constexpr int kTrilinear = 1;
 
-Error fail(const Error& e, const std::string& what) {
+Error filtering_fail(const Error& e, const std::string& what) {
   return Error{e.code, "filtering table: " + what + ": " + e.message};
 }
 
@@ -106,7 +105,7 @@ Result<AccuracyTable> filtering_table(const AccuracyContext& ctx) {
   }
   if (Status s = views::need_gl_context("filtering table"); !s) return s.error();
   auto sampler = PyramidSampler::open(ctx.archive, 256);
-  if (!sampler) return fail(sampler.error(), "cannot read " + ctx.archive.string());
+  if (!sampler) return filtering_fail(sampler.error(), "cannot read " + ctx.archive.string());
   const Geometry g = (*sampler)->geometry();
   const std::vector<views::View> views = filtering_views(g, h, ctx.quick);
   const int timed_frames = ctx.quick ? 5 : 21;
@@ -121,7 +120,7 @@ Result<AccuracyTable> filtering_table(const AccuracyContext& ctx) {
             " of " + std::to_string(views.size()) + ")");
     const auto t0 = Clock::now();
     auto ref = render_supersampled(**sampler, *views[v].scene, w, h, kSuperFactor);
-    if (!ref) return fail(ref.error(), "reference of " + views[v].name);
+    if (!ref) return filtering_fail(ref.error(), "reference of " + views[v].name);
     truth_ms += views::ms_since(t0);
     truth.push_back(std::move(*ref));
     masks.push_back(views::textured_mask(*views[v].scene, g, w, h));
@@ -131,7 +130,7 @@ Result<AccuracyTable> filtering_table(const AccuracyContext& ctx) {
     ctx.say("filtering: 64-sample reference of " + views[oblique].name);
     const auto t0 = Clock::now();
     auto ref = render_supersampled(**sampler, *views[oblique].scene, w, h, kFineFactor);
-    if (!ref) return fail(ref.error(), "64-sample reference of " + views[oblique].name);
+    if (!ref) return filtering_fail(ref.error(), "64-sample reference of " + views[oblique].name);
     truth_ms += views::ms_since(t0);
     truth64 = std::move(*ref);
   }
@@ -156,7 +155,8 @@ Result<AccuracyTable> filtering_table(const AccuracyContext& ctx) {
     o.anisotropy = mode.anisotropy;
     auto opened = views::open_vt(ctx.archive, o);
     if (!opened) {
-      return fail(opened.error(), "cannot open a virtual texture on " + ctx.archive.string());
+      return filtering_fail(opened.error(),
+                            "cannot open a virtual texture on " + ctx.archive.string());
     }
     textures.push_back(std::move(*opened));
     VirtualTexture& vt = *textures.back();
@@ -230,12 +230,12 @@ Result<AccuracyTable> filtering_table(const AccuracyContext& ctx) {
         std::string(kModes[m].name),
         double(kModes[m].anisotropy),
         r.all.psnr_db(),
-        r.per_view.size() > oblique ? r.per_view[oblique].psnr_db() : kNaN,
+        r.per_view.size() > oblique ? r.per_view[oblique].psnr_db() : kNotMeasured,
         r.oblique64.psnr_db(),
         r.all.mean_abs(),
         double(r.all.max),
         ms,
-        tri_ms > 0 ? ms / tri_ms : kNaN,
+        tri_ms > 0 ? ms / tri_ms : kNotMeasured,
         r.wanted,
         double(r.upload_bytes) / 1e6,
     });

@@ -216,8 +216,8 @@ std::string CameraPath::to_json() const {
 
 namespace {
 
-constexpr double kPi = std::numbers::pi;
-constexpr double kDeg = 180 / kPi;
+using std::numbers::pi;
+constexpr double kDeg = 180 / pi;
 // Zooms the presets aim at: the globe's finest-level views and the plane's map scale.
 constexpr double kFinestTexelsPerPixel = 1.5;
 constexpr double kPanTexelsPerPixel = 1;
@@ -257,7 +257,7 @@ std::pair<double, double> random_place(Rng& rng) {
 // Distance along the screen-centre ray at which a pixel covers `tpp` finest texels: the zoom
 // GlobeScene::texels_per_pixel() defines, for a viewport of o.viewport_height rows.
 double centre_distance_m(const PresetOptions& o, double tpp) {
-  const double texel_m = 2 * kPi * kEarthRadiusM / double(o.image_width);
+  const double texel_m = 2 * pi * kEarthRadiusM / double(o.image_width);
   const double pixel_rad = 2 * std::tan(kFov / 2) / double(o.viewport_height);
   return tpp * texel_m / pixel_rad;
 }
@@ -280,7 +280,7 @@ std::vector<CameraKey> flyover(const PresetOptions& o, double frames, Rng& rng) 
   // Ground speed: half a screen height per second at the centre, as an angle (radians of
   // great circle per second).
   const double omega =
-      0.5 * o.viewport_height * kFinestTexelsPerPixel * 2 * kPi / double(o.image_width);
+      0.5 * o.viewport_height * kFinestTexelsPerPixel * 2 * pi / double(o.image_width);
   // The centre ray meets the ground at kFlyoverTilt from the vertical there. (From high above,
   // as a coarse image's finest level is seen, the camera's own tilt must be smaller for that:
   // the triangle centre-eye-hit has sides R and d around the angle pi - incidence.)
@@ -295,9 +295,9 @@ std::vector<CameraKey> flyover(const PresetOptions& o, double frames, Rng& rng) 
   // ground speed, dlambda/ds = sqrt(1 - phi'^2) / cos(phi), and the heading is the direction of
   // motion.
   const double period_angle = omega * 30;
-  const double amp = std::min(0.3 * period_angle / (2 * kPi), 10 / kDeg);
-  const double wave = 2 * kPi / period_angle;
-  const double phase = rng.uniform(0, 2 * kPi);
+  const double amp = std::min(0.3 * period_angle / (2 * pi), 10 / kDeg);
+  const double wave = 2 * pi / period_angle;
+  const double phase = rng.uniform(0, 2 * pi);
   const double phi0 = rng.uniform(-60, 60) / kDeg;
   const double lon_u = rng.uniform();
   auto phi = [&](double s) { return phi0 + amp * (std::sin(wave * s + phase) - std::sin(phase)); };
@@ -327,7 +327,7 @@ std::vector<CameraKey> flyover(const PresetOptions& o, double frames, Rng& rng) 
       lambda += sum * h / 3;
     }
     prev_s = s;
-    const double heading = kPi / 2 - std::asin(std::clamp(slope(s), -1.0, 1.0));
+    const double heading = pi / 2 - std::asin(std::clamp(slope(s), -1.0, 1.0));
     keys.push_back(globe_key(ts[i], lambda * kDeg, phi(s) * kDeg, altitude, heading, tilt, i == 0));
   }
   // Start where the whole route fits in [-180, 180] when it can (it heads east: the longitude
@@ -373,7 +373,7 @@ std::vector<CameraKey> pan(const PresetOptions& o, double frames, Rng& rng) {
   // so a small image does not make a path of countless bounces.
   const double speed =
       std::min(0.5 * o.viewport_width * kPanTexelsPerPixel, std::min(len[0], len[1]));
-  const double angle = rng.uniform(0, 2 * kPi);
+  const double angle = rng.uniform(0, 2 * pi);
   const double vel[2] = {speed * std::cos(angle) / o.fps, speed * std::sin(angle) / o.fps};
   const double start[2] = {rng.uniform(0, len[0]), rng.uniform(0, len[1])};
 

@@ -12,9 +12,6 @@ namespace vts::renderer {
 
 namespace {
 
-// globe.cpp's nominal viewport height for texels_per_pixel().
-constexpr double kNominalHeightPx = 1024;
-
 std::string num(double v) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%.9g", v);
@@ -58,7 +55,7 @@ Result<CameraKey> camera_at(const CameraKey& base, Tiling t, const Geometry& g, 
   k.globe.lat_deg = at.lat;
   k.globe.tilt = 0;
   // Straight down the distance to the ground is the altitude (GlobeScene::texels_per_pixel).
-  const double pixel_rad = 2 * std::tan(k.globe.fov_y / 2) / kNominalHeightPx;
+  const double pixel_rad = 2 * std::tan(k.globe.fov_y / 2) / kGlobeNominalHeightPx;
   k.globe.altitude_m =
       zoom * 2 * std::numbers::pi * k.globe.radius_m / (pixel_rad * double(g.width()));
   return k;
@@ -73,7 +70,7 @@ CameraPath plane_path_from_places(const CameraPath& path, Tiling t, const Geomet
     k.plane.center_u = p.x;
     k.plane.center_v = p.y;
     // camera_at()'s altitude for a zoom, inverted.
-    const double pixel_rad = 2 * std::tan(k.globe.fov_y / 2) / kNominalHeightPx;
+    const double pixel_rad = 2 * std::tan(k.globe.fov_y / 2) / kGlobeNominalHeightPx;
     k.plane.texels_per_pixel = k.globe.altitude_m * pixel_rad * double(g.width()) /
                                (2 * std::numbers::pi * k.globe.radius_m);
     k.plane.heading = k.globe.heading;

@@ -56,9 +56,7 @@ namespace vts::renderer {
 
 namespace {
 
-constexpr double kPi = std::numbers::pi;
-// texels_per_pixel() has no viewport: it is given for a viewport of this many rows.
-constexpr double kNominalHeightPx = 1024;
+using std::numbers::pi;
 
 struct LocalFrame {
   Vec3d east, north, up;
@@ -79,7 +77,7 @@ struct GlobeCamera {
 
 GlobeCamera camera_of(const GlobeView& v) {
   GlobeCamera cam;
-  cam.nadir = frame_at(v.lon_deg * kPi / 180, v.lat_deg * kPi / 180);
+  cam.nadir = frame_at(v.lon_deg * pi / 180, v.lat_deg * pi / 180);
   const Vec3d ahead = cam.nadir.north * std::cos(v.heading) + cam.nadir.east * std::sin(v.heading);
   const double ct = std::cos(v.tilt), st = std::sin(v.tilt);
   cam.forward = cam.nadir.up * (-ct) + ahead * st;
@@ -122,11 +120,11 @@ UvHit uv_at(const GlobeCamera& cam, Vec3d d, double s, double w, double h) {
   const Vec3d p = cam.nadir.up * cam.rh + d * (s * cam.rh);
   const double lon = std::atan2(p.y, p.x);
   const double lat = std::atan2(p.z, std::hypot(p.x, p.y));
-  double u = (lon / (2 * kPi) + 0.5) * w;
+  double u = (lon / (2 * pi) + 0.5) * w;
   u = std::fmod(u, w);
   if (u < 0) u += w;
   if (u >= w) u -= w;
-  double v = (0.5 - lat / kPi) * h;
+  double v = (0.5 - lat / pi) * h;
   v = std::clamp(v, 0.0, std::nextafter(h, 0.0));
   if (!std::isfinite(u) || !std::isfinite(v)) return std::nullopt;
   return std::pair<double, double>{u, v};
@@ -178,8 +176,8 @@ double GlobeScene::texels_per_pixel() const {
   const GlobeCamera& cam = *camera_;
   const auto s = ray_param(cam, cam.forward);
   const double dist = s ? *s * cam.rh : std::max(view_.altitude_m, 0.0);
-  const double pixel_rad = 2 * cam.tan_half_fov / kNominalHeightPx;
-  return dist * pixel_rad * double(width_) / (2 * kPi * view_.radius_m);
+  const double pixel_rad = 2 * cam.tan_half_fov / kGlobeNominalHeightPx;
+  return dist * pixel_rad * double(width_) / (2 * pi * view_.radius_m);
 }
 
 std::string GlobeScene::glsl() const {
@@ -232,8 +230,8 @@ bool scene_hit(vec2 px, out vec2 rel) {
 void GlobeScene::set_uniforms(UniformSink& sink, int width, int height) const {
   const GlobeCamera& cam = *camera_;
   const auto an = anchor();
-  const double lon_a = (double(an[0]) / double(width_) - 0.5) * 2 * kPi;
-  const double lat_a = (0.5 - double(an[1]) / double(height_)) * kPi;
+  const double lon_a = (double(an[0]) / double(width_) - 0.5) * 2 * pi;
+  const double lat_a = (0.5 - double(an[1]) / double(height_)) * pi;
   const LocalFrame fa = frame_at(lon_a, lat_a);
   const double r = view_.radius_m;
   const auto local = [&fa](Vec3d v) {
@@ -260,7 +258,7 @@ void GlobeScene::set_uniforms(UniformSink& sink, int width, int height) const {
   set1("u_g_rh", cam.rh);
   set1("u_g_radius", r);
   sink.set("u_g_sincos", float(std::sin(lat_a)), float(std::cos(lat_a)));
-  sink.set("u_g_scale", float(double(width_) / (2 * kPi)), float(double(height_) / kPi));
+  sink.set("u_g_scale", float(double(width_) / (2 * pi)), float(double(height_) / pi));
   sink.set_int("u_g_wrap", int(-an[0]), int(std::int64_t(width_) - an[0]));
   set1("u_g_period", double(width_));
   // [-a, n - a) as floats that stay inside it once rounded.

@@ -18,6 +18,7 @@
 #include <gtest/gtest.h>
 
 #include "vts/archive/pmtiles.hpp"
+#include "vts/test/files.hpp"
 #include "vts/test/temp_dir.hpp"
 
 namespace vts::archive {
@@ -30,10 +31,7 @@ Bytes bytes_of(std::string_view s) {
   return Bytes(s.begin(), s.end());
 }
 
-Bytes read_all(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return Bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-}
+using vts::test::read_bytes;
 
 // A fresh directory under the system temp dir, removed with everything in it.
 class TempDir : public vts::test::TempDir {
@@ -804,9 +802,9 @@ TEST(Writer, LeavesTheDestinationUntouchedUntilFinishSucceeds) {
   {
     auto w = Writer::create(o).value();
     ASSERT_TRUE(w->add_tile(TileId{0, 0, 0}, bytes_of("new")).ok());
-    EXPECT_EQ(read_all(dest), bytes_of("previous archive"));
+    EXPECT_EQ(read_bytes(dest), bytes_of("previous archive"));
   }
-  EXPECT_EQ(read_all(dest), bytes_of("previous archive"));
+  EXPECT_EQ(read_bytes(dest), bytes_of("previous archive"));
   write_archive(dir, {{TileId{0, 0, 0}, bytes_of("new")}}, "{}", o);
   auto reader = Reader::open(dest).value();  // the tile is a view into the reader's mapping
   auto got = reader->get(TileId{0, 0, 0}).value();
@@ -905,7 +903,7 @@ TEST(Reader, ReadsAHandAssembledTwoLevelArchive) {
 
 TEST(Reader, RejectsArchiveTruncatedAtAnyByte) {
   TempDir dir;
-  const Bytes written = read_all(write_archive(dir, small_tiles()));
+  const Bytes written = read_bytes(write_archive(dir, small_tiles()));
   for (const Bytes& file : {written, assemble(two_level_parts())}) {
     for (std::size_t n = 0; n < file.size(); ++n) {
       auto r = Reader::open_bytes(std::span(file).first(n));
@@ -919,7 +917,7 @@ TEST(Reader, RejectsArchiveTruncatedAtAnyByte) {
 
 TEST(Reader, SurvivesEveryBitFlip) {
   TempDir dir;
-  const Bytes written = read_all(write_archive(dir, small_tiles()));
+  const Bytes written = read_bytes(write_archive(dir, small_tiles()));
   for (const Bytes& file : {written, assemble(two_level_parts())}) {
     for (std::size_t bit = 0; bit < file.size() * 8; ++bit) {
       Bytes flipped = file;

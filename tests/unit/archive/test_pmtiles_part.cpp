@@ -12,6 +12,7 @@
 
 #include "vts/archive/pmtiles.hpp"
 #include "vts/archive/pmtiles_part.hpp"
+#include "vts/test/files.hpp"
 #include "vts/test/temp_dir.hpp"
 
 namespace vts::archive {
@@ -20,10 +21,7 @@ namespace {
 namespace fs = std::filesystem;
 using Bytes = std::vector<std::uint8_t>;
 
-Bytes read_all(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return Bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-}
+using vts::test::read_bytes;
 
 void flip_byte(const fs::path& p, std::uint64_t offset) {
   std::fstream f(p, std::ios::binary | std::ios::in | std::ios::out);
@@ -35,9 +33,9 @@ void flip_byte(const fs::path& p, std::uint64_t offset) {
   f.write(&c, 1);
 }
 
-class TempDir : public vts::test::TempDir {
+class PartTempDir : public vts::test::TempDir {
  public:
-  TempDir() : vts::test::TempDir("vts-part-test") {}
+  PartTempDir() : vts::test::TempDir("vts-part-test") {}
 };
 
 // A pyramid of levels 0..max_z with every kind of payload the layout rule treats differently:
@@ -136,10 +134,10 @@ Result<WriterStats> merge(const std::vector<fs::path>& parts, const fs::path& ou
 }
 
 TEST(Merge, WritesTheWritersArchiveByteForByteWhateverThePartition) {
-  TempDir dir;
+  PartTempDir dir;
   constexpr int kMaxZ = 6;
   const auto tiles = make_tiles(kMaxZ, 11);
-  const Bytes single = read_all(write_single(dir.path(), tiles, kMaxZ));
+  const Bytes single = read_bytes(write_single(dir.path(), tiles, kMaxZ));
   for (int split : {0, 1, 2, 3}) {
     SCOPED_TRACE("split level " + std::to_string(split));
     const fs::path sub = dir.path() / ("split" + std::to_string(split));
@@ -148,12 +146,12 @@ TEST(Merge, WritesTheWritersArchiveByteForByteWhateverThePartition) {
     auto stats = merge(parts, sub / "merged.pmtiles", kMaxZ);
     ASSERT_TRUE(stats) << stats.error().message;
     EXPECT_EQ(stats->addressed_tiles, tiles.size());
-    EXPECT_TRUE(read_all(sub / "merged.pmtiles") == single);
+    EXPECT_TRUE(read_bytes(sub / "merged.pmtiles") == single);
   }
 }
 
 TEST(Merge, FollowsTheLayoutRuleForRepeatedPayloads) {
-  TempDir dir;
+  PartTempDir dir;
   std::map<std::uint64_t, Bytes> tiles;
   const Bytes small(100, 9), large(5000, 4);
   // Level 3: small far apart (stored once), large far apart (twice), large in a run (once).
@@ -174,11 +172,11 @@ TEST(Merge, FollowsTheLayoutRuleForRepeatedPayloads) {
   for (const auto& [id, b] : tiles) EXPECT_EQ(r->get_by_tile_id(id).value(), b);
   const auto parts = write_parts(dir.path(), tiles, 3, 1);
   ASSERT_TRUE(merge(parts, dir.path() / "m.pmtiles", 3));
-  EXPECT_TRUE(read_all(dir.path() / "m.pmtiles") == read_all(out));
+  EXPECT_TRUE(read_bytes(dir.path() / "m.pmtiles") == read_bytes(out));
 }
 
 TEST(Merge, LaysOutLeavesOfAtMost4096EntriesThatReadersWalk) {
-  TempDir dir;
+  PartTempDir dir;
   std::map<std::uint64_t, Bytes> tiles;
   // 3 x 4096 + 5 distinct tiles of level 7: more than a root-only archive may hold.
   const std::uint64_t first = zxy_to_tile_id(7, 0, 0);
@@ -198,17 +196,17 @@ TEST(Merge, LaysOutLeavesOfAtMost4096EntriesThatReadersWalk) {
     EXPECT_EQ(r->get_by_tile_id(first + i).value(), tiles.at(first + i));
   const auto parts = write_parts(dir.path(), tiles, 7, 2);
   ASSERT_TRUE(merge(parts, dir.path() / "m.pmtiles", 7));
-  EXPECT_TRUE(read_all(dir.path() / "m.pmtiles") == read_all(out));
+  EXPECT_TRUE(read_bytes(dir.path() / "m.pmtiles") == read_bytes(out));
 }
 
 TEST(Part, SameTilesGiveTheSameBytesAndItsInfoReadsBack) {
-  TempDir dir;
+  PartTempDir dir;
   const auto tiles = make_tiles(4, 3);
   const auto a = write_parts(dir.path() / "", tiles, 4, 0);
-  const Bytes first = read_all(a.back());
+  const Bytes first = read_bytes(a.back());
   fs::remove(a.back());
   const auto b = write_parts(dir.path() / "", tiles, 4, 0);
-  EXPECT_TRUE(read_all(b.back()) == first);
+  EXPECT_TRUE(read_bytes(b.back()) == first);
   auto info = read_part_info(b.back());
   ASSERT_TRUE(info) << info.error().message;
   EXPECT_EQ(info->tiles, tiles.size());
@@ -236,7 +234,7 @@ TEST(Part, SameTilesGiveTheSameBytesAndItsInfoReadsBack) {
 // The caller checks each part's manifest and attachment as the merge reads it, and sets the
 // metadata once all are checked; its refusal stops the merge before anything is written.
 TEST(Merge, LetsTheCallerCheckEachPartAndSetTheMetadata) {
-  TempDir dir;
+  PartTempDir dir;
   const auto tiles = make_tiles(4, 9);
   const auto parts = write_parts(dir.path(), tiles, 4, 1);
   const fs::path out = dir.path() / "out.pmtiles";
@@ -257,7 +255,7 @@ TEST(Merge, LetsTheCallerCheckEachPartAndSetTheMetadata) {
   };
   ASSERT_TRUE(merge_parts(m));
   EXPECT_EQ(seen.front(), "{\"part\":\"apex.part\"}");
-  EXPECT_EQ(read_all(out), read_all(write_single(dir.path(), tiles, 4)));
+  EXPECT_EQ(read_bytes(out), read_bytes(write_single(dir.path(), tiles, 4)));
 
   fs::remove(out);
   m.check_part = [&](const PartInfo& info) -> Status {
@@ -279,7 +277,7 @@ TEST(Merge, LetsTheCallerCheckEachPartAndSetTheMetadata) {
 }
 
 TEST(Merge, NamesAMissingADamagedOrAnOverlappingPartAndWritesNothing) {
-  TempDir dir;
+  PartTempDir dir;
   const auto tiles = make_tiles(4, 5);
   auto parts = write_parts(dir.path(), tiles, 4, 1);
   const fs::path out = dir.path() / "out.pmtiles";
@@ -292,7 +290,7 @@ TEST(Merge, NamesAMissingADamagedOrAnOverlappingPartAndWritesNothing) {
 
   // A byte of the index, then a byte of a payload (found only when copied).
   const fs::path victim = parts[2];
-  const Bytes good = read_all(victim);
+  const Bytes good = read_bytes(victim);
   const auto info = read_part_info(victim).value();
   flip_byte(victim, info.data_bytes + 3);
   EXPECT_FALSE(read_part_info(victim));
@@ -334,7 +332,7 @@ namespace vts::archive {
 namespace {
 
 TEST(Merge, NestsLeavesOfLeavesWhenTheRootCannotHoldEveryLeafAndReadersWalkThem) {
-  TempDir dir;
+  PartTempDir dir;
   std::map<std::uint64_t, Bytes> tiles;
   const std::uint64_t first = zxy_to_tile_id(6, 0, 0);
   for (std::uint64_t i = 0; i < 3000; ++i)
@@ -354,7 +352,7 @@ TEST(Merge, NestsLeavesOfLeavesWhenTheRootCannotHoldEveryLeafAndReadersWalkThem)
   m.archive.path = dir.path() / "merged.pmtiles";
   m.metadata_json = "{}";
   ASSERT_TRUE(merge_parts(m));
-  EXPECT_TRUE(read_all(m.archive.path) == read_all(o.path));
+  EXPECT_TRUE(read_bytes(m.archive.path) == read_bytes(o.path));
 }
 
 }  // namespace
@@ -364,9 +362,9 @@ namespace vts::archive {
 namespace {
 
 TEST(Merge, CopiesInTheKernelWithoutVerifyingToTheSameBytes) {
-  TempDir dir;
+  PartTempDir dir;
   const auto tiles = make_tiles(5, 17);
-  const Bytes single = read_all(write_single(dir.path(), tiles, 5));
+  const Bytes single = read_bytes(write_single(dir.path(), tiles, 5));
   const auto parts = write_parts(dir.path(), tiles, 5, 2);
   MergeOptions m;
   m.parts.assign(parts.begin(), parts.end());
@@ -374,7 +372,7 @@ TEST(Merge, CopiesInTheKernelWithoutVerifyingToTheSameBytes) {
   m.metadata_json = "{\"name\":\"t\"}";
   m.verify = false;
   ASSERT_TRUE(merge_parts(m));
-  EXPECT_TRUE(read_all(m.archive.path) == single);
+  EXPECT_TRUE(read_bytes(m.archive.path) == single);
   // A damaged payload gets through without verification (the index is still checked), and is
   // caught with it.
   flip_byte(parts[3], 5);

@@ -20,11 +20,11 @@ namespace vts {
 namespace {
 
 using detail::Cascade;
-using Image = std::vector<std::uint8_t>;
+using Rgba8 = std::vector<std::uint8_t>;
 
 // A textured image, transparent outside `data`; partly translucent so alpha is exercised.
-Image make_image(std::uint64_t w, std::uint64_t h, const TexelRect& data) {
-  Image img(w * h * 4, 0);
+Rgba8 make_image(std::uint64_t w, std::uint64_t h, const TexelRect& data) {
+  Rgba8 img(w * h * 4, 0);
   for (std::uint64_t y = data.y0; y < data.y1; ++y)
     for (std::uint64_t x = data.x0; x < data.x1; ++x) {
       std::uint8_t* p = img.data() + (y * w + x) * 4;
@@ -37,8 +37,8 @@ Image make_image(std::uint64_t w, std::uint64_t h, const TexelRect& data) {
 }
 
 // Every level of the whole image (index z).
-std::vector<Image> reference_levels(const Geometry& g, Image finest, DownsampleFilter f) {
-  std::vector<Image> levels(static_cast<std::size_t>(g.max_zoom()) + 1);
+std::vector<Rgba8> reference_levels(const Geometry& g, Rgba8 finest, DownsampleFilter f) {
+  std::vector<Rgba8> levels(static_cast<std::size_t>(g.max_zoom()) + 1);
   levels.back() = std::move(finest);
   for (int z = g.max_zoom(); z > 0; --z)
     levels[static_cast<std::size_t>(z - 1)] = downsample_image_rgba8(
@@ -46,9 +46,9 @@ std::vector<Image> reference_levels(const Geometry& g, Image finest, DownsampleF
   return levels;
 }
 
-Image reference_tile(const Geometry& g, const Image& level, TileId id) {
+Rgba8 reference_tile(const Geometry& g, const Rgba8& level, TileId id) {
   const std::uint32_t S = g.stored_size();
-  Image t(std::size_t{S} * S * 4);
+  Rgba8 t(std::size_t{S} * S * 4);
   for (std::uint32_t sy = 0; sy < S; ++sy)
     for (std::uint32_t sx = 0; sx < S; ++sx)
       std::memcpy(
@@ -59,19 +59,19 @@ Image reference_tile(const Geometry& g, const Image& level, TileId id) {
   return t;
 }
 
-using Tiles = std::map<std::tuple<int, std::uint32_t, std::uint32_t>, Image>;
+using Tiles = std::map<std::tuple<int, std::uint32_t, std::uint32_t>, Rgba8>;
 
 // Pushes the window's rows of `image` through a cascade of levels finest..coarsest.
-Tiles run(const Geometry& g, const Image& image, const std::vector<TexelRect>& windows,
+Tiles run(const Geometry& g, const Rgba8& image, const std::vector<TexelRect>& windows,
           int coarsest, DownsampleFilter f, const std::vector<TileRect>& emit,
-          std::map<std::uint64_t, Image>* coarse_rows = nullptr) {
+          std::map<std::uint64_t, Rgba8>* coarse_rows = nullptr) {
   Tiles tiles;
   const int finest = g.max_zoom();
   Cascade::RowSink rows;
   if (coarse_rows) {
     const std::uint64_t w = windows[static_cast<std::size_t>(coarsest)].width() * 4;
     rows = [&, w](std::uint64_t y, const std::uint8_t* row) {
-      (*coarse_rows)[y] = Image(row, row + w);
+      (*coarse_rows)[y] = Rgba8(row, row + w);
     };
   }
   Cascade c(
@@ -121,8 +121,8 @@ TEST_P(WindowedCascade, EveryTileOfEveryLevelEqualsTheWholeImageBuild) {
                  std::to_string(k.data.x1) + "," + std::to_string(k.data.y1));
     auto g = Geometry::create(k.w, k.h, 16, 2);
     ASSERT_TRUE(g);
-    const Image image = make_image(k.w, k.h, k.data);
-    const std::vector<Image> ref = reference_levels(*g, image, f);
+    const Rgba8 image = make_image(k.w, k.h, k.data);
+    const std::vector<Rgba8> ref = reference_levels(*g, image, f);
     const Tiles tiles = run(*g, image, derive(*g, k.data, 0, f), 0, f, all_tiles(*g));
     ASSERT_EQ(tiles.size(), g->total_tile_count());
     for (const auto& [key, pixels] : tiles) {
@@ -139,8 +139,8 @@ TEST_P(WindowedCascade, AStripeWithItsHaloIsExactInItsOwnColumns) {
   auto g = Geometry::create(1024, 200, 16, 2);
   ASSERT_TRUE(g);
   const TexelRect data{0, 0, 1024, 200};
-  const Image image = make_image(1024, 200, data);
-  const std::vector<Image> ref = reference_levels(*g, image, f);
+  const Rgba8 image = make_image(1024, 200, data);
+  const std::vector<Rgba8> ref = reference_levels(*g, image, f);
   const int s = 3, finest = g->max_zoom(), coarsest = finest - s;
   const std::uint64_t block = 16 << s, halo = detail::stripe_halo(*g, s, f);
   for (std::uint64_t j = 0; j < 1024 / block; ++j) {
@@ -156,7 +156,7 @@ TEST_P(WindowedCascade, AStripeWithItsHaloIsExactInItsOwnColumns) {
                                            g->tiles_y(z)};
     }
     const std::vector<TexelRect> windows = derive(*g, w, coarsest, f);
-    std::map<std::uint64_t, Image> rows;
+    std::map<std::uint64_t, Rgba8> rows;
     const Tiles tiles = run(*g, image, windows, coarsest, f, emit, &rows);
     for (const auto& [key, pixels] : tiles) {
       const auto [z, x, y] = key;

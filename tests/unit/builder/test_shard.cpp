@@ -84,13 +84,13 @@ TEST(ShardPlan, ShardsAreTheSplitLevelTilesInHilbertOrder) {
 
 TEST(ShardPlan, ShardCountPicksTheSmallestLevelGivingThem) {
   const BuildOptions o = synthetic(3000, 1700);  // levels: 1, 2, 6, 24, 84 tiles
-  struct Case {
+  struct ShardCase {
     std::uint64_t n;
     int level;
     std::size_t shards;
   };
-  for (const Case c : {Case{1, 0, 1}, Case{2, 1, 2}, Case{4, 2, 6}, Case{7, 3, 24}, Case{25, 4, 84},
-                       Case{1000000, 4, 84}}) {
+  for (const ShardCase c : {ShardCase{1, 0, 1}, ShardCase{2, 1, 2}, ShardCase{4, 2, 6},
+                            ShardCase{7, 3, 24}, ShardCase{25, 4, 84}, ShardCase{1000000, 4, 84}}) {
     auto plan = make_shard_plan(o, std::nullopt, c.n);
     ASSERT_TRUE(plan);
     EXPECT_EQ(plan->split_level, c.level) << c.n;

@@ -34,8 +34,9 @@ struct Dir : vts::test::TempDir {
 };
 
 // 1000 x 600 texels, levels 0-2; with a region, levels >= 1 hold only the tiles over it.
-fs::path build(const fs::path& out, std::optional<vts::TexelRect> region = std::nullopt,
-               std::uint64_t width = 1000) {
+fs::path build_provider_archive(const fs::path& out,
+                                std::optional<vts::TexelRect> region = std::nullopt,
+                                std::uint64_t width = 1000) {
   vts::BuildOptions o;
   o.synthetic = vts::SyntheticSpec{width, 600, region, 1};
   o.output = out;
@@ -45,7 +46,7 @@ fs::path build(const fs::path& out, std::optional<vts::TexelRect> region = std::
   return out;
 }
 
-std::unique_ptr<TileSource> open(const fs::path& archive) {
+std::unique_ptr<TileSource> open_local(const fs::path& archive) {
   auto s = open_source(archive.string());
   EXPECT_TRUE(s.ok()) << s.error().to_string();
   return s.ok() ? std::move(*s) : nullptr;
@@ -96,8 +97,8 @@ std::vector<std::uint8_t> payload_of(TileSource& source, TileId id) {
 
 TEST(CacheProvider, FindsItsOneTilesetByName) {
   Dir d;
-  const fs::path archive = build(d.path / "a.pmtiles");
-  auto local = open(archive);
+  const fs::path archive = build_provider_archive(d.path / "a.pmtiles");
+  auto local = open_local(archive);
   const SourceInfo info = local->info();
   Daemon daemon(info, std::move(local), archive, d.path / "cache");
   EXPECT_EQ(daemon.provider->find("earth"), daemon.tileset);
@@ -108,8 +109,8 @@ TEST(CacheProvider, FindsItsOneTilesetByName) {
 
 TEST(CacheProvider, ServesTheUpstreamsTileBytesThenFromTheCache) {
   Dir d;
-  const fs::path archive = build(d.path / "a.pmtiles");
-  auto local = open(archive);
+  const fs::path archive = build_provider_archive(d.path / "a.pmtiles");
+  auto local = open_local(archive);
   const std::vector<std::uint8_t> want = payload_of(*local, TileId{2, 1, 1});
   ASSERT_FALSE(want.empty());
   const SourceInfo info = local->info();
@@ -134,12 +135,12 @@ TEST(CacheProvider, ServesTheUpstreamsTileBytesThenFromTheCache) {
 // healthy (it is the upstream that is broken).
 TEST(CacheProvider, ATileThatContradictsTheTilesetIsBadOriginAndNeverCached) {
   Dir d;
-  const fs::path good = build(d.path / "good.pmtiles");
+  const fs::path good = build_provider_archive(d.path / "good.pmtiles");
   const fs::path forged = d.path / "forged.pmtiles";
   vts::test::copy_archive_replacing(good, forged,
                                     {{TileId{2, 1, 1}, vts::test::flat_tile(64, 64, 9)},
                                      {TileId{2, 2, 1}, vts::test::flat_tile(8192, 8192, 9)}});
-  auto local = open(forged);
+  auto local = open_local(forged);
   const SourceInfo info = local->info();
   ASSERT_EQ(info.info.geometry.stored_size(), 264u);
   Daemon daemon(info, std::move(local), forged, d.path / "cache");
@@ -161,7 +162,7 @@ TEST(CacheProvider, ATileThatContradictsTheTilesetIsBadOriginAndNeverCached) {
 // router puts in ETag), which for this upstream is the same tag.
 TEST(CacheProvider, AStaleTileIsRevalidatedWithTheUpstreamsTagAndTheUpstreamAnswers304) {
   Dir d;
-  const fs::path archive = build(d.path / "earth.pmtiles");
+  const fs::path archive = build_provider_archive(d.path / "earth.pmtiles");
   vts::test::RunningServer server({archive});
   const std::string location = server.base_url() + "/earth";
   auto opened = open_source(location);
@@ -208,8 +209,9 @@ TEST(CacheProvider, AStaleTileIsRevalidatedWithTheUpstreamsTagAndTheUpstreamAnsw
 
 TEST(CacheProvider, ATileTheUpstreamLacksIsAbsent) {
   Dir d;
-  const fs::path archive = build(d.path / "sparse.pmtiles", vts::TexelRect{0, 0, 256, 256});
-  auto local = open(archive);
+  const fs::path archive =
+      build_provider_archive(d.path / "sparse.pmtiles", vts::TexelRect{0, 0, 256, 256});
+  auto local = open_local(archive);
   const SourceInfo info = local->info();
   Daemon daemon(info, std::move(local), archive, d.path / "cache");
   EXPECT_EQ(daemon.get(TileId{2, 3, 2}).kind, ProvidedTile::Kind::absent);
@@ -219,8 +221,8 @@ TEST(CacheProvider, ATileTheUpstreamLacksIsAbsent) {
 
 TEST(CacheProvider, OfflineItServesWhatTheCacheHoldsAndTheRestIsUnavailable) {
   Dir d;
-  const fs::path archive = build(d.path / "a.pmtiles");
-  auto local = open(archive);
+  const fs::path archive = build_provider_archive(d.path / "a.pmtiles");
+  auto local = open_local(archive);
   const SourceInfo info = local->info();
   {
     Daemon online(info, std::move(local), archive, d.path / "cache");
@@ -241,8 +243,8 @@ TEST(CacheProvider, OfflineItServesWhatTheCacheHoldsAndTheRestIsUnavailable) {
 
 TEST(CacheProvider, AnOfflineUpstreamGoesOnlineWhenTheSameTilesetOpensAgain) {
   Dir d;
-  const fs::path archive = build(d.path / "a.pmtiles");
-  SourceInfo info = open(archive)->info();
+  const fs::path archive = build_provider_archive(d.path / "a.pmtiles");
+  SourceInfo info = open_local(archive)->info();
   fs::rename(archive, d.path / "moved.pmtiles");
   std::promise<SourceInfo> back;
   ReconnectingSource::Hooks hooks;
@@ -260,7 +262,7 @@ TEST(CacheProvider, AnOfflineUpstreamGoesOnlineWhenTheSameTilesetOpensAgain) {
 
 TEST(CacheProvider, AnArchiveOverwrittenInPlaceIsReopenedAndItsNewTilesServed) {
   Dir d;
-  const fs::path archive = build(d.path / "a.pmtiles");
+  const fs::path archive = build_provider_archive(d.path / "a.pmtiles");
   // The same tileset (name, geometry, codec) with other bytes: built with another zstd level.
   vts::BuildOptions o;
   o.synthetic = vts::SyntheticSpec{1000, 600, std::nullopt, 1};
@@ -269,7 +271,7 @@ TEST(CacheProvider, AnArchiveOverwrittenInPlaceIsReopenedAndItsNewTilesServed) {
   o.encode.zstd_level = 19;
   fs::create_directories(d.path / "b");
   ASSERT_TRUE(vts::build_pyramid(o).ok());
-  auto first = open(archive);
+  auto first = open_local(archive);
   const SourceInfo info = first->info();
   std::promise<SourceInfo> back;
   ReconnectingSource::Hooks hooks;
@@ -286,17 +288,17 @@ TEST(CacheProvider, AnArchiveOverwrittenInPlaceIsReopenedAndItsNewTilesServed) {
   EXPECT_TRUE(daemon.upstream->online());
   const ProvidedTile after = daemon.get(TileId{2, 1, 1});
   ASSERT_EQ(after.kind, ProvidedTile::Kind::ok);
-  auto b = open(o.output);
+  auto b = open_local(o.output);
   EXPECT_EQ(std::vector<std::uint8_t>(after.payload.begin(), after.payload.end()),
             payload_of(*b, TileId{2, 1, 1}));
 }
 
 TEST(CacheProvider, AnUpstreamThatReopensWithAnotherTilesetStaysOffline) {
   Dir d;
-  const fs::path archive = build(d.path / "a.pmtiles");
-  SourceInfo info = open(archive)->info();
+  const fs::path archive = build_provider_archive(d.path / "a.pmtiles");
+  SourceInfo info = open_local(archive)->info();
   fs::remove(archive);
-  build(archive, std::nullopt, 1200);  // same location (key), other geometry
+  build_provider_archive(archive, std::nullopt, 1200);  // same location (key), other geometry
   std::promise<SourceInfo> changed;
   std::atomic<bool> once{false};
   ReconnectingSource::Hooks hooks;
@@ -313,8 +315,8 @@ TEST(CacheProvider, AnUpstreamThatReopensWithAnotherTilesetStaysOffline) {
 
 TEST(CacheProvider, AfterShutdownTheMetricsAreEmptyAndShutdownIsIdempotent) {
   Dir d;
-  const fs::path archive = build(d.path / "a.pmtiles");
-  auto local = open(archive);
+  const fs::path archive = build_provider_archive(d.path / "a.pmtiles");
+  auto local = open_local(archive);
   const SourceInfo info = local->info();
   Daemon daemon(info, std::move(local), archive, d.path / "cache");
   EXPECT_FALSE(daemon.provider->metrics_text().empty());
@@ -324,10 +326,11 @@ TEST(CacheProvider, AfterShutdownTheMetricsAreEmptyAndShutdownIsIdempotent) {
 
 TEST(CacheProvider, SameTilesetComparesKeyGeometryAndCodec) {
   Dir d;
-  const SourceInfo a = open(build(d.path / "a.pmtiles"))->info();
+  const SourceInfo a = open_local(build_provider_archive(d.path / "a.pmtiles"))->info();
   SourceInfo other_key = a;
   other_key.key += "x";
-  const SourceInfo wider = open(build(d.path / "b.pmtiles", std::nullopt, 1200))->info();
+  const SourceInfo wider =
+      open_local(build_provider_archive(d.path / "b.pmtiles", std::nullopt, 1200))->info();
   SourceInfo wider_same_key = wider;
   wider_same_key.key = a.key;
   EXPECT_TRUE(same_tileset(a, a));

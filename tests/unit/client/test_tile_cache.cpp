@@ -30,9 +30,10 @@ using vts::TileId;
 
 namespace {
 
-using Dir = vts::test::TempDir;
+using vts::test::TempDir;
 
-fs::path build(const fs::path& out, std::optional<vts::TexelRect> region = std::nullopt) {
+fs::path build_cache_archive(const fs::path& out,
+                             std::optional<vts::TexelRect> region = std::nullopt) {
   vts::BuildOptions o;
   o.synthetic = vts::SyntheticSpec{1000, 600, region, 2};
   o.output = out;
@@ -183,8 +184,8 @@ TileCacheOptions with_disk(const fs::path& dir) {
 }  // namespace
 
 TEST(TileCache, EveryTileComesByteExactFromTheSourceThenDiskThenRam) {
-  Dir d;
-  const auto archive = build(d.path() / "a.pmtiles");
+  TempDir d;
+  const auto archive = build_cache_archive(d.path() / "a.pmtiles");
   auto reader = vts::archive::Reader::open(archive);
   std::vector<TileId> ids;
   ASSERT_TRUE((*reader)
@@ -236,8 +237,8 @@ TEST(TileCache, EveryTileComesByteExactFromTheSourceThenDiskThenRam) {
 }
 
 TEST(TileCache, ConcurrentGetsOfOneTileAreMergedIntoOneFetch) {
-  Dir d;
-  const auto archive = build(d.path() / "a.pmtiles");
+  TempDir d;
+  const auto archive = build_cache_archive(d.path() / "a.pmtiles");
   auto source = held(archive);
   auto cache = take(TileCache::create(source, {}));
   Got got;
@@ -253,8 +254,8 @@ TEST(TileCache, ConcurrentGetsOfOneTileAreMergedIntoOneFetch) {
 }
 
 TEST(TileCache, CancellingTheLastWaiterCancelsTheFetchButOthersKeepIt) {
-  Dir d;
-  const auto archive = build(d.path() / "a.pmtiles");
+  TempDir d;
+  const auto archive = build_cache_archive(d.path() / "a.pmtiles");
   auto source = held(archive);
   auto cache = take(TileCache::create(source, {}));
   Got a, b;
@@ -272,8 +273,8 @@ TEST(TileCache, CancellingTheLastWaiterCancelsTheFetchButOthersKeepIt) {
 }
 
 TEST(TileCache, ACorruptPayloadIsRefetchedAndNeverCachedOrDelivered) {
-  Dir d;
-  const auto archive = build(d.path() / "a.pmtiles");
+  TempDir d;
+  const auto archive = build_cache_archive(d.path() / "a.pmtiles");
   auto source = held(archive);
   auto cache = take(TileCache::create(source, with_disk(d.path() / "cache")));
   // One bad answer: refetched, then the good bytes.
@@ -310,7 +311,7 @@ struct ForgedArchive {
   static constexpr TileId kBc1{2, 3, 2};    // 264 x 264, but bc1
   explicit ForgedArchive(const fs::path& dir)
       : good(dir / "good.pmtiles"), forged(dir / "f.pmtiles") {
-    build(good);
+    build_cache_archive(good);
     vts::TileImage img;
     img.width = img.height = 264;
     img.pixels.assign(264u * 264u * 4u, 0x80);
@@ -324,7 +325,7 @@ struct ForgedArchive {
 };
 
 TEST(TileCache, ATileThatContradictsTheTilesetIsRefusedNeverCachedAndCounted) {
-  Dir d;
+  TempDir d;
   ForgedArchive a(d.path());
   auto source = take(open_source(a.forged.string()));
   ASSERT_EQ(source->info().info.geometry.stored_size(), 264u);
@@ -362,7 +363,7 @@ TEST(TileCache, ATileThatContradictsTheTilesetIsRefusedNeverCachedAndCounted) {
 }
 
 TEST(TileCache, ADiskRowThatContradictsTheTilesetIsDroppedAndFetchedAgain) {
-  Dir d;
+  TempDir d;
   ForgedArchive a(d.path());
   auto source = take(open_source(a.good.string()));
   const std::string key = source->info().key;
@@ -394,8 +395,8 @@ TEST(TileCache, ADiskRowThatContradictsTheTilesetIsDroppedAndFetchedAgain) {
 // the first at once, then at most one line per interval counting the ones in between; the disk
 // is marked failing until a tile is stored again, which is reported too.
 TEST(TileCache, FailingDiskWritesAreReportedRateLimitedAndTheStateRecovers) {
-  Dir d;
-  const auto archive = build(d.path() / "a.pmtiles");
+  TempDir d;
+  const auto archive = build_cache_archive(d.path() / "a.pmtiles");
   vts::test::FakeClock clock;
   std::mutex m;
   std::vector<std::string> lines;
@@ -460,8 +461,8 @@ TEST(TileCache, FailingDiskWritesAreReportedRateLimitedAndTheStateRecovers) {
 // "... is not in cache" (which ends a warm) and the tile was gone from the disk; taken in one
 // transaction, the read is a miss, the tile comes from the source and is stored pinned.
 TEST(TileCache, APinnedGetKeepsTheTileWhenAnotherProcessEvictsItBeforeThePin) {
-  Dir d;
-  const auto archive = build(d.path() / "a.pmtiles");
+  TempDir d;
+  const auto archive = build_cache_archive(d.path() / "a.pmtiles");
   TileCacheOptions o = with_disk(d.path() / "cache");
   o.ram_bytes = 0;  // as `vts warm`: every get reads the disk
   o.disk->vfs = fault::register_vfs();
@@ -502,9 +503,9 @@ TEST(TileCache, APinnedGetKeepsTheTileWhenAnotherProcessEvictsItBeforeThePin) {
 }
 
 TEST(TileCache, AbsentTilesAreRememberedAndNotAskedForAgain) {
-  Dir d;
+  TempDir d;
   // Sparse: only the top-left finest tile exists.
-  const auto archive = build(d.path() / "s.pmtiles", vts::TexelRect{0, 0, 256, 256});
+  const auto archive = build_cache_archive(d.path() / "s.pmtiles", vts::TexelRect{0, 0, 256, 256});
   auto source = held(archive);
   auto cache = take(TileCache::create(source, {}));
   Got got;
@@ -519,8 +520,8 @@ TEST(TileCache, AbsentTilesAreRememberedAndNotAskedForAgain) {
 }
 
 TEST(TileCache, AStaleTileIsServedAtOnceThenRevalidatedInTheBackground) {
-  Dir d;
-  const auto archive = build(d.path() / "a.pmtiles");
+  TempDir d;
+  const auto archive = build_cache_archive(d.path() / "a.pmtiles");
   auto source = held(archive);
   TileCacheOptions o;
   o.revalidate_after = std::chrono::seconds(0);
@@ -540,8 +541,8 @@ TEST(TileCache, AStaleTileIsServedAtOnceThenRevalidatedInTheBackground) {
 }
 
 TEST(TileCache, DiskReadsAreNotBlockedByAStuckNetwork) {
-  Dir d;
-  const auto archive = build(d.path() / "a.pmtiles");
+  TempDir d;
+  const auto archive = build_cache_archive(d.path() / "a.pmtiles");
   {
     auto source = held(archive);
     auto cache = take(TileCache::create(source, with_disk(d.path() / "cache")));
@@ -568,8 +569,8 @@ TEST(TileCache, DiskReadsAreNotBlockedByAStuckNetwork) {
 }
 
 TEST(TileClient, AncestorsAreFetchedFirstAndEveryTileIsDecodedExactly) {
-  Dir d;
-  const auto archive = build(d.path() / "a.pmtiles");
+  TempDir d;
+  const auto archive = build_cache_archive(d.path() / "a.pmtiles");
   auto source = held(archive);
   auto client = take(TileClient::create(source, {}));
   client->request(TileId{2, 3, 1}, 1.0);
@@ -599,8 +600,8 @@ TEST(TileClient, AncestorsAreFetchedFirstAndEveryTileIsDecodedExactly) {
 
 TEST(TileClient, ADecodeThreadTheSystemRefusesIsAnIoErrorNotAnAbort) {
   if (vts::test::sanitized()) GTEST_SKIP() << "sanitizers reserve the address space";
-  Dir d;
-  const auto archive = build(d.path() / "a.pmtiles");
+  TempDir d;
+  const auto archive = build_cache_archive(d.path() / "a.pmtiles");
   auto source = held(archive);
   TileClientOptions o;
   o.decode_threads = 512;  // some start, then one is refused
@@ -617,8 +618,8 @@ TEST(TileClient, ADecodeThreadTheSystemRefusesIsAnIoErrorNotAnAbort) {
 }
 
 TEST(TileClient, DecodedTilesWaitWithinTheirByteBudget) {
-  Dir d;
-  const auto archive = build(d.path() / "a.pmtiles");
+  TempDir d;
+  const auto archive = build_cache_archive(d.path() / "a.pmtiles");
   auto source = held(archive);
   TileClientOptions o;
   o.decoded_bytes = 1;  // one tile at a time
@@ -637,8 +638,8 @@ TEST(TileClient, DecodedTilesWaitWithinTheirByteBudget) {
 }
 
 TEST(TileClient, CancelledTilesProduceNoEvent) {
-  Dir d;
-  const auto archive = build(d.path() / "a.pmtiles");
+  TempDir d;
+  const auto archive = build_cache_archive(d.path() / "a.pmtiles");
   auto source = held(archive);
   auto client = take(TileClient::create(source, {}));
   client->request(TileId{2, 3, 2});

@@ -28,14 +28,15 @@ using vts::TileId;
 namespace {
 
 // A private temporary folder (vts::test::TempDir) whose path the tests name `d.path`.
-struct Dir : vts::test::TempDir {
-  Dir() : TempDir("vts-warm-test"), path(TempDir::path()) {}
+struct WarmDir : vts::test::TempDir {
+  WarmDir() : TempDir("vts-warm-test"), path(TempDir::path()) {}
   const fs::path path;
 };
 
 // 1000 x 600 texels, 256-texel tiles: levels 0-2. With a region, levels >= 1 hold only the tiles
 // over it.
-fs::path build(const fs::path& out, std::optional<vts::TexelRect> region = std::nullopt) {
+fs::path build_warm_archive(const fs::path& out,
+                            std::optional<vts::TexelRect> region = std::nullopt) {
   vts::BuildOptions o;
   o.synthetic = vts::SyntheticSpec{1000, 600, region, 1};
   o.output = out;
@@ -45,7 +46,7 @@ fs::path build(const fs::path& out, std::optional<vts::TexelRect> region = std::
   return out;
 }
 
-std::shared_ptr<TileSource> open(const fs::path& archive) {
+std::shared_ptr<TileSource> open_warm_source(const fs::path& archive) {
   auto s = open_source(archive.string());
   EXPECT_TRUE(s.ok()) << s.error().to_string();
   return s.ok() ? std::shared_ptr<TileSource>(std::move(*s)) : nullptr;
@@ -70,8 +71,8 @@ std::vector<TileId> every_tile(const vts::Geometry& g, int first, int last) {
   return out;
 }
 
-// The source's answer for `id`: a local source answers inside fetch().
-SourceTile fetch(TileSource& source, TileId id) {
+// The source's answer for `id`: a local source answers inside TileSource::fetch().
+SourceTile fetch_tile(TileSource& source, TileId id) {
   SourceTile got;
   SourceRequest r;
   r.id = id;
@@ -80,8 +81,8 @@ SourceTile fetch(TileSource& source, TileId id) {
 }
 
 TEST(Warm, StoresEveryTileOfALocalArchivePinnedAndByteForByte) {
-  Dir d;
-  auto source = open(build(d.path / "dense.pmtiles"));
+  WarmDir d;
+  auto source = open_warm_source(build_warm_archive(d.path / "dense.pmtiles"));
   ASSERT_TRUE(source);
   const vts::Geometry& g = source->info().info.geometry;
   ASSERT_EQ(g.max_zoom(), 2);
@@ -110,7 +111,7 @@ TEST(Warm, StoresEveryTileOfALocalArchivePinnedAndByteForByte) {
     ASSERT_TRUE(held.ok()) << held.error().to_string();
     ASSERT_TRUE(held->has_value()) << "tile " << id.to_string() << " is not in the cache";
     EXPECT_TRUE((*held)->pinned) << id.to_string();
-    const SourceTile want = fetch(*source, id);
+    const SourceTile want = fetch_tile(*source, id);
     EXPECT_EQ((*held)->payload, want.payload) << id.to_string();
     bytes += want.payload.size();
   }
@@ -118,8 +119,8 @@ TEST(Warm, StoresEveryTileOfALocalArchivePinnedAndByteForByte) {
 }
 
 TEST(Warm, ASecondRunFindsEveryTileAlreadyCachedAndFetchesNothing) {
-  Dir d;
-  auto source = open(build(d.path / "dense.pmtiles"));
+  WarmDir d;
+  auto source = open_warm_source(build_warm_archive(d.path / "dense.pmtiles"));
   ASSERT_TRUE(source);
   auto first = warm_cache(options(source, d.path / "cache"));
   ASSERT_TRUE(first.ok()) << first.error().to_string();
@@ -135,9 +136,10 @@ TEST(Warm, ASecondRunFindsEveryTileAlreadyCachedAndFetchesNothing) {
 }
 
 TEST(Warm, TilesASparseArchiveLacksCountAsAbsentAndTheRunIsComplete) {
-  Dir d;
+  WarmDir d;
   // Levels 1 and 2 hold only the tiles over the top-left 256 x 256 texels.
-  auto source = open(build(d.path / "sparse.pmtiles", vts::TexelRect{0, 0, 256, 256}));
+  auto source = open_warm_source(
+      build_warm_archive(d.path / "sparse.pmtiles", vts::TexelRect{0, 0, 256, 256}));
   ASSERT_TRUE(source);
   const vts::Geometry& g = source->info().info.geometry;
   auto report = warm_cache(options(source, d.path / "cache"));
@@ -151,8 +153,8 @@ TEST(Warm, TilesASparseArchiveLacksCountAsAbsentAndTheRunIsComplete) {
 }
 
 TEST(Warm, LevelsAndARegionBoundTheTilesWalked) {
-  Dir d;
-  auto source = open(build(d.path / "dense.pmtiles"));
+  WarmDir d;
+  auto source = open_warm_source(build_warm_archive(d.path / "dense.pmtiles"));
   ASSERT_TRUE(source);
   WarmOptions o = options(source, d.path / "cache");
   o.first_level = 1;
@@ -183,8 +185,8 @@ TEST(Warm, LevelsAndARegionBoundTheTilesWalked) {
 }
 
 TEST(Warm, FailedTilesAreCountedAndTheRunStopsAfterMaxErrors) {
-  Dir d;
-  auto local = open(build(d.path / "dense.pmtiles"));
+  WarmDir d;
+  auto local = open_warm_source(build_warm_archive(d.path / "dense.pmtiles"));
   ASSERT_TRUE(local);
   // The offline source fails every fetch, as an unreachable upstream does.
   std::shared_ptr<TileSource> offline = offline_source(local->info());
@@ -203,8 +205,8 @@ TEST(Warm, FailedTilesAreCountedAndTheRunStopsAfterMaxErrors) {
 }
 
 TEST(Warm, AStopRequestedBeforeTheStartFailsCancelledAndLeavesNoCacheFolder) {
-  Dir d;
-  auto source = open(build(d.path / "dense.pmtiles"));
+  WarmDir d;
+  auto source = open_warm_source(build_warm_archive(d.path / "dense.pmtiles"));
   ASSERT_TRUE(source);
   std::atomic<bool> stop{true};
   WarmOptions o = options(source, d.path / "cache");
@@ -216,8 +218,8 @@ TEST(Warm, AStopRequestedBeforeTheStartFailsCancelledAndLeavesNoCacheFolder) {
 }
 
 TEST(Warm, RemembersTheSourceInTheCacheFolderWhenAsked) {
-  Dir d;
-  auto source = open(build(d.path / "dense.pmtiles"));
+  WarmDir d;
+  auto source = open_warm_source(build_warm_archive(d.path / "dense.pmtiles"));
   ASSERT_TRUE(source);
   WarmOptions o = options(source, d.path / "cache");
   o.remember_as = "http://example.invalid/dense";
@@ -231,8 +233,8 @@ TEST(Warm, RemembersTheSourceInTheCacheFolderWhenAsked) {
 TEST(Warm, ASavedSourceNestedDeeperThanAnyWeWriteIsRefusedNamingTheFile) {
   // The cache folder may be shared or damaged: its metadata was dumped recursively once read, and
   // 100,000 levels overflowed the stack.
-  Dir d;
-  auto source = open(build(d.path / "dense.pmtiles"));
+  WarmDir d;
+  auto source = open_warm_source(build_warm_archive(d.path / "dense.pmtiles"));
   ASSERT_TRUE(source);
   WarmOptions o = options(source, d.path / "cache");
   o.remember_as = "http://example.invalid/dense";
@@ -261,8 +263,8 @@ TEST(Warm, ASavedSourceNestedDeeperThanAnyWeWriteIsRefusedNamingTheFile) {
 }
 
 TEST(Warm, ReportsProgressUpToTheTotalOnTheCallingThread) {
-  Dir d;
-  auto source = open(build(d.path / "dense.pmtiles"));
+  WarmDir d;
+  auto source = open_warm_source(build_warm_archive(d.path / "dense.pmtiles"));
   ASSERT_TRUE(source);
   WarmOptions o = options(source, d.path / "cache");
   std::vector<WarmProgress> seen;
@@ -286,8 +288,8 @@ TEST(Warm, ReportsProgressUpToTheTotalOnTheCallingThread) {
 }
 
 TEST(Warm, TheJsonReportCarriesTheCountsAndTheRequest) {
-  Dir d;
-  auto source = open(build(d.path / "dense.pmtiles"));
+  WarmDir d;
+  auto source = open_warm_source(build_warm_archive(d.path / "dense.pmtiles"));
   ASSERT_TRUE(source);
   WarmOptions o = options(source, d.path / "cache");
   o.region = vts::TexelRect{0, 0, 300, 200};

@@ -3,6 +3,7 @@
 // where asked, a limit on the entries of any one array or object; refusals name the document and
 // the place, and a 100,000-level document is refused without touching the stack.
 #include "vts/protocol/json_input.hpp"
+#include "vts/test/nested_json.hpp"
 
 #include <gtest/gtest.h>
 
@@ -12,19 +13,8 @@
 namespace vts {
 namespace {
 
-// `levels` arrays nested in one another, the innermost holding `inner`.
-std::string nested_arrays(int levels, const std::string& inner = "") {
-  return std::string(std::size_t(levels), '[') + inner + std::string(std::size_t(levels), ']');
-}
-
-// `levels` objects nested under the key "k".
-std::string nested_objects(int levels) {
-  std::string s;
-  for (int i = 0; i < levels; ++i) s += "{\"k\":";
-  s += "1";
-  for (int i = 0; i < levels; ++i) s += "}";
-  return s;
-}
+using test::nested_arrays;
+using test::nested_objects;
 
 void expect_refused(const Result<nlohmann::json>& r, const std::string& needle) {
   ASSERT_FALSE(r.ok()) << "expected an error mentioning " << needle;

@@ -1,6 +1,7 @@
 // TileJSON: what the server writes, the client reads back unchanged; the reader refuses documents
 // that are not ours with the URL and the reason; relative tile URLs resolve like a browser's.
 #include "vts/protocol/tilejson.hpp"
+#include "vts/test/nested_json.hpp"
 
 #include <gtest/gtest.h>
 
@@ -134,9 +135,7 @@ std::string metadata_with(const TilesetInfo& info, const std::string& where,
   return meta.insert(at + key.size(), "\"future_key\":" + value_json + ",");
 }
 
-std::string nested_arrays(int levels) {
-  return std::string(std::size_t(levels), '[') + std::string(std::size_t(levels), ']');
-}
+using test::nested_arrays;
 
 TilesetInfo georeferenced() {
   TilesetInfo info;

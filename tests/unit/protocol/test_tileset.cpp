@@ -12,7 +12,7 @@ namespace {
 
 using nlohmann::json;
 
-TilesetInfo sample() {
+TilesetInfo sample_tileset() {
   TilesetInfo info;
   info.geometry = Geometry::create(86400, 43200, 512, 8).value();
   info.name = "Blue \"Marble\" — 2004";
@@ -25,7 +25,7 @@ TilesetInfo sample() {
 }
 
 json metadata() {
-  return json::parse(sample().to_json());
+  return json::parse(sample_tileset().to_json());
 }
 
 Result<TilesetInfo> read(const json& j) {
@@ -40,8 +40,8 @@ void expect_error(const Result<TilesetInfo>& r, ErrorCode code, const std::strin
 
 TEST(TilesetInfo, WritesTheDocumentedKeys) {
   const json j = metadata();
-  EXPECT_EQ(j["name"], sample().name);
-  EXPECT_EQ(j["description"], sample().description);
+  EXPECT_EQ(j["name"], sample_tileset().name);
+  EXPECT_EQ(j["description"], sample_tileset().description);
   EXPECT_EQ(j["type"], "baselayer");
   EXPECT_EQ(j["format"], "vts-lossless");
   EXPECT_EQ(j["version"], "1");
@@ -65,7 +65,7 @@ TEST(TilesetInfo, WritesTheDocumentedKeys) {
 }
 
 TEST(TilesetInfo, RoundTripsThroughJson) {
-  const TilesetInfo in = sample();
+  const TilesetInfo in = sample_tileset();
   auto out = TilesetInfo::from_json(in.to_json());
   ASSERT_TRUE(out.ok()) << out.error().to_string();
   EXPECT_EQ(out->format_version, 1);
@@ -95,7 +95,7 @@ TEST(TilesetInfo, RoundTripsThroughJson) {
 }
 
 // A WorldCRS84Quad tileset of TMS levels 0..3 (our 0..4, 4096 x 2048 texels) over Europe.
-TilesetInfo georeferenced() {
+TilesetInfo georeferenced_tileset() {
   TilesetInfo info;
   info.geometry = tiling_geometry(Tiling::world_crs84_quad, 3, 256, 4).value();
   info.sparse = true;
@@ -104,7 +104,7 @@ TilesetInfo georeferenced() {
 }
 
 TEST(TilesetInfo, GeoreferenceRoundTripsUnderItsDocumentedKeys) {
-  const TilesetInfo in = georeferenced();
+  const TilesetInfo in = georeferenced_tileset();
   const json j = json::parse(in.to_json());
   const json& g = j["vtstream"]["georeference"];
   EXPECT_EQ(g["tiling"], "WorldCRS84Quad");
@@ -118,14 +118,14 @@ TEST(TilesetInfo, GeoreferenceRoundTripsUnderItsDocumentedKeys) {
   EXPECT_EQ(*out->georeference, *in.georeference);
   // Metadata without the key (every archive written before it existed) is a plain image.
   EXPECT_FALSE(metadata()["vtstream"].contains("georeference"));
-  auto plain = TilesetInfo::from_json(sample().to_json());
+  auto plain = TilesetInfo::from_json(sample_tileset().to_json());
   ASSERT_TRUE(plain.ok());
   EXPECT_FALSE(plain->georeference.has_value());
 }
 
 TEST(TilesetInfo, RejectsAGeoreferenceThatContradictsItselfOrTheGeometry) {
   auto with = [](auto edit) {
-    json j = json::parse(georeferenced().to_json());
+    json j = json::parse(georeferenced_tileset().to_json());
     edit(j["vtstream"]["georeference"]);
     return read(j);
   };
@@ -176,8 +176,8 @@ TEST(TilesetInfo, RejectsAGeoreferenceThatContradictsItselfOrTheGeometry) {
   merc.georeference = Georeference{Tiling::web_mercator_quad, {-10, 80, 10, 89}, {0, 82, 0}};
   expect_error(TilesetInfo::from_json(merc.to_json()), ErrorCode::corrupt, "extent");
   // And a plain image cannot claim a scheme.
-  TilesetInfo odd = sample();
-  odd.georeference = georeferenced().georeference;
+  TilesetInfo odd = sample_tileset();
+  odd.georeference = georeferenced_tileset().georeference;
   expect_error(TilesetInfo::from_json(odd.to_json()), ErrorCode::corrupt, "WorldCRS84Quad");
 }
 

@@ -1,5 +1,7 @@
 #include "vts/renderer/feedback.hpp"
 
+#include "pyramid_helpers.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cstdint>
@@ -8,9 +10,8 @@
 namespace vts::renderer {
 namespace {
 
-TileId tile(int z, std::uint32_t x, std::uint32_t y) {
-  return TileId{static_cast<std::uint8_t>(z), x, y};
-}
+using testing::pyramid;
+using testing::tile;
 
 // A feedback buffer built pixel by pixel, packed as the shader will.
 struct Buffer {
@@ -26,10 +27,6 @@ struct Buffer {
     for (int i = 0; i < count; ++i) words.insert(words.end(), {FeedbackPixel::kEmpty, 0u});
   }
 };
-
-Pyramid pyramid(int max_level, std::uint32_t tx, std::uint32_t ty) {
-  return *Pyramid::create(max_level, tx, ty);
-}
 
 TEST(Feedback, DeduplicatesPixelsIntoCoverageCounts) {
   FeedbackProcessor fp(pyramid(4, 16, 16));

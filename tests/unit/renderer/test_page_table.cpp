@@ -1,5 +1,7 @@
 #include "vts/renderer/page_table.hpp"
 
+#include "pyramid_helpers.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cstdint>
@@ -12,20 +14,13 @@
 namespace vts::renderer {
 namespace {
 
-Pyramid pyramid(int max_level, std::uint32_t tx, std::uint32_t ty) {
-  auto p = Pyramid::create(max_level, tx, ty);
-  EXPECT_TRUE(p.ok());
-  return *p;
-}
+using testing::pyramid;
+using testing::tile;
 
 ClipmapPageTable table(const Pyramid& p, std::uint32_t window) {
   auto t = ClipmapPageTable::create(p, {window});
   EXPECT_TRUE(t.ok());
   return std::move(t).value();
-}
-
-TileId tile(int z, std::uint32_t x, std::uint32_t y) {
-  return TileId{static_cast<std::uint8_t>(z), x, y};
 }
 
 // The page table's contract computed the slow, obvious way: walk up from the tile until a mapped

@@ -70,7 +70,7 @@ class RouterWeb : public ::testing::Test {
   vts::HttpRequest req_;
 };
 
-std::optional<std::string> header(const vts::HttpResponse& r, std::string_view name) {
+std::optional<std::string> header_of(const vts::HttpResponse& r, std::string_view name) {
   for (const auto& [k, v] : r.headers)
     if (k == name) return v;
   return std::nullopt;
@@ -90,7 +90,7 @@ TEST_F(RouterWeb, PngIsTheTileContentExactly) {
     SCOPED_TRACE(t);
     const auto r = get(std::string("/dense/") + t + ".png");
     ASSERT_EQ(r.status, 200) << body(r);
-    EXPECT_EQ(header(r, "Content-Type"), "image/png");
+    EXPECT_EQ(header_of(r, "Content-Type"), "image/png");
     auto t0 = registry_->find("dense");
     unsigned z, x, y;
     ASSERT_EQ(std::sscanf(t, "%u/%u/%u", &z, &x, &y), 3);
@@ -111,47 +111,47 @@ TEST_F(RouterWeb, PngIsTheTileContentExactly) {
 TEST_F(RouterWeb, EveryFormatHasItsTypeAndItsOwnStrongEtag) {
   const auto png = get("/dense/1/0/0.png"), webp = get("/dense/1/0/0.webp"),
              jpg = get("/dense/1/0/0.jpg"), jpeg = get("/dense/1/0/0.jpeg");
-  EXPECT_EQ(header(webp, "Content-Type"), "image/webp");
-  EXPECT_EQ(header(jpg, "Content-Type"), "image/jpeg");
-  EXPECT_EQ(header(jpeg, "ETag"), header(jpg, "ETag"));
-  const auto tag = *header(png, "ETag");
+  EXPECT_EQ(header_of(webp, "Content-Type"), "image/webp");
+  EXPECT_EQ(header_of(jpg, "Content-Type"), "image/jpeg");
+  EXPECT_EQ(header_of(jpeg, "ETag"), header_of(jpg, "ETag"));
+  const auto tag = *header_of(png, "ETag");
   EXPECT_EQ(tag.size(), 1 + 16 + 1 + 4 + 1) << tag;  // "<16 hex>-png6"
   EXPECT_TRUE(tag.ends_with("-png6\"")) << tag;
-  EXPECT_NE(tag, header(webp, "ETag"));
-  EXPECT_NE(tag, header(jpg, "ETag"));
-  EXPECT_NE(tag, header(get("/dense/1/1/0.png"), "ETag"));
+  EXPECT_NE(tag, header_of(webp, "ETag"));
+  EXPECT_NE(tag, header_of(jpg, "ETag"));
+  EXPECT_NE(tag, header_of(get("/dense/1/1/0.png"), "ETag"));
   // Other encoder settings, another tag (a client's copy is never wrongly current).
   config_.web.encode.png_level = 9;
   config_.web.cache = std::make_shared<WebTileCache>(1 << 20);
-  EXPECT_NE(header(get("/dense/1/0/0.png"), "ETag"), tag);
+  EXPECT_NE(header_of(get("/dense/1/0/0.png"), "ETag"), tag);
 }
 
 TEST_F(RouterWeb, IfNoneMatchAnswers304WithoutEncoding) {
   const auto first = get("/dense/2/1/1.webp");
-  const auto tag = *header(first, "ETag");
+  const auto tag = *header_of(first, "ETag");
   config_.web.cache = std::make_shared<WebTileCache>(1 << 20);  // empty: a 304 must not encode
   req_.if_none_match = tag;
   const auto again = get("/dense/2/1/1.webp");
   EXPECT_EQ(again.status, 304);
   EXPECT_EQ(again.content_length, 0u);
-  EXPECT_EQ(header(again, "ETag"), tag);
+  EXPECT_EQ(header_of(again, "ETag"), tag);
   EXPECT_EQ(config_.web.cache->encodes.load(), 0u);
   req_.if_none_match = "\"0000000000000000-webp90m4\"";
   EXPECT_EQ(get("/dense/2/1/1.webp").status, 200);
 }
 
 TEST_F(RouterWeb, CacheControlFollowsTheNativeRules) {
-  EXPECT_EQ(header(get("/dense/0/0/0.png"), "Cache-Control"), "public, max-age=3600");
+  EXPECT_EQ(header_of(get("/dense/0/0/0.png"), "Cache-Control"), "public, max-age=3600");
   const auto v = get("/dense@" + version("dense") + "/0/0/0.png");
   EXPECT_EQ(v.status, 200);
-  EXPECT_EQ(header(v, "Cache-Control"), "public, max-age=31536000, immutable");
+  EXPECT_EQ(header_of(v, "Cache-Control"), "public, max-age=31536000, immutable");
   const auto stale = get("/dense@" + version("sparse") + "/0/0/0.png");
   EXPECT_EQ(stale.status, 404);
-  EXPECT_EQ(header(stale, "Vts-Error"), "version-not-current");
+  EXPECT_EQ(header_of(stale, "Vts-Error"), "version-not-current");
   // Protected: credentials checked, answers private.
   EXPECT_EQ(get("/secret/0/0/0.png").status, 401);
   req_.authorization = "Bearer tok";
-  EXPECT_EQ(header(get("/secret/0/0/0.png"), "Cache-Control"), "private, max-age=3600");
+  EXPECT_EQ(header_of(get("/secret/0/0/0.png"), "Cache-Control"), "private, max-age=3600");
 }
 
 TEST_F(RouterWeb, NothingToShowIsATransparentTileAndBeyondTheGridIs404) {
@@ -164,11 +164,11 @@ TEST_F(RouterWeb, NothingToShowIsATransparentTileAndBeyondTheGridIs404) {
     const auto img = decoded(r);
     ASSERT_EQ(img.width, 256u);
     EXPECT_EQ(img.pixels, std::vector<std::uint8_t>(256 * 256 * 4, 0));
-    EXPECT_TRUE(header(r, "ETag")->starts_with("\"empty-256-"));
+    EXPECT_TRUE(header_of(r, "ETag")->starts_with("\"empty-256-"));
   }
   const auto jpg = get("/dense/2/3/3.jpg");
   EXPECT_EQ(jpg.status, 200);
-  EXPECT_EQ(header(jpg, "Content-Type"), "image/png");  // JPEG has no alpha
+  EXPECT_EQ(header_of(jpg, "Content-Type"), "image/png");  // JPEG has no alpha
   for (const char* target : {"/dense/2/4/0.png", "/dense/2/0/4.png", "/dense/3/0/0.png"}) {
     EXPECT_EQ(get(target).status, 404) << target;
   }
@@ -280,7 +280,7 @@ TEST_F(RouterWeb, AMissWhileAnotherEncodesWaitsForThatFlight) {
   EXPECT_EQ(c->encodes.load(), 0u);
   auto tile = std::make_shared<const WebTile>(
       WebTile{std::vector<std::uint8_t>(first.view.begin(), first.view.end()),
-              *header(first, "ETag"), "image/png"});
+              *header_of(first, "ETag"), "image/png"});
   std::optional<vts::HttpResponse> done;
   lead.lead->on_done([&](const WebTilePtr& img, int status, const std::string& why) {
     done = vts::complete_web_wait(std::move(marker), img, status, why);
@@ -289,7 +289,7 @@ TEST_F(RouterWeb, AMissWhileAnotherEncodesWaitsForThatFlight) {
   ASSERT_TRUE(done);
   EXPECT_EQ(done->status, 200);
   EXPECT_EQ(body(*done), body(first));
-  EXPECT_EQ(header(*done, "Access-Control-Allow-Origin"), "*");  // the marker's CORS headers
+  EXPECT_EQ(header_of(*done, "Access-Control-Allow-Origin"), "*");  // the marker's CORS headers
 }
 
 TEST(ServeConfigWeb, KeysApplyAndBadValuesNameTheKey) {
@@ -338,7 +338,7 @@ TEST_F(RouterWeb, WithWorkersEveryMissWaitsForTheEncodingOffTheIoThread) {
   std::unique_lock lock(m);
   ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(30), [&] { return done.has_value(); }));
   EXPECT_EQ(done->status, 200);
-  EXPECT_EQ(header(*done, "Content-Type"), "image/jpeg");
+  EXPECT_EQ(header_of(*done, "Content-Type"), "image/jpeg");
   EXPECT_EQ(c->encodes.load(), 1u);
   lock.unlock();
   EXPECT_EQ(get("/dense/2/1/0.jpg").status, 200);  // now a hit, answered at once
@@ -358,7 +358,7 @@ TEST_F(RouterWeb, ASecondRequestIsACacheHitAndIsNotEncodedAgain) {
   EXPECT_EQ(c.misses.load(), 1u);
   EXPECT_EQ(c.hits.load(), 1u);
   EXPECT_EQ(c.encodes.load(), 1u);
-  const std::string tag = *header(first, "ETag");
+  const std::string tag = *header_of(first, "ETag");
   req_.if_none_match = tag;
   EXPECT_EQ(get("/dense/2/2/0.webp").status, 304);  // from the cached image's tag
   EXPECT_EQ(c.encodes.load(), 1u);
@@ -376,7 +376,7 @@ TEST_F(RouterWeb, AMissBeyondTheQueuesCapsIs503WithRetryAfterAndQueuesNothing) {
   EXPECT_TRUE(get("/dense/2/0/0.png").web_wait);
   auto over = get("/dense/2/1/0.png");  // the same connection's second cold image
   EXPECT_EQ(over.status, 503);
-  EXPECT_EQ(header(over, "Retry-After"), "1");
+  EXPECT_EQ(header_of(over, "Retry-After"), "1");
   EXPECT_NE(body(over).find("this connection"), std::string::npos) << body(over);
   req_.connection = 2;
   // The image refused to connection 1 left no flight behind: connection 2 queues it anew.
@@ -384,7 +384,7 @@ TEST_F(RouterWeb, AMissBeyondTheQueuesCapsIs503WithRetryAfterAndQueuesNothing) {
   req_.connection = 3;
   auto full = get("/dense/2/2/0.png");
   EXPECT_EQ(full.status, 503);
-  EXPECT_EQ(header(full, "Retry-After"), "1");
+  EXPECT_EQ(header_of(full, "Retry-After"), "1");
   EXPECT_EQ(c->shed.load(), 2u);
   EXPECT_EQ(c->queued(), 2u);
   busy.release();

@@ -23,6 +23,7 @@
 
 #include <filesystem>
 #include <functional>
+#include <limits>
 #include <string>
 #include <utility>
 #include <variant>
@@ -42,6 +43,9 @@ struct Column {
 // A cell: a number (NaN: not measured, shown "n/a", JSON null; +inf shown "inf", JSON "inf") or
 // text.
 using Cell = std::variant<double, std::string>;
+
+// The number of a cell that was not measured.
+inline constexpr double kNotMeasured = std::numeric_limits<double>::quiet_NaN();
 
 struct PlotSeries {
   std::string label;

@@ -17,6 +17,9 @@
 
 namespace vts::renderer {
 
+// GlobeScene::texels_per_pixel() has no viewport: it is given for a viewport of this many rows.
+inline constexpr double kGlobeNominalHeightPx = 1024;
+
 inline constexpr double kEarthRadiusM = 6371008.8;  // mean Earth radius (IUGG)
 
 struct GlobeView {
