@@ -1,8 +1,8 @@
 // The HTTP semantics of `vts serve` (docs/PROTOCOL.md): routing, tile and archive answers,
-// TileJSON and the index. Pure but for reading tiles from their archive (archive::Reader: a copy
-// per tile, kept by the response); archive bodies are a file region the network layer reads. The
-// target is checked in router_target.cpp, ranges in router_conditional.cpp, credentials in
-// router_access.cpp, the admin listener in router_admin.cpp.
+// TileJSON and the index. Not pure: it reads tiles from their archive (archive::Reader: a copy
+// per tile, kept by the response) and queues web-image encodes; archive bodies are a file region
+// the network layer reads. The target is checked in router_target.cpp, ranges in
+// router_conditional.cpp, credentials in router_access.cpp, the admin listener in router_admin.cpp.
 #include "vts/server/router.hpp"
 
 #include <algorithm>

@@ -1,5 +1,7 @@
-// The HTTP semantics of `vts serve`, as pure functions from a parsed request to a response
-// description — no sockets, so every route and status is unit-testable and fuzzable. The network
+// The HTTP semantics of `vts serve`: functions from a parsed request to a response description,
+// with no sockets, so every route and status is unit-testable and fuzzable. They are not pure:
+// route() reads a tile's bytes from its archive, remembers tile tags in the tileset's memo and,
+// for a web image that is not cached, queues its encoding (docs/ARCHITECTURE.md). The network
 // layer (http_server.hpp) parses bytes into HttpRequest, calls route() (tile listener) or
 // route_admin() (admin listener), and writes the HttpResponse (its body: bytes in memory, or a
 // region of the archive `hold` names). docs/PROTOCOL.md documents every route, header and
