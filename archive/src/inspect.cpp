@@ -10,6 +10,7 @@
 #include <array>
 #include <atomic>
 #include <chrono>
+#include <cstring>
 #include <map>
 #include <mutex>
 #include <new>
@@ -278,6 +279,46 @@ Result<VerifyReport> verify_archive(
     if (id) report.first_bad = *id;
   }
   return report;
+}
+
+Result<TileImage> read_tile_rgba8(const archive::Reader& reader, const TilesetInfo& info,
+                                  TileId id) {
+  auto bytes = reader.get(id);
+  if (!bytes) {
+    Error e = std::move(bytes).error();
+    if (e.message.find(id.to_string()) == std::string::npos)
+      e.message = "tile " + id.to_string() + ": " + e.message;
+    return e;
+  }
+  auto img = decode_tile(*bytes, info.tile_spec());
+  if (img && img->format == PixelFormat::bc1) img = bc1_to_rgba8(*img);
+  if (!img) {
+    Error e = std::move(img).error();
+    e.message = "tile " + id.to_string() + ": " + e.message;
+    return e;
+  }
+  const std::uint32_t s = info.geometry.stored_size();
+  if (img->format != PixelFormat::rgba8 || img->width != s || img->height != s)
+    return make_error(ErrorCode::corrupt, "tile " + id.to_string() + " is " +
+                                              std::to_string(img->width) + "x" +
+                                              std::to_string(img->height) + ", expected " +
+                                              std::to_string(s) + "x" + std::to_string(s));
+  return img;
+}
+
+TileImage extracted_texels(const TileImage& stored, const Geometry& geometry, TileId id,
+                           bool with_border) {
+  if (with_border) return stored;
+  const std::uint32_t s = geometry.stored_size(), b = geometry.border();
+  const TexelRect r = geometry.content_rect(id);
+  TileImage out;
+  out.width = static_cast<std::uint32_t>(r.width());
+  out.height = static_cast<std::uint32_t>(r.height());
+  out.pixels.resize(std::size_t{out.width} * out.height * 4);
+  for (std::uint32_t y = 0; y < out.height; ++y)
+    std::memcpy(&out.pixels[std::size_t{y} * out.width * 4],
+                &stored.pixels[(std::size_t{b + y} * s + b) * 4], std::size_t{out.width} * 4);
+  return out;
 }
 
 }  // namespace vts::archive

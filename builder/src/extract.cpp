@@ -4,36 +4,13 @@
 
 #include <cstring>
 
+#include "vts/archive/inspect.hpp"
+
 namespace vts {
 
 namespace OIIO = OIIO_NAMESPACE;
 
 namespace {
-
-Result<TileImage> load_tile(const archive::Reader& reader, const TilesetInfo& info, TileId id) {
-  auto bytes = reader.get(id);
-  if (!bytes) {
-    Error e = std::move(bytes).error();
-    if (e.message.find(id.to_string()) == std::string::npos)
-      e.message = "tile " + id.to_string() + ": " + e.message;
-    return e;
-  }
-  auto img = decode_tile(*bytes);
-  // A bc1 tileset extracts to what the GPU shows: its blocks decoded to rgba8.
-  if (img && img->format == PixelFormat::bc1) img = bc1_to_rgba8(*img);
-  if (!img) {
-    Error e = std::move(img).error();
-    e.message = "tile " + id.to_string() + ": " + e.message;
-    return e;
-  }
-  const std::uint32_t s = info.geometry.stored_size();
-  if (img->format != PixelFormat::rgba8 || img->width != s || img->height != s)
-    return make_error(ErrorCode::corrupt, "tile " + id.to_string() + " is " +
-                                              std::to_string(img->width) + "x" +
-                                              std::to_string(img->height) + ", expected " +
-                                              std::to_string(s) + "x" + std::to_string(s));
-  return img;
-}
 
 class Output {
  public:
@@ -116,23 +93,12 @@ Status extract_tile(const archive::Reader& reader, const TilesetInfo& info, Tile
   const Geometry& g = info.geometry;
   if (!g.exists(id))
     return make_error(ErrorCode::not_found, "tile " + id.to_string() + " is outside the pyramid");
-  auto img = load_tile(reader, info, id);
-  if (!img) return std::move(img).error();
-  const std::uint32_t s = g.stored_size();
-  std::uint32_t x0 = 0, y0 = 0, w = s, h = s;
-  if (!o.with_border) {
-    const TexelRect r = g.content_rect(id);
-    x0 = y0 = g.border();
-    w = static_cast<std::uint32_t>(r.width());
-    h = static_cast<std::uint32_t>(r.height());
-  }
-  auto out = Output::open(o, w, h);
+  auto stored = archive::read_tile_rgba8(reader, info, id);
+  if (!stored) return std::move(stored).error();
+  const TileImage img = archive::extracted_texels(*stored, g, id, o.with_border);
+  auto out = Output::open(o, img.width, img.height);
   if (!out) return std::move(out).error();
-  std::vector<std::uint8_t> rows(std::size_t{w} * h * 4);
-  for (std::uint32_t y = 0; y < h; ++y)
-    std::memcpy(&rows[std::size_t{y} * w * 4], &img->pixels[(std::size_t{y0 + y} * s + x0) * 4],
-                std::size_t{w} * 4);
-  if (auto st = out->write_rows(0, h, rows.data()); !st) return st;
+  if (auto st = out->write_rows(0, img.height, img.pixels.data()); !st) return st;
   return out->finish();
 }
 
@@ -164,7 +130,7 @@ Status extract_level(const archive::Reader& reader, const TilesetInfo& info, int
     const auto rows = static_cast<std::uint32_t>(std::min<std::uint64_t>(T, h - y0));
     for (std::uint32_t tx = 0; tx < g.tiles_x(z); ++tx) {
       const TileId id{static_cast<std::uint8_t>(z), tx, ty};
-      auto img = load_tile(reader, info, id);
+      auto img = archive::read_tile_rgba8(reader, info, id);
       if (!img) {
         if (img.error().code == ErrorCode::not_found && info.sparse) continue;
         return std::move(img).error();

@@ -23,7 +23,7 @@ using Adder = Runner (*)(CLI::App& app);
 Runner add_build(CLI::App& app);
 Runner add_plan(CLI::App& app);     // vts plan (cmd_plan.cpp)
 Runner add_merge(CLI::App& app);    // vts merge (cmd_merge.cpp)
-Runner add_extract(CLI::App& app);  // vts extract (cmd_extract.cpp)
+Runner add_extract(CLI::App& app);  // vts-build's extract: every format, tiles and levels
 Runner add_export(CLI::App& app);   // vts export (cmd_export.cpp)
 Runner add_bench(CLI::App& app);    // vts bench accuracy (cmd_bench.cpp): only with VTS_BUILD_BENCH
 
@@ -39,6 +39,19 @@ Runner add_loadtest(CLI::App& app);  // vts loadtest (cmd_loadtest.cpp)
 // runs the one that was parsed.
 Runner add_loadtest_tools(CLI::App& loadtest);
 Runner add_view(CLI::App& app);  // vts view (cmd_view.cpp): only when the renderer is built
+// vts extract in `vts`: a tile as PNG itself, the rest handed over to vts-build (cmd_extract.cpp).
+Runner add_extract_runtime(CLI::App& app);
+
+// `vts extract`'s arguments, and its subcommand (cmd_extract.cpp): a single tile written as PNG
+// (imaging::write_png) by whichever executable runs it; a whole level, or another image format,
+// by `rest` (vts-build: OpenImageIO; vts: hands the command over to vts-build).
+struct ExtractArgs {
+  std::string archive, tile, output;
+  int level = -1;
+  bool with_border = false;
+  int channels = 4;
+};
+Runner add_extract_command(CLI::App& app, std::function<int(const ExtractArgs&)> rest);
 
 // Registers the subcommands `adders` add to `app` (with --version), parses the command line and
 // runs the subcommand given: the process's exit status (entry.cpp).
@@ -73,8 +86,10 @@ Result<std::pair<std::string, std::uint16_t>> parse_endpoint(const std::string& 
 // command can stop cleanly (flush, write its output); a second signal kills as usual.
 const std::atomic<bool>& install_stop_signals();
 
-// The command line as typed ("vts loadtest http://... --viewers 64"), for reports.
+// The command line as typed ("vts loadtest http://... --viewers 64"), for reports; and as given
+// to run_cli() (argc, argv), for handing the command over to vts-build.
 const std::string& command_line();
+std::pair<int, char**> command_arguments();
 
 // "unknown command 'buidl'; did you mean 'build'?" when argv has a word where a subcommand of
 // `app` is expected that names none (below the top level: a plain lower-case word within 2 edits

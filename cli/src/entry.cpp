@@ -12,6 +12,8 @@ namespace vts::cli {
 
 namespace {
 std::string g_command_line;
+int g_argc = 0;
+char** g_argv = nullptr;
 std::atomic<bool> g_stop{false};
 extern "C" void on_stop_signal(int) {
   g_stop.store(true);
@@ -45,6 +47,10 @@ int parse(CLI::App& app, int argc, char** argv) {
 
 const std::string& command_line() {
   return g_command_line;
+}
+
+std::pair<int, char**> command_arguments() {
+  return {g_argc, g_argv};
 }
 
 int report_error(const Error& e) {
@@ -81,6 +87,8 @@ int run_cli(CLI::App& app, std::span<const Adder> adders, int argc, char** argv)
     Runner r = add(app);
     runners.emplace_back(app.get_subcommands({})[before], std::move(r));
   }
+  g_argc = argc;
+  g_argv = argv;
   for (int i = 0; i < argc; ++i) {
     if (i) g_command_line += ' ';
     g_command_line += i == 0 ? "vts" : argv[i];

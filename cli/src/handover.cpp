@@ -1,7 +1,7 @@
 // `vts build ...` and the other build commands: `vts` lists them in its --help and hands them
 // over to `vts-build` (the executable beside it, else the one on PATH) by exec, with the same
 // arguments, so the process, its stdin/stdout/stderr, its signals and its exit status are the
-// builder's own.
+// builder's own. `vts extract` is the runtime's own for a tile as PNG and hands the rest over.
 #include <unistd.h>
 
 #include <cerrno>
@@ -28,7 +28,6 @@ constexpr BuilderCommand kBuilderCommands[] = {
     {"build", "Cut images into a tile pyramid archive (PMTiles)"},
     {"plan", "Fix a build once for many machines: its options, inputs and shards, in a JSON plan"},
     {"merge", "Merge the parts of a sharded build (vts plan) into the archive vts build writes"},
-    {"extract", "Write one tile, or a whole level stitched together, as an image file"},
     {"export",
      "Write an archive's tiles as standard web images (PNG, WebP, JPEG) in a raster PMTiles "
      "archive or a {z}/{x}/{y} folder, for stock web maps"},
@@ -71,6 +70,13 @@ int hand_over_to_builder(const char* command, int argc, char** argv) {
           "installed: not beside " + (ec ? std::string("this vts") : "'" + self.string() + "'") +
           " nor on PATH (" + std::strerror(err) +
           "); build vtstream with -DVTS_BUILD_BUILDER=ON or install vts-build"));
+}
+
+Runner add_extract_runtime(CLI::App& app) {
+  return add_extract_command(app, [](const ExtractArgs&) {
+    const auto [argc, argv] = command_arguments();
+    return hand_over_to_builder("extract", argc, argv);
+  });
 }
 
 }  // namespace vts::cli

@@ -325,16 +325,25 @@ Result<TileImage> tile_content(const TileImage& stored, const Geometry& geometry
 }
 
 Status write_png(const std::filesystem::path& path, int width, int height,
-                 std::span<const std::uint8_t> rgba, int level) {
+                 std::span<const std::uint8_t> rgba, int level, int channels) {
   const std::string where = "cannot write '" + path.string() + "': ";
   if (width <= 0 || height <= 0 || width > (1 << 20) || height > (1 << 20) ||
       rgba.size() != std::size_t(width) * std::size_t(height) * 4)
     return bad(where + "invalid " + std::to_string(width) + "x" + std::to_string(height) +
                " image of " + std::to_string(rgba.size()) + " bytes");
   if (level < 0 || level > 9) return bad(where + "PNG level " + std::to_string(level));
+  if (channels != 3 && channels != 4) return bad(where + std::to_string(channels) + " channels");
+  const std::uint8_t* pixels = rgba.data();
+  std::vector<std::uint8_t> rgb;
+  if (channels == 3) {  // alpha dropped
+    rgb.resize(rgba.size() / 4 * 3);
+    for (std::size_t i = 0, j = 0; i < rgba.size(); i += 4, j += 3)
+      std::memcpy(&rgb[j], &rgba[i], 3);
+    pixels = rgb.data();
+  }
   std::vector<std::uint8_t> bytes;
   PngMessage message;
-  if (!write_png(rgba.data(), std::uint32_t(width), std::uint32_t(height), true, level, true,
+  if (!write_png(pixels, std::uint32_t(width), std::uint32_t(height), channels == 4, level, true,
                  &bytes, &message))
     return make_error(ErrorCode::io, where + "PNG encoding failed: " + message.text);
   Status written = write_file_atomically(

@@ -4,7 +4,8 @@
 # bin/.debug/NAME.debug, named by a .gnu_debuglink section (where gdb looks); the installed vts
 # loads neither GDAL nor OpenImageIO nor their heavy dependencies, lists the build commands and
 # hands them over to the installed vts-build beside it; without a vts-build beside it or on PATH,
-# `vts build` fails with exit 6 saying vts-build is missing, and the runtime commands still work.
+# `vts build` fails with exit 6 saying vts-build is missing, and the runtime commands still work,
+# `vts extract` of a tile as PNG among them (the pixels vts-build's OpenImageIO writer gives).
 source "$(dirname "$0")/lib.sh"
 : "${VTS_BUILD_DIR:?VTS_BUILD_DIR must name the build folder to install}"
 require_tool readelf
@@ -55,4 +56,29 @@ PATH=/usr/bin:/bin run "$WORK/alone/vts" build --synthetic 600x400 -o "$WORK/b.p
 grep -q "vts-build, which is not installed" "$ERR" || { show_output; fail "no message naming vts-build"; }
 [[ ! -e $WORK/b.pmtiles ]] || fail "vts build without vts-build wrote $WORK/b.pmtiles"
 PATH=/usr/bin:/bin expect_ok "$WORK/alone/vts" info "$WORK/a.pmtiles"
+
+note "vts without vts-build extracts a tile as PNG itself, the pixels OpenImageIO's TIFF has"
+# (600 x 400 texels, 256-texel tiles: 2/2/1 is an edge tile, clipped to 88 x 144 texels.)
+for t in 2/0/0 2/2/1; do
+  f=${t//\//_}
+  PATH=/usr/bin:/bin expect_ok "$WORK/alone/vts" extract "$WORK/a.pmtiles" "$t" -o "$WORK/$f.png"
+  expect_ok "$P/bin/vts" extract "$WORK/a.pmtiles" "$t" -o "$WORK/$f.tif"  # vts-build's writer
+  expect_same_pixels "$WORK/$f.png" "$WORK/$f.tif"
+done
+read -r w h c <<<"$(image_dims "$WORK/2_2_1.png")"
+[[ "$w $h $c" == "88 144 4" ]] || fail "the edge tile's PNG is ${w}x${h}, $c channels; expected 88x144, 4"
+PATH=/usr/bin:/bin expect_ok "$WORK/alone/vts" extract "$WORK/a.pmtiles" 2/1/0 --with-border \
+  --channels 3 -o "$WORK/border.png"
+read -r w h c <<<"$(image_dims "$WORK/border.png")"
+[[ "$w $h $c" == "264 264 3" ]] || fail "--with-border --channels 3 gave ${w}x${h}, $c channels"
+expect_ok "$P/bin/vts" extract "$WORK/a.pmtiles" 2/1/0 --with-border --channels 3 -o "$WORK/border.tif"
+expect_same_pixels "$WORK/border.png" "$WORK/border.tif"
+note "... and hands a whole level, or another format, to vts-build: exit 6 without it"
+for args in "--level 1 -o $WORK/level.png" "2/0/0 -o $WORK/tile.tif"; do
+  # shellcheck disable=SC2086  # the words of $args are the arguments
+  PATH=/usr/bin:/bin run "$WORK/alone/vts" extract "$WORK/a.pmtiles" $args
+  ((RC == 6)) || { show_output; fail "vts extract $args without vts-build exited $RC, expected 6"; }
+  grep -q "vts-build, which is not installed" "$ERR" || { show_output; fail "no message naming vts-build"; }
+done
+[[ ! -e $WORK/level.png && ! -e $WORK/tile.tif ]] || fail "an extract handed to no vts-build wrote a file"
 note "ok"

@@ -42,6 +42,18 @@ struct ArchiveSummary {
 Result<TilesetInfo> archive_tileset(const archive::Header& header,
                                     const std::string& metadata_json);
 
+// The stored texels of tile `id` as rgba8 (stored_size() on both sides, borders included): a bc1
+// tile decoded to what the GPU shows. not_found when the archive lacks the tile; corrupt when its
+// payload does not decode or is not the tileset's stored size; every error names the tile. What
+// `vts extract` writes.
+Result<TileImage> read_tile_rgba8(const archive::Reader& reader, const TilesetInfo& info,
+                                  TileId id);
+
+// The texels of a stored rgba8 tile that `vts extract` writes for tile `id`: its content clipped
+// to the image at its level, or with `with_border` the whole stored tile.
+TileImage extracted_texels(const TileImage& stored, const Geometry& geometry, TileId id,
+                           bool with_border);
+
 // Walks every directory once; a run of tiles costs the same as one tile, whatever its length.
 // Fails on malformed metadata or directories, or a header archive_tileset() refuses.
 Result<ArchiveSummary> summarize_archive(const archive::Reader& reader);

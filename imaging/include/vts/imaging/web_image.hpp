@@ -51,10 +51,10 @@ Result<TileImage> tile_content(const TileImage& stored, const Geometry& geometry
 
 // Writes an 8-bit RGBA PNG file (whatever the extension) of width x height pixels, rows top to
 // bottom, straight alpha, tagged sRGB, through write_file_atomically: the one PNG writer of
-// screenshots, plots and references. invalid_argument when `rgba` does not hold
-// width * height * 4 bytes or `level` is not a zlib level 0..9; io when the file cannot be
-// written.
+// screenshots, plots, references and extracted tiles. With `channels` 3 the file is RGB (alpha
+// dropped). invalid_argument when `rgba` does not hold width * height * 4 bytes, `level` is not a
+// zlib level 0..9 or `channels` is neither 3 nor 4; io when the file cannot be written.
 Status write_png(const std::filesystem::path& path, int width, int height,
-                 std::span<const std::uint8_t> rgba, int level = 6);
+                 std::span<const std::uint8_t> rgba, int level = 6, int channels = 4);
 
 }  // namespace vts::imaging
