@@ -15,6 +15,7 @@
     kind: null, // 'pixels' | 'WorldCRS84Quad' | 'WebMercatorQuad'
     tiles: { loading: 0, loaded: 0, failed: 0 },
     renders: 0, // rendercomplete events: a render with every wanted tile loaded
+    wantedView: null, // { center, resolution } setPixelView() asked for last
     readout: '',
     map: null,
     grid: null,
@@ -112,7 +113,20 @@
       view,
     });
     view.fit(grid.extent, { size: map.getSize() });
-    map.on('rendercomplete', () => { state.renders++; });
+    // Counts frames of the view setPixelView() asked for last: a frame of the view before it,
+    // completing just after the call (its tiles loaded, the new view's not yet started), is not
+    // a render of the new view.
+    map.on('rendercomplete', (e) => {
+      const shown = e.frameState && e.frameState.viewState;
+      const wanted = state.wantedView;
+      if (wanted && shown) {
+        const res = wanted.resolution;
+        const dc = Math.hypot(shown.center[0] - wanted.center[0],
+          shown.center[1] - wanted.center[1]);
+        if (Math.abs(shown.resolution - res) > 1e-9 * res || dc > 1e-6 * res) return;
+      }
+      state.renders++;
+    });
     map.on('pointermove', (e) => {
       state.readout = formatReadout(grid, e.coordinate);
       readout.textContent = state.readout;
@@ -122,7 +136,8 @@
   }
 
   // Shows image pixel (px, py) of level z at the viewport's top-left corner, one image pixel per
-  // CSS pixel; returns the number of renders so far (wait for state.renders to exceed it).
+  // CSS pixel; returns the number of renders so far (wait for state.renders to exceed it: it
+  // counts only complete renders of this view from now on).
   state.setPixelView = function (z, px, py) {
     const grid = state.grid;
     const res = grid.resolutions[z];
@@ -132,6 +147,7 @@
     view.setResolution(res);
     view.setCenter([grid.origin[0] + (px + size[0] / 2) * res,
       grid.origin[1] - (py + size[1] / 2) * res]);
+    state.wantedView = { center: view.getCenter(), resolution: view.getResolution() };
     return before;
   };
 
