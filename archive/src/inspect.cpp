@@ -290,6 +290,7 @@ Result<TileImage> read_tile_rgba8(const archive::Reader& reader, const TilesetIn
       e.message = "tile " + id.to_string() + ": " + e.message;
     return e;
   }
+  // The tileset's TileSpec refuses a tile of another size or codec before anything is decoded.
   auto img = decode_tile(*bytes, info.tile_spec());
   if (img && img->format == PixelFormat::bc1) img = bc1_to_rgba8(*img);
   if (!img) {
@@ -297,12 +298,6 @@ Result<TileImage> read_tile_rgba8(const archive::Reader& reader, const TilesetIn
     e.message = "tile " + id.to_string() + ": " + e.message;
     return e;
   }
-  const std::uint32_t s = info.geometry.stored_size();
-  if (img->format != PixelFormat::rgba8 || img->width != s || img->height != s)
-    return make_error(ErrorCode::corrupt, "tile " + id.to_string() + " is " +
-                                              std::to_string(img->width) + "x" +
-                                              std::to_string(img->height) + ", expected " +
-                                              std::to_string(s) + "x" + std::to_string(s));
   return img;
 }
 

@@ -15,6 +15,7 @@
 #include <nlohmann/json.hpp>
 #include <thread>
 
+#include "vts/archive/inspect.hpp"
 #include "vts/imaging/web_mercator.hpp"
 #include "vts/protocol/json_input.hpp"
 #include "work_queue.hpp"
@@ -297,16 +298,9 @@ class EntryJob {
 // Decoded stored texels of a source tile as rgba8; nullopt when the archive lacks it.
 Result<std::optional<TileImage>> load_stored(const archive::Reader& reader, const TilesetInfo& info,
                                              TileId id) {
-  auto bytes = reader.get(id);
-  if (!bytes && bytes.error().code == ErrorCode::not_found) return std::optional<TileImage>{};
-  if (!bytes) return bytes.error();
-  auto img = decode_tile(*bytes, info.tile_spec());
-  if (img && img->format == PixelFormat::bc1) img = bc1_to_rgba8(*img);
-  if (!img) {
-    Error e = std::move(img).error();
-    e.message = "tile " + id.to_string() + ": " + e.message;
-    return e;
-  }
+  auto img = archive::read_tile_rgba8(reader, info, id);
+  if (!img && img.error().code == ErrorCode::not_found) return std::optional<TileImage>{};
+  if (!img) return std::move(img).error();
   return std::optional<TileImage>(std::move(img).value());
 }
 
