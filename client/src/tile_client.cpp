@@ -1,4 +1,4 @@
-// TileClient: ancestors first, decode worker pool, bounded event queue (see the header).
+// TileClient: decode worker pool, bounded event queue (see the header).
 #include "vts/client/tile_client.hpp"
 
 #include <algorithm>
@@ -52,33 +52,24 @@ class TileClient::Impl {
   }
 
   void request(TileId id, double urgency) {
-    std::vector<TileId> chain;
-    if (options_.prefetch_ancestors) {
-      chain = ancestors(id);
-      std::reverse(chain.begin(), chain.end());  // root first
-    }
-    chain.push_back(id);
-    for (const TileId t : chain) {
-      const bool target = t == id;
-      std::uint64_t serial = 0;
-      {
-        std::lock_guard lock(mutex_);
-        if (stop_ || delivered_.count(t) || inflight_.count(t)) continue;
-        serial = next_serial_++;
-        inflight_[t] = Slot{serial, 0, false};
-        (target ? stats_.requested : stats_.ancestors_requested)++;
-      }
-      GetOptions go;
-      go.level = t.z;
-      go.urgency = urgency;
-      go.pin = t.z == 0;  // the root is every tile's last fallback
-      const auto h = cache_->get(
-          t, go, [this, t, serial](PayloadResult&& r) { on_payload(t, serial, std::move(r)); });
+    std::uint64_t serial = 0;
+    {
       std::lock_guard lock(mutex_);
-      auto it = inflight_.find(t);
-      if (it != inflight_.end() && it->second.serial == serial && !it->second.fetched)
-        it->second.handle = h;
+      if (stop_ || delivered_.count(id) || inflight_.count(id)) return;
+      serial = next_serial_++;
+      inflight_[id] = Slot{serial, 0, false};
+      stats_.requested++;
     }
+    GetOptions go;
+    go.level = id.z;
+    go.urgency = urgency;
+    go.pin = id.z == 0;  // the root is every tile's last fallback
+    const auto h = cache_->get(
+        id, go, [this, id, serial](PayloadResult&& r) { on_payload(id, serial, std::move(r)); });
+    std::lock_guard lock(mutex_);
+    auto it = inflight_.find(id);
+    if (it != inflight_.end() && it->second.serial == serial && !it->second.fetched)
+      it->second.handle = h;
   }
 
   void cancel(TileId id) {

@@ -10,11 +10,11 @@
 #include <string>
 #include <thread>
 #include <unordered_map>
-#include <unordered_set>
 #include <utility>
 
 #include "vts/client/tile_cache.hpp"
 #include "vts/imaging/web_image.hpp"
+#include "vts/renderer/tile_stream.hpp"
 
 namespace vts::loadtest {
 
@@ -173,11 +173,13 @@ struct Request {
 
 class Engine;
 
-// One simulated viewer: its client stack, what it holds and what it waits for.
+// One simulated viewer: its client stack, its tile stream (the viewer's own policy: what to ask
+// for, cancel, hold and retry) and the requests it has on their way.
 class Viewer {
  public:
-  Viewer(Engine& engine, std::uint32_t index, std::unique_ptr<client::TileCache> cache)
-      : engine_(engine), index_(index), cache_(std::move(cache)) {}
+  Viewer(Engine& engine, std::uint32_t index, std::unique_ptr<client::TileCache> cache,
+         renderer::TileStreamOptions stream)
+      : engine_(engine), index_(index), cache_(std::move(cache)), stream_(std::move(stream)) {}
 
   std::uint32_t index() const { return index_; }
   client::TileCache& cache() { return *cache_; }
@@ -196,7 +198,10 @@ class Viewer {
     std::lock_guard lock(mutex_);
     req->cancelled = true;
     auto it = inflight_.find(req->key);
-    if (it != inflight_.end() && it->second == req) inflight_.erase(it);
+    if (it != inflight_.end() && it->second == req) {
+      inflight_.erase(it);
+      stream_.drop(req->id);
+    }
   }
   // Cancels whatever is still on its way; returns how many.
   std::size_t cancel_all();
@@ -214,25 +219,21 @@ class Viewer {
   // Hands the request to the cache unless the view dropped it first (then false).
   bool issue(const std::shared_ptr<Request>& req);
   void done(const std::shared_ptr<Request>& req, client::PayloadResult&& r);
-  void evict(std::uint64_t frame);
+  // Drops requests the stream cancelled; returns how many were on their way (wasted).
+  std::size_t cancel(const std::vector<TileId>& tiles,
+                     std::vector<client::TileCache::Handle>& handles);
 
   Engine& engine_;
   std::uint32_t index_;
   std::unique_ptr<client::TileCache> cache_;
 
-  std::mutex mutex_;  // guards arrived_ and inflight_ (callbacks run on the cache's threads)
-  std::unordered_map<std::uint64_t, Clock::time_point> arrived_;  // resident (or absent) tiles
+  std::mutex mutex_;  // guards the rest (callbacks run on the cache's threads)
+  renderer::TileStream stream_;
+  // When each resident (or absent) tile came: the moves' times. Evicted tiles leave it.
+  std::unordered_map<std::uint64_t, Clock::time_point> arrived_;
   std::unordered_map<std::uint64_t, std::shared_ptr<Request>> inflight_;
-  // Tiles that failed, and when they may be asked for again (a viewer backs off instead of asking
-  // every frame): 250 ms, doubling per failure up to 8 s.
-  struct Backoff {
-    Clock::time_point until{};
-    int failures = 0;
-  };
-  std::unordered_map<std::uint64_t, Backoff> backoff_;
 
   // Driver thread only.
-  std::unordered_map<std::uint64_t, std::uint64_t> last_wanted_;  // frame a tile was last demanded
   bool move_open_ = false, first_visible_known_ = false;
   Clock::time_point move_start_{};
   Ns first_visible_{0};
@@ -283,8 +284,6 @@ Status Viewer::frame(std::uint64_t f, Clock::time_point due) {
     ++moves_started_;
   }
 
-  std::unordered_set<std::uint64_t> wanted;
-  wanted.reserve(d->tiles.size() * 2);
   std::vector<std::shared_ptr<Request>> to_issue;
   std::vector<client::TileCache::Handle> to_cancel;
   std::size_t cancelled = 0;  // issued requests dropped (wasted)
@@ -292,43 +291,29 @@ Status Viewer::frame(std::uint64_t f, Clock::time_point due) {
   Clock::time_point first{Clock::time_point::max()}, last{Clock::time_point::min()};
   {
     std::lock_guard lock(mutex_);
-    for (const DemandTile& t : d->tiles) {
-      const std::uint64_t k = tile_key(t.id);
-      if (!wanted.insert(k).second) continue;
-      last_wanted_[k] = f;
-      auto a = arrived_.find(k);
-      if (t.direct) {
-        ++direct;
-        if (a != arrived_.end()) {
-          ++resolved;
-          // Only tiles that came after the move make it "visible": a coarse tile held from
-          // before (the globe's limb, a shared ancestor) shows nothing new.
-          if (a->second >= move_start_) {
-            ++fresh;
-            first = std::min(first, a->second);
-          }
-          last = std::max(last, a->second);
-        }
-      }
-      if (a == arrived_.end() && !inflight_.count(k)) {
-        if (auto b = backoff_.find(k); b != backoff_.end() && b->second.until > due) continue;
-        auto req = std::make_shared<Request>();
-        req->id = t.id;
-        req->key = k;
-        req->intended = due;
-        inflight_.emplace(k, req);
-        to_issue.push_back(std::move(req));
-      }
+    const renderer::StreamStep step = stream_.frame(f, due, &d->tiles);
+    cancelled = cancel(step.cancels, to_cancel);
+    for (const DemandTile& t : step.requests) {
+      auto req = std::make_shared<Request>();
+      req->id = t.tile;
+      req->key = tile_key(t.tile);
+      req->intended = due;
+      inflight_[req->key] = req;
+      to_issue.push_back(std::move(req));
     }
-    for (auto it = inflight_.begin(); it != inflight_.end();) {
-      if (wanted.count(it->first)) {
-        ++it;
-        continue;
+    for (const DemandTile& t : d->tiles) {
+      if (!t.direct) continue;
+      ++direct;
+      auto a = arrived_.find(tile_key(t.tile));
+      if (a == arrived_.end()) continue;
+      ++resolved;
+      // Only tiles that came after the move make it "visible": a coarse tile held from before
+      // (the globe's limb, a shared ancestor) shows nothing new.
+      if (a->second >= move_start_) {
+        ++fresh;
+        first = std::min(first, a->second);
       }
-      it->second->cancelled = true;
-      if (it->second->issued) ++cancelled;
-      if (it->second->handle != 0) to_cancel.push_back(it->second->handle);
-      it = inflight_.erase(it);
+      last = std::max(last, a->second);
     }
   }
   for (client::TileCache::Handle h : to_cancel) cache_->cancel(h);
@@ -358,8 +343,21 @@ Status Viewer::frame(std::uint64_t f, Clock::time_point due) {
   } else {
     for (auto& r : to_issue) issue(r);
   }
-  evict(f);
   return {};
+}
+
+std::size_t Viewer::cancel(const std::vector<TileId>& tiles,
+                           std::vector<client::TileCache::Handle>& handles) {
+  std::size_t n = 0;
+  for (const TileId t : tiles) {
+    auto it = inflight_.find(tile_key(t));
+    if (it == inflight_.end()) continue;
+    it->second->cancelled = true;
+    if (it->second->issued) ++n;
+    if (it->second->handle != 0) handles.push_back(it->second->handle);
+    inflight_.erase(it);
+  }
+  return n;
 }
 
 bool Viewer::issue(const std::shared_ptr<Request>& req) {
@@ -384,7 +382,16 @@ bool Viewer::send(const std::shared_ptr<Request>& req, Clock::time_point slot) {
 }
 
 void Viewer::done(const std::shared_ptr<Request>& req, client::PayloadResult&& r) {
-  if (r.kind == client::PayloadResult::Kind::cancelled) return;
+  if (r.kind == client::PayloadResult::Kind::cancelled) {
+    // Cancelled by the cache itself (ours left inflight_ first): the stream may ask again.
+    std::lock_guard lock(mutex_);
+    auto it = inflight_.find(req->key);
+    if (it != inflight_.end() && it->second == req) {
+      inflight_.erase(it);
+      stream_.drop(req->id);
+    }
+    return;
+  }
   const auto now = Clock::now();  // the answer's arrival: --decode's time is not the server's
   // --decode: an image tile that does not decode shows nothing; it is an error, not resident.
   const char* kind = nullptr;
@@ -399,36 +406,20 @@ void Viewer::done(const std::shared_ptr<Request>& req, client::PayloadResult&& r
     if (it != inflight_.end() && it->second == req) inflight_.erase(it);
     // Dropped while its answer was on its way: already counted as cancelled or abandoned.
     counted = !req->cancelled;
-    if (!kind && (r.kind == client::PayloadResult::Kind::ok ||
-                  r.kind == client::PayloadResult::Kind::absent)) {
+    if (!kind && r.kind == client::PayloadResult::Kind::ok) {
+      // A slot, as the viewer's physical texture gives (or refuses, or takes from another tile).
+      if (const auto got = stream_.place(req->id)) {
+        arrived_[req->key] = now;
+        if (got->evicted) arrived_.erase(tile_key(*got->evicted));
+      }
+    } else if (!kind && r.kind == client::PayloadResult::Kind::absent) {
+      stream_.absent(req->id);
       arrived_[req->key] = now;
-      backoff_.erase(req->key);
     } else {
-      Backoff& b = backoff_[req->key];
-      b.failures = std::min(b.failures + 1, 6);
-      b.until = now + std::chrono::milliseconds(125 << b.failures);
+      stream_.failed(req->id, now);
     }
   }
   if (counted) engine_.metrics.request_done(r, req->intended, req->sent, now, kind);
-}
-
-void Viewer::evict(std::uint64_t frame) {
-  const std::size_t cap = std::max<std::size_t>(engine_.options.resident_tiles, 1);
-  std::lock_guard lock(mutex_);
-  if (arrived_.size() <= cap) return;
-  std::vector<std::pair<std::uint64_t, std::uint64_t>> order;  // (last wanted frame, key)
-  order.reserve(arrived_.size());
-  for (const auto& [k, t] : arrived_) {
-    auto w = last_wanted_.find(k);
-    order.emplace_back(w == last_wanted_.end() ? 0 : w->second, k);
-  }
-  const std::size_t drop = arrived_.size() - cap;
-  std::nth_element(order.begin(), order.begin() + std::ptrdiff_t(drop - 1), order.end());
-  for (std::size_t i = 0; i < drop; ++i) {
-    if (order[i].first == frame) continue;  // wanted this frame: never evicted
-    arrived_.erase(order[i].second);
-    last_wanted_.erase(order[i].second);
-  }
 }
 
 std::size_t Viewer::cancel_all() {
@@ -445,6 +436,16 @@ std::size_t Viewer::cancel_all() {
   }
   for (auto h : handles) cache_->cancel(h);
   return n;
+}
+
+// A viewer's stream: its physical texture's slots, and the run's trace.
+renderer::TileStreamOptions stream_options(const LoadTestOptions& o, std::uint32_t viewer) {
+  renderer::TileStreamOptions s;
+  s.slots.capacity = std::uint32_t(std::clamp<std::size_t>(o.resident_tiles, 1, 1u << 20));
+  s.slots.keep_frames = o.keep_frames;
+  if (o.trace)
+    s.trace = [&trace = o.trace, viewer](const renderer::StreamEvent& e) { trace(viewer, e); };
+  return s;
 }
 
 Status check(const LoadTestOptions& o) {
@@ -488,7 +489,8 @@ Result<LoadTestResult> run_load_test(const LoadTestOptions& options, const Deman
                                std::chrono::duration<double>(options.duration_s));
   Engine engine(options, demand, start);
   for (std::uint32_t v = 0; v < options.viewers; ++v)
-    engine.viewers.push_back(std::make_unique<Viewer>(engine, v, std::move(caches[v])));
+    engine.viewers.push_back(
+        std::make_unique<Viewer>(engine, v, std::move(caches[v]), stream_options(options, v)));
 
   const int threads = std::max(
       1, std::min<int>(options.threads > 0 ? options.threads

@@ -64,9 +64,7 @@ struct Cameras {
                   GlobeScene(std::get<GlobeView>(view), geometry.width(), geometry.height()), w, h)
             : c.sim->demand(PlaneScene(std::get<PlaneView>(view)), w, h);
     if (!wanted) return wanted.error();
-    d.tiles.reserve(wanted->size());
-    for (const TileRequest& r : *wanted)
-      d.tiles.push_back(DemandTile{r.tile, double(r.coverage), r.direct});
+    d.tiles = std::move(*wanted);
     c.last_view = view;
     c.last_tiles = d.tiles;
     return d;

@@ -21,7 +21,7 @@
 #include "vts/renderer/page_table.hpp"
 #include "vts/renderer/pyramid.hpp"
 #include "vts/renderer/shaders.hpp"
-#include "vts/renderer/slot_cache.hpp"
+#include "vts/renderer/tile_stream.hpp"
 
 namespace vts::renderer {
 namespace {
@@ -76,7 +76,8 @@ class VirtualTexture::Impl {
         format_(format),
         pyramid_(pyramid),
         table_(std::move(table)),
-        slots_({options.slots, options.keep_frames}),
+        stream_(TileStreamOptions{.slots = {options.slots, options.keep_frames},
+                                  .trace = options.trace}),
         bias_({.capacity = options.slots, .max_bias = options.max_bias}),
         feedback_(pyramid),
         options_(options) {}
@@ -152,8 +153,7 @@ class VirtualTexture::Impl {
     glCreateFramebuffers(1, feedback_fbo_.out());
 
     // The root first: everything falls back on it.
-    client_->request(TileId{}, 1e18);
-    pending_[tile_key(TileId{})] = 0;
+    issue(stream_.start());
     return Status{};
   }
 
@@ -211,9 +211,9 @@ class VirtualTexture::Impl {
 
     note_view(scene);
     const auto t_vt = Clock::now();
-    slots_.begin_frame(frame_);
-    st.feedback_frames = collect_feedback();
-    touch_wanted();
+    std::vector<TileRequest> fresh;
+    st.feedback_frames = collect_feedback(fresh);
+    issue(stream_.frame(frame_, Clock::now(), st.feedback_frames ? &fresh : nullptr));
     st.uploads = upload_tiles(st.upload_bytes);
     recenter(scene.focus());
     upload_page_table();
@@ -347,7 +347,7 @@ class VirtualTexture::Impl {
     return std::uint64_t(w) * std::uint64_t(h) * std::uint64_t(std::max(d, 1)) * texel_bytes;
   }
 
-  const std::vector<TileRequest>& wanted() const { return wanted_; }
+  const std::vector<TileRequest>& wanted() const { return stream_.wanted(); }
   double bias() const { return bias_.bias(); }
 
  private:
@@ -407,9 +407,10 @@ class VirtualTexture::Impl {
     ring_pos_ = 0;
   }
 
-  // Processes the oldest feedback buffer whose fence has signalled (without waiting); returns 1
-  // when one was processed. Each ring entry is reused only after it was read.
-  std::uint32_t collect_feedback() {
+  // Processes the oldest feedback buffer whose fence has signalled (without waiting) into the
+  // view's wanted list; returns 1 when one was processed. Each ring entry is reused only after it
+  // was read.
+  std::uint32_t collect_feedback(std::vector<TileRequest>& wanted) {
     auto& rb = readbacks_[ring_pos_];  // the oldest in flight is the next one to be written
     if (!rb.fence) return 0;
     // The ring is full: the oldest frame is readback_ring frames old, so this rarely waits.
@@ -422,34 +423,15 @@ class VirtualTexture::Impl {
     wanted_generation_ = rb.view_generation;
     glUnmapNamedBuffer(rb.buffer.get());
     if (!requests) return 0;
-    wanted_ = std::move(*requests);
-    bias_.update(wanted_.size());
-    ask_for_wanted();
+    wanted = std::move(*requests);
+    bias_.update(wanted.size());
     return 1;
   }
 
-  void ask_for_wanted() {
-    wanted_keys_.clear();
-    for (const auto& r : wanted_) {
-      const std::uint64_t key = tile_key(r.tile);
-      wanted_keys_.insert(key);
-      if (slots_.slot_of(r.tile) || absent_.count(key) || pending_.count(key)) continue;
-      client_->request(r.tile, double(r.coverage));
-      pending_[key] = frame_;
-    }
-    // Pending tiles that the view no longer wants are cancelled (never the root).
-    for (auto it = pending_.begin(); it != pending_.end();) {
-      if (it->first != tile_key(TileId{}) && !wanted_keys_.count(it->first)) {
-        client_->cancel(tile_from_key(it->first));
-        it = pending_.erase(it);
-      } else {
-        ++it;
-      }
-    }
-  }
-
-  void touch_wanted() {
-    for (const auto& r : wanted_) slots_.touch(r.tile);
+  // What the stream decided this frame, handed to the tile client.
+  void issue(const StreamStep& step) {
+    for (const TileId t : step.cancels) client_->cancel(t);
+    for (const TileRequest& r : step.requests) client_->request(r.tile, double(r.coverage));
   }
 
   // Moves decoded tiles into slots, within the per-frame budget. Returns the tiles uploaded.
@@ -475,30 +457,22 @@ class VirtualTexture::Impl {
     for (std::size_t i = 0; i < inbox_.size();) {
       if (count >= options_.upload_tiles || used + tile_bytes_ > options_.upload_bytes) break;
       client::TileEvent& e = inbox_[i];
-      const std::uint64_t key = tile_key(e.id);
       if (!root_mapped_ && !(e.id == root)) {  // nothing maps before the root
         ++i;
         continue;
       }
-      if (e.kind != client::TileEvent::Kind::decoded) {
-        pending_.erase(key);
-        if (e.kind == client::TileEvent::Kind::absent) {
-          absent_.insert(key);
-          ++absent_count_;
-        } else {
-          ++error_count_;
-        }
-        inbox_.erase(inbox_.begin() + std::ptrdiff_t(i));
-        continue;
-      }
-      const bool well_formed = e.image.format == format_ && e.image.width == slot_size_ &&
+      const bool well_formed = e.kind == client::TileEvent::Kind::decoded &&
+                               e.image.format == format_ && e.image.width == slot_size_ &&
                                e.image.height == slot_size_ && e.image.pixels.size() == tile_bytes_;
-      std::optional<SlotCache::Acquired> got;
-      if (well_formed && !slots_.slot_of(e.id)) got = slots_.acquire(e.id);
-      if (!well_formed) ++error_count_;
-      if (!got) {  // malformed, already resident, or no slot may be taken this frame
-        pending_.erase(key);
-        client_->release(e.id);
+      if (e.kind == client::TileEvent::Kind::absent) {
+        stream_.absent(e.id);
+      } else if (!well_formed) {  // an error, or a tile of the wrong size or format
+        stream_.failed(e.id, Clock::now());
+      }
+      // Placed, or (already resident, or no slot may be taken this frame) given back.
+      const auto got = well_formed ? stream_.place(e.id) : std::nullopt;
+      if (!got) {
+        if (e.kind == client::TileEvent::Kind::decoded) client_->release(e.id);
         inbox_.erase(inbox_.begin() + std::ptrdiff_t(i));
         continue;
       }
@@ -518,11 +492,7 @@ class VirtualTexture::Impl {
       used += tile_bytes_;
       ++count;
       (void)table_.map(e.id, got->slot);
-      if (e.id == root) {
-        root_mapped_ = true;
-        slots_.pin(root);
-      }
-      pending_.erase(key);
+      if (e_is_root) root_mapped_ = true;  // the stream pinned it
       inbox_.erase(inbox_.begin() + std::ptrdiff_t(i));
       if (e_is_root) i = 0;  // the tiles held back for the root may go now
     }
@@ -579,23 +549,21 @@ class VirtualTexture::Impl {
   }
 
   void fill_stats(FrameStats& st) const {
-    std::uint32_t missing = 0;
-    for (const auto& r : wanted_) {
-      if (!slots_.slot_of(r.tile) && !absent_.count(tile_key(r.tile))) ++missing;
-    }
-    const auto ss = slots_.stats();
-    st.wanted = std::uint32_t(wanted_.size());
+    const auto& wanted = stream_.wanted();
+    const std::uint32_t missing = stream_.missing();
+    const auto ss = stream_.slots().stats();
+    st.wanted = std::uint32_t(wanted.size());
     st.wanted_missing = missing;
     st.resident = std::uint32_t(ss.resident);
-    st.pending = std::uint32_t(pending_.size());
+    st.pending = std::uint32_t(stream_.pending());
     st.mip_bias = bias_.bias();
-    st.hit_ratio = wanted_.empty() ? 1.0 : double(wanted_.size() - missing) / wanted_.size();
+    st.hit_ratio = wanted.empty() ? 1.0 : double(wanted.size() - missing) / wanted.size();
     st.evictions = ss.evictions;
     st.refusals = ss.refusals;
-    st.absent = absent_count_;
-    st.errors = error_count_;
-    st.complete = root_mapped_ && wanted_generation_ == view_generation_ && !wanted_.empty() &&
-                  missing == 0 && pending_.empty() && inbox_.empty();
+    st.absent = stream_.absent_count();
+    st.errors = stream_.failure_count() + error_count_;
+    st.complete = root_mapped_ && wanted_generation_ == view_generation_ && !wanted.empty() &&
+                  missing == 0 && stream_.pending() == 0 && inbox_.empty();
   }
 
   std::shared_ptr<client::TileClient> client_;
@@ -603,7 +571,7 @@ class VirtualTexture::Impl {
   PixelFormat format_;  // of the decoded tiles, the upload ring and the physical texture
   Pyramid pyramid_;
   ClipmapPageTable table_;
-  SlotCache slots_;
+  TileStream stream_;  // requests, cancellations, back-off and residency (the slot cache)
   MipBiasController bias_;
   FeedbackProcessor feedback_;
   VirtualTextureOptions options_;
@@ -630,16 +598,13 @@ class VirtualTexture::Impl {
 
   std::uint64_t frame_ = 0;
   bool root_mapped_ = false;
-  std::vector<TileRequest> wanted_;
-  std::uint64_t wanted_generation_ = 0;  // view generation of the feedback wanted_ came from
+  std::uint64_t wanted_generation_ =
+      0;  // view generation of the feedback the wanted list came from
   std::uint64_t view_generation_ = 0;
   std::vector<double> view_signature_;
   std::string view_name_;
-  std::unordered_set<std::uint64_t> wanted_keys_;
-  std::unordered_map<std::uint64_t, std::uint64_t> pending_;  // tile key -> frame asked
-  std::unordered_set<std::uint64_t> absent_;
   std::deque<client::TileEvent> inbox_;
-  std::uint64_t absent_count_ = 0, error_count_ = 0;
+  std::uint64_t error_count_ = 0;  // programs that failed to build
 };
 
 Result<std::unique_ptr<VirtualTexture>> VirtualTexture::create(

@@ -238,8 +238,9 @@ TEST(LoadTest, ViewsAlternatingFasterThanTilesArriveCancelWhatTheyNoLongerNeed) 
 }
 
 TEST(LoadTest, ResidentSetKeepsItsCapAndEvictedTilesComeBackFromRam) {
-  // Sets A and B of 6 tiles each, alternated every frame, 8 resident slots: each frame evicts 4
-  // tiles of the other set, which the next frame asks for again and the RAM cache answers.
+  // Sets A and B of 6 tiles each, alternated every frame, 8 slots that a tile unseen for one
+  // frame may lose: each frame evicts 4 tiles of the other set, which the next frame asks for
+  // again and the RAM cache answers.
   const auto level3 = tiles_of_levels(3, 3);
   const std::vector<DemandTile> a(level3.begin(), level3.begin() + 6),
       b(level3.begin() + 6, level3.begin() + 12);
@@ -249,6 +250,7 @@ TEST(LoadTest, ResidentSetKeepsItsCapAndEvictedTilesComeBackFromRam) {
   LoadTestOptions o = local_options(1, 0.5);
   o.cache = CacheMode::ram;
   o.resident_tiles = 8;
+  o.keep_frames = 1;
   auto r = run_load_test(o, demand);
   ASSERT_TRUE(r.ok()) << r.error().to_string();
   const LoadReport& rep = r->report;

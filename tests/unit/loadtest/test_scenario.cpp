@@ -90,7 +90,7 @@ TEST(Scenario, APresetGivesEveryViewerCoarseFirstDemandStartingWithAMove) {
     EXPECT_TRUE(first->move) << "frame 0 starts a view";
     ASSERT_FALSE(first->tiles.empty());
     for (std::size_t i = 1; i < first->tiles.size(); ++i)
-      EXPECT_LE(first->tiles[i - 1].id.z, first->tiles[i].id.z) << "coarse first";
+      EXPECT_LE(first->tiles[i - 1].tile.z, first->tiles[i].tile.z) << "coarse first";
   }
 }
 
@@ -126,8 +126,8 @@ TEST(Scenario, AnUnmovedCameraReusesItsDemandAndAMovedOneIsSimulatedAgain) {
       EXPECT_FALSE(one->reused) << "frame " << f;
       ASSERT_EQ(one->tiles.size(), r->tiles.size()) << "frame " << f;
       for (std::size_t i = 0; i < r->tiles.size(); ++i) {
-        EXPECT_EQ(one->tiles[i].id, r->tiles[i].id) << "frame " << f;
-        EXPECT_EQ(one->tiles[i].urgency, r->tiles[i].urgency) << "frame " << f;
+        EXPECT_EQ(one->tiles[i].tile, r->tiles[i].tile) << "frame " << f;
+        EXPECT_EQ(one->tiles[i].coverage, r->tiles[i].coverage) << "frame " << f;
         EXPECT_EQ(one->tiles[i].direct, r->tiles[i].direct) << "frame " << f;
       }
     }
@@ -166,10 +166,11 @@ TEST(Scenario, GeneratorsSpreadTheirViewersAlongACameraFileTogether) {
     ASSERT_TRUE(want.ok() && got.ok() && first.ok());
     ASSERT_EQ(got->tiles.size(), want->tiles.size()) << "viewer " << v;
     for (std::size_t i = 0; i < got->tiles.size(); ++i)
-      EXPECT_EQ(got->tiles[i].id, want->tiles[i].id) << "viewer " << v;
-    EXPECT_FALSE(first->tiles.size() == got->tiles.size() &&
-                 std::equal(got->tiles.begin(), got->tiles.end(), first->tiles.begin(),
-                            [](const DemandTile& x, const DemandTile& y) { return x.id == y.id; }))
+      EXPECT_EQ(got->tiles[i].tile, want->tiles[i].tile) << "viewer " << v;
+    EXPECT_FALSE(
+        first->tiles.size() == got->tiles.size() &&
+        std::equal(got->tiles.begin(), got->tiles.end(), first->tiles.begin(),
+                   [](const DemandTile& x, const DemandTile& y) { return x.tile == y.tile; }))
         << "viewer " << v << " flies what generator 0's viewer " << v << " flies";
   }
 }

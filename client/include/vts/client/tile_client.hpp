@@ -1,15 +1,16 @@
-// The viewer's end of the client stack: TileCache plus parent prefetch and a decode worker pool.
+// The viewer's end of the client stack: TileCache plus a decode worker pool.
 //
-// request(id) first makes sure every ancestor of `id` up to the root is delivered or on its way
-// (ancestors go out at their own, coarser, level, so the fetcher starts them first); the root is
-// pinned in RAM. Payloads are decoded (header, checksum, zstd, filter) by `decode_threads`
-// workers; decoded tiles wait in a queue bounded by `decoded_bytes` (the renderer's upload queue
-// drains it with poll()). When the queue is full the workers stop (back-pressure) and payloads
-// wait undecoded, compressed, so memory stays bounded by what was requested.
+// request(id) fetches one tile through the cache, at its level's priority (coarser levels
+// first, then urgency); the root is pinned in RAM. Which tiles to ask for, ancestors included,
+// is the caller's policy (the renderer's TileStream). Payloads are decoded (header, checksum,
+// zstd, filter) by `decode_threads` workers; decoded tiles wait in a queue bounded by
+// `decoded_bytes` (the renderer's upload queue drains it with poll()). When the queue is full the
+// workers stop (back-pressure) and payloads wait undecoded, compressed, so memory stays bounded by
+// what was requested.
 //
 // Every request ends in exactly one Event: the decoded tile, or why there is none (absent,
-// error), unless it was cancelled first. A delivered tile is not asked for again (not even as an
-// ancestor) until the consumer calls release(id) — when it has dropped the tile.
+// error), unless it was cancelled first. A delivered tile is not asked for again until the
+// consumer calls release(id) — when it has dropped the tile.
 #pragma once
 
 #include <chrono>
@@ -27,7 +28,6 @@ struct TileClientOptions {
   TileCacheOptions cache;
   int decode_threads = 2;
   std::size_t decoded_bytes = 64u << 20;  // decoded tiles waiting for the consumer
-  bool prefetch_ancestors = true;
 };
 
 struct TileEvent {
@@ -48,11 +48,10 @@ class TileClient {
   TileClient& operator=(const TileClient&) = delete;
 
   const SourceInfo& info() const;
-  // Asks for a tile (and its ancestors first). Repeating a request for a tile on its way only
-  // raises its urgency for tiles not yet started. Thread-safe, never blocks on I/O.
+  // Asks for a tile. Repeating a request for a tile on its way or delivered does nothing.
+  // Thread-safe, never blocks on I/O.
   void request(TileId id, double urgency = 0);
   // Nobody wants the tile any more (it left the view): its fetch is cancelled if still pending.
-  // Ancestors are kept (they are cheap and every finer tile needs them).
   void cancel(TileId id);
   // The consumer dropped a delivered tile; a later request() fetches it again (from the caches).
   void release(TileId id);
@@ -62,8 +61,8 @@ class TileClient {
   std::optional<TileEvent> wait(std::chrono::milliseconds timeout);
 
   struct Stats {
-    std::uint64_t requested = 0, ancestors_requested = 0, decoded = 0, decode_errors = 0,
-                  absent = 0, errors = 0, cancelled = 0, queued_decoded_bytes = 0;
+    std::uint64_t requested = 0, decoded = 0, decode_errors = 0, absent = 0, errors = 0,
+                  cancelled = 0, queued_decoded_bytes = 0;
   };
   Stats stats() const;
   TileCache& cache();

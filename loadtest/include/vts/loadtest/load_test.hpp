@@ -3,16 +3,16 @@
 // computes per viewer and frame (the CLI uses the renderer's CPU demand simulator on a camera path;
 // this library knows no cameras), measured per request and per camera move.
 //
-// Each viewer has its own source and TileCache (caches per CacheMode), a resident set of at most
-// `resident_tiles` tiles (the viewer's physical texture; least recently wanted go first) and the
-// tiles it has asked for. Frame f of every viewer is due at start + f / fps; a driver thread that
-// falls more than a frame behind skips to the frame due now (counted as late frames), as a
-// renderer's frame rate drops, rather than replaying a backlog. At each frame the viewer takes
-// its demand and
-//   - asks its cache for every demanded tile neither resident nor on its way (coarse first, as the
-//     demand lists them), and cancels what it asked for that the frame no longer demands; a tile
-//     whose request failed is asked for again after a backoff (250 ms, doubling to 8 s), not at
-//     every frame;
+// Each viewer has its own source and TileCache (caches per CacheMode) and runs the GL viewer's own
+// streaming policy, renderer::TileStream, over a physical texture of `resident_tiles` slots
+// (SlotCache's rules: least recently used first, none used in the last `keep_frames` frames).
+// Frame f of every viewer is due at start + f / fps; a driver thread that falls more than a frame
+// behind skips to the frame due now (counted as late frames), as a renderer's frame rate drops,
+// rather than replaying a backlog. At each frame the viewer takes its demand and
+//   - hands it to its stream as the wanted list: every tile neither resident nor on its way nor
+//     absent is asked for (in the list's order), what is on its way and no longer wanted is
+//     cancelled; a tile whose request failed is asked for again after a back-off (250 ms,
+//     doubling to 8 s), not at every frame. An answer takes a slot when it arrives;
 //   - tracks camera moves: a move starts at a frame whose demand says `move` (and at frame 0). Its
 //     time to first visible tile is from the move's due time to the earliest arrival, after the
 //     move, among the frame's direct tiles (0 when the whole view was already resident; a coarse
@@ -57,17 +57,15 @@
 #include "vts/client/source.hpp"
 #include "vts/loadtest/load_report.hpp"
 #include "vts/protocol/geometry.hpp"
+#include "vts/renderer/tile_stream.hpp"
 
 namespace vts::loadtest {
 
-struct DemandTile {
-  TileId id;
-  double urgency = 0;   // within a level, higher first (the renderer's pixel coverage)
-  bool direct = false;  // a pixel of the view samples this tile itself (not only a descendant)
-};
+// A tile a viewer's frame wants: the renderer's own request (tile, pixel coverage, direct).
+using DemandTile = renderer::TileRequest;
 
 struct ViewerDemand {
-  std::vector<DemandTile> tiles;  // coarse first
+  std::vector<DemandTile> tiles;  // ancestors included, coarse first (FeedbackProcessor's order)
   bool move = false;              // the camera jumped / started a new view at this frame
   // The camera had not moved since the viewer's previous frame, so its tiles are the previous
   // frame's, not simulated again (a view's demand depends only on its camera).
@@ -100,7 +98,8 @@ struct LoadTestOptions {
   CacheMode cache = CacheMode::none;
   std::filesystem::path cache_dir;    // CacheMode::disk: viewer folders are made under it
   std::size_t ram_bytes = 64u << 20;  // per viewer, CacheMode::ram and ::disk
-  std::size_t resident_tiles = 256;   // per viewer (the renderer's default slot count)
+  std::size_t resident_tiles = 256;   // per viewer: physical texture slots (as the viewer's)
+  std::uint32_t keep_frames = 8;      // as VirtualTextureOptions::keep_frames
   std::chrono::milliseconds view_timeout{10000};
   std::chrono::milliseconds drain_timeout{5000};  // at the end, for requests still on their way
   int threads = 0;                                // driver threads; 0: one per core
@@ -111,6 +110,10 @@ struct LoadTestOptions {
   std::string title, path_name, command_line;
   std::function<void(const LoadProgress&)> progress;  // about once a second
   const std::atomic<bool>* stop = nullptr;            // set to end the run early (SIGINT)
+  // Every decision of each viewer's tile stream, in order per viewer (from the driver and the
+  // cache's threads, never twice at once for one viewer): what VirtualTextureOptions::trace gives
+  // for the GL viewer.
+  std::function<void(std::uint32_t viewer, const renderer::StreamEvent&)> trace;
 };
 
 // Extra figures of a run that LoadReport has no field for.

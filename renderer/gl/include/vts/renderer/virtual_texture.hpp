@@ -2,13 +2,14 @@
 // pipeline"). One VirtualTexture draws one tiled image (a vts::Geometry) on a scene; it owns the
 // physical texture (a slot atlas in the tiles' format: SRGB8_ALPHA8 for rgba8, S3TC DXT1 for bc1),
 // the page table (an R32UI array texture, kMaxLevels layers of W x W), the feedback pass and its
-// fenced readback ring, the upload ring, and the CPU core (FeedbackProcessor, SlotCache,
+// fenced readback ring, the upload ring, and the CPU core (FeedbackProcessor, TileStream,
 // MipBiasController). render() runs one frame into the texture's own framebuffer.
 //
 // Thread safety: GL-thread only; create, use and destroy it with its GlContext current.
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <vector>
 
@@ -21,6 +22,7 @@
 #include "vts/renderer/mip_bias.hpp"
 #include "vts/renderer/reference.hpp"
 #include "vts/renderer/scene.hpp"
+#include "vts/renderer/tile_stream.hpp"
 
 namespace vts::renderer {
 
@@ -49,6 +51,9 @@ struct VirtualTextureOptions {
   int anisotropy = 1;
   double max_bias = 4.0;  // upper bound of the automatic mip bias
   DebugView debug = DebugView::none;
+  // Every decision of the tile stream (requests, cancellations, placements, evictions, absences,
+  // failures), in order, on the render thread: the load tester's simulated viewers make the same.
+  std::function<void(const StreamEvent&)> trace;
 };
 
 // What one frame did; the viewer's HUD and `vts view --json` print these.
