@@ -270,7 +270,12 @@ class Engine {
 Status Viewer::frame(std::uint64_t f, Clock::time_point due) {
   ++frames;
   const double t0 = thread_cpu_ms();
-  auto d = engine_.demand(index_, f);
+  double bias = 0;
+  {
+    std::lock_guard lock(mutex_);
+    bias = stream_.bias();
+  }
+  auto d = engine_.demand(index_, f, bias);
   demand_ms += thread_cpu_ms() - t0;
   if (!d) return d.error();
   if (d->reused) ++demand_reused;

@@ -32,6 +32,7 @@ struct ViewerCamera {
   std::unique_ptr<DemandSimulator> sim;
   // The previous frame's view and tiles: a camera that has not moved wants the same tiles.
   View last_view;
+  double last_bias = 0;
   std::vector<DemandTile> last_tiles;
 };
 
@@ -41,7 +42,7 @@ struct Cameras {
   bool preset = false;
   std::vector<ViewerCamera> viewers;
 
-  Result<ViewerDemand> demand(std::uint32_t v, std::uint64_t frame) {
+  Result<ViewerDemand> demand(std::uint32_t v, std::uint64_t frame, double bias) {
     ViewerCamera& c = viewers[v];
     const CameraPath& p = *c.path;
     // A file path loops; presets cover the run.
@@ -53,19 +54,20 @@ struct Cameras {
     const int w = options.width, h = options.height;
     const bool globe = p.has_globe() && !p.has_plane();
     const View view = globe ? View{p.globe_at(t)} : View{p.plane_at(t)};
-    if (view == c.last_view) {
+    if (view == c.last_view && bias == c.last_bias) {
       d.tiles = c.last_tiles;
       d.reused = true;
       return d;
     }
     Result<std::vector<TileRequest>> wanted =
-        globe
-            ? c.sim->demand(
-                  GlobeScene(std::get<GlobeView>(view), geometry.width(), geometry.height()), w, h)
-            : c.sim->demand(PlaneScene(std::get<PlaneView>(view)), w, h);
+        globe ? c.sim->demand(
+                    GlobeScene(std::get<GlobeView>(view), geometry.width(), geometry.height()), w,
+                    h, bias)
+              : c.sim->demand(PlaneScene(std::get<PlaneView>(view)), w, h, bias);
     if (!wanted) return wanted.error();
     d.tiles = std::move(*wanted);
     c.last_view = view;
+    c.last_bias = bias;
     c.last_tiles = d.tiles;
     return d;
   }
@@ -160,7 +162,9 @@ Result<CameraDemand> camera_demand(const Geometry& geometry, const CameraDemandO
   }
   CameraDemand d;
   d.path_name = cams->preset ? o.path : std::filesystem::path(o.path).filename().string();
-  d.demand = [cams](std::uint32_t v, std::uint64_t frame) { return cams->demand(v, frame); };
+  d.demand = [cams](std::uint32_t v, std::uint64_t frame, double bias) {
+    return cams->demand(v, frame, bias);
+  };
   return d;
 }
 

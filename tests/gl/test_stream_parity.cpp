@@ -127,7 +127,7 @@ TEST_F(StreamParityTest, TheViewerAndTheLoadTesterMakeTheSameRequestsOnOneCamera
   std::size_t view = 0;
   int settled = 0;
   const vts::loadtest::DemandFn demand =
-      [&](std::uint32_t, std::uint64_t f) -> vts::Result<vts::loadtest::ViewerDemand> {
+      [&](std::uint32_t, std::uint64_t f, double bias) -> vts::Result<vts::loadtest::ViewerDemand> {
     bool move = f == 0;
     {
       std::lock_guard lock(mutex);
@@ -142,7 +142,7 @@ TEST_F(StreamParityTest, TheViewerAndTheLoadTesterMakeTheSameRequestsOnOneCamera
         }
       }
     }
-    auto tiles = sim->demand(PlaneScene(path()[view]), kWidth, kHeight);
+    auto tiles = sim->demand(PlaneScene(path()[view]), kWidth, kHeight, bias);
     if (!tiles) return tiles.error();
     return vts::loadtest::ViewerDemand{std::move(*tiles), move};
   };

@@ -26,7 +26,9 @@ const char* stream_event_name(StreamEvent::Kind kind) {
 }
 
 TileStream::TileStream(TileStreamOptions options)
-    : options_(std::move(options)), slots_(options_.slots) {}
+    : options_(std::move(options)),
+      slots_(options_.slots),
+      bias_({.capacity = options_.slots.capacity, .max_bias = options_.max_bias}) {}
 
 void TileStream::note(StreamEvent::Kind kind, TileId tile) const {
   if (options_.trace) options_.trace(StreamEvent{kind, tile});
@@ -55,6 +57,7 @@ StreamStep TileStream::frame(std::uint64_t frame, Clock::time_point now,
   slots_.begin_frame(frame);
   if (wanted) {
     wanted_ = *wanted;
+    bias_.update(wanted_.size());
     wanted_keys_.clear();
     for (const TileRequest& r : wanted_) wanted_keys_.insert(tile_key(r.tile));
     // On their way and no longer wanted: cancelled (never the root).

@@ -77,8 +77,8 @@ class VirtualTexture::Impl {
         pyramid_(pyramid),
         table_(std::move(table)),
         stream_(TileStreamOptions{.slots = {options.slots, options.keep_frames},
+                                  .max_bias = options.max_bias,
                                   .trace = options.trace}),
-        bias_({.capacity = options.slots, .max_bias = options.max_bias}),
         feedback_(pyramid),
         options_(options) {}
 
@@ -273,7 +273,7 @@ class VirtualTexture::Impl {
       glUseProgram(p);
     } else {
       GlProgramUniforms& u = (*programs)->color;
-      set_common(u, width_, height_, float(-bias_.bias()));
+      set_common(u, width_, height_, float(-stream_.bias()));
       std::uint32_t origins[2 * kMaxLevels];
       for (int z = 0; z < kMaxLevels; ++z) {
         origins[2 * z] = table_.origin_x(z);
@@ -348,7 +348,7 @@ class VirtualTexture::Impl {
   }
 
   const std::vector<TileRequest>& wanted() const { return stream_.wanted(); }
-  double bias() const { return bias_.bias(); }
+  double bias() const { return stream_.bias(); }
 
  private:
   struct Readback {
@@ -419,12 +419,11 @@ class VirtualTexture::Impl {
     const auto* words = static_cast<const std::uint32_t*>(
         glMapNamedBufferRange(rb.buffer.get(), 0, GLsizeiptr(rb.bytes), GL_MAP_READ_BIT));
     if (!words) return 0;
-    auto requests = feedback_.process(std::span(words, rb.bytes / 4), bias_.bias());
+    auto requests = feedback_.process(std::span(words, rb.bytes / 4), stream_.bias());
     wanted_generation_ = rb.view_generation;
     glUnmapNamedBuffer(rb.buffer.get());
     if (!requests) return 0;
-    wanted = std::move(*requests);
-    bias_.update(wanted.size());
+    wanted = std::move(*requests);  // the stream updates the bias from it
     return 1;
   }
 
@@ -556,7 +555,7 @@ class VirtualTexture::Impl {
     st.wanted_missing = missing;
     st.resident = std::uint32_t(ss.resident);
     st.pending = std::uint32_t(stream_.pending());
-    st.mip_bias = bias_.bias();
+    st.mip_bias = stream_.bias();
     st.hit_ratio = wanted.empty() ? 1.0 : double(wanted.size() - missing) / wanted.size();
     st.evictions = ss.evictions;
     st.refusals = ss.refusals;
@@ -572,7 +571,6 @@ class VirtualTexture::Impl {
   Pyramid pyramid_;
   ClipmapPageTable table_;
   TileStream stream_;  // requests, cancellations, back-off and residency (the slot cache)
-  MipBiasController bias_;
   FeedbackProcessor feedback_;
   VirtualTextureOptions options_;
 

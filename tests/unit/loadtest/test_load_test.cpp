@@ -89,7 +89,8 @@ LoadTestOptions local_options(std::uint32_t viewers, double duration_s) {
 
 // The same demand for every viewer and frame; a move at frame 0 only.
 DemandFn constant(std::vector<DemandTile> tiles) {
-  return [tiles = std::move(tiles)](std::uint32_t, std::uint64_t f) -> vts::Result<ViewerDemand> {
+  return [tiles = std::move(tiles)](std::uint32_t, std::uint64_t f,
+                                    double) -> vts::Result<ViewerDemand> {
     return ViewerDemand{tiles, f == 0};
   };
 }
@@ -163,7 +164,7 @@ TEST(LoadTest, EveryViewerStreamsItsDemandOnceAndReachesFullResolution) {
 
 TEST(LoadTest, EveryMoveTheDemandAnnouncesIsCountedAndTimed) {
   // Moves at frames 0, 5 and 10, each to a level of its own.
-  const DemandFn demand = [](std::uint32_t, std::uint64_t f) -> vts::Result<ViewerDemand> {
+  const DemandFn demand = [](std::uint32_t, std::uint64_t f, double) -> vts::Result<ViewerDemand> {
     const int z = f < 5 ? 1 : f < 10 ? 2 : 3;
     return ViewerDemand{tiles_of_levels(z, z), f == 0 || f == 5 || f == 10};
   };
@@ -178,7 +179,7 @@ TEST(LoadTest, EveryMoveTheDemandAnnouncesIsCountedAndTimed) {
 TEST(LoadTest, AMoveToAViewAlreadyResidentIsAtFullResolutionAtOnce) {
   // The same tiles before and after the move at frame 10.
   const auto tiles = tiles_of_levels(0, 2);
-  const DemandFn demand = [&](std::uint32_t, std::uint64_t f) -> vts::Result<ViewerDemand> {
+  const DemandFn demand = [&](std::uint32_t, std::uint64_t f, double) -> vts::Result<ViewerDemand> {
     return ViewerDemand{tiles, f == 0 || f == 10};
   };
   auto r = run_load_test(local_options(1, 0.5), demand);
@@ -218,7 +219,7 @@ TEST(LoadTest, ViewsAlternatingFasterThanTilesArriveCancelWhatTheyNoLongerNeed) 
   ASSERT_EQ(level5.size(), 1024u);
   const std::vector<DemandTile> a(level5.begin(), level5.begin() + 512),
       b(level5.begin() + 512, level5.end());
-  const DemandFn demand = [&](std::uint32_t, std::uint64_t f) -> vts::Result<ViewerDemand> {
+  const DemandFn demand = [&](std::uint32_t, std::uint64_t f, double) -> vts::Result<ViewerDemand> {
     return ViewerDemand{f % 2 ? b : a, f == 0};
   };
   LoadTestOptions o = local_options(1, 0.5);
@@ -244,7 +245,7 @@ TEST(LoadTest, ResidentSetKeepsItsCapAndEvictedTilesComeBackFromRam) {
   const auto level3 = tiles_of_levels(3, 3);
   const std::vector<DemandTile> a(level3.begin(), level3.begin() + 6),
       b(level3.begin() + 6, level3.begin() + 12);
-  const DemandFn demand = [&](std::uint32_t, std::uint64_t f) -> vts::Result<ViewerDemand> {
+  const DemandFn demand = [&](std::uint32_t, std::uint64_t f, double) -> vts::Result<ViewerDemand> {
     return ViewerDemand{f % 2 ? b : a, f == 0};
   };
   LoadTestOptions o = local_options(1, 0.5);
@@ -289,7 +290,7 @@ TEST(LoadTest, LatencyCountsFromTheFrameDueTimeNotFromWhenTheDriverGotRoundToIt)
   // The demand of frame 0 takes 40 ms: its requests go out 40 ms after they were due, and that
   // lag is part of their queue time and total latency (no coordinated omission).
   const auto tiles = tiles_of_levels(0, 1);
-  const DemandFn demand = [&](std::uint32_t, std::uint64_t f) -> vts::Result<ViewerDemand> {
+  const DemandFn demand = [&](std::uint32_t, std::uint64_t f, double) -> vts::Result<ViewerDemand> {
     if (f == 0) std::this_thread::sleep_for(40ms);
     return ViewerDemand{tiles, f == 0};
   };
@@ -348,7 +349,7 @@ TEST(LoadTest, OpenLoopSpendsNoSlotOnARequestTheViewNoLongerWants) {
   const auto level4 = tiles_of_levels(4, 4);
   const std::vector<DemandTile> a(level4.begin(), level4.begin() + 16),
       b(level4.begin() + 16, level4.begin() + 32);
-  const DemandFn demand = [&](std::uint32_t, std::uint64_t f) -> vts::Result<ViewerDemand> {
+  const DemandFn demand = [&](std::uint32_t, std::uint64_t f, double) -> vts::Result<ViewerDemand> {
     return ViewerDemand{f % 2 ? b : a, f == 0};
   };
   LoadTestOptions o = local_options(1, 0.5);
@@ -387,7 +388,7 @@ TEST(LoadTest, AFailingTileIsRetriedAfterABackoffNotEveryFrame) {
   LoadTestOptions o = local_options(2, 1.0);
   o.target = bad.string();
   // Moves at frames 0 and 15: the first is superseded, the second still open at the end.
-  const DemandFn demand = [](std::uint32_t, std::uint64_t f) -> vts::Result<ViewerDemand> {
+  const DemandFn demand = [](std::uint32_t, std::uint64_t f, double) -> vts::Result<ViewerDemand> {
     return ViewerDemand{{{TileId{0, 0, 0}, 0, true}, {TileId{1, 0, 0}, 0, true}},
                         f == 0 || f == 15};
   };
@@ -409,7 +410,8 @@ TEST(LoadTest, AFailingTileIsRetriedAfterABackoffNotEveryFrame) {
 
 TEST(LoadTest, TheDemandFunctionsErrorEndsTheRunAndIsReturned) {
   const auto tiles = tiles_of_levels(0, 1);
-  const DemandFn demand = [&](std::uint32_t v, std::uint64_t f) -> vts::Result<ViewerDemand> {
+  const DemandFn demand = [&](std::uint32_t v, std::uint64_t f,
+                              double) -> vts::Result<ViewerDemand> {
     if (v == 1 && f == 3) return vts::make_error(vts::ErrorCode::corrupt, "camera path broke");
     return ViewerDemand{tiles, f == 0};
   };

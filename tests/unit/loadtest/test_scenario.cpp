@@ -85,7 +85,7 @@ TEST(Scenario, APresetGivesEveryViewerCoarseFirstDemandStartingWithAMove) {
   ASSERT_TRUE(d.ok()) << d.error().to_string();
   EXPECT_EQ(d->path_name, "flyover");
   for (std::uint32_t v = 0; v < c.viewers; ++v) {
-    auto first = d->demand(v, 0);
+    auto first = d->demand(v, 0, 0);
     ASSERT_TRUE(first.ok()) << first.error().to_string();
     EXPECT_TRUE(first->move) << "frame 0 starts a view";
     ASSERT_FALSE(first->tiles.empty());
@@ -111,7 +111,7 @@ TEST(Scenario, AnUnmovedCameraReusesItsDemandAndAMovedOneIsSimulatedAgain) {
   ASSERT_TRUE(d.ok()) << d.error().to_string();
   int reused = 0, moves = 0;
   for (std::uint64_t f = 0; f < 100; ++f) {
-    auto r = d->demand(0, f);
+    auto r = d->demand(0, f, 0);
     ASSERT_TRUE(r.ok()) << r.error().to_string();
     if (r->move || f == 0) {
       ++moves;
@@ -121,7 +121,7 @@ TEST(Scenario, AnUnmovedCameraReusesItsDemandAndAMovedOneIsSimulatedAgain) {
     if (f % 7 == 3) {
       auto fresh = camera_demand(*g, c);  // the same viewer, asked only for this frame
       ASSERT_TRUE(fresh.ok());
-      auto one = fresh->demand(0, f);
+      auto one = fresh->demand(0, f, 0);
       ASSERT_TRUE(one.ok());
       EXPECT_FALSE(one->reused) << "frame " << f;
       ASSERT_EQ(one->tiles.size(), r->tiles.size()) << "frame " << f;
@@ -162,7 +162,7 @@ TEST(Scenario, GeneratorsSpreadTheirViewersAlongACameraFileTogether) {
   fs::remove(file);
   ASSERT_TRUE(a.ok() && b.ok());
   for (std::uint32_t v = 0; v < 2; ++v) {
-    auto want = a->demand(2 + v, 0), got = b->demand(v, 0), first = a->demand(v, 0);
+    auto want = a->demand(2 + v, 0, 0), got = b->demand(v, 0, 0), first = a->demand(v, 0, 0);
     ASSERT_TRUE(want.ok() && got.ok() && first.ok());
     ASSERT_EQ(got->tiles.size(), want->tiles.size()) << "viewer " << v;
     for (std::size_t i = 0; i < got->tiles.size(); ++i)

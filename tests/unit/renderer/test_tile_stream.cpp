@@ -14,7 +14,7 @@ namespace {
 using namespace std::chrono_literals;
 using Clock = TileStream::Clock;
 
-const TileId kRoot{0, 0, 0};
+const TileId kStreamRoot{0, 0, 0};
 const TileId kA{1, 0, 0}, kB{1, 1, 0}, kC{2, 0, 0}, kD{2, 3, 1};
 
 std::vector<TileRequest> want(std::initializer_list<TileId> tiles) {
@@ -43,9 +43,9 @@ struct Traced {
 TEST(TileStream, AsksForTheRootFirstAndThenEveryWantedTileOnceInItsOrder) {
   TileStream s;
   const Clock::time_point t0{};
-  EXPECT_EQ(tiles_of(s.start().requests), std::vector<TileId>{kRoot});
+  EXPECT_EQ(tiles_of(s.start().requests), std::vector<TileId>{kStreamRoot});
   EXPECT_TRUE(s.start().requests.empty());  // on its way already
-  const auto w = want({kRoot, kA, kC});
+  const auto w = want({kStreamRoot, kA, kC});
   const StreamStep step = s.frame(1, t0, &w);
   EXPECT_EQ(tiles_of(step.requests), (std::vector<TileId>{kA, kC}));
   EXPECT_TRUE(step.cancels.empty());
@@ -67,7 +67,7 @@ TEST(TileStream, CancelsWhatIsOnItsWayAndNoLongerWantedButNeverTheRoot) {
   EXPECT_EQ(step.cancels, (std::vector<TileId>{kA, kC}));  // sorted
   EXPECT_EQ(tiles_of(step.requests), std::vector<TileId>{kD});
   EXPECT_EQ(s.state(kA), TileStream::State::none);
-  EXPECT_EQ(s.state(kRoot), TileStream::State::pending);
+  EXPECT_EQ(s.state(kStreamRoot), TileStream::State::pending);
   EXPECT_EQ(s.pending(), 3u);  // root, B, D
   // Wanted again: asked for again.
   EXPECT_EQ(tiles_of(s.frame(3, t0, &first).requests), (std::vector<TileId>{kA, kC}));
@@ -77,12 +77,12 @@ TEST(TileStream, PlacedTilesAreResidentAbsentOnesResolvedAndNeitherIsAskedForAga
   Traced t;
   const Clock::time_point t0{};
   t.stream.start();
-  const auto w = want({kRoot, kA, kB});
+  const auto w = want({kStreamRoot, kA, kB});
   t.stream.frame(1, t0, &w);
-  ASSERT_TRUE(t.stream.place(kRoot));
+  ASSERT_TRUE(t.stream.place(kStreamRoot));
   ASSERT_TRUE(t.stream.place(kA));
   t.stream.absent(kB);
-  EXPECT_EQ(t.stream.state(kRoot), TileStream::State::resident);
+  EXPECT_EQ(t.stream.state(kStreamRoot), TileStream::State::resident);
   EXPECT_EQ(t.stream.state(kB), TileStream::State::absent);
   EXPECT_EQ(t.stream.pending(), 0u);
   EXPECT_EQ(t.stream.missing(), 0u);
@@ -121,12 +121,12 @@ TEST(TileStream, ResidencyFollowsTheSlotCacheAndTheRootIsPinned) {
   Traced t({.capacity = 2, .keep_frames = 1});
   const Clock::time_point t0{};
   t.stream.start();
-  const auto first = want({kRoot, kA});
+  const auto first = want({kStreamRoot, kA});
   t.stream.frame(1, t0, &first);
-  ASSERT_TRUE(t.stream.place(kRoot));
+  ASSERT_TRUE(t.stream.place(kStreamRoot));
   ASSERT_TRUE(t.stream.place(kA));
   // Frame 2 wants B instead of A: A (unseen this frame) gives B its slot, the root stays.
-  const auto second = want({kRoot, kB});
+  const auto second = want({kStreamRoot, kB});
   t.stream.frame(2, t0, &second);
   auto got = t.stream.place(kB);
   ASSERT_TRUE(got);
@@ -135,7 +135,7 @@ TEST(TileStream, ResidencyFollowsTheSlotCacheAndTheRootIsPinned) {
   EXPECT_EQ(t.stream.state(kA), TileStream::State::none);
   // Frame 3 wants A and B: B is used this frame, the root is pinned, so A is refused and asked
   // for again at the next frame.
-  const auto both = want({kRoot, kA, kB});
+  const auto both = want({kStreamRoot, kA, kB});
   EXPECT_EQ(tiles_of(t.stream.frame(3, t0, &both).requests), std::vector<TileId>{kA});
   EXPECT_FALSE(t.stream.place(kA));
   EXPECT_EQ(tiles_of(t.stream.frame(4, t0, nullptr).requests), std::vector<TileId>{kA});
@@ -157,6 +157,21 @@ TEST(TileStream, ADroppedRequestIsAskedForAgainAndALateArrivalIsStillPlaced) {
   EXPECT_EQ(s.frame(3, t0, &only_a).cancels, std::vector<TileId>{kB});
   EXPECT_TRUE(s.place(kB));
   EXPECT_EQ(s.pending(), 1u);
+}
+
+TEST(TileStream, AWantedListBeyondTheSlotsRaisesTheMipBias) {
+  TileStream s(TileStreamOptions{.slots = {.capacity = 10, .keep_frames = 1}, .max_bias = 2});
+  const Clock::time_point t0{};
+  std::vector<TileRequest> many;
+  for (std::uint32_t x = 0; x < 12; ++x) many.push_back(TileRequest{TileId{4, x, 0}, 1, true});
+  EXPECT_EQ(s.bias(), 0.0);
+  s.frame(1, t0, nullptr);  // no new list: nothing to judge by
+  EXPECT_EQ(s.bias(), 0.0);
+  s.frame(2, t0, &many);
+  EXPECT_EQ(s.bias(), 1.0);
+  s.frame(3, t0, &many);
+  s.frame(4, t0, &many);
+  EXPECT_EQ(s.bias(), 2.0);  // its cap
 }
 
 }  // namespace

@@ -72,7 +72,10 @@ struct ViewerDemand {
   bool reused = false;
 };
 
-using DemandFn = std::function<Result<ViewerDemand>(std::uint32_t viewer, std::uint64_t frame)>;
+// `bias`: the viewer's mip bias (its TileStream's), to reduce the feedback with, as the GL viewer
+// does.
+using DemandFn =
+    std::function<Result<ViewerDemand>(std::uint32_t viewer, std::uint64_t frame, double bias)>;
 
 enum class CacheMode : std::uint8_t {
   none,  // every tile from the network (the target may itself be a cache daemon)

@@ -19,7 +19,9 @@
 //     `max_backoff` (a viewer does not hammer a failing server every frame).
 //   - drop(): the request ended with nothing (the client cancelled it): asked for again when
 //     wanted.
-// Ancestors are added once, by the wanted list; the stream adds none.
+// Ancestors are added once, by the wanted list; the stream adds none. The stream also holds the
+// mip bias (MipBiasController, over the slots): each new wanted list updates it, and the owner
+// reduces the next feedback with bias() (coarser levels when a view wants more than the slots).
 //
 // Every decision can be traced (TileStreamOptions::trace), in the order it was made.
 //
@@ -36,6 +38,7 @@
 #include <vector>
 
 #include "vts/renderer/feedback.hpp"
+#include "vts/renderer/mip_bias.hpp"
 #include "vts/renderer/slot_cache.hpp"
 
 namespace vts::renderer {
@@ -51,6 +54,7 @@ struct TileStreamOptions {
   SlotCache::Options slots{.capacity = 256, .keep_frames = 8};
   std::chrono::milliseconds backoff{250};       // after the first failure
   std::chrono::milliseconds max_backoff{8000};  // the doubling stops here
+  double max_bias = 4.0;                        // upper bound of the automatic mip bias
   std::function<void(const StreamEvent&)> trace;
 };
 
@@ -87,6 +91,8 @@ class TileStream {
   // Wanted tiles neither resident nor absent.
   std::uint32_t missing() const;
   const SlotCache& slots() const { return slots_; }
+  // The mip bias to reduce the next feedback with, in levels.
+  double bias() const { return bias_.bias(); }
   std::uint64_t absent_count() const { return absent_count_; }
   std::uint64_t failure_count() const { return failure_count_; }
 
@@ -102,6 +108,7 @@ class TileStream {
 
   TileStreamOptions options_;
   SlotCache slots_;
+  MipBiasController bias_;
   std::vector<TileRequest> wanted_;
   std::unordered_set<std::uint64_t> wanted_keys_;
   std::unordered_map<std::uint64_t, Entry> entries_;  // tile_key -> what is known of the tile
