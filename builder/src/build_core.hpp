@@ -32,8 +32,12 @@ struct PreparedBuild {
   std::string input_description;
 };
 
-// Checks the options (not the output) and opens the source.
+// Checks the options (not the output) and opens the source (input files through
+// input_drivers.hpp).
 Result<PreparedBuild> prepare_build(const BuildOptions& o);
+
+// build_pyramid() and build_synthetic_pyramid(), once the input drivers are settled.
+Result<BuildReport> build(const BuildOptions& o);
 
 // The GdalSource options BuildOptions asks for (what probing resolves left unpinned).
 GdalSourceOptions gdal_source_options(const BuildOptions& o);

@@ -18,6 +18,7 @@
 #include "cascade.hpp"
 #include "gdal_source.hpp"
 #include "image_source.hpp"
+#include "input_drivers.hpp"
 #include "vts/base/file_io.hpp"
 #include "vts/builder/downsample.hpp"
 #include "vts/builder/synthetic.hpp"
@@ -389,7 +390,9 @@ Result<std::unique_ptr<GdalSource>> open_gdal(const BuildOptions& o) {
       p.inputs_total = total;
       o.on_progress(p);
     };
-  auto s = GdalSource::open(o.inputs, go);
+  auto drivers = detail::input_drivers();
+  if (!drivers) return std::move(drivers).error();
+  auto s = (*drivers)->open_georeferenced(o.inputs, go);
   if (s && o.on_warning)
     for (const std::string& w : (*s)->warnings()) o.on_warning(w);
   return s;
@@ -534,7 +537,9 @@ Status check_synthetic_region(const SyntheticSpec& s, std::uint64_t width, std::
 
 // Opens the source of a build's inputs (not synthetic).
 Status open_source(const BuildOptions& o, PreparedBuild& p) {
-  if (o.tiling != Tiling::none || detail::gdal_is_georeferenced(o.inputs.front())) {
+  auto drivers = detail::input_drivers();
+  if (!drivers) return std::move(drivers).error();
+  if (o.tiling != Tiling::none || (*drivers)->is_georeferenced(o.inputs.front())) {
     auto src = open_gdal(o);
     if (!src) return std::move(src).error();
     p.gdal = std::move(src).value();
@@ -549,7 +554,7 @@ Status open_source(const BuildOptions& o, PreparedBuild& p) {
                       "only "
                       "(" +
                           o.inputs.front().string() + " has no georeference)");
-  auto src = ImageSource::open(o.inputs, o.grid_columns, o.grid_rows);
+  auto src = (*drivers)->open_image(o.inputs, o.grid_columns, o.grid_rows);
   if (!src) return std::move(src).error();
   p.source = std::move(src).value();
   p.input_description = p.source->description();
@@ -604,9 +609,7 @@ Result<PreparedBuild> prepare_build(const BuildOptions& o) {
   return p;
 }
 
-}  // namespace detail
-
-Result<BuildReport> build_pyramid(const BuildOptions& o) {
+Result<BuildReport> build(const BuildOptions& o) {
   const auto t0 = Clock::now();
   if (o.output.empty()) return make_error(ErrorCode::invalid_argument, "no output file given");
   if (Status s = check_output_is_not_an_input(o.output, o.inputs); !s) return s.error();
@@ -678,6 +681,15 @@ Result<BuildReport> build_pyramid(const BuildOptions& o) {
   report.stats = *stats;
   report.seconds = seconds_since(t0);
   return report;
+}
+
+}  // namespace detail
+
+Result<BuildReport> build_synthetic_pyramid(const BuildOptions& o) {
+  if (!o.synthetic)
+    return make_error(ErrorCode::invalid_argument,
+                      "build_synthetic_pyramid builds synthetic options only");
+  return detail::build(o);
 }
 
 }  // namespace vts

@@ -76,7 +76,9 @@ class GdalSource {
   // Without a range, an input whose values span under 1/16 of 0..255 gets a warning (warnings()).
   static Result<std::unique_ptr<GdalSource>> open(const std::vector<std::filesystem::path>& inputs,
                                                   const GdalSourceOptions& options);
-  ~GdalSource();
+  // Virtual, as the members below that the build calls: the build reaches this class through
+  // input_drivers.hpp only, so a program that builds only synthetic pyramids links no GDAL.
+  virtual ~GdalSource();
 
   std::uint64_t width() const { return width_; }
   std::uint64_t height() const { return height_; }
@@ -91,19 +93,19 @@ class GdalSource {
   // The value mapping in use, one MIN,MAX per data band (1 or 3), or empty (values as they are).
   const std::vector<std::pair<double, double>>& value_ranges() const { return ranges_; }
   // Each input's extent in degrees, clipped to the scheme's extent (the inputs' order).
-  std::vector<LonLatBounds> input_bounds() const;
+  virtual std::vector<LonLatBounds> input_bounds() const;
   // The most inputs that were open at once so far.
   std::size_t peak_open() const { return peak_open_; }
   // `n` readers of the same grid for n threads (GDAL datasets are not shared between threads):
   // this one and n - 1 copies of what probing found, each opening its own datasets; max_open is
   // divided between them, so the process still holds at most max_open inputs open.
-  std::vector<GdalSource*> split(unsigned n);
+  virtual std::vector<GdalSource*> split(unsigned n);
 
   // Grid columns [x0, x1) of rows [y, y + count) as RGBA8 ((x1 - x0) * 4 bytes per row). Texels no
   // input covers (or covers with nodata, a mask or alpha 0) are transparent black; later inputs
   // are composited over earlier ones. A GDAL read error is corrupt, naming the file.
-  Status read_window(std::uint64_t x0, std::uint64_t x1, std::uint64_t y, std::uint32_t count,
-                     std::uint8_t* out);
+  virtual Status read_window(std::uint64_t x0, std::uint64_t x1, std::uint64_t y,
+                             std::uint32_t count, std::uint8_t* out);
 
   struct Input;  // one input: what probing found, and its datasets while open (gdal_source.cpp)
 

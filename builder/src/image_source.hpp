@@ -31,7 +31,9 @@ class ImageSource {
   // or an empty file, is corrupt or truncated.
   static Result<std::unique_ptr<ImageSource>> open(const std::vector<std::filesystem::path>& inputs,
                                                    std::uint32_t columns, std::uint32_t rows);
-  ~ImageSource();
+  // Virtual, as the members below that the build calls: the build reaches this class through
+  // input_drivers.hpp only, so a program that builds only synthetic pyramids links no OpenImageIO.
+  virtual ~ImageSource();
 
   std::uint64_t width() const { return width_; }
   std::uint64_t height() const { return height_; }
@@ -42,11 +44,11 @@ class ImageSource {
   // Reads mosaic rows [y, y + count) as RGBA8 into out (width() * 4 bytes per row). Rows must be
   // read in increasing order. Damaged pixel data is an error (see check_read()), never rows of
   // whatever the decoder filled in.
-  Status read_rows(std::uint64_t y, std::uint32_t count, std::uint8_t* out);
+  virtual Status read_rows(std::uint64_t y, std::uint32_t count, std::uint8_t* out);
   // Columns [x0, x1) of those rows ((x1 - x0) * 4 bytes per row): mosaic pieces beside the
   // columns are not read, and a tiled file decodes only the tiles over them (a shard's window).
-  Status read_window(std::uint64_t x0, std::uint64_t x1, std::uint64_t y, std::uint32_t count,
-                     std::uint8_t* out);
+  virtual Status read_window(std::uint64_t x0, std::uint64_t x1, std::uint64_t y,
+                             std::uint32_t count, std::uint8_t* out);
 
  private:
   struct Piece;

@@ -7,6 +7,7 @@
 #include <xxhash.h>
 
 #include "build_core.hpp"
+#include "input_drivers.hpp"
 #include "shard_geo.hpp"
 #include "shard_internal.hpp"
 #include "vts/base/file_io.hpp"
@@ -213,6 +214,7 @@ Result<std::string> input_fingerprint(const std::filesystem::path& path) {
 
 Result<ShardPlan> make_shard_plan(const BuildOptions& o, std::optional<int> split_level,
                                   std::uint64_t min_shards, int apex_levels) {
+  detail::use_image_inputs();
   if (apex_levels < 0)
     return make_error(ErrorCode::invalid_argument,
                       "--apex-levels " + std::to_string(apex_levels) + " is negative");

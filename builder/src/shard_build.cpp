@@ -7,6 +7,7 @@
 
 #include "build_core.hpp"
 #include "cascade.hpp"
+#include "input_drivers.hpp"
 #include "shard_geo.hpp"
 #include "shard_internal.hpp"
 #include "vts/base/file_io.hpp"
@@ -145,6 +146,7 @@ Result<ShardReport> write_part(const ShardPlan& plan, detail::BuildRun& run,
 
 Result<ShardReport> build_shard(const ShardPlan& plan, std::size_t index,
                                 const ShardBuildOptions& so) {
+  detail::use_image_inputs();
   if (index >= plan.shards.size())
     return make_error(ErrorCode::invalid_argument,
                       "shard " + std::to_string(index) + " is out of range: the plan has " +
@@ -310,6 +312,7 @@ class ApexLevelRows {
 }  // namespace
 
 Result<ShardReport> build_apex(const ShardPlan& plan, const ShardBuildOptions& so) {
+  detail::use_image_inputs();
   const int A = plan.apex_level;
   if (A == 0)
     return make_error(ErrorCode::invalid_argument,

@@ -1,6 +1,8 @@
 // Georeferenced builds in plans (shard_geo.hpp).
 #include "shard_geo.hpp"
 
+#include "input_drivers.hpp"
+
 #include <algorithm>
 
 #include "shard_internal.hpp"
@@ -199,7 +201,9 @@ Result<PreparedBuild> prepare_shard_build(const ShardPlan& plan, const BuildOpti
   go.bounds = plan.geo->georeference.bounds;
   std::vector<std::filesystem::path> paths;
   for (std::size_t i : chosen) paths.push_back(plan.inputs[i].path);
-  auto src = GdalSource::open(paths, go);
+  auto drivers = input_drivers();
+  if (!drivers) return std::move(drivers).error();
+  auto src = (*drivers)->open_georeferenced(paths, go);
   if (!src) return std::move(src).error();
   if ((*src)->width() != plan.width || (*src)->height() != plan.height)
     return make_error(ErrorCode::invalid_argument, "the inputs' geometry is not the plan's");

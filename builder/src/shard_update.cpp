@@ -8,6 +8,7 @@
 #include <xxhash.h>
 
 #include "cascade.hpp"
+#include "input_drivers.hpp"
 #include "shard_geo.hpp"
 #include "shard_internal.hpp"
 #include "vts/builder/shard.hpp"
@@ -206,6 +207,7 @@ std::vector<std::size_t> affected_shards(const ShardPlan& plan,
 
 Result<PlanUpdate> update_shard_plan(const ShardPlan& old,
                                      const std::vector<std::filesystem::path>& inputs) {
+  detail::use_image_inputs();
   if (old.options.synthetic) {
     if (!inputs.empty())
       return make_error(ErrorCode::invalid_argument,

@@ -17,7 +17,7 @@ BuildOptions synthetic_options(const std::filesystem::path& output, std::uint64_
 BuildReport build_archive(const BuildOptions& options) {
   if (options.output.has_parent_path())
     std::filesystem::create_directories(options.output.parent_path());
-  auto r = build_pyramid(options);
+  auto r = build_synthetic_pyramid(options);
   if (!r)
     throw std::runtime_error("build " + options.output.string() + ": " + r.error().to_string());
   return std::move(*r);

@@ -41,7 +41,7 @@ fs::path build_provider_archive(const fs::path& out,
   o.synthetic = vts::SyntheticSpec{width, 600, region, 1};
   o.output = out;
   o.threads = 1;
-  auto r = vts::build_pyramid(o);
+  auto r = vts::build_synthetic_pyramid(o);
   EXPECT_TRUE(r.ok()) << r.error().to_string();
   return out;
 }
@@ -270,7 +270,7 @@ TEST(CacheProvider, AnArchiveOverwrittenInPlaceIsReopenedAndItsNewTilesServed) {
   o.threads = 1;
   o.encode.zstd_level = 19;
   fs::create_directories(d.path / "b");
-  ASSERT_TRUE(vts::build_pyramid(o).ok());
+  ASSERT_TRUE(vts::build_synthetic_pyramid(o).ok());
   auto first = open_local(archive);
   const SourceInfo info = first->info();
   std::promise<SourceInfo> back;

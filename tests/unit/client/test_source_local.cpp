@@ -36,7 +36,7 @@ class SourceLocal : public ::testing::Test {
     o.output = *dir_ / (name + ".pmtiles");
     o.threads = 1;
     o.description = "test " + name;
-    auto r = vts::build_pyramid(o);
+    auto r = vts::build_synthetic_pyramid(o);
     ASSERT_TRUE(r.ok()) << r.error().to_string();
   }
   static fs::path path(const std::string& name) { return *dir_ / (name + ".pmtiles"); }

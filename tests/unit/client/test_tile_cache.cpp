@@ -39,7 +39,7 @@ fs::path build_cache_archive(const fs::path& out,
   o.synthetic = vts::SyntheticSpec{1000, 600, region, 2};
   o.output = out;
   o.threads = 1;
-  auto r = vts::build_pyramid(o);
+  auto r = vts::build_synthetic_pyramid(o);
   EXPECT_TRUE(r.ok()) << r.error().to_string();
   return out;
 }

@@ -41,7 +41,7 @@ fs::path build_warm_archive(const fs::path& out,
   o.synthetic = vts::SyntheticSpec{1000, 600, region, 1};
   o.output = out;
   o.threads = 1;
-  auto r = vts::build_pyramid(o);
+  auto r = vts::build_synthetic_pyramid(o);
   EXPECT_TRUE(r.ok()) << r.error().to_string();
   return out;
 }

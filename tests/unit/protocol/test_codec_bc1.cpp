@@ -2,8 +2,6 @@
 // samples, and its error on a real image (the Earth) at every quality, against stated bounds.
 #include <gtest/gtest.h>
 
-#include <OpenImageIO/imagebuf.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -12,7 +10,9 @@
 #include <thread>
 #include <vector>
 
+#include "vts/imaging/web_image.hpp"
 #include "vts/protocol/codec.hpp"
+#include "vts/test/files.hpp"
 
 namespace vts {
 namespace {
@@ -73,11 +73,11 @@ Error2 rgb_error(const TileImage& a, const TileImage& b) {
 
 // The Earth (xplanet's 2048x1024 blue marble) cut into 256x256 tiles, as a builder would.
 std::vector<TileImage> earth_tiles() {
-  OIIO::ImageBuf buf(VTS_EARTH_JPG);
-  EXPECT_TRUE(buf.read(0, 0, true, OIIO::TypeDesc::UINT8)) << buf.geterror();
-  const int w = buf.spec().width, h = buf.spec().height, ch = buf.spec().nchannels;
-  std::vector<std::uint8_t> px(std::size_t(w) * h * ch);
-  buf.get_pixels(OIIO::ROI::All(), OIIO::TypeDesc::UINT8, px.data());
+  auto earth = imaging::decode_web_image(test::read_bytes(VTS_EARTH_JPG));  // libjpeg-turbo
+  EXPECT_TRUE(earth.ok()) << earth.error().to_string();
+  if (!earth.ok()) return {};
+  const int w = int(earth->width), h = int(earth->height), ch = 4;
+  const std::vector<std::uint8_t>& px = earth->pixels;
   std::vector<TileImage> tiles;
   for (int ty = 0; ty + 256 <= h; ty += 256)
     for (int tx = 0; tx + 256 <= w; tx += 256) {

@@ -16,7 +16,6 @@
 #include <string>
 
 #include "vts/builder/builder.hpp"
-#include "vts/builder/image_io.hpp"
 #include "vts/builder/synthetic.hpp"
 #include "vts/imaging/web_image.hpp"
 
@@ -79,7 +78,7 @@ class ReferenceArchive : public ::testing::Test {
     o.tile_size = tile;
     o.border = border;
     o.threads = 1;
-    auto r = build_pyramid(o);
+    auto r = build_synthetic_pyramid(o);
     ASSERT_TRUE(r.ok()) << r.error().to_string();
   }
   static fs::path path(const std::string& name) { return *dir_ / (name + ".pmtiles"); }
@@ -412,34 +411,6 @@ TEST(ReferenceImageDiff, IdenticalImagesHaveInfinitePsnrAndOnePixelIsCounted) {
   Image broken = a;
   broken.rgba.pop_back();
   EXPECT_FALSE(compare_images(a, broken).ok());
-}
-
-TEST(ImageIo, PngRoundTripsExactlyAndErrorsNameThePath) {
-  const fs::path dir =
-      fs::temp_directory_path() / ("vts-reference-png-" + std::to_string(::getpid()));
-  fs::create_directories(dir);
-  Image img = Image::blank(13, 9);
-  for (std::size_t i = 0; i < img.rgba.size(); ++i)
-    img.rgba[i] = static_cast<std::uint8_t>((i * 89 + 7) ^ (i >> 3));
-  const fs::path p = dir / "round.png";
-  Status w = imaging::write_png(p, img.width, img.height, img.rgba);
-  ASSERT_TRUE(w.ok()) << w.error().to_string();
-  auto back = read_rgba8(p);
-  ASSERT_TRUE(back.ok()) << back.error().to_string();
-  EXPECT_EQ(back->width, 13);
-  EXPECT_EQ(back->height, 9);
-  EXPECT_EQ(back->rgba, img.rgba);
-
-  const fs::path nowhere = dir / "no-such-dir" / "x.png";
-  Status bad = imaging::write_png(nowhere, img.width, img.height, img.rgba);
-  ASSERT_FALSE(bad.ok());
-  EXPECT_NE(bad.error().message.find(nowhere.string()), std::string::npos) << bad.error().message;
-  auto missing = read_rgba8(nowhere);
-  ASSERT_FALSE(missing.ok());
-  EXPECT_EQ(missing.error().code, ErrorCode::not_found);
-  EXPECT_NE(missing.error().message.find(nowhere.string()), std::string::npos);
-  std::error_code ec;
-  fs::remove_all(dir, ec);
 }
 
 TEST(ReferenceAnisotropy, TapsFollowTheFootprintRatioUpToTheLimit) {

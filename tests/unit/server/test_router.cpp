@@ -49,7 +49,7 @@ class Router : public ::testing::Test {
     o.output = *dir_ / (name + ".pmtiles");
     o.threads = 1;
     o.description = "test " + name;
-    auto r = vts::build_pyramid(o);
+    auto r = vts::build_synthetic_pyramid(o);
     ASSERT_TRUE(r.ok()) << r.error().to_string();
   }
 
@@ -182,7 +182,7 @@ TEST_F(Router, AKnownTagAnswers304WithoutReadingTheArchiveAgain) {
   o.synthetic = vts::SyntheticSpec{600, 300, std::nullopt, 2};
   o.output = dir.path() / "memo.pmtiles";
   o.threads = 1;
-  ASSERT_TRUE(vts::build_pyramid(o).ok());
+  ASSERT_TRUE(vts::build_synthetic_pyramid(o).ok());
   vts::TilesetRegistry registry;
   ASSERT_TRUE(registry.load({dir.path()}).ok());
   auto route = [&](std::string_view target, std::string inm) {
@@ -783,7 +783,7 @@ TEST(RouterDamage, ADamagedTileHeaderAnswers500NamingTheTileAndOtherTilesStillSe
   o.synthetic = vts::SyntheticSpec{600, 300};
   o.output = dir / "d.pmtiles";
   o.threads = 1;
-  ASSERT_TRUE(vts::build_pyramid(o).ok());
+  ASSERT_TRUE(vts::build_synthetic_pyramid(o).ok());
   // Overwrite the magic of tile 2/1/0's header frame in the file itself.
   std::uint64_t offset = 0;
   {
@@ -952,13 +952,13 @@ TEST(RouterGeoreference, ServesTheTileMatrixSetOfAGeoreferencedTilesetAnd404ForA
   o.bounds = vts::LonLatBounds{-10, 35, 30, 60};
   o.output = dir / "geo.pmtiles";
   o.threads = 1;
-  auto built = vts::build_pyramid(o);
+  auto built = vts::build_synthetic_pyramid(o);
   ASSERT_TRUE(built.ok()) << built.error().to_string();
   vts::BuildOptions p;
   p.synthetic = vts::SyntheticSpec{600, 300};
   p.output = dir / "plain.pmtiles";
   p.threads = 1;
-  ASSERT_TRUE(vts::build_pyramid(p).ok());
+  ASSERT_TRUE(vts::build_synthetic_pyramid(p).ok());
   vts::TilesetRegistry registry;
   ASSERT_TRUE(registry.load({dir.path()}).ok());
   vts::RouterConfig config;

@@ -49,7 +49,7 @@ class RouterWeb : public ::testing::Test {
     o.synthetic = vts::SyntheticSpec{600, 300, region, 2};  // 3 x 2 tiles at z = 2
     o.output = *dir_ / (name + ".pmtiles");
     o.threads = 1;
-    auto r = vts::build_pyramid(o);
+    auto r = vts::build_synthetic_pyramid(o);
     ASSERT_TRUE(r.ok()) << r.error().to_string();
   }
   void SetUp() override {

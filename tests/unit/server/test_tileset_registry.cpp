@@ -28,7 +28,7 @@ void build_archive(const fs::path& out, std::uint64_t width, std::uint64_t heigh
   o.synthetic = vts::SyntheticSpec{width, height};
   o.output = out;
   o.threads = 1;
-  auto r = vts::build_pyramid(o);
+  auto r = vts::build_synthetic_pyramid(o);
   ASSERT_TRUE(r.ok()) << r.error().to_string();
 }
 

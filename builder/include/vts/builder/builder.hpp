@@ -158,4 +158,9 @@ struct BuildReport {
 
 Result<BuildReport> build_pyramid(const BuildOptions& options);
 
+// The same build for synthetic options only (invalid_argument otherwise), in a program that links
+// neither OpenImageIO nor GDAL: build_pyramid's image inputs are what links them
+// (builder/src/input_drivers.hpp). The tests' archives are built with it.
+Result<BuildReport> build_synthetic_pyramid(const BuildOptions& options);
+
 }  // namespace vts

@@ -1,4 +1,5 @@
-// Test archives built in process with the real builder (vts::build_pyramid), no subprocess.
+// Test archives built in process with the real builder (vts::build_synthetic_pyramid: synthetic
+// options only, so a test links no image library), no subprocess.
 // Failures throw std::runtime_error: a test that cannot make its input cannot run.
 #pragma once
 
@@ -19,7 +20,7 @@ BuildOptions synthetic_options(const std::filesystem::path& output, std::uint64_
                                std::uint64_t height, std::optional<TexelRect> region = std::nullopt,
                                int region_level = 6);
 
-// Builds the archive `options` describe (creating its folder); returns the build report.
+// Builds the synthetic archive `options` describe (creating its folder); returns the build report.
 BuildReport build_archive(const BuildOptions& options);
 
 // An archive opened for reading, with every stored tile listed in directory order.
