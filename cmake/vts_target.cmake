@@ -53,6 +53,12 @@ function(vts_library name)
   vts_configure_target(vts_${name})
   target_include_directories(vts_${name} PUBLIC ${CMAKE_CURRENT_SOURCE_DIR}/include)
   target_link_libraries(vts_${name} PUBLIC ${ARG_PUBLIC} PRIVATE ${ARG_PRIVATE})
+  # The libraries parse untrusted bytes (archives, tiles, HTTP, JSON, images): an implicit
+  # narrowing of a size or an offset is a warning, and with VTS_WERROR an error.
+  # (Clang's -Wconversion also turns on -Wsign-conversion, which GCC's leaves off: kept off there
+  # too, so both compilers hold the code to the same rule.)
+  target_compile_options(vts_${name} PRIVATE -Wconversion
+                                             $<$<CXX_COMPILER_ID:Clang>:-Wno-sign-conversion>)
 endfunction()
 
 # vts_install_executable(<target>): installs the executable into bin/ stripped, with its debug

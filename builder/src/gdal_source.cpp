@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <limits>
 #include <mutex>
 
 #include <cpl_error.h>
@@ -835,11 +836,17 @@ Status GdalSource::read_window(std::uint64_t x0, std::uint64_t x1, std::uint64_t
     if (Status st = acquire(*in); !st) return st;
     const std::uint64_t w = c1 - c0, h = y1 - y0;
     const int nb = in->bands;
-    scratch_.resize(std::size_t(w) * h * nb);
+    // GDAL's line spacing is an int: a window row of floats must fit in one.
+    const std::uint64_t line_bytes = w * std::uint64_t(nb) * 4;
+    if (line_bytes > std::uint64_t(std::numeric_limits<int>::max()))
+      return make_error(ErrorCode::too_large, in->path.string() + ": a window row of " +
+                                                  std::to_string(w) + " texels is beyond GDAL's " +
+                                                  "int line spacing");
+    scratch_.resize(std::size_t(w) * h * std::size_t(nb));
     CPLErrorReset();
-    const CPLErr err = GDALDatasetRasterIO(in->warped, GF_Read, int(c0), int(y0), int(w), int(h),
-                                           scratch_.data(), int(w), int(h), GDT_Float32, nb,
-                                           nullptr, nb * 4, GSpacing(w) * nb * 4, 4);
+    const CPLErr err =
+        GDALDatasetRasterIO(in->warped, GF_Read, int(c0), int(y0), int(w), int(h), scratch_.data(),
+                            int(w), int(h), GDT_Float32, nb, nullptr, nb * 4, int(line_bytes), 4);
     if (err != CE_None || errors.failed())
       return make_error(ErrorCode::corrupt, in->path.string() + ": reading grid rows " +
                                                 std::to_string(y0) + ".." + std::to_string(y1) +

@@ -133,8 +133,11 @@ void ClipmapPageTable::recenter(int z, std::uint32_t cx, std::uint32_t cy) {
   if (nx == old_x && ny == old_y) return;
   ox_[z] = nx;
   oy_[z] = ny;
-  const std::uint32_t x1 = std::min<std::uint64_t>(std::uint64_t{nx} + w_, pyramid_.tiles_x(z));
-  const std::uint32_t y1 = std::min<std::uint64_t>(std::uint64_t{ny} + w_, pyramid_.tiles_y(z));
+  // At most the level's tile count, a uint32.
+  const auto x1 =
+      std::uint32_t(std::min<std::uint64_t>(std::uint64_t{nx} + w_, pyramid_.tiles_x(z)));
+  const auto y1 =
+      std::uint32_t(std::min<std::uint64_t>(std::uint64_t{ny} + w_, pyramid_.tiles_y(z)));
   for (std::uint32_t y = ny; y < y1; ++y) {
     const bool row_kept = y - old_y < w_;
     for (std::uint32_t x = nx; x < x1; ++x) {

@@ -556,7 +556,7 @@ class VirtualTexture::Impl {
     st.resident = std::uint32_t(ss.resident);
     st.pending = std::uint32_t(stream_.pending());
     st.mip_bias = stream_.bias();
-    st.hit_ratio = wanted.empty() ? 1.0 : double(wanted.size() - missing) / wanted.size();
+    st.hit_ratio = wanted.empty() ? 1.0 : double(wanted.size() - missing) / double(wanted.size());
     st.evictions = ss.evictions;
     st.refusals = ss.refusals;
     st.absent = stream_.absent_count();
