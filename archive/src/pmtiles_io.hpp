@@ -438,13 +438,13 @@ class DirectoryBuilder {
   std::uint64_t entries_ = 0, leaf_count_ = 0, leaves_size_ = 0;
 };
 
-// Writes `path` through `write` under a temporary name beside it, fsyncs it, renames it into
-// place and fsyncs the directory; on any failure the temporary file is removed and `path` is
-// untouched. Returns the file's size.
-Result<std::uint64_t> write_file_atomically(const std::filesystem::path& path,
-                                            const std::function<Status(BufferedOut&)>& write);
+// Writes `path` through `write`, buffered, by base's write_file_atomically (a temporary beside it,
+// fsynced, renamed into place, the folder fsynced: on any failure `path` is untouched). Returns the
+// file's size.
+Result<std::uint64_t> write_archive_file(const std::filesystem::path& path,
+                                         const std::function<Status(BufferedOut&)>& write);
 
-// Writes an archive (write_file_atomically): the header (from `options` and `stats`: tiles,
+// Writes an archive (write_archive_file): the header (from `options` and `stats`: tiles,
 // entries, contents, tile_bytes), the root, the gzip/zstd metadata, the leaves from `dirs`, then
 // `write_data`, which must write stats.tile_bytes bytes. Sets stats.file_bytes.
 Status write_archive(const WriterOptions& options, const std::string& metadata_json,

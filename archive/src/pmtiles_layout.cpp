@@ -3,6 +3,7 @@
 #include <cassert>
 
 #include "pmtiles_io.hpp"
+#include "vts/base/file_io.hpp"
 
 namespace vts::archive::detail {
 
@@ -85,39 +86,20 @@ Result<std::vector<std::uint8_t>> DirectoryBuilder::finish() {
   }
 }
 
-Result<std::uint64_t> write_file_atomically(const std::filesystem::path& path,
-                                            const std::function<Status(BufferedOut&)>& write) {
-  const std::filesystem::path dir =
-      path.has_parent_path() ? path.parent_path() : std::filesystem::path(".");
-  Result<std::pair<Fd, std::filesystem::path>> tmp =
-      create_unique(dir, "." + path.filename().string() + ".tmp-", 0666);
-  if (!tmp) return std::move(tmp).error();
-  Fd out = std::move(tmp->first);
-  const std::filesystem::path tmp_path = tmp->second;
+Result<std::uint64_t> write_archive_file(const std::filesystem::path& path,
+                                         const std::function<Status(BufferedOut&)>& write) {
   std::uint64_t size = 0;
-  Status st = [&]() -> Status {
-    BufferedOut w(out.get(), tmp_path);
-    if (Status s = write(w); !s) return s;
-    if (Status s = w.flush(); !s) return s;
-    size = w.position();
-    if (::fsync(out.get()) != 0) return io_error("cannot fsync", tmp_path, errno);
-    if (const int err = out.close_checked(); err != 0)
-      return io_error("cannot close", tmp_path, err);
-    if (::rename(tmp_path.c_str(), path.c_str()) != 0)
-      return io_error("cannot rename " + tmp_path.string() + " to", path, errno);
-    return {};
-  }();
-  if (!st) {
-    out.reset();
-    std::error_code ignored;
-    std::filesystem::remove(tmp_path, ignored);
-    return st.error();
-  }
-  // Make the rename itself durable. The file is complete either way, so a failure here is still
-  // reported: the caller asked for a durable file.
-  Fd dfd(::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC));
-  if (dfd.get() < 0 || ::fsync(dfd.get()) != 0)
-    return io_error("cannot fsync directory", dir, errno);
+  Status st = vts::write_file_atomically(
+      path,
+      [&](int fd, const std::filesystem::path& tmp) -> Status {
+        BufferedOut w(fd, tmp);
+        if (Status s = write(w); !s) return s;
+        if (Status s = w.flush(); !s) return s;
+        size = w.position();
+        return {};
+      },
+      /*folder_sync_required=*/true);
+  if (!st) return st.error();
   return size;
 }
 
@@ -147,23 +129,20 @@ Status write_archive(const WriterOptions& options, const std::string& metadata_j
   h.tile_data_offset = h.leaf_dirs_offset + h.leaf_dirs_length;
   h.tile_data_length = stats.tile_bytes;
   stats.file_bytes = h.tile_data_offset + h.tile_data_length;
-  Result<std::uint64_t> written =
-      write_file_atomically(options.path, [&](BufferedOut& w) -> Status {
-        const auto header_bytes = serialize_header(h);
-        for (std::span<const std::uint8_t> part :
-             {std::span<const std::uint8_t>(header_bytes), root,
-              std::span<const std::uint8_t>(*metadata)}) {
-          if (Status s = w.write(part); !s) return s;
-        }
-        if (Status s = w.copy_from(dirs.leaves_fd(), dirs.leaves_path(), 0, dirs.leaves_bytes());
-            !s)
-          return s;
-        assert(w.position() == h.tile_data_offset);
-        if (Status s = write_data(w); !s) return s;
-        if (w.position() != stats.file_bytes)
-          return make_error(ErrorCode::internal, "archive data section has the wrong size");
-        return Status{};
-      });
+  Result<std::uint64_t> written = write_archive_file(options.path, [&](BufferedOut& w) -> Status {
+    const auto header_bytes = serialize_header(h);
+    for (std::span<const std::uint8_t> part : {std::span<const std::uint8_t>(header_bytes), root,
+                                               std::span<const std::uint8_t>(*metadata)}) {
+      if (Status s = w.write(part); !s) return s;
+    }
+    if (Status s = w.copy_from(dirs.leaves_fd(), dirs.leaves_path(), 0, dirs.leaves_bytes()); !s)
+      return s;
+    assert(w.position() == h.tile_data_offset);
+    if (Status s = write_data(w); !s) return s;
+    if (w.position() != stats.file_bytes)
+      return make_error(ErrorCode::internal, "archive data section has the wrong size");
+    return Status{};
+  });
   if (!written) return written.error();
   return {};
 }

@@ -93,7 +93,7 @@ class PartWriterImpl final : public PartWriter {
     PartStats stats;
     stats.tiles = records.size();
     stats.content_sum = content_sum_;
-    Result<std::uint64_t> size = write_file_atomically(path_, [&](BufferedOut& w) -> Status {
+    Result<std::uint64_t> size = write_archive_file(path_, [&](BufferedOut& w) -> Status {
       // Payloads: each distinct one at its first appearance in tile-id order.
       std::unordered_map<std::uint64_t, std::uint64_t> offset_of;
       std::vector<std::uint64_t> offsets(records.size());

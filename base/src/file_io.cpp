@@ -40,7 +40,9 @@ bool is_space(char c) noexcept {
 
 }  // namespace
 
-Status write_file_atomically(const fs::path& path, std::string_view bytes) {
+Status write_file_atomically(const fs::path& path,
+                             const std::function<Status(int fd, const fs::path& temporary)>& write,
+                             bool folder_sync_required) {
   const fs::path dir = path.has_parent_path() ? path.parent_path() : fs::path(".");
   // A unique temporary name with O_EXCL (not mkstemp, which forces mode 0600).
   std::random_device rd;
@@ -57,34 +59,46 @@ Status write_file_atomically(const fs::path& path, std::string_view bytes) {
   }
   if (fd < 0) return io_error("cannot create a temporary file like", tmp, EEXIST);
 
-  auto fail = [&](const std::string& what, const fs::path& p, int err) -> Status {
+  const auto discard = [&] {
     if (fd >= 0) ::close(fd);
     ::unlink(tmp.c_str());
+  };
+  auto fail = [&](const std::string& what, const fs::path& p, int err) -> Status {
+    discard();
     return io_error(what, p, err);
   };
-  const char* data = bytes.data();
-  std::size_t left = bytes.size();
-  while (left > 0) {
-    const ssize_t n = ::write(fd, data, left);
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      return fail("cannot write", tmp, errno);
-    }
-    data += n;
-    left -= static_cast<std::size_t>(n);
+  if (Status st = write(fd, tmp); !st) {
+    discard();
+    return st;
   }
   if (::fsync(fd) != 0) return fail("cannot flush", tmp, errno);
   const int closed = ::close(fd);
   fd = -1;
   if (closed != 0) return fail("cannot write", tmp, errno);
   if (::rename(tmp.c_str(), path.c_str()) != 0) return fail("cannot rename a file to", path, errno);
-  // Make the rename durable too; the file is complete either way, so this is best effort.
+  // Make the rename durable too. The file is complete either way.
   const int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-  if (dfd >= 0) {
-    ::fsync(dfd);
-    ::close(dfd);
-  }
+  const int synced = dfd >= 0 && ::fsync(dfd) == 0 ? 0 : errno;
+  if (dfd >= 0) ::close(dfd);
+  if (synced != 0 && folder_sync_required) return io_error("cannot fsync directory", dir, synced);
   return {};
+}
+
+Status write_file_atomically(const fs::path& path, std::string_view bytes) {
+  return write_file_atomically(path, [bytes](int fd, const fs::path& tmp) -> Status {
+    const char* data = bytes.data();
+    std::size_t left = bytes.size();
+    while (left > 0) {
+      const ssize_t n = ::write(fd, data, left);
+      if (n < 0) {
+        if (errno == EINTR) continue;
+        return io_error("cannot write", tmp, errno);
+      }
+      data += n;
+      left -= static_cast<std::size_t>(n);
+    }
+    return {};
+  });
 }
 
 Status check_output_is_not_an_input(const fs::path& output, std::span<const fs::path> inputs) {

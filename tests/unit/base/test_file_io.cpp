@@ -4,6 +4,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 
 #include <filesystem>
@@ -99,6 +100,43 @@ TEST(FileIo, AFifoADeviceOrAFolderIsRefusedAtOnceNamingTheFileAndItsKind) {
 // A name, whatever bytes it holds, stays one line and cannot drive a terminal: control bytes (a
 // newline that would forge a line, ESC) and UTF-8-encoded C1 controls become \xHH; text, UTF-8
 // and backslashes pass as they are, so escaping twice changes nothing.
+// Every file in `dir`, by name.
+std::vector<std::string> names_in(const fs::path& dir) {
+  std::vector<std::string> out;
+  for (const auto& e : fs::directory_iterator(dir)) out.push_back(e.path().filename().string());
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+TEST(FileIo, AnAtomicWriteReplacesTheFileWholeAndAFailedOneLeavesTheOldOne) {
+  const vts::test::TempDir dir("vts-file-io");
+  const fs::path p = dir / "config.json";
+  ASSERT_TRUE(vts::write_file_atomically(p, "first").ok());
+  EXPECT_EQ(vts::read_file(p).value(), "first");
+  // Piece by piece, through the descriptor it is given.
+  vts::Status st = vts::write_file_atomically(p, [](int fd, const fs::path&) -> vts::Status {
+    for (const char* piece : {"sec", "ond"})
+      if (::write(fd, piece, 3) != 3) return vts::make_error(vts::ErrorCode::io, "short");
+    return {};
+  });
+  ASSERT_TRUE(st.ok()) << st.error().to_string();
+  EXPECT_EQ(vts::read_file(p).value(), "second");
+  // A writer's error is the error; the old file stays, no temporary is left.
+  st = vts::write_file_atomically(p, [](int fd, const fs::path& tmp) -> vts::Status {
+    EXPECT_EQ(::write(fd, "third", 5), 5);
+    return vts::make_error(vts::ErrorCode::corrupt, "gave up on " + tmp.string());
+  });
+  ASSERT_FALSE(st.ok());
+  EXPECT_EQ(st.error().code, vts::ErrorCode::corrupt);
+  EXPECT_EQ(vts::read_file(p).value(), "second");
+  EXPECT_EQ(names_in(dir.path()), std::vector<std::string>{"config.json"});
+  // A folder that does not exist: io, naming the temporary's place.
+  st = vts::write_file_atomically(dir / "none" / "x.json", "x");
+  ASSERT_FALSE(st.ok());
+  EXPECT_EQ(st.error().code, vts::ErrorCode::io);
+  EXPECT_NE(st.error().message.find("none"), std::string::npos) << st.error().message;
+}
+
 TEST(EscapeControls, ControlBytesAndC1ControlsBecomeHexAndEverythingElsePasses) {
   EXPECT_EQ(vts::escape_controls(""), "");
   EXPECT_EQ(vts::escape_controls("plain/name-1.pmtiles"), "plain/name-1.pmtiles");

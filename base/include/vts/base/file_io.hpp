@@ -4,6 +4,7 @@
 #pragma once
 
 #include <filesystem>
+#include <functional>
 #include <initializer_list>
 #include <span>
 #include <string>
@@ -21,6 +22,16 @@ inline namespace base {
 // O_EXCL, mode 0666 & ~umask), fsyncs it, renames it over `path`, then fsyncs the folder (best
 // effort). On failure nothing but the old file is left. Error io, naming the file and the cause.
 Status write_file_atomically(const std::filesystem::path& path, std::string_view bytes);
+
+// The same for a file written piece by piece (an archive): `write` is given the temporary file's
+// descriptor (O_WRONLY, at offset 0) and name (for its messages) and writes every byte; its error
+// ends the write, with the temporary removed. With `folder_sync_required` a failed fsync of the
+// folder after the rename is an error too (the caller promised a durable file); otherwise it is
+// best effort.
+Status write_file_atomically(
+    const std::filesystem::path& path,
+    const std::function<Status(int fd, const std::filesystem::path& temporary)>& write,
+    bool folder_sync_required = false);
 
 // invalid_argument, naming both, when `output` already exists as one of `inputs`: the same file
 // by any path, a symbolic link to it or a hard link (what a command would destroy by writing its
