@@ -16,7 +16,9 @@
 #include "image_source.hpp"
 #include "vts/builder/builder.hpp"
 
-namespace vts::detail {
+namespace vts {
+inline namespace builder {
+namespace detail {
 
 // A build's options resolved: its source opened, its geometry and georeference.
 struct PreparedBuild {
@@ -93,4 +95,6 @@ unsigned worker_count(unsigned requested);
 // Synthetic builds: the tiles of level z (all, or those over the region).
 TileRect synthetic_tiles(const Geometry& g, const SyntheticSpec& spec, int z);
 
-}  // namespace vts::detail
+}  // namespace detail
+}  // namespace builder
+}  // namespace vts

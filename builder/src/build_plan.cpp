@@ -9,7 +9,9 @@
 
 #include "cascade.hpp"
 
-namespace vts::detail {
+namespace vts {
+inline namespace builder {
+namespace detail {
 
 namespace {
 
@@ -167,4 +169,6 @@ Status ScratchRaster::read(std::uint64_t x0, std::uint64_t x1, std::uint64_t y, 
   return {};
 }
 
-}  // namespace vts::detail
+}  // namespace detail
+}  // namespace builder
+}  // namespace vts

@@ -16,7 +16,9 @@
 #include "vts/protocol/geometry.hpp"
 #include "vts/protocol/tiling.hpp"
 
-namespace vts::detail {
+namespace vts {
+inline namespace builder {
+namespace detail {
 
 struct Pass {
   int finest = 0, coarsest = 0;
@@ -72,4 +74,6 @@ class ScratchRaster {
   TexelRect window_;
 };
 
-}  // namespace vts::detail
+}  // namespace detail
+}  // namespace builder
+}  // namespace vts

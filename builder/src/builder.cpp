@@ -25,6 +25,7 @@
 #include "work_queue.hpp"
 
 namespace vts {
+inline namespace builder {
 
 namespace {
 
@@ -692,4 +693,5 @@ Result<BuildReport> build_synthetic_pyramid(const BuildOptions& o) {
   return detail::build(o);
 }
 
+}  // namespace builder
 }  // namespace vts

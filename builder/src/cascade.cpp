@@ -4,7 +4,9 @@
 #include <cassert>
 #include <cstring>
 
-namespace vts::detail {
+namespace vts {
+inline namespace builder {
+namespace detail {
 
 namespace {
 
@@ -223,4 +225,6 @@ void Cascade::make_parent_rows(int z) {
   }
 }
 
-}  // namespace vts::detail
+}  // namespace detail
+}  // namespace builder
+}  // namespace vts

@@ -23,7 +23,9 @@
 #include "vts/protocol/geometry.hpp"
 #include "vts/protocol/tiling.hpp"
 
-namespace vts::detail {
+namespace vts {
+inline namespace builder {
+namespace detail {
 
 // The window of level z - 1 that level z's `window` can make non-transparent with `filter`
 // (box: the parents of its texels; lanczos3: three more texels on each side), clipped to the image.
@@ -70,4 +72,6 @@ class Cascade {
   std::vector<std::unique_ptr<Level>> levels_;
 };
 
-}  // namespace vts::detail
+}  // namespace detail
+}  // namespace builder
+}  // namespace vts

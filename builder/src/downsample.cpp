@@ -6,6 +6,7 @@
 #include <numbers>
 
 namespace vts {
+inline namespace builder {
 
 const char* downsample_filter_name(DownsampleFilter f) {
   switch (f) {
@@ -210,4 +211,5 @@ std::vector<std::uint8_t> downsample_image_rgba8(const std::uint8_t* pixels, std
   return out;
 }
 
+}  // namespace builder
 }  // namespace vts

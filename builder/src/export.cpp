@@ -21,6 +21,7 @@
 #include "work_queue.hpp"
 
 namespace vts {
+inline namespace builder {
 
 namespace {
 
@@ -591,4 +592,5 @@ Result<ExportReport> export_web_tiles(const archive::Reader& reader, const Tiles
   return r;
 }
 
+}  // namespace builder
 }  // namespace vts

@@ -7,6 +7,7 @@
 #include "vts/archive/inspect.hpp"
 
 namespace vts {
+inline namespace builder {
 
 namespace OIIO = OIIO_NAMESPACE;
 
@@ -145,4 +146,5 @@ Status extract_level(const archive::Reader& reader, const TilesetInfo& info, int
   return out->finish();
 }
 
+}  // namespace builder
 }  // namespace vts

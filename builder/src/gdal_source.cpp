@@ -19,6 +19,7 @@
 #include "vts/base/file_io.hpp"
 
 namespace vts {
+inline namespace builder {
 
 const char* resampling_name(Resampling r) noexcept {
   switch (r) {
@@ -881,4 +882,5 @@ Status GdalSource::read_window(std::uint64_t x0, std::uint64_t x1, std::uint64_t
 
 }  // namespace detail
 
+}  // namespace builder
 }  // namespace vts

@@ -18,7 +18,9 @@
 #include "vts/protocol/geometry.hpp"
 #include "vts/protocol/tiling.hpp"
 
-namespace vts::detail {
+namespace vts {
+inline namespace builder {
+namespace detail {
 
 // Whether GDAL opens `path` as a raster with a CRS and a geotransform. False for anything else
 // (a plain JPEG, a missing file, anything but a regular file, which is not even opened): those go
@@ -131,4 +133,6 @@ class GdalSource {
   std::vector<std::unique_ptr<GdalSource>> copies_;  // split()'s
 };
 
-}  // namespace vts::detail
+}  // namespace detail
+}  // namespace builder
+}  // namespace vts

@@ -4,7 +4,9 @@
 #include "build_core.hpp"
 #include "input_drivers.hpp"
 
-namespace vts::detail {
+namespace vts {
+inline namespace builder {
+namespace detail {
 namespace {
 
 const InputDrivers kImageInputs{&gdal_is_georeferenced, &GdalSource::open, &ImageSource::open};
@@ -15,13 +17,17 @@ void use_image_inputs() {
   set_input_drivers(&kImageInputs);
 }
 
-}  // namespace vts::detail
+}  // namespace detail
+}  // namespace builder
+}  // namespace vts
 
 namespace vts {
+inline namespace builder {
 
 Result<BuildReport> build_pyramid(const BuildOptions& options) {
   detail::use_image_inputs();
   return detail::build(options);
 }
 
+}  // namespace builder
 }  // namespace vts

@@ -8,6 +8,7 @@
 #include "vts/base/file_io.hpp"
 
 namespace vts {
+inline namespace builder {
 
 namespace OIIO = OIIO_NAMESPACE;
 
@@ -64,4 +65,5 @@ Result<Rgba8Image> read_rgba8(const std::filesystem::path& path) {
   return img;
 }
 
+}  // namespace builder
 }  // namespace vts

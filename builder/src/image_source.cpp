@@ -10,7 +10,9 @@
 #include "vts/base/file_io.hpp"
 #include "vts/builder/downsample.hpp"
 
-namespace vts::detail {
+namespace vts {
+inline namespace builder {
+namespace detail {
 
 namespace OIIO = OIIO_NAMESPACE;
 
@@ -346,4 +348,6 @@ Status ImageSource::read_window(std::uint64_t x0, std::uint64_t x1, std::uint64_
   return {};
 }
 
-}  // namespace vts::detail
+}  // namespace detail
+}  // namespace builder
+}  // namespace vts

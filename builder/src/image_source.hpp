@@ -10,7 +10,9 @@
 
 #include "vts/base/result.hpp"
 
-namespace vts::detail {
+namespace vts {
+inline namespace builder {
+namespace detail {
 
 // Decides whether an OpenImageIO read of `path` went wrong: `ok` is what the read call returned,
 // `messages` what the reader reported meanwhile (ImageInput::geterror()). Decoders report damage
@@ -68,4 +70,6 @@ class ImageSource {
   std::vector<float> scratch_float_;
 };
 
-}  // namespace vts::detail
+}  // namespace detail
+}  // namespace builder
+}  // namespace vts

@@ -4,7 +4,9 @@
 
 #include <atomic>
 
-namespace vts::detail {
+namespace vts {
+inline namespace builder {
+namespace detail {
 namespace {
 
 std::atomic<const InputDrivers*> g_drivers{nullptr};
@@ -22,4 +24,6 @@ Result<const InputDrivers*> input_drivers() {
                     "(vts-build does)");
 }
 
-}  // namespace vts::detail
+}  // namespace detail
+}  // namespace builder
+}  // namespace vts

@@ -15,7 +15,9 @@
 #include "image_source.hpp"
 #include "vts/base/result.hpp"
 
-namespace vts::detail {
+namespace vts {
+inline namespace builder {
+namespace detail {
 
 struct InputDrivers {
   bool (*is_georeferenced)(const std::filesystem::path& path) = nullptr;
@@ -32,4 +34,6 @@ void set_input_drivers(const InputDrivers* drivers);
 // The table, or unsupported naming what this program lacks (it was linked for synthetic builds).
 Result<const InputDrivers*> input_drivers();
 
-}  // namespace vts::detail
+}  // namespace detail
+}  // namespace builder
+}  // namespace vts

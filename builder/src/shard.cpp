@@ -15,6 +15,7 @@
 #include "vts/protocol/json_input.hpp"
 
 namespace vts {
+inline namespace builder {
 
 namespace {
 
@@ -405,4 +406,5 @@ std::string shard_part_name(std::size_t index) {
   return name;
 }
 
+}  // namespace builder
 }  // namespace vts

@@ -15,6 +15,7 @@
 #include "vts/protocol/json_input.hpp"
 
 namespace vts {
+inline namespace builder {
 
 namespace {
 
@@ -423,4 +424,5 @@ Result<MergeReport> merge_plan(const ShardPlan& plan, const std::filesystem::pat
   return report;
 }
 
+}  // namespace builder
 }  // namespace vts

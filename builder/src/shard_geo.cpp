@@ -7,7 +7,9 @@
 
 #include "shard_internal.hpp"
 
-namespace vts::detail {
+namespace vts {
+inline namespace builder {
+namespace detail {
 
 namespace {
 
@@ -211,4 +213,6 @@ Result<PreparedBuild> prepare_shard_build(const ShardPlan& plan, const BuildOpti
   return p;
 }
 
-}  // namespace vts::detail
+}  // namespace detail
+}  // namespace builder
+}  // namespace vts

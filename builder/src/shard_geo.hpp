@@ -10,7 +10,9 @@
 #include "build_core.hpp"
 #include "vts/builder/shard.hpp"
 
-namespace vts::detail {
+namespace vts {
+inline namespace builder {
+namespace detail {
 
 // The georeferenced options of BuildOptions (tiling, bounds, max level, resampling, warp error,
 // window width, bands, value ranges) in a plan's options JSON, and back.
@@ -41,4 +43,6 @@ std::vector<std::size_t> plan_inputs_meeting(const ShardPlan& plan, const Geomet
 Result<PreparedBuild> prepare_shard_build(const ShardPlan& plan, const BuildOptions& o,
                                           const std::vector<std::size_t>& chosen);
 
-}  // namespace vts::detail
+}  // namespace detail
+}  // namespace builder
+}  // namespace vts

@@ -10,7 +10,9 @@
 
 #include "vts/builder/shard.hpp"
 
-namespace vts::detail {
+namespace vts {
+inline namespace builder {
+namespace detail {
 
 // The tiles of `level` (one level's rect) at level z that lie under `root`.
 TileRect shard_rect(const TileRect& level, TileId root, int z);
@@ -38,4 +40,6 @@ Status check_apex_shards(const ShardPlan& plan, const nlohmann::json& apex_manif
                          const std::filesystem::path& apex,
                          const std::vector<std::uint64_t>& attachment_hashes);
 
-}  // namespace vts::detail
+}  // namespace detail
+}  // namespace builder
+}  // namespace vts

@@ -14,6 +14,7 @@
 #include "vts/builder/shard.hpp"
 
 namespace vts {
+inline namespace builder {
 
 namespace {
 
@@ -238,4 +239,5 @@ Result<PlanUpdate> update_shard_plan(const ShardPlan& old,
   return u;
 }
 
+}  // namespace builder
 }  // namespace vts

@@ -1,6 +1,7 @@
 #include "vts/builder/synthetic.hpp"
 
 namespace vts {
+inline namespace builder {
 
 TileImage synthetic_tile(const Geometry& g, TileId t) {
   const std::uint32_t s = g.stored_size();
@@ -17,4 +18,5 @@ TileImage synthetic_tile(const Geometry& g, TileId t) {
   return img;
 }
 
+}  // namespace builder
 }  // namespace vts

@@ -19,7 +19,9 @@
 
 #include "vts/base/result.hpp"
 
-namespace vts::detail {
+namespace vts {
+inline namespace builder {
+namespace detail {
 
 // Threads joined by join() or, at the latest, by the destructor. Not thread-safe: one thread
 // starts and joins them.
@@ -113,4 +115,6 @@ class WorkQueue {
   ThreadGroup workers_;  // last: joined before the members its workers use go away
 };
 
-}  // namespace vts::detail
+}  // namespace detail
+}  // namespace builder
+}  // namespace vts

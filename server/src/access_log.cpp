@@ -2,7 +2,9 @@
 
 #include <ctime>
 
-namespace vts::http_detail {
+namespace vts {
+inline namespace server {
+namespace http_detail {
 namespace {
 
 // A JSON string's content: quote and backslash escaped; control bytes (newline, ESC, ...) and
@@ -63,4 +65,6 @@ void AccessLog::write(const AccessLogEntry& e) {
   std::fflush(file_);
 }
 
-}  // namespace vts::http_detail
+}  // namespace http_detail
+}  // namespace server
+}  // namespace vts

@@ -11,7 +11,9 @@
 
 #include "vts/base/result.hpp"
 
-namespace vts::http_detail {
+namespace vts {
+inline namespace server {
+namespace http_detail {
 
 struct AccessLogEntry {
   std::string_view remote, method, target, route, tileset;
@@ -40,4 +42,6 @@ class AccessLog {
   std::mutex mutex_;
 };
 
-}  // namespace vts::http_detail
+}  // namespace http_detail
+}  // namespace server
+}  // namespace vts

@@ -3,7 +3,9 @@
 #include <boost/asio/post.hpp>
 #include <boost/system/error_code.hpp>
 
-namespace vts::http_detail {
+namespace vts {
+inline namespace server {
+namespace http_detail {
 
 void Sweeper::start() {
   boost::asio::post(ioc_, [this] { schedule(); });
@@ -53,4 +55,6 @@ void Sweeper::sweep() {
   for (Swept* s : swept_) s->check_deadlines(now);
 }
 
-}  // namespace vts::http_detail
+}  // namespace http_detail
+}  // namespace server
+}  // namespace vts

@@ -9,7 +9,9 @@
 #include <optional>
 #include <vector>
 
-namespace vts::http_detail {
+namespace vts {
+inline namespace server {
+namespace http_detail {
 
 // Deadlines (seconds long, enforced by a sweep every 10-250 ms) need no nanoseconds: the coarse
 // monotonic clock is read from the vDSO without touching the TSC, and a request reads it ~4 times.
@@ -66,4 +68,6 @@ class Sweeper {
   std::vector<Swept*> swept_;
 };
 
-}  // namespace vts::http_detail
+}  // namespace http_detail
+}  // namespace server
+}  // namespace vts

@@ -2,7 +2,9 @@
 
 #include <system_error>
 
-namespace vts::http_detail {
+namespace vts {
+inline namespace server {
+namespace http_detail {
 
 EncodeQueue::EncodeQueue(int threads, EncodeLimits limits) : limits_(limits) {
   try {
@@ -86,4 +88,6 @@ void EncodeQueue::work() {
   }
 }
 
-}  // namespace vts::http_detail
+}  // namespace http_detail
+}  // namespace server
+}  // namespace vts

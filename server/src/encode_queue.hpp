@@ -18,7 +18,9 @@
 #include <unordered_map>
 #include <vector>
 
-namespace vts::http_detail {
+namespace vts {
+inline namespace server {
+namespace http_detail {
 
 struct EncodeLimits {
   std::size_t max_queued = 1024;         // encodes waiting for a worker, in all
@@ -73,4 +75,6 @@ class EncodeQueue {
   std::vector<std::thread> workers_;
 };
 
-}  // namespace vts::http_detail
+}  // namespace http_detail
+}  // namespace server
+}  // namespace vts

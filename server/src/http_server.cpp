@@ -30,6 +30,7 @@
 #include "web_tile_cache.hpp"
 
 namespace vts {
+inline namespace server {
 namespace {
 
 using namespace http_detail;
@@ -366,4 +367,5 @@ void raise_fd_limit_for_connections() noexcept {
   }
 }
 
+}  // namespace server
 }  // namespace vts

@@ -2,7 +2,9 @@
 
 #include <cstdio>
 
-namespace vts::http_detail {
+namespace vts {
+inline namespace server {
+namespace http_detail {
 namespace {
 
 std::size_t status_index(int status) {
@@ -112,4 +114,6 @@ std::string prometheus_text(const Metrics& m, std::size_t tilesets_loaded,
   return out;
 }
 
-}  // namespace vts::http_detail
+}  // namespace http_detail
+}  // namespace server
+}  // namespace vts

@@ -11,7 +11,9 @@
 #include "vts/protocol/tile_provider.hpp"
 #include "vts/server/router.hpp"
 
-namespace vts::http_detail {
+namespace vts {
+inline namespace server {
+namespace http_detail {
 
 // Statuses counted by label; anything else counts as "other" (the trailing 0).
 inline constexpr std::array<int, 17> kStatuses = {200, 204, 206, 304, 400, 401, 403, 404, 405,
@@ -41,4 +43,6 @@ struct Metrics {
 std::string prometheus_text(const Metrics& m, std::size_t tilesets_loaded,
                             std::size_t archives_skipped, const AsyncTileProvider* provider);
 
-}  // namespace vts::http_detail
+}  // namespace http_detail
+}  // namespace server
+}  // namespace vts

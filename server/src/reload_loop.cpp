@@ -5,7 +5,9 @@
 
 #include "vts/base/file_io.hpp"
 
-namespace vts::http_detail {
+namespace vts {
+inline namespace server {
+namespace http_detail {
 
 Status ReloadLoop::start() {
   try {
@@ -92,4 +94,6 @@ void ReloadLoop::reload(bool force) {
   refusals_ = std::move(refusals);
 }
 
-}  // namespace vts::http_detail
+}  // namespace http_detail
+}  // namespace server
+}  // namespace vts

@@ -24,7 +24,9 @@
 #include "vts/base/result.hpp"
 #include "vts/server/tileset_registry.hpp"
 
-namespace vts::http_detail {
+namespace vts {
+inline namespace server {
+namespace http_detail {
 
 class ReloadLoop {
  public:
@@ -74,4 +76,6 @@ class ReloadLoop {
   std::thread thread_;
 };
 
-}  // namespace vts::http_detail
+}  // namespace http_detail
+}  // namespace server
+}  // namespace vts

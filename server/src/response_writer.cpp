@@ -13,7 +13,9 @@
 #include "vts/archive/pmtiles.hpp"
 #include "vts/server/tileset_registry.hpp"
 
-namespace vts::http_detail {
+namespace vts {
+inline namespace server {
+namespace http_detail {
 namespace {
 
 // One pass with no calls (find_first_of calls memchr once per character of its set).
@@ -136,4 +138,6 @@ std::size_t write_some(int sock, Outgoing& o, boost::system::error_code& ec) {
   return std::size_t(n);
 }
 
-}  // namespace vts::http_detail
+}  // namespace http_detail
+}  // namespace server
+}  // namespace vts

@@ -20,7 +20,9 @@
 #include "vts/archive/pmtiles.hpp"
 #include "vts/server/router.hpp"
 
-namespace vts::http_detail {
+namespace vts {
+inline namespace server {
+namespace http_detail {
 
 // One queued response of a connection.
 struct Outgoing {
@@ -58,4 +60,6 @@ void prepare_response(Outgoing& o);
 // read as it was (the archive was modified in place, or a read error).
 std::size_t write_some(int sock, Outgoing& o, boost::system::error_code& ec);
 
-}  // namespace vts::http_detail
+}  // namespace http_detail
+}  // namespace server
+}  // namespace vts

@@ -21,6 +21,7 @@
 #include "web_tile_cache.hpp"
 
 namespace vts {
+inline namespace server {
 
 namespace router_detail {
 
@@ -775,4 +776,5 @@ HttpResponse complete_web_wait(HttpResponse marker,
   return r;
 }
 
+}  // namespace server
 }  // namespace vts

@@ -11,6 +11,7 @@
 #include "vts/base/file_io.hpp"
 
 namespace vts {
+inline namespace server {
 namespace {
 
 using namespace router_detail;
@@ -123,4 +124,5 @@ std::string sign_path(std::string_view path, std::int64_t expires_unix, std::str
   return "?expires=" + expires + "&sig=" + hex(mac);
 }
 
+}  // namespace server
 }  // namespace vts

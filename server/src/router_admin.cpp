@@ -3,6 +3,7 @@
 #include "vts/base/file_io.hpp"
 
 namespace vts {
+inline namespace server {
 
 using namespace router_detail;
 
@@ -56,4 +57,5 @@ HttpResponse route_admin(const HttpRequest& request, const AdminState& state) {
   return r;
 }
 
+}  // namespace server
 }  // namespace vts

@@ -4,7 +4,9 @@
 #include "router_internal.hpp"
 #include "vts/base/file_io.hpp"
 
-namespace vts::router_detail {
+namespace vts {
+inline namespace server {
+namespace router_detail {
 
 bool none_match(std::string_view header, std::string_view etag) {
   if (header.empty()) return false;
@@ -87,4 +89,6 @@ RangeDecision decide_range(std::string_view header, std::uint64_t size) {
   return a.empty() ? suffix(b, size) : first_last(a, b, size);
 }
 
-}  // namespace vts::router_detail
+}  // namespace router_detail
+}  // namespace server
+}  // namespace vts

@@ -11,7 +11,9 @@
 
 #include "vts/server/router.hpp"
 
-namespace vts::router_detail {
+namespace vts {
+inline namespace server {
+namespace router_detail {
 
 inline constexpr const char* kAllowedMethods = "GET, HEAD, OPTIONS";
 inline constexpr const char* kTextType = "text/plain; charset=utf-8";
@@ -147,4 +149,6 @@ std::optional<HttpResponse> web_page(const HttpRequest& request, const Target& t
                                      const TilesetRegistry& registry, const RouterConfig& config,
                                      const AsyncTileProvider* provider);
 
-}  // namespace vts::router_detail
+}  // namespace router_detail
+}  // namespace server
+}  // namespace vts

@@ -3,7 +3,9 @@
 
 #include "router_internal.hpp"
 
-namespace vts::router_detail {
+namespace vts {
+inline namespace server {
+namespace router_detail {
 namespace {
 
 bool is_unreserved(unsigned char c) {
@@ -150,4 +152,6 @@ bool valid_host(std::string_view h) {
   return true;
 }
 
-}  // namespace vts::router_detail
+}  // namespace router_detail
+}  // namespace server
+}  // namespace vts

@@ -15,7 +15,9 @@
 #include "vts/protocol/tiling.hpp"
 #include "web_tile_cache.hpp"
 
-namespace vts::router_detail {
+namespace vts {
+inline namespace server {
+namespace router_detail {
 namespace {
 
 using http_detail::WebTile;
@@ -499,4 +501,6 @@ HttpResponse web_tilejson_route(const std::string& name, const TilesetInfo& info
   return r;
 }
 
-}  // namespace vts::router_detail
+}  // namespace router_detail
+}  // namespace server
+}  // namespace vts

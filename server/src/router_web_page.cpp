@@ -11,7 +11,9 @@
 #include "vts/base/file_io.hpp"
 #include "vts/protocol/tileset.hpp"
 
-namespace vts::router_detail {
+namespace vts {
+inline namespace server {
+namespace router_detail {
 
 namespace {
 
@@ -166,4 +168,6 @@ std::optional<HttpResponse> web_page(const HttpRequest& request, const Target& t
   return tileset_page(name);
 }
 
-}  // namespace vts::router_detail
+}  // namespace router_detail
+}  // namespace server
+}  // namespace vts

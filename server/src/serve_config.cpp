@@ -10,6 +10,7 @@
 #include "vts/protocol/json_input.hpp"
 
 namespace vts {
+inline namespace server {
 namespace {
 
 using nlohmann::json;
@@ -257,4 +258,5 @@ Status check_access_names(const HttpServerOptions& options, const TilesetRegistr
   return {};
 }
 
+}  // namespace server
 }  // namespace vts

@@ -8,7 +8,9 @@
 #include <boost/asio/post.hpp>
 #include <cassert>
 
-namespace vts::http_detail {
+namespace vts {
+inline namespace server {
+namespace http_detail {
 namespace {
 
 namespace asio = boost::asio;
@@ -584,4 +586,6 @@ void Session::check_deadlines(DeadlineClock::time_point now) {
   if ((now >= read_deadline_ && !owed) || now >= write_deadline_) close();
 }
 
-}  // namespace vts::http_detail
+}  // namespace http_detail
+}  // namespace server
+}  // namespace vts

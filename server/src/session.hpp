@@ -21,7 +21,9 @@
 #include "response_writer.hpp"
 #include "vts/server/http_server.hpp"
 
-namespace vts::http_detail {
+namespace vts {
+inline namespace server {
+namespace http_detail {
 
 class Session;
 
@@ -123,4 +125,6 @@ class Session final : public std::enable_shared_from_this<Session>, public Swept
   const std::uint64_t id_;  // HttpRequest::connection: unique in this process
 };
 
-}  // namespace vts::http_detail
+}  // namespace http_detail
+}  // namespace server
+}  // namespace vts

@@ -18,7 +18,9 @@
 #include <optional>
 #include <unordered_map>
 
-namespace vts::http_detail {
+namespace vts {
+inline namespace server {
+namespace http_detail {
 
 class TileTagMemo {
  public:
@@ -64,4 +66,6 @@ class TileTagMemo {
   std::array<Shard, kShards> shards_;
 };
 
-}  // namespace vts::http_detail
+}  // namespace http_detail
+}  // namespace server
+}  // namespace vts

@@ -14,6 +14,7 @@
 #include <system_error>
 
 namespace vts {
+inline namespace server {
 namespace {
 
 namespace fs = std::filesystem;
@@ -425,4 +426,5 @@ std::size_t TilesetRegistry::size() const {
   return tilesets_.size();
 }
 
+}  // namespace server
 }  // namespace vts

@@ -1,6 +1,8 @@
 #include "web_tile_cache.hpp"
 
-namespace vts::http_detail {
+namespace vts {
+inline namespace server {
+namespace http_detail {
 
 void Flight::on_done(Callback cb, std::stop_token interest) {
   std::unique_lock lock(m_);
@@ -180,4 +182,6 @@ std::string web_metrics_text(const WebTileCache& c) {
   return s;
 }
 
-}  // namespace vts::http_detail
+}  // namespace http_detail
+}  // namespace server
+}  // namespace vts

@@ -27,7 +27,9 @@
 #include "encode_queue.hpp"
 #include "vts/imaging/web_image.hpp"
 
-namespace vts::http_detail {
+namespace vts {
+inline namespace server {
+namespace http_detail {
 
 // One encoded image and its strong ETag (with quotes).
 struct WebTile {
@@ -141,4 +143,6 @@ class WebTileCache {
 // Prometheus lines of the cache's counters (vts_web_*).
 std::string web_metrics_text(const WebTileCache& c);
 
-}  // namespace vts::http_detail
+}  // namespace http_detail
+}  // namespace server
+}  // namespace vts

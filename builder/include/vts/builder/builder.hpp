@@ -40,6 +40,7 @@
 #include "vts/protocol/tileset.hpp"
 
 namespace vts {
+inline namespace builder {
 
 struct SyntheticSpec {
   std::uint64_t width = 0, height = 0;
@@ -163,4 +164,5 @@ Result<BuildReport> build_pyramid(const BuildOptions& options);
 // (builder/src/input_drivers.hpp). The tests' archives are built with it.
 Result<BuildReport> build_synthetic_pyramid(const BuildOptions& options);
 
+}  // namespace builder
 }  // namespace vts

@@ -25,6 +25,7 @@
 #include "vts/base/srgb.hpp"
 
 namespace vts {
+inline namespace builder {
 
 enum class DownsampleFilter : std::uint8_t { box, lanczos3 };
 
@@ -79,4 +80,5 @@ class LanczosReducer {
 std::vector<std::uint8_t> downsample_image_rgba8(const std::uint8_t* pixels, std::uint64_t width,
                                                  std::uint64_t height, DownsampleFilter filter);
 
+}  // namespace builder
 }  // namespace vts

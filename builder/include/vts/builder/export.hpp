@@ -37,6 +37,7 @@
 #include "vts/protocol/tiling.hpp"
 
 namespace vts {
+inline namespace builder {
 
 enum class ExportLayout : std::uint8_t { pmtiles, xyz };
 
@@ -96,4 +97,5 @@ std::string export_metadata_json(const TilesetInfo& info, const std::string& sou
 Result<ExportReport> export_web_tiles(const archive::Reader& reader, const TilesetInfo& info,
                                       const ExportOptions& options);
 
+}  // namespace builder
 }  // namespace vts

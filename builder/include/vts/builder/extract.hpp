@@ -9,6 +9,7 @@
 #include "vts/protocol/tileset.hpp"
 
 namespace vts {
+inline namespace builder {
 
 struct ExtractOptions {
   std::filesystem::path output;
@@ -33,4 +34,5 @@ Status extract_tile(const archive::Reader& reader, const TilesetInfo& info, Tile
 Status extract_level(const archive::Reader& reader, const TilesetInfo& info, int z,
                      const ExtractOptions& options);
 
+}  // namespace builder
 }  // namespace vts

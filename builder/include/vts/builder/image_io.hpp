@@ -10,6 +10,7 @@
 #include "vts/base/result.hpp"
 
 namespace vts {
+inline namespace builder {
 
 // width x height pixels, 4 bytes each, rows top to bottom.
 struct Rgba8Image {
@@ -24,4 +25,5 @@ struct Rgba8Image {
 // channels.
 Result<Rgba8Image> read_rgba8(const std::filesystem::path& path);
 
+}  // namespace builder
 }  // namespace vts

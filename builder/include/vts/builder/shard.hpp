@@ -21,6 +21,7 @@
 #include "vts/builder/builder.hpp"
 
 namespace vts {
+inline namespace builder {
 
 inline constexpr int kPlanVersion = 3;
 
@@ -178,4 +179,5 @@ Result<MergeReport> merge_plan(const ShardPlan& plan, const std::filesystem::pat
                                const std::function<void(const archive::MergeProgress&)>& progress,
                                const std::atomic<bool>* cancel, bool verify = true);
 
+}  // namespace builder
 }  // namespace vts

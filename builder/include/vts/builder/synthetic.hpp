@@ -11,6 +11,7 @@
 #include "vts/protocol/geometry.hpp"
 
 namespace vts {
+inline namespace builder {
 
 inline void synthetic_texel(std::uint64_t px, std::uint64_t py, std::uint8_t out[4]) {
   out[0] = static_cast<std::uint8_t>(px & 0xFF);
@@ -22,4 +23,5 @@ inline void synthetic_texel(std::uint64_t px, std::uint64_t py, std::uint8_t out
 // The stored tile (content + clamped border) of the synthetic source for tile t.
 TileImage synthetic_tile(const Geometry& g, TileId t);
 
+}  // namespace builder
 }  // namespace vts

@@ -47,6 +47,7 @@
 #include "vts/server/tileset_registry.hpp"
 
 namespace vts {
+inline namespace server {
 
 struct HttpServerLimits {
   std::size_t max_header_bytes = 8 * 1024;  // request line + headers; beyond: 431
@@ -113,4 +114,5 @@ class HttpServer {
 // one, so the server's connection limit, not the process's, is what refuses clients. Best effort.
 void raise_fd_limit_for_connections() noexcept;
 
+}  // namespace server
 }  // namespace vts

@@ -26,6 +26,7 @@
 #include "vts/server/tileset_registry.hpp"
 
 namespace vts {
+inline namespace server {
 
 namespace http_detail {
 class WebTileCache;  // web_tile_cache.hpp
@@ -187,4 +188,5 @@ HttpResponse complete_web_wait(HttpResponse marker,
 // Signs a URL path for an HMAC-protected tileset: returns "?expires=<t>&sig=<hex>" to append.
 std::string sign_path(std::string_view path, std::int64_t expires_unix, std::string_view key);
 
+}  // namespace server
 }  // namespace vts

@@ -24,6 +24,7 @@
 #include "vts/server/tileset_registry.hpp"
 
 namespace vts {
+inline namespace server {
 
 // "HOST:PORT", "[v6]:PORT" or ":PORT" (host 0.0.0.0). Error invalid_argument.
 Result<std::pair<std::string, std::uint16_t>> parse_endpoint(const std::string& s);
@@ -48,4 +49,5 @@ Status check_cors_origin(std::string_view origin);
 // (checked at start-up: a misspelt name would leave the real tileset public).
 Status check_access_names(const HttpServerOptions& options, const TilesetRegistry& registry);
 
+}  // namespace server
 }  // namespace vts

@@ -21,6 +21,7 @@
 #include "vts/protocol/tileset.hpp"
 
 namespace vts {
+inline namespace server {
 
 namespace http_detail {
 class TileTagMemo;
@@ -134,4 +135,5 @@ class TilesetRegistry {
   std::map<std::filesystem::path, Refusal> refused_;  // archive files refused, as seen
 };
 
+}  // namespace server
 }  // namespace vts
