@@ -34,17 +34,12 @@ void TileStream::note(StreamEvent::Kind kind, TileId tile) const {
   if (options_.trace) options_.trace(StreamEvent{kind, tile});
 }
 
-TileStream::Entry* TileStream::pending_entry(std::uint64_t key) {
-  auto it = entries_.find(key);
-  return it != entries_.end() && it->second.state == State::pending ? &it->second : nullptr;
-}
-
 StreamStep TileStream::start() {
   StreamStep step;
   const TileId root{};
   if (state(root) != State::none) return step;
   entries_[tile_key(root)].state = State::pending;
-  ++pending_;
+  pending_.insert(tile_key(root));
   step.requests.push_back(
       TileRequest{root, std::numeric_limits<std::uint32_t>::max(), /*direct=*/false});
   note(StreamEvent::Kind::request, root);
@@ -62,28 +57,28 @@ StreamStep TileStream::frame(std::uint64_t frame, Clock::time_point now,
     for (const TileRequest& r : wanted_) wanted_keys_.insert(tile_key(r.tile));
     // On their way and no longer wanted: cancelled (never the root).
     const std::uint64_t root = tile_key(TileId{});
-    for (auto it = entries_.begin(); it != entries_.end();) {
-      if (it->second.state != State::pending || it->first == root ||
-          wanted_keys_.count(it->first)) {
+    for (auto it = pending_.begin(); it != pending_.end();) {
+      if (*it == root || wanted_keys_.count(*it)) {
         ++it;
         continue;
       }
-      const TileId t = tile_from_key(it->first);
+      const TileId t = tile_from_key(*it);
       step.cancels.push_back(t);
       note(StreamEvent::Kind::cancel, t);
-      --pending_;
-      it = entries_.erase(it);
+      entries_.erase(*it);
+      it = pending_.erase(it);
     }
     // The cancellations in a stable order (the map's is not), so traces compare.
     std::sort(step.cancels.begin(), step.cancels.end());
   }
   for (const TileRequest& r : wanted_) {
     if (slots_.slot_of(r.tile)) continue;
-    Entry& e = entries_[tile_key(r.tile)];
+    const std::uint64_t key = tile_key(r.tile);
+    Entry& e = entries_[key];
     if (e.state == State::pending || e.state == State::absent) continue;
     if (e.state == State::backing_off && e.retry_at > now) continue;
     e.state = State::pending;
-    ++pending_;
+    pending_.insert(key);
     step.requests.push_back(r);
     note(StreamEvent::Kind::request, r.tile);
   }
@@ -95,10 +90,8 @@ std::optional<SlotCache::Acquired> TileStream::place(TileId tile) {
   const std::uint64_t key = tile_key(tile);
   if (slots_.slot_of(tile)) return std::nullopt;
   // A tile may arrive after its cancellation (it was on its way): it is placed all the same.
-  if (auto it = entries_.find(key); it != entries_.end()) {
-    if (it->second.state == State::pending) --pending_;
-    entries_.erase(it);
-  }
+  entries_.erase(key);
+  pending_.erase(key);
   auto got = slots_.acquire(tile);
   if (!got) {
     note(StreamEvent::Kind::refused, tile);
@@ -113,7 +106,7 @@ std::optional<SlotCache::Acquired> TileStream::place(TileId tile) {
 void TileStream::absent(TileId tile) {
   Entry& e = entries_[tile_key(tile)];
   if (e.state == State::absent) return;
-  if (e.state == State::pending) --pending_;
+  pending_.erase(tile_key(tile));
   e.state = State::absent;
   ++absent_count_;
   note(StreamEvent::Kind::absent, tile);
@@ -121,7 +114,7 @@ void TileStream::absent(TileId tile) {
 
 void TileStream::failed(TileId tile, Clock::time_point now) {
   Entry& e = entries_[tile_key(tile)];
-  if (e.state == State::pending) --pending_;
+  pending_.erase(tile_key(tile));
   e.state = State::backing_off;
   e.failures = std::min(e.failures + 1, 30);
   auto wait = options_.backoff;
@@ -133,10 +126,7 @@ void TileStream::failed(TileId tile, Clock::time_point now) {
 
 void TileStream::drop(TileId tile) {
   const std::uint64_t key = tile_key(tile);
-  if (pending_entry(key)) {
-    --pending_;
-    entries_.erase(key);
-  }
+  if (pending_.erase(key)) entries_.erase(key);
 }
 
 TileStream::State TileStream::state(TileId tile) const {

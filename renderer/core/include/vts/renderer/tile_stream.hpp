@@ -87,7 +87,7 @@ class TileStream {
 
   State state(TileId tile) const;
   const std::vector<TileRequest>& wanted() const { return wanted_; }
-  std::size_t pending() const { return pending_; }
+  std::size_t pending() const { return pending_.size(); }
   // Wanted tiles neither resident nor absent.
   std::uint32_t missing() const;
   const SlotCache& slots() const { return slots_; }
@@ -103,8 +103,6 @@ class TileStream {
     Clock::time_point retry_at{};
   };
   void note(StreamEvent::Kind kind, TileId tile) const;
-  // The entry of a tile on its way, or nullptr.
-  Entry* pending_entry(std::uint64_t key);
 
   TileStreamOptions options_;
   SlotCache slots_;
@@ -112,7 +110,9 @@ class TileStream {
   std::vector<TileRequest> wanted_;
   std::unordered_set<std::uint64_t> wanted_keys_;
   std::unordered_map<std::uint64_t, Entry> entries_;  // tile_key -> what is known of the tile
-  std::size_t pending_ = 0;
+  // The tiles on its way: a new wanted list looks for cancellations among these only, not among
+  // every tile it knows (absent ones are kept forever).
+  std::unordered_set<std::uint64_t> pending_;
   std::uint64_t absent_count_ = 0, failure_count_ = 0;
 };
 
