@@ -1,5 +1,6 @@
 #include "encode_queue.hpp"
 
+#include <algorithm>
 #include <system_error>
 
 namespace vts {
@@ -7,12 +8,11 @@ inline namespace server {
 namespace http_detail {
 
 EncodeQueue::EncodeQueue(int threads, EncodeLimits limits) : limits_(limits) {
-  try {
-    for (int i = 0; i < threads; ++i) workers_.emplace_back([this] { work(); });
-  } catch (const std::system_error&) {
-    stop();  // joins the ones that started
-    throw;
-  }
+  auto pool = WorkerPool::start({.threads = unsigned(std::max(1, threads)), .name = "vts-encode"});
+  if (!pool)
+    throw std::system_error(std::make_error_code(std::errc::resource_unavailable_try_again),
+                            pool.error().message);
+  pool_ = std::move(*pool);
 }
 
 EncodeQueue::~EncodeQueue() {
@@ -24,9 +24,8 @@ void EncodeQueue::stop() {
     std::lock_guard lock(m_);
     stopping_ = true;
   }
-  cv_.notify_all();
-  for (auto& w : workers_) w.join();
-  workers_.clear();
+  // Every job queued has its turn queued on the pool: joining runs (or drops) them all.
+  if (pool_) pool_->join();
 }
 
 std::size_t EncodeQueue::queued() const {
@@ -44,8 +43,10 @@ EncodeQueue::Admit EncodeQueue::push(Job job) {
       if (it->second.empty()) turn_.push_back(job.owner);
       it->second.push_back(std::move(job));
       ++queued_;
-      lock.unlock();
-      cv_.notify_one();
+      // Under m_, so stop() (which sets stopping_ under it before it closes the pool) cannot
+      // come between: the turn is never refused. The pool's queue is unbounded (admission is
+      // bounded above), so submit() does not wait.
+      pool_->submit([this] { turn(); });
       return Admit::queued;
     }
   }
@@ -76,16 +77,13 @@ void EncodeQueue::execute(Job& job) {
   }
 }
 
-void EncodeQueue::work() {
-  while (true) {
-    Job job;
-    {
-      std::unique_lock lock(m_);
-      cv_.wait(lock, [this] { return stopping_ || !turn_.empty(); });
-      if (!pop(job)) return;  // stopping, and nothing left
-    }
-    execute(job);
+void EncodeQueue::turn() {
+  Job job;
+  {
+    std::lock_guard lock(m_);
+    if (!pop(job)) return;
   }
+  execute(job);
 }
 
 }  // namespace http_detail

@@ -5,18 +5,20 @@
 // queued (one connection's 500 pipelined images wait their turn behind one image of every other
 // connection, not in front of them), and a job is asked whether anybody still wants it just
 // before it runs (a connection that closed leaves its queued encodes to be dropped, not run).
+// The threads are the project's one pool (vts::WorkerPool): this queue keeps only the policy —
+// each job it admits hands the pool one turn, and a turn runs whichever job is next round-robin.
 // Thread-safe.
 #pragma once
 
-#include <condition_variable>
 #include <cstddef>
 #include <cstdint>
 #include <deque>
 #include <functional>
+#include <memory>
 #include <mutex>
-#include <thread>
 #include <unordered_map>
-#include <vector>
+
+#include "vts/base/worker_pool.hpp"
 
 namespace vts {
 inline namespace server {
@@ -39,8 +41,8 @@ class EncodeQueue {
   };
   enum class Admit : std::uint8_t { queued, owner_full, full };
 
-  // Starts `threads` (>= 1) workers. When the system refuses a thread, the workers already
-  // started are joined and the std::system_error is rethrown.
+  // Starts a pool of `threads` (>= 1) workers named "vts-encode". When the system refuses a
+  // thread, the workers already started are joined and std::system_error is thrown.
   EncodeQueue(int threads, EncodeLimits limits);
   // stop().
   ~EncodeQueue();
@@ -54,25 +56,25 @@ class EncodeQueue {
   // Runs (or drops) the jobs still queued, then joins the workers. Idempotent.
   void stop();
 
-  int threads() const noexcept { return int(workers_.size()); }
+  int threads() const noexcept { return pool_ ? int(pool_->threads()) : 0; }
   std::size_t queued() const;
 
   const EncodeLimits& limits() const noexcept { return limits_; }
 
  private:
-  void work();
+  // One turn on the pool: runs (or drops) the next job, round-robin between owners.
+  void turn();
   // Under m_: the next job, round-robin between owners; false when none.
   bool pop(Job& out);
   static void execute(Job& job);
 
   EncodeLimits limits_;
   mutable std::mutex m_;
-  std::condition_variable cv_;
   std::unordered_map<std::uint64_t, std::deque<Job>> by_owner_;
   std::deque<std::uint64_t> turn_;  // owners with jobs queued, in the order they are served
   std::size_t queued_ = 0;
   bool stopping_ = false;
-  std::vector<std::thread> workers_;
+  std::unique_ptr<WorkerPool> pool_;  // last: joined (stop()) before the queue goes
 };
 
 }  // namespace http_detail

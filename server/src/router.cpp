@@ -381,14 +381,15 @@ HttpResponse provided_tile_route(const HttpRequest& request,
       *y >= g.tiles_y(static_cast<std::uint8_t>(*z))) {
     return outside_pyramid(*z, *x, *y, t->name);
   }
-  auto d = std::make_shared<DeferredTile>();
-  d->id = TileId{static_cast<std::uint8_t>(*z), *x, *y};
-  d->if_none_match = std::string(request.if_none_match);
-  d->cache_control = cache_control(priv, config.max_age_seconds, false);
-  d->tileset = std::move(t);
+  auto p = std::make_shared<PendingAnswer>();
+  p->id = TileId{static_cast<std::uint8_t>(*z), *x, *y};
+  p->if_none_match = std::string(request.if_none_match);
+  p->cache_control = cache_control(priv, config.max_age_seconds, false);
+  p->provided = std::move(t);
+  p->connection = request.connection;
   HttpResponse r;
   r.route = Route::tile;
-  r.deferred = std::move(d);
+  r.pending = std::move(p);
   return r;
 }
 
@@ -525,8 +526,8 @@ HttpResponse serve_archive(const HttpRequest& request, std::shared_ptr<const Til
 }
 
 // Web images of a provided tileset (vts cache serve): the tile comes from the provider
-// (deferred), then is encoded as for archives (provided_web_image). Not versioned as immutable,
-// as its native tiles. WebMercatorQuad resampling is not served from a provider.
+// (a pending answer), then is encoded as for archives (provided_web_image). Not versioned as
+// immutable, as its native tiles. WebMercatorQuad resampling is not served from a provider.
 HttpResponse provided_web(const HttpRequest& request, std::shared_ptr<const ProvidedTileset> t,
                           const Target& target, const Address& a, const RouterConfig& config,
                           const std::string& base, bool priv) {
@@ -566,18 +567,18 @@ HttpResponse provided_web(const HttpRequest& request, std::shared_ptr<const Prov
   const std::string cc = cache_control(priv, config.max_age_seconds, false);
   if (!g.exists(id))
     return web_filler(g.tile_size(), *a.web, config, request.if_none_match, cc, request.connection);
-  auto d = std::make_shared<DeferredTile>();
-  d->id = id;
-  d->if_none_match = std::string(request.if_none_match);
-  d->cache_control = cc;
-  d->tileset = std::move(t);
-  d->web = *a.web;
-  d->web_options = config.web.encode;
-  d->web_cache = config.web.cache;
-  d->connection = request.connection;
+  auto p = std::make_shared<PendingAnswer>();
+  p->id = id;
+  p->if_none_match = std::string(request.if_none_match);
+  p->cache_control = cc;
+  p->provided = std::move(t);
+  p->web = *a.web;
+  p->web_options = config.web.encode;
+  p->cache = config.web.cache;
+  p->connection = request.connection;
   HttpResponse r;
   r.route = Route::tile;
-  r.deferred = std::move(d);
+  r.pending = std::move(p);
   return r;
 }
 
@@ -702,79 +703,46 @@ HttpResponse route(const HttpRequest& request, const TilesetRegistry& registry,
   return r;
 }
 
-HttpResponse complete_deferred(HttpResponse marker, ProvidedTile tile) {
-  assert(marker.deferred);
-  const DeferredTile& d = *marker.deferred;
-  const std::string& name = d.tileset->name;
-  HttpResponse r;
+namespace router_detail {
+
+HttpResponse answer_provided(const PendingAnswer& p, ProvidedTile tile) {
+  const std::string& name = p.provided->name;
   const bool web_ok =
-      d.web && (tile.kind == ProvidedTile::Kind::ok ||
-                (tile.kind == ProvidedTile::Kind::absent && d.tileset->info.sparse));
+      p.web && (tile.kind == ProvidedTile::Kind::ok ||
+                (tile.kind == ProvidedTile::Kind::absent && p.provided->info.sparse));
   if (web_ok) {
     const std::vector<std::uint8_t> bytes(tile.payload.begin(), tile.payload.end());
-    r = provided_web_image(d, tile.kind == ProvidedTile::Kind::ok ? &bytes : nullptr);
+    return provided_web_image(p, tile.kind == ProvidedTile::Kind::ok ? &bytes : nullptr);
   }
-  if (!web_ok) switch (tile.kind) {
-      case ProvidedTile::Kind::unavailable:
-        r = error(503, "tile " + d.id.to_string() + " of " + name +
-                           " is not cached and its origin is unavailable" +
-                           (tile.message.empty() ? std::string() : ": " + tile.message));
-        break;
-      case ProvidedTile::Kind::ok:
-        r = payload_response(tile.payload, d.if_none_match, d.cache_control, 502, d.id, name);
-        if (r.status == 200) r.keep = std::move(tile.keep);
-        break;
-      case ProvidedTile::Kind::absent:
-        if (d.tileset->info.sparse) {
-          r.status = 204;  // known-empty: cacheable like a tile
-          add(r, "Cache-Control", d.cache_control);
-        } else {
-          r = error(404, "tile " + d.id.to_string() + " is missing from the origin of " + name +
-                             " (origin incomplete)");
-        }
-        break;
-      case ProvidedTile::Kind::bad_origin:
-        r = error(502, "the origin of " + name + " sent an unusable tile " + d.id.to_string() +
-                           (tile.message.empty() ? std::string() : ": " + tile.message));
-        break;
-    }
-  r.route = Route::tile;
-  for (auto& h : marker.headers) r.headers.push_back(std::move(h));  // CORS, from route()
-  r.head_only = marker.head_only;
-  if (r.status == 204 || r.status == 304) {
-    r.owned.clear();
-    r.view = {};
-    r.keep.reset();
-    r.content_length = 0;
+  HttpResponse r;
+  switch (tile.kind) {
+    case ProvidedTile::Kind::unavailable:
+      r = error(503, "tile " + p.id.to_string() + " of " + name +
+                         " is not cached and its origin is unavailable" +
+                         (tile.message.empty() ? std::string() : ": " + tile.message));
+      break;
+    case ProvidedTile::Kind::ok:
+      r = payload_response(tile.payload, p.if_none_match, p.cache_control, 502, p.id, name);
+      if (r.status == 200) r.keep = std::move(tile.keep);
+      break;
+    case ProvidedTile::Kind::absent:
+      if (p.provided->info.sparse) {
+        r.status = 204;  // known-empty: cacheable like a tile
+        add(r, "Cache-Control", p.cache_control);
+      } else {
+        r = error(404, "tile " + p.id.to_string() + " is missing from the origin of " + name +
+                           " (origin incomplete)");
+      }
+      break;
+    case ProvidedTile::Kind::bad_origin:
+      r = error(502, "the origin of " + name + " sent an unusable tile " + p.id.to_string() +
+                         (tile.message.empty() ? std::string() : ": " + tile.message));
+      break;
   }
   return r;
 }
 
-HttpResponse complete_web_wait(HttpResponse marker,
-                               const std::shared_ptr<const http_detail::WebTile>& tile, int status,
-                               const std::string& why) {
-  assert(marker.web_wait);
-  const DeferredWebTile& d = *marker.web_wait;
-  HttpResponse r;
-  if (tile) {
-    r = web_image_response(tile, d.if_none_match, d.cache_control);
-  } else if (status == 503) {  // shed or dropped: the message says why
-    r = tile_error(503, why.empty() || why.back() != '\n' ? why : why.substr(0, why.size() - 1));
-    add(r, "Retry-After", "1");
-  } else {
-    r = tile_error(500, "cannot encode the web image: " + why);
-  }
-  r.route = Route::tile;
-  r.hold = std::move(marker.hold);
-  for (auto& h : marker.headers) r.headers.push_back(std::move(h));  // CORS, from route()
-  r.head_only = marker.head_only;
-  if (r.status == 304) {
-    r.view = {};
-    r.keep.reset();
-    r.content_length = 0;
-  }
-  return r;
-}
+}  // namespace router_detail
 
 }  // namespace server
 }  // namespace vts

@@ -112,18 +112,23 @@ HttpResponse web_mercator_tile_route(const HttpRequest& request, std::shared_ptr
                                      imaging::WebFormat format, const RouterConfig& config,
                                      bool priv);
 // The answer to a provided tile (vts cache serve) wanted as a web image, once it has arrived:
-// `payload` (null: absent from a sparse origin, the transparent filler).
-HttpResponse provided_web_image(const DeferredTile& d, const std::vector<std::uint8_t>* payload);
+// `payload` (null: absent from a sparse origin, the transparent filler). A 304 or 502 at once, a
+// cached image, or the plan to encode it (a pending answer with `image`).
+HttpResponse provided_web_image(const PendingAnswer& d, const std::vector<std::uint8_t>* payload);
+// The answer a provided tile (the pending answer `p`'s step 1) leads to: the tile (a view of its
+// payload, kept by `keep`), 304, 204 (absent from a sparse origin), 404, 502, 503; or for a web
+// image what provided_web_image() answers. Without the finishing touches (finish_pending's).
+HttpResponse answer_provided(const PendingAnswer& p, ProvidedTile tile);
 // The transparent filler of a tile with nothing to show (T x T texels), asked for on connection
 // `owner` (HttpRequest::connection).
 HttpResponse web_filler(std::uint32_t tile_size, imaging::WebFormat f, const RouterConfig& config,
                         std::string_view if_none_match, const std::string& cc, std::uint64_t owner);
-// GET /{ts}.json?format=...[&tiling=...]: the TileJSON stock web maps read; 400 for an unknown
-// format or a tiling this tileset cannot be served in.
 // 200 with an encoded image, or 304 when `if_none_match` names its ETag.
 HttpResponse web_image_response(const std::shared_ptr<const http_detail::WebTile>& tile,
                                 std::string_view if_none_match, const std::string& cc);
-// `versioned`: the template names the version (archives); provided tilesets' tiles are not.
+// GET /{ts}.json?format=...[&tiling=...]: the TileJSON stock web maps read; 400 for an unknown
+// format or a tiling this tileset cannot be served in. `versioned`: the template names the
+// version (archives); provided tilesets' tiles are not.
 HttpResponse web_tilejson_route(const std::string& name, const TilesetInfo& info,
                                 const std::string& version, bool versioned, const Query& q,
                                 const std::string& base, bool priv);

@@ -1,7 +1,8 @@
 // Web images of tiles (docs/PROTOCOL.md §12): /{ts}[@{version}]/{z}/{x}/{y}.png|.webp|.jpg and the
-// TileJSON that points stock web maps at them. An image is encoded from the stored tile on the
-// cache's encode workers (decode, crop the border, encode), once per key however many requests
-// want it at the same time (WebTileCache's single flight), and kept in the bounded RAM cache.
+// TileJSON that points stock web maps at them. A cached image answers at once; otherwise the
+// route's answer is the plan to make it (what to encode from the stored tile: decode, crop the
+// border, encode), which the answer pipeline (answer_pipeline.cpp) carries out on the shared
+// encode pool, once per key however many requests want it at the same time.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -69,94 +70,25 @@ namespace {
 
 using Encoder = std::function<Result<std::vector<std::uint8_t>>()>;
 
-// Runs `encode`, counts it, and (with a cache) stores the image and ends the flight `lead`,
-// which answers the requests waiting for it. Null with `why` set when encoding failed.
-WebTilePtr encode_now(WebTileCache* cache, const std::string& key,
-                      const std::shared_ptr<http_detail::Flight>& lead, std::string etag,
-                      const char* type, const Encoder& encode, std::string& why) {
-  const auto start = std::chrono::steady_clock::now();
-  WebTilePtr tile;
-  try {
-    if (auto bytes = encode()) {
-      tile = std::make_shared<const WebTile>(WebTile{std::move(*bytes), std::move(etag), type});
-    } else {
-      why = bytes.error().to_string();
-    }
-  } catch (const std::exception& e) {  // bad_alloc: the waiters must still be answered
-    why = e.what();
-  }
-  if (cache != nullptr) {
-    const auto us = std::chrono::duration_cast<std::chrono::microseconds>(
-                        std::chrono::steady_clock::now() - start)
-                        .count();
-    cache->encodes.fetch_add(1, std::memory_order_relaxed);
-    cache->encode_us_sum.fetch_add(std::uint64_t(us), std::memory_order_relaxed);
-    if (!tile) cache->encode_failures.fetch_add(1, std::memory_order_relaxed);
-    cache->finish(key, lead, tile, tile ? 200 : 500, why);
-  }
-  return tile;
-}
-
-HttpResponse wait_for(std::shared_ptr<http_detail::Flight> flight, std::string_view if_none_match,
-                      const std::string& cc) {
-  auto d = std::make_shared<DeferredWebTile>();
-  d->flight = std::move(flight);
-  d->if_none_match = std::string(if_none_match);
-  d->cache_control = cc;
-  HttpResponse r;
-  r.route = Route::tile;
-  r.web_wait = std::move(d);
-  return r;
-}
-
-// 503 with Retry-After for a miss the encode queue refused.
-HttpResponse shed(http_detail::EncodeQueue::Admit why, const WebTileCache& cache) {
-  const http_detail::EncodeLimits l = cache.limits();
-  HttpResponse r = tile_error(503, why == http_detail::EncodeQueue::Admit::owner_full
-                                       ? "this connection already has " +
-                                             std::to_string(l.max_queued_per_owner) +
-                                             " web images waiting to be encoded; retry after those"
-                                       : "the server has " + std::to_string(l.max_queued) +
-                                             " web images waiting to be encoded; retry shortly");
-  add(r, "Retry-After", "1");
-  return r;
-}
-
-// The image under `key`: from the cache; else encoded by the cache's workers (the first request
-// to miss it starts the encoding, it and every request for the same image meanwhile wait for it:
-// a web_wait marker the session completes without blocking its thread; a miss the queue cannot
-// take, for connection `owner` or in all, is 503); without workers (or without a cache), encoded
-// now on this thread. `encode` must own what it reads.
-HttpResponse encoded(const RouterConfig& config, const std::string& key, std::string etag,
+// The image under `key`: from the cache when it holds it, else the plan to make it (a pending
+// answer the pipeline carries out: the cache again, single flight, the encode pool).
+HttpResponse encoded(const RouterConfig& config, std::string key, std::string etag,
                      const char* type, Encoder encode, std::string_view if_none_match,
                      const std::string& cc, std::uint64_t owner) {
-  WebTileCache* cache = config.web.cache.get();
-  WebTileCache::Lookup found;
-  if (cache != nullptr) {
-    found = cache->acquire(key);
-    if (found.hit) return web_image_response(found.hit, if_none_match, cc);
-    if (found.wait) return wait_for(std::move(found.wait), if_none_match, cc);
-    if (cache->has_workers()) {
-      const auto admit =
-          cache->queue(key, found.lead, owner,
-                       [cache, key, lead = found.lead, etag = std::move(etag), type,
-                        encode = std::move(encode)]() mutable {
-                         std::string why;
-                         encode_now(cache, key, lead, std::move(etag), type, encode, why);
-                       });
-      if (admit != http_detail::EncodeQueue::Admit::queued) {
-        HttpResponse r = shed(admit, *cache);
-        // Requests that joined the flight meanwhile get the same answer.
-        cache->finish(key, found.lead, nullptr, 503, r.owned);
-        return r;
-      }
-      return wait_for(std::move(found.lead), if_none_match, cc);
-    }
+  if (config.web.cache) {
+    if (WebTilePtr hit = config.web.cache->peek(key))
+      return web_image_response(hit, if_none_match, cc);
   }
-  std::string why;
-  WebTilePtr tile = encode_now(cache, key, found.lead, std::move(etag), type, encode, why);
-  if (!tile) return tile_error(500, "cannot encode the web image: " + why);
-  return web_image_response(tile, if_none_match, cc);
+  auto p = std::make_shared<PendingAnswer>();
+  p->image = WebImageJob{std::move(key), std::move(etag), type, std::move(encode)};
+  p->cache = config.web.cache;
+  p->if_none_match = std::string(if_none_match);
+  p->cache_control = cc;
+  p->connection = owner;
+  HttpResponse r;
+  r.route = Route::tile;
+  r.pending = std::move(p);
+  return r;
 }
 
 // A tile with nothing to show (beyond the image's edge, or absent from a sparse archive): a
@@ -371,13 +303,13 @@ HttpResponse web_mercator_tile_route(const HttpRequest& request, std::shared_ptr
   return r;
 }
 
-HttpResponse provided_web_image(const DeferredTile& d, const std::vector<std::uint8_t>* payload) {
+HttpResponse provided_web_image(const PendingAnswer& d, const std::vector<std::uint8_t>* payload) {
   RouterConfig config;  // the parts encoded() reads
   config.web.encode = d.web_options;
-  config.web.cache = d.web_cache;
-  const std::string& name = d.tileset->name;
+  config.web.cache = d.cache;
+  const std::string& name = d.provided->name;
   if (payload == nullptr) {
-    return web_filler(d.tileset->info.geometry.tile_size(), *d.web, config, d.if_none_match,
+    return web_filler(d.provided->info.geometry.tile_size(), *d.web, config, d.if_none_match,
                       d.cache_control, d.connection);
   }
   auto header = parse_tile_header(*payload);
@@ -399,7 +331,7 @@ HttpResponse provided_web_image(const DeferredTile& d, const std::vector<std::ui
   const std::string key =
       "provided/" + name + "/" + d.id.to_string() + "/" + hex16(header->checksum) + "/" + tag;
   Encoder encode = [stored_payload = std::make_shared<const std::vector<std::uint8_t>>(*payload),
-                    tileset = d.tileset, id = d.id, format = *d.web,
+                    tileset = d.provided, id = d.id, format = *d.web,
                     options = d.web_options]() -> Result<std::vector<std::uint8_t>> {
     auto stored = decode_tile(*stored_payload);
     if (!stored) return stored.error();

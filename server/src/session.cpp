@@ -352,7 +352,8 @@ std::unique_ptr<Outgoing> Session::answer(RequestParser::value_type& req) {
     out->method = std::string(hr.method_text);
     out->target = std::string(hr.target);
     if (out->response.hold) out->tileset = out->response.hold->name;
-    if (out->response.deferred) out->tileset = out->response.deferred->tileset->name;
+    if (out->response.pending && out->response.pending->provided)
+      out->tileset = out->response.pending->provided->name;
   }
   return out;
 }
@@ -375,93 +376,61 @@ void Session::on_read(error_code ec) {
 void Session::enqueue(std::unique_ptr<Outgoing> out) {
   out->seq = next_seq_++;
   Outgoing& o = *out;
-  const bool deferred = o.response.deferred != nullptr;
-  const bool web_wait = o.response.web_wait != nullptr;
-  if (deferred || web_wait)
+  const bool pending = o.response.pending != nullptr;
+  if (pending)
     o.ready = false;
   else
     prepare(o);
   queue_.push_back(std::move(out));
-  if (deferred)
-    start_deferred(o);  // may finish it at once (a cache hit)
-  else if (web_wait)
-    start_web_wait(o);  // may finish it at once (the encoding ended meanwhile)
+  if (pending)
+    start_pending(o);  // may finish it at once (a cache hit)
   else if (!writing_ && !in_write_)
     write_next();
 }
 
-// Asks the provider for a deferred tile. Its answer comes back through finish_deferred(): at once
-// when `done` runs inside tile() (a RAM hit: no scheduler round trip), else posted to this
-// connection's thread. `state` tells the two apart without a lock: whoever moves it from
-// kCalling first decides.
-void Session::start_deferred(const Outgoing& o) {
+// Hands a pending answer to the answer pipeline (finish_pending). Its final response comes back
+// through finish_pending_answer(): at once when the pipeline answers inside the call (a RAM hit:
+// no scheduler round trip), else posted to this connection's thread from the thread that ended
+// the work (the provider's, an encoder's); no thread ever blocks waiting. `state` tells the two
+// apart without a lock: whoever moves it from kCalling first decides. The connection's stop
+// token marks its interest: once the client has gone, a fetch or an encode only it waited for is
+// abandoned.
+void Session::start_pending(const Outgoing& o) {
   struct Call {
     enum : int { kCalling, kReturned, kAnsweredInside };
     std::atomic<int> state{kCalling};
-    ProvidedTile answer;  // written by `done` before it sets kAnsweredInside
+    HttpResponse answer;  // written by `done` before it sets kAnsweredInside
   };
   auto call = std::make_shared<Call>();
   const std::uint64_t seq = o.seq;
-  const DeferredTile& d = *o.response.deferred;
-  server_.provider()->tile(
-      d.tileset, d.id,
+  finish_pending(
+      o.response, server_.provider(), abandon_.get_token(),
       [self = shared_from_this(), call, seq,
-       executor = socket_.get_executor()](ProvidedTile tile) mutable {
+       executor = socket_.get_executor()](HttpResponse answer) mutable {
         auto keep_alive = std::move(self);  // released here or on the connection's thread
-        call->answer = std::move(tile);
+        call->answer = std::move(answer);
         int expected = Call::kCalling;
         if (call->state.compare_exchange_strong(expected, Call::kAnsweredInside,
                                                 std::memory_order_acq_rel))
-          return;  // start_deferred() picks the answer up when tile() returns
+          return;  // start_pending() picks the answer up when finish_pending() returns
         asio::post(executor, [session = std::move(keep_alive), call = std::move(call), seq] {
-          session->finish_deferred(seq, std::move(call->answer));
+          session->finish_pending_answer(seq, std::move(call->answer));
         });
-      },
-      abandon_.get_token());
+      });
   int expected = Call::kCalling;
   if (!call->state.compare_exchange_strong(expected, Call::kReturned, std::memory_order_acq_rel))
-    finish_deferred(seq, std::move(call->answer));
+    finish_pending_answer(seq, std::move(call->answer));
 }
 
-// Waits for the encoding of a web image another request leads (single flight). The flight's
-// callback runs on the leader's thread when it finishes (or here at once when it has finished
-// already) and posts the answer to this connection's thread: no thread ever blocks waiting.
-// The connection's stop token marks its interest: once the client has gone, an encoding not
-// started yet is dropped unless another connection waits for it too.
-void Session::start_web_wait(const Outgoing& o) {
-  o.response.web_wait->flight->on_done(
-      [self = shared_from_this(), seq = o.seq, executor = socket_.get_executor()](
-          const WebTilePtr& tile, int status, const std::string& why) mutable {
-        asio::post(executor, [session = std::move(self), seq, tile, status, why] {
-          session->finish_web_wait(seq, tile, status, why);
-        });
-      },
-      abandon_.get_token());
-}
-
-void Session::finish_web_wait(std::uint64_t seq, const WebTilePtr& tile, int status,
-                              const std::string& why) {
+// On the connection's thread: the final answer of response `seq`. Dropped when the connection
+// has closed meanwhile (its queue is gone or going).
+void Session::finish_pending_answer(std::uint64_t seq, HttpResponse answer) {
   if (closed_) return;
   auto it = std::find_if(queue_.begin(), queue_.end(),
                          [seq](const std::unique_ptr<Outgoing>& o) { return o->seq == seq; });
   if (it == queue_.end() || (*it)->ready) return;
   Outgoing& o = **it;
-  o.response = complete_web_wait(std::move(o.response), tile, status, why);
-  o.ready = true;
-  prepare(o);
-  if (!writing_ && !in_write_) write_next();
-}
-
-// On the connection's thread: the provider answered response `seq`. Dropped when the
-// connection has closed meanwhile (its queue is gone or going).
-void Session::finish_deferred(std::uint64_t seq, ProvidedTile tile) {
-  if (closed_) return;
-  auto it = std::find_if(queue_.begin(), queue_.end(),
-                         [seq](const std::unique_ptr<Outgoing>& o) { return o->seq == seq; });
-  if (it == queue_.end() || (*it)->ready) return;
-  Outgoing& o = **it;
-  o.response = complete_deferred(std::move(o.response), std::move(tile));
-  if (o.response.web_wait) return start_web_wait(o);  // a web image, being encoded
+  o.response = std::move(answer);
   o.ready = true;
   prepare(o);
   // Inside write_next() (the answer came at once, while completing a response resumed reading),
@@ -488,7 +457,7 @@ void Session::write_next() {
   const auto& limits = server_.options().limits;
   while (!closed_ && !queue_.empty()) {
     Outgoing& o = *queue_.front();
-    if (!o.ready) return;  // a provided tile not answered yet: finish_deferred() resumes
+    if (!o.ready) return;  // an answer still pending: finish_pending_answer() resumes
     if (o.deadline == DeadlineClock::time_point{}) {
       o.deadline = DeadlineClock::now() + limits.write_timeout;
       if (limits.min_send_rate > 0)

@@ -77,11 +77,8 @@ class Session final : public std::enable_shared_from_this<Session>, public Swept
   std::unique_ptr<Outgoing> answer(RequestParser::value_type& req);
   void enqueue(std::unique_ptr<Outgoing> out);
   void prepare(Outgoing& o);
-  void start_deferred(const Outgoing& o);
-  void finish_deferred(std::uint64_t seq, ProvidedTile tile);
-  void start_web_wait(const Outgoing& o);
-  void finish_web_wait(std::uint64_t seq, const std::shared_ptr<const WebTile>& tile, int status,
-                       const std::string& why);
+  void start_pending(const Outgoing& o);
+  void finish_pending_answer(std::uint64_t seq, HttpResponse answer);
   void write_next();
   void wait_writable();
   bool complete_front();

@@ -10,6 +10,7 @@
 #include <optional>
 #include <stop_token>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "busy_worker.hpp"
@@ -58,16 +59,55 @@ class RouterWeb : public ::testing::Test {
     access.bearer_tokens = {"tok"};
     config_.access["secret"] = access;
   }
-  vts::HttpResponse get(std::string_view target) {
+  // route()'s answer, a plan when it needs work (PendingAnswer).
+  vts::HttpResponse plan(std::string_view target) {
     req_.target = target;
     return vts::route(req_, *registry_, config_);
   }
+  // The final answer: route()'s, its plan carried out (and waited for) when it has one.
+  vts::HttpResponse get(std::string_view target) { return vts::finish_pending_now(plan(target)); }
   static std::string version(std::string_view name) { return registry_->find(name)->version; }
 
   static inline vts::test::TempDir* dir_ = nullptr;
   static inline vts::TilesetRegistry* registry_ = nullptr;
   vts::RouterConfig config_;
   vts::HttpRequest req_;
+};
+
+// The answers finish_pending() hands back, from whichever thread ends the work.
+class Answers {
+ public:
+  std::function<void(vts::HttpResponse)> sink() {
+    return [this](vts::HttpResponse r) {
+      std::lock_guard lock(m_);
+      got_.push_back(std::move(r));
+      threads_.push_back(std::this_thread::get_id());
+      cv_.notify_all();
+    };
+  }
+  std::size_t count() {
+    std::lock_guard lock(m_);
+    return got_.size();
+  }
+  // Waits (30 s at most) for `n` answers; false if they did not come.
+  bool wait_for(std::size_t n) {
+    std::unique_lock lock(m_);
+    return cv_.wait_for(lock, std::chrono::seconds(30), [&] { return got_.size() >= n; });
+  }
+  vts::HttpResponse at(std::size_t i) {
+    std::lock_guard lock(m_);
+    return got_.at(i);
+  }
+  std::thread::id thread(std::size_t i) {
+    std::lock_guard lock(m_);
+    return threads_.at(i);
+  }
+
+ private:
+  std::mutex m_;
+  std::condition_variable cv_;
+  std::vector<vts::HttpResponse> got_;
+  std::vector<std::thread::id> threads_;
 };
 
 std::optional<std::string> header_of(const vts::HttpResponse& r, std::string_view name) {
@@ -275,21 +315,23 @@ TEST_F(RouterWeb, AMissWhileAnotherEncodesWaitsForThatFlight) {
       "dense@" + t->version + "/" + std::to_string(vts::archive::zxy_to_tile_id(1, 1, 0)) + "/png6";
   auto lead = c->acquire(key);
   ASSERT_TRUE(lead.lead);
-  auto marker = get("/dense/1/1/0.png");
-  ASSERT_TRUE(marker.web_wait) << marker.status;
+  auto marker = plan("/dense/1/1/0.png");
+  ASSERT_TRUE(marker.pending && marker.pending->image) << marker.status;
+  EXPECT_EQ(marker.pending->image->key, key);
+  Answers answers;
+  vts::finish_pending(std::move(marker), nullptr, {}, answers.sink());
+  EXPECT_EQ(answers.count(), 0u);  // waits for the flight another request leads
   EXPECT_EQ(c->encodes.load(), 0u);
   auto tile = std::make_shared<const WebTile>(
       WebTile{std::vector<std::uint8_t>(first.view.begin(), first.view.end()),
               *header_of(first, "ETag"), "image/png"});
-  std::optional<vts::HttpResponse> done;
-  lead.lead->on_done([&](const WebTilePtr& img, int status, const std::string& why) {
-    done = vts::complete_web_wait(std::move(marker), img, status, why);
-  });
   c->finish(key, lead.lead, tile, 200, "");
-  ASSERT_TRUE(done);
-  EXPECT_EQ(done->status, 200);
-  EXPECT_EQ(body(*done), body(first));
-  EXPECT_EQ(header_of(*done, "Access-Control-Allow-Origin"), "*");  // the marker's CORS headers
+  ASSERT_EQ(answers.count(), 1u);
+  const auto done = answers.at(0);
+  EXPECT_EQ(done.status, 200);
+  EXPECT_EQ(body(done), body(first));
+  EXPECT_EQ(header_of(done, "Access-Control-Allow-Origin"), "*");  // the marker's CORS headers
+  EXPECT_EQ(c->encodes.load(), 0u);
 }
 
 TEST(ServeConfigWeb, KeysApplyAndBadValuesNameTheKey) {
@@ -325,23 +367,20 @@ namespace {
 TEST_F(RouterWeb, WithWorkersEveryMissWaitsForTheEncodingOffTheIoThread) {
   auto c = std::make_shared<WebTileCache>(1 << 20, 1);
   config_.web.cache = c;
-  auto marker = get("/dense/2/1/0.jpg");  // a miss: encoded by the worker, never here
-  ASSERT_TRUE(marker.web_wait) << marker.status;
-  std::mutex m;
-  std::condition_variable cv;
-  std::optional<vts::HttpResponse> done;
-  marker.web_wait->flight->on_done([&](const WebTilePtr& img, int status, const std::string& why) {
-    std::lock_guard lock(m);
-    done = vts::complete_web_wait(std::move(marker), img, status, why);
-    cv.notify_one();
-  });
-  std::unique_lock lock(m);
-  ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(30), [&] { return done.has_value(); }));
-  EXPECT_EQ(done->status, 200);
-  EXPECT_EQ(header_of(*done, "Content-Type"), "image/jpeg");
+  auto marker = plan("/dense/2/1/0.jpg");  // a miss: planned, encoded by the worker, never here
+  ASSERT_TRUE(marker.pending && marker.pending->image) << marker.status;
+  EXPECT_EQ(c->encodes.load(), 0u);  // route() starts nothing
+  Answers answers;
+  vts::finish_pending(std::move(marker), nullptr, {}, answers.sink());
+  ASSERT_TRUE(answers.wait_for(1));
+  const auto done = answers.at(0);
+  EXPECT_EQ(done.status, 200);
+  EXPECT_EQ(header_of(done, "Content-Type"), "image/jpeg");
+  EXPECT_NE(answers.thread(0), std::this_thread::get_id());  // answered from the encoder
   EXPECT_EQ(c->encodes.load(), 1u);
-  lock.unlock();
-  EXPECT_EQ(get("/dense/2/1/0.jpg").status, 200);  // now a hit, answered at once
+  const auto again = plan("/dense/2/1/0.jpg");  // now a hit, answered at once
+  EXPECT_FALSE(again.pending);
+  EXPECT_EQ(again.status, 200);
 }
 
 }  // namespace
@@ -372,55 +411,57 @@ TEST_F(RouterWeb, AMissBeyondTheQueuesCapsIs503WithRetryAfterAndQueuesNothing) {
   auto c = std::make_shared<WebTileCache>(1 << 20, 1, vts::http_detail::EncodeLimits{2, 1});
   config_.web.cache = c;
   vts::test::BusyWorker busy(*c);
+  Answers answers;
   req_.connection = 1;
-  EXPECT_TRUE(get("/dense/2/0/0.png").web_wait);
-  auto over = get("/dense/2/1/0.png");  // the same connection's second cold image
+  vts::finish_pending(plan("/dense/2/0/0.png"), nullptr, {}, answers.sink());
+  EXPECT_EQ(answers.count(), 0u);  // queued
+  // The same connection's second cold image: refused at once.
+  vts::finish_pending(plan("/dense/2/1/0.png"), nullptr, {}, answers.sink());
+  ASSERT_EQ(answers.count(), 1u);
+  const auto over = answers.at(0);
   EXPECT_EQ(over.status, 503);
   EXPECT_EQ(header_of(over, "Retry-After"), "1");
   EXPECT_NE(body(over).find("this connection"), std::string::npos) << body(over);
   req_.connection = 2;
   // The image refused to connection 1 left no flight behind: connection 2 queues it anew.
-  EXPECT_TRUE(get("/dense/2/1/0.png").web_wait);
+  vts::finish_pending(plan("/dense/2/1/0.png"), nullptr, {}, answers.sink());
+  EXPECT_EQ(answers.count(), 1u);
   req_.connection = 3;
-  auto full = get("/dense/2/2/0.png");
+  vts::finish_pending(plan("/dense/2/2/0.png"), nullptr, {}, answers.sink());
+  ASSERT_EQ(answers.count(), 2u);
+  const auto full = answers.at(1);
   EXPECT_EQ(full.status, 503);
   EXPECT_EQ(header_of(full, "Retry-After"), "1");
+  EXPECT_NE(body(full).find("the server has 2"), std::string::npos) << body(full);
   EXPECT_EQ(c->shed.load(), 2u);
   EXPECT_EQ(c->queued(), 2u);
   busy.release();
   c->stop();  // runs the two queued encodes
   EXPECT_EQ(c->encodes.load(), 2u);
+  ASSERT_EQ(answers.count(), 4u);
+  EXPECT_EQ(answers.at(2).status, 200);
+  EXPECT_EQ(answers.at(3).status, 200);
 }
 
 TEST_F(RouterWeb, AnEncodeEveryWaiterOfWhichHasGoneIsDroppedNotRun) {
   auto c = std::make_shared<WebTileCache>(1 << 20, 1);
   config_.web.cache = c;
-  std::mutex m;
-  std::condition_variable cv;
-  std::vector<int> statuses;
+  Answers answers;
   std::stop_source gone, still_here;
   {
     vts::test::BusyWorker busy(*c);
     req_.connection = 1;
-    std::vector<vts::HttpResponse> markers;
     for (const char* t : {"/dense/2/0/0.png", "/dense/2/1/0.png", "/dense/2/2/0.png"})
-      markers.push_back(get(t));
+      vts::finish_pending(plan(t), nullptr, gone.get_token(), answers.sink());
     req_.connection = 2;
-    markers.push_back(get("/dense/2/2/0.png"));  // joins the third image's flight
-    for (std::size_t i = 0; i < markers.size(); ++i) {
-      ASSERT_TRUE(markers[i].web_wait) << i;
-      markers[i].web_wait->flight->on_done(
-          [&](const WebTilePtr&, int status, const std::string&) {
-            std::lock_guard lock(m);
-            statuses.push_back(status);
-            cv.notify_all();
-          },
-          i < 3 ? gone.get_token() : still_here.get_token());
-    }
+    // Joins the third image's flight.
+    vts::finish_pending(plan("/dense/2/2/0.png"), nullptr, still_here.get_token(), answers.sink());
+    EXPECT_EQ(answers.count(), 0u);
     gone.request_stop();  // connection 1 closed; connection 2 still waits for the third image
   }
-  std::unique_lock lock(m);
-  ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(30), [&] { return statuses.size() == 4; }));
+  ASSERT_TRUE(answers.wait_for(4));
+  std::vector<int> statuses;
+  for (std::size_t i = 0; i < 4; ++i) statuses.push_back(answers.at(i).status);
   std::sort(statuses.begin(), statuses.end());
   EXPECT_EQ(statuses, (std::vector<int>{200, 200, 503, 503}));
   EXPECT_EQ(c->encodes.load(), 1u);

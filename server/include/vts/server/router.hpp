@@ -1,11 +1,13 @@
 // The HTTP semantics of `vts serve`: functions from a parsed request to a response description,
-// with no sockets, so every route and status is unit-testable and fuzzable. They are not pure:
-// route() reads a tile's bytes from its archive, remembers tile tags in the tileset's memo and,
-// for a web image that is not cached, queues its encoding (docs/ARCHITECTURE.md). The network
-// layer (http_server.hpp) parses bytes into HttpRequest, calls route() (tile listener) or
-// route_admin() (admin listener), and writes the HttpResponse (its body: bytes in memory, or a
-// region of the archive `hold` names). docs/PROTOCOL.md documents every route, header and
-// status. All functions are thread-safe for concurrent calls.
+// with no sockets, so every route and status is unit-testable and fuzzable. route() answers at
+// once what its archive, memo and caches hold (it reads a tile's bytes, remembers tile tags in the
+// tileset's memo, looks web images up in the web tile cache) and starts no work: an answer that
+// needs a provided tile or a web image encode is a plan (PendingAnswer) that finish_pending()
+// carries out (docs/ARCHITECTURE.md "One answer pipeline"). The network layer (http_server.hpp)
+// parses bytes into HttpRequest, calls route() (tile listener) or route_admin() (admin listener),
+// and writes the HttpResponse (its body: bytes in memory, or a region of the archive `hold`
+// names). docs/PROTOCOL.md documents every route, header and status. All functions are
+// thread-safe for concurrent calls.
 #pragma once
 
 #include <chrono>
@@ -15,6 +17,7 @@
 #include <memory>
 #include <optional>
 #include <span>
+#include <stop_token>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -30,7 +33,6 @@ inline namespace server {
 
 namespace http_detail {
 class WebTileCache;  // web_tile_cache.hpp
-class Flight;
 struct WebTile;
 }  // namespace http_detail
 
@@ -92,26 +94,35 @@ enum class Route : std::uint8_t { index, tilejson, tile, archive, preflight, err
 inline constexpr int kRouteCount = 8;
 const char* route_name(Route r) noexcept;
 
-// route()'s marker for a tile that must come from the provider: what complete_deferred() needs
-// once it arrives (copies, since the request's bytes are gone by then).
-struct DeferredTile {
-  std::shared_ptr<const ProvidedTileset> tileset;
-  TileId id;
-  std::string if_none_match;
-  std::string cache_control;
-  // A web image of the tile (/{ts}/{z}/{x}/{y}.{ext}): encoded once the tile arrives.
-  std::optional<imaging::WebFormat> web;
-  imaging::WebEncodeOptions web_options;
-  std::shared_ptr<http_detail::WebTileCache> web_cache;
-  std::uint64_t connection = 0;  // HttpRequest::connection
+// A web image route() decided on: `encode` makes it from the tileset's bytes (owning what it
+// reads), and it is kept under `key` in the web tile cache with its strong ETag.
+struct WebImageJob {
+  std::string key;
+  std::string etag;
+  const char* content_type = "";  // a string literal
+  std::function<Result<std::vector<std::uint8_t>>()> encode;
 };
 
-// route()'s marker for a web image another request is encoding (single flight): wait for
-// `flight` (Flight::on_done), then complete_web_wait().
-struct DeferredWebTile {
-  std::shared_ptr<http_detail::Flight> flight;
+// route()'s plan for an answer it cannot give at once: the answer pipeline (finish_pending())
+// carries it out, in order (docs/ARCHITECTURE.md "One answer pipeline"):
+//   1. with `provided`: the provider's tile `id` (vts cache serve), from which the answer
+//      follows: the tile itself, a status, or (with `web`) a web image job;
+//   2. with `image`: the web image from the cache, or encoded on the cache's shared encode pool
+//      (single flight, fair between connections, shed over its caps);
+//   3. one finish: the final response with the marker's CORS headers, HEAD flag and tileset.
+// A plain value: route() starts nothing.
+struct PendingAnswer {
+  std::shared_ptr<const ProvidedTileset> provided;
+  TileId id;
+  std::optional<imaging::WebFormat> web;  // step 1's tile wanted as this web image
+  imaging::WebEncodeOptions web_options;
+  std::optional<WebImageJob> image;
+  // The web tile cache (RouterConfig::web::cache); null: the image is encoded on the thread
+  // that carries the plan out, and kept nowhere.
+  std::shared_ptr<http_detail::WebTileCache> cache;
   std::string if_none_match;
   std::string cache_control;
+  std::uint64_t connection = 0;  // HttpRequest::connection
 };
 
 struct HttpResponse {
@@ -135,12 +146,9 @@ struct HttpResponse {
   // the server should reload its tilesets now rather than at its next periodic check.
   bool archive_changed = false;
   bool head_only = false;  // HEAD: send headers, no body
-  // Set (and nothing else but `route`, CORS headers and head_only) when the answer depends on
-  // a provided tile: call provider->tile(), then complete_deferred() with its answer.
-  std::shared_ptr<const DeferredTile> deferred;
-  // Set (with `route`, `hold`, CORS headers and head_only) when the answer is a web image being
-  // encoded for another request: wait for its flight, then call complete_web_wait().
-  std::shared_ptr<const DeferredWebTile> web_wait;
+  // Set (with `route`, `hold`, CORS headers and head_only, nothing else) when the answer needs
+  // work first: hand the response to finish_pending().
+  std::shared_ptr<const PendingAnswer> pending;
 };
 
 // The answer to a request refused before it could be routed (the network layer: a request that
@@ -172,18 +180,16 @@ struct AdminState {
 // a line is a line).
 HttpResponse route_admin(const HttpRequest& request, const AdminState& state);
 
-// Finishes a deferred response (`marker`, as route() returned it) with the provider's answer:
-// 200 / 304 / 204 / 404 / 502 / 503 (docs/PROTOCOL.md §11), keeping the marker's CORS headers
-// and HEAD flag. A payload whose tile header frame is damaged is a 502. For a web image the
-// answer may be a `web_wait` response (its encoding under way): wait for it as for route()'s.
-HttpResponse complete_deferred(HttpResponse marker, ProvidedTile tile);
-
-// Finishes a `web_wait` response (`marker`) once its flight is done: 200 / 304 with the image,
-// else `status` with `error`: 500 when its encoding failed, 503 with Retry-After when the server
-// shed or dropped it.
-HttpResponse complete_web_wait(HttpResponse marker,
-                               const std::shared_ptr<const http_detail::WebTile>& tile, int status,
-                               const std::string& error);
+// Carries out `marker.pending` (route()'s plan; `provider` is the one given to route()) and calls
+// `done` exactly once with the final response: 200 / 304 / 204 / 404 / 500 / 502 / 503
+// (docs/PROTOCOL.md §11, §12). `done` runs on this thread when nothing had to wait (a cache hit,
+// an encode without a pool), else on the thread that ended the work (the provider's, an
+// encoder's). `interest` stopped means the client has gone: an encode nobody else waits for is
+// dropped before it runs, and the provider may abandon the fetch.
+void finish_pending(HttpResponse marker, AsyncTileProvider* provider, std::stop_token interest,
+                    std::function<void(HttpResponse)> done);
+// finish_pending(), waited for on this thread (tests and tools: a server never blocks a thread).
+HttpResponse finish_pending_now(HttpResponse marker, AsyncTileProvider* provider = nullptr);
 
 // Signs a URL path for an HMAC-protected tileset: returns "?expires=<t>&sig=<hex>" to append.
 std::string sign_path(std::string_view path, std::int64_t expires_unix, std::string_view key);
