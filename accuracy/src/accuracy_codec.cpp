@@ -10,6 +10,7 @@
 
 #include "vts/accuracy/accuracy.hpp"
 #include "vts/archive/pmtiles.hpp"
+#include "vts/builder/tile_encoder.hpp"
 #include "vts/protocol/codec.hpp"
 #include "vts/protocol/tileset.hpp"
 
@@ -188,8 +189,6 @@ Result<AccuracyTable> codec_table(const AccuracyContext& ctx) {
   double upload_rgba = NAN, upload_bc1 = NAN;
   for (const Setting& s : settings(ctx.quick)) {
     ctx.say("codec table: " + s.label);
-    const Codec* codec = find_codec(s.codec);
-    if (!codec) return Error{ErrorCode::unsupported, s.label + ": codec not available"};
     double encode_ms = 0, decode_ms = 0, se = 0;
     std::uint64_t bytes = 0, values = 0;
     int max_err = 0;
@@ -197,7 +196,7 @@ Result<AccuracyTable> codec_table(const AccuracyContext& ctx) {
     decoded.reserve(tiles.size());
     for (const TileImage& tile : tiles) {
       const auto te = Clock::now();
-      auto payload = codec->encode(tile, s.encode);
+      auto payload = encode_tile(tile, s.codec, s.encode);
       encode_ms += ms_since(te);
       if (!payload) return payload.error();
       bytes += payload->size();
@@ -249,8 +248,8 @@ Result<AccuracyTable> codec_table(const AccuracyContext& ctx) {
           ", evenly over the archive's tile order); each encoded, decoded and compared with "
           "the source tile.",
       "PSNR and max error over R, G and B of the sRGB-encoded texels the GPU is given "
-      "(bc1: decoded on the CPU with libsquish's decoder); inf = exact.",
-      "encode: Codec::encode (filter + zstd, or BC1 block search + zstd); decode: decode_tile "
+      "(bc1: decoded on the CPU by bc1_to_rgba8, libsquish's decoder to the bit); inf = exact.",
+      "encode: encode_tile (filter + zstd, or BC1 block search + zstd); decode: decode_tile "
       "(checksum + zstd + unfilter; bc1 stops at the blocks the GPU takes). One thread.",
       "upload: memcpy into a mapped pixel-unpack buffer + glTextureSubImage2D "
       "(bc1: glCompressedTextureSubImage2D) into an sRGB atlas, until glFinish; measured once per "

@@ -22,7 +22,7 @@ namespace detail {
 
 // A build's options resolved: its source opened, its geometry and georeference.
 struct PreparedBuild {
-  const Codec* codec = nullptr;
+  CodecId codec = CodecId::lossless;
   std::unique_ptr<ImageSource> source;  // plain images and grids
   std::unique_ptr<GdalSource> gdal;     // georeferenced inputs
   // Georeferenced inputs (gdal, or a plan's record of them): the build writes their footprint.
@@ -65,7 +65,7 @@ struct BuildRun {
   const BuildOptions* options = nullptr;  // downsample, on_progress, cancel
   std::filesystem::path scratch_dir;
   const Geometry* geometry = nullptr;
-  const Codec* codec = nullptr;
+  CodecId codec = CodecId::lossless;
   archive::TileSink* sink = nullptr;
   unsigned threads = 0;
   const BuildPlan* plan = nullptr;

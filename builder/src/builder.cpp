@@ -32,7 +32,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 using detail::GdalSource;
 using detail::ImageSource;
-using detail::WorkQueue;
 
 double seconds_since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
@@ -40,7 +39,7 @@ double seconds_since(Clock::time_point t0) {
 
 // State shared by the building thread and the encoder workers.
 struct Shared {
-  const Codec* codec = nullptr;
+  CodecId codec = CodecId::lossless;
   EncodeOptions encode;
   archive::TileSink* sink = nullptr;
   // A shard's level-A tiles, kept lossless for the apex (shard.hpp).
@@ -70,12 +69,12 @@ struct Shared {
   }
   void store(TileId id, const TileImage& img) {
     if (failed) return;
-    auto payload = codec->encode(img, encode);
+    auto payload = encode_tile(img, codec, encode);
     if (!payload) return fail(std::move(payload).error());
     if (auto st = sink->add_tile(id, *payload); !st) return fail(st.error());
     if (keep && id.z == keep->z && id.x >= keep->rect.x0 && id.x < keep->rect.x1 &&
         id.y >= keep->rect.y0 && id.y < keep->rect.y1) {
-      auto exact = find_codec(CodecId::lossless)->encode(img, EncodeOptions{});
+      auto exact = encode_lossless(img);
       if (!exact) return fail(std::move(exact).error());
       std::lock_guard lock(kept_mutex);
       kept[{id.y, id.x}] = std::move(exact).value();
@@ -204,7 +203,7 @@ struct PassContext {
   const BuildOptions& o;
   const Geometry& g;
   Shared& shared;
-  WorkQueue& queue;
+  WorkerPool& queue;  // the encoders (detail::start_encoders)
   ProgressTicker& ticker;
   std::uint64_t rows = 0;  // read so far, all passes
 };
@@ -217,7 +216,7 @@ void run_pass(PassContext& c, const detail::Pass& pass, const std::vector<Window
   const std::vector<TexelRect> windows = detail::pass_windows(c.g, c.o.downsample, pass);
   const TexelRect& coarse = windows[static_cast<std::size_t>(pass.coarsest)];
   Shared& shared = c.shared;
-  WorkQueue& queue = c.queue;
+  WorkerPool& queue = c.queue;
   detail::Cascade::RowSink to_scratch;
   if (scratch)
     to_scratch = [&](std::uint64_t y, const std::uint8_t* row) {
@@ -302,7 +301,7 @@ void build_from_source(const BuildOptions& o, const std::filesystem::path& scrat
     if (!r) return shared.fail(std::move(r).error());
     scratch.push_back(std::move(r).value());
   }
-  auto queue = WorkQueue::start(threads, std::size_t{threads} * 4);
+  auto queue = detail::start_encoders(threads);
   if (!queue) return shared.fail(std::move(queue).error());
   ProgressTicker ticker(o, shared, plan.tiles, plan.rows);
   PassContext c{o, g, shared, **queue, ticker};
@@ -317,7 +316,7 @@ void build_from_source(const BuildOptions& o, const std::filesystem::path& scrat
     run_pass(c, pass, pass.source >= 0 ? from_scratch : read_input,
              pass.scratch >= 0 ? &scratch[static_cast<std::size_t>(pass.scratch)] : nullptr);
   }
-  (*queue)->close_and_join();
+  (*queue)->join();
   ticker.tick(c.rows, true);
 }
 
@@ -326,9 +325,9 @@ void build_synthetic(const BuildOptions& o, const std::vector<TileRect>& levels,
   std::uint64_t total = 0;
   for (const TileRect& r : levels) total += r.count();
   ProgressTicker ticker(o, shared, total, 0);
-  auto started = WorkQueue::start(threads, std::size_t{threads} * 4);
+  auto started = detail::start_encoders(threads);
   if (!started) return shared.fail(std::move(started).error());
-  WorkQueue& queue = **started;
+  WorkerPool& queue = **started;
   for (int z = 0; z < static_cast<int>(levels.size()) && !shared.stopping(); ++z) {
     const TileRect r = levels[static_cast<std::size_t>(z)];
     for (std::uint32_t y = r.y0; y < r.y1 && !shared.stopping(); ++y) {
@@ -344,7 +343,7 @@ void build_synthetic(const BuildOptions& o, const std::vector<TileRect>& levels,
       }
     }
   }
-  queue.close_and_join();
+  queue.join();
   ticker.tick(0, true);
 }
 
@@ -566,10 +565,10 @@ Status open_source(const BuildOptions& o, PreparedBuild& p) {
 
 Result<PreparedBuild> prepare_build(const BuildOptions& o) {
   PreparedBuild p;
-  p.codec = find_codec(o.codec);
-  if (!p.codec)
+  if (find_codec(o.codec) == nullptr)
     return make_error(ErrorCode::unsupported,
                       std::string("codec '") + codec_name(o.codec) + "' is not available yet");
+  p.codec = o.codec;
   if (o.synthetic && !o.inputs.empty())
     return make_error(ErrorCode::invalid_argument, "give either input images or --synthetic");
   if (!o.synthetic && o.inputs.empty())

@@ -432,7 +432,7 @@ class Feeder {
  public:
   Feeder(const ExportOptions& o, const Counters& c, std::uint64_t total)
       : options_(o), counters_(c), total_(total) {
-    auto q = detail::WorkQueue::start(threads(o), std::size_t{threads(o)} * 4);
+    auto q = detail::start_encoders(threads(o));
     if (q)
       queue_ = std::move(q).value();
     else
@@ -459,7 +459,7 @@ class Feeder {
   }
   // Waits for the queued jobs; the first error, else the walk's own status.
   Status finish(Status walked) {
-    if (queue_) queue_->close_and_join();
+    if (queue_) queue_->join();
     if (auto e = first_.take()) return *e;
     if (!walked) return walked;
     if (options_.on_progress) options_.on_progress(counters_.done.load(), total_);
@@ -476,7 +476,7 @@ class Feeder {
   Clock::time_point last_ = Clock::now();
   FirstError first_;
   // Last: joined before the members its jobs use go away. Null when its threads did not start.
-  std::unique_ptr<detail::WorkQueue> queue_;
+  std::unique_ptr<WorkerPool> queue_;
 };
 
 // The archive's own grid: walks the source directory, one job per entry.

@@ -333,7 +333,7 @@ Result<ShardReport> build_apex(const ShardPlan& plan, const ShardBuildOptions& s
   run.options = &o;
   run.scratch_dir = so.out_dir;
   run.geometry = &g;
-  run.codec = find_codec(o.codec);
+  run.codec = o.codec;
   run.threads = so.threads;
   detail::BuildPlan bp;
   ApexLevelRows rows(plan, g, so.out_dir);

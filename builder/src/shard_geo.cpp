@@ -136,7 +136,7 @@ Result<PreparedBuild> plan_prepared(const ShardPlan& plan) {
   auto geometry = plan_geometry(plan);
   if (!geometry) return std::move(geometry).error();
   PreparedBuild p;
-  p.codec = find_codec(plan.options.codec);
+  p.codec = plan.options.codec;
   p.geometry = *geometry;
   p.synthetic = plan.options.synthetic;
   p.input_description = plan.input_description;
@@ -192,7 +192,7 @@ Result<PreparedBuild> prepare_shard_build(const ShardPlan& plan, const BuildOpti
                           " inputs");
   auto p = plan_prepared(plan);
   if (!p) return p;
-  if (!p->codec)
+  if (find_codec(p->codec) == nullptr)
     return make_error(ErrorCode::unsupported,
                       std::string("codec '") + codec_name(o.codec) + "' is not available yet");
   GdalSourceOptions go = gdal_source_options(o);

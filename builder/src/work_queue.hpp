@@ -1,23 +1,23 @@
-// The builder's threads: a ThreadGroup that always joins what it started, and a fixed pool of
-// worker threads fed through a bounded queue (WorkQueue): submit() blocks while the queue is
-// full, which is what bounds the builder's memory (back-pressure from encoding to cutting).
+// The builder's threads: a ThreadGroup that always joins what it started (the readers of a
+// pass), and the encoder pool, a WorkerPool (base/worker_pool.hpp) whose bounded queue blocks
+// submit() while full, which is what bounds the builder's memory (back-pressure from encoding to
+// cutting).
 //
 // A thread the system refuses to start (a tasks limit, `ulimit -v` leaving no room for its
 // stack) is an error value, io "cannot start a thread ...", never an abort: std::thread throws
 // std::system_error, and a std::thread destroyed while joinable calls std::terminate.
 #pragma once
 
-#include <condition_variable>
-#include <deque>
+#include <algorithm>
 #include <functional>
 #include <memory>
-#include <mutex>
 #include <string>
 #include <system_error>
 #include <thread>
 #include <vector>
 
 #include "vts/base/result.hpp"
+#include "vts/base/worker_pool.hpp"
 
 namespace vts {
 inline namespace builder {
@@ -55,65 +55,15 @@ class ThreadGroup {
   std::vector<std::thread> threads_;
 };
 
-class WorkQueue {
- public:
-  // Starts `threads` (>= 1) workers; the error of ThreadGroup::start when one cannot start (those
-  // started are stopped and joined first).
-  static Result<std::unique_ptr<WorkQueue>> start(unsigned threads, std::size_t capacity) {
-    std::unique_ptr<WorkQueue> q(new WorkQueue(capacity));
-    for (unsigned i = 0; i < threads; ++i)
-      if (Status s = q->workers_.start([p = q.get()] { p->run(); }, "encoder"); !s) {
-        q->close_and_join();
-        return s.error();
-      }
-    return q;
-  }
-  ~WorkQueue() { close_and_join(); }
-  WorkQueue(const WorkQueue&) = delete;
-  WorkQueue& operator=(const WorkQueue&) = delete;
-
-  void submit(std::function<void()> job) {
-    std::unique_lock lock(mutex_);
-    not_full_.wait(lock, [&] { return jobs_.size() < capacity_; });
-    jobs_.push_back(std::move(job));
-    not_empty_.notify_one();
-  }
-
-  // Runs every job already submitted, then stops the workers.
-  void close_and_join() {
-    {
-      std::lock_guard lock(mutex_);
-      closed_ = true;
-    }
-    not_empty_.notify_all();
-    workers_.join();
-  }
-
- private:
-  explicit WorkQueue(std::size_t capacity) : capacity_(capacity) {}
-
-  void run() {
-    for (;;) {
-      std::function<void()> job;
-      {
-        std::unique_lock lock(mutex_);
-        not_empty_.wait(lock, [&] { return closed_ || !jobs_.empty(); });
-        if (jobs_.empty()) return;
-        job = std::move(jobs_.front());
-        jobs_.pop_front();
-        not_full_.notify_one();
-      }
-      job();
-    }
-  }
-
-  std::size_t capacity_;
-  std::mutex mutex_;
-  std::condition_variable not_empty_, not_full_;
-  std::deque<std::function<void()>> jobs_;
-  bool closed_ = false;
-  ThreadGroup workers_;  // last: joined before the members its workers use go away
-};
+// The encoder pool: `threads` (>= 1) workers named "vts-encode" on the one thread pool
+// (base/worker_pool.hpp), its queue bounded to 4 tiles per thread so that cutting waits for
+// encoding. io "cannot start a thread (vts-encode) ..." when one cannot start (those started are
+// joined first).
+inline Result<std::unique_ptr<WorkerPool>> start_encoders(unsigned threads) {
+  threads = std::max(threads, 1u);  // capacity 0 would mean unbounded
+  return WorkerPool::start(
+      {.threads = threads, .capacity = std::size_t{threads} * 4, .name = "vts-encode"});
+}
 
 }  // namespace detail
 }  // namespace builder

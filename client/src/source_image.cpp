@@ -78,8 +78,12 @@ struct ImagePending {
 
 class ImageTemplateSource final : public FetchingSource<ImagePending> {
  public:
-  ImageTemplateSource(std::unique_ptr<Fetcher> fetcher, SourceInfo info, ImageLayout layout)
-      : FetchingSource(std::move(fetcher)), info_(std::move(info)), layout_(std::move(layout)) {
+  ImageTemplateSource(std::unique_ptr<Fetcher> fetcher, SourceInfo info, ImageLayout layout,
+                      std::unique_ptr<WorkerPool> callbacks)
+      : FetchingSource(std::move(fetcher)),
+        info_(std::move(info)),
+        layout_(std::move(layout)),
+        callbacks_(std::move(callbacks)) {
     for (const std::string& t : layout_.mirrors) {
       auto more = expand_hosts(t);
       urls_.insert(urls_.end(), more.begin(), more.end());
@@ -97,7 +101,7 @@ class ImageTemplateSource final : public FetchingSource<ImagePending> {
     auto [h, p] = add_locked(request, std::move(callback));
     if (!image_tile_exists(info_, request.id)) {
       // Outside the zoom range or the bounds: a viewer of this server would not ask.
-      callbacks_.post([this, h = h] {
+      callbacks_->submit([this, h = h] {
         SourceTile t;
         t.kind = SourceTile::Kind::absent;
         finish(h, std::move(t));
@@ -137,7 +141,8 @@ class ImageTemplateSource final : public FetchingSource<ImagePending> {
   const SourceInfo info_;
   const ImageLayout layout_;
   std::vector<std::string> urls_;  // the templates requests are spread over
-  CallbackThread callbacks_;       // last: destroyed first, running what is queued
+  // Last: destroyed first, running what is queued (start_deliverer).
+  std::unique_ptr<WorkerPool> callbacks_;
 };
 
 Result<double> number_at(const nlohmann::json& j, const char* key, const std::string& url) {
@@ -335,8 +340,10 @@ Result<std::unique_ptr<TileSource>> open_image_template(const ImageLayout& layou
   if (!info) return info.error();
   auto fetcher = Fetcher::create(options.fetcher);
   if (!fetcher) return std::move(fetcher).error();
-  return std::unique_ptr<TileSource>(
-      std::make_unique<ImageTemplateSource>(std::move(*fetcher), std::move(*info), layout));
+  auto callbacks = start_deliverer();
+  if (!callbacks) return std::move(callbacks).error();
+  return std::unique_ptr<TileSource>(std::make_unique<ImageTemplateSource>(
+      std::move(*fetcher), std::move(*info), layout, std::move(*callbacks)));
 }
 
 }  // namespace vts::client

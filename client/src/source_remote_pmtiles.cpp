@@ -33,14 +33,11 @@
 #include <xxhash.h>
 
 #include <algorithm>
-#include <condition_variable>
 #include <cstdio>
-#include <deque>
 #include <functional>
 #include <future>
 #include <limits>
 #include <mutex>
-#include <thread>
 #include <tuple>
 #include <utility>
 
@@ -134,7 +131,7 @@ struct RemotePending {
 class RemoteArchiveSource final : public FetchingSource<RemotePending> {
  public:
   RemoteArchiveSource(std::unique_ptr<Fetcher> fetcher, std::string url, Opened opened,
-                      std::size_t max_tile_bytes)
+                      std::size_t max_tile_bytes, std::unique_ptr<WorkerPool> deliverer)
       : FetchingSource(std::move(fetcher)),
         url_(std::move(url)),
         header_(opened.header),
@@ -142,7 +139,8 @@ class RemoteArchiveSource final : public FetchingSource<RemotePending> {
         info_(std::move(opened.info)),
         whole_(std::move(opened.whole)),
         whole_cache_control_(std::move(opened.whole_cache_control)),
-        max_tile_bytes_(max_tile_bytes) {}
+        max_tile_bytes_(max_tile_bytes),
+        deliverer_(std::move(deliverer)) {}
 
   // Cancels every transfer: their callbacks finish their requests now. Then deliverer_'s
   // destructor (a member) runs the answers still queued.
@@ -180,7 +178,7 @@ class RemoteArchiveSource final : public FetchingSource<RemotePending> {
     if (on_fetcher_thread) return finish(h, std::move(tile));
     // std::function needs a copyable callable: hold the tile by shared_ptr.
     auto t = std::make_shared<SourceTile>(std::move(tile));
-    deliverer_.post([this, h, t] { finish(h, std::move(*t)); });
+    deliverer_->submit([this, h, t] { finish(h, std::move(*t)); });
   }
 
   void post_kind(Handle h, SourceTile::Kind kind) {
@@ -292,7 +290,7 @@ class RemoteArchiveSource final : public FetchingSource<RemotePending> {
                                           length, whole_->size() - offset)));
       }
       auto cb = std::make_shared<FetchCallback>(std::move(callback));
-      deliverer_.post([r, cb] { (*cb)(std::move(*r)); });
+      deliverer_->submit([r, cb] { (*cb)(std::move(*r)); });
       return;
     }
     FetchRequest r;
@@ -401,7 +399,8 @@ class RemoteArchiveSource final : public FetchingSource<RemotePending> {
 
   archive::DirectoryCache leaves_{kLeafCacheBytes};  // thread-safe on its own
 
-  CallbackThread deliverer_;  // last: destroyed first, after the fetcher is gone
+  // Last: destroyed first, after the fetcher is gone, running what is queued (start_deliverer).
+  std::unique_ptr<WorkerPool> deliverer_;
 };
 
 // Checks the header's sections are well-formed and lie where we can read them.
@@ -589,8 +588,11 @@ Result<std::unique_ptr<TileSource>> open_remote_archive(std::string_view url_vie
       archive::archive_version(bytes.first(archive::kHeaderSize), root_bytes, stored_metadata);
   opened.whole = std::move(whole);
   if (opened.whole) opened.whole_cache_control = head.cache_control;
-  return std::unique_ptr<TileSource>(std::make_unique<RemoteArchiveSource>(
-      std::move(*fetcher), url, std::move(opened), options.fetcher.max_body_bytes));
+  auto deliverer = start_deliverer();
+  if (!deliverer) return std::move(deliverer).error();
+  return std::unique_ptr<TileSource>(
+      std::make_unique<RemoteArchiveSource>(std::move(*fetcher), url, std::move(opened),
+                                            options.fetcher.max_body_bytes, std::move(*deliverer)));
 }
 
 }  // namespace vts::client

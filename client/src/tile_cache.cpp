@@ -31,15 +31,21 @@ constexpr int kRevalidateLevel = 1 << 20;
 
 class TileCache::Impl {
  public:
+  // `disk_thread`: the disk stage's one-thread pool (start_disk_thread), null without a disk.
   Impl(std::shared_ptr<TileSource> source, TileCacheOptions options,
-       std::unique_ptr<DiskCache> disk)
+       std::unique_ptr<DiskCache> disk, std::unique_ptr<WorkerPool> disk_thread)
       : source_(std::move(source)),
         options_(std::move(options)),
         disk_(std::move(disk)),
         key_(source_->info().key),
-        spec_(source_->info().info.tile_spec()) {
+        spec_(source_->info().info.tile_spec()),
+        disk_thread_(std::move(disk_thread)) {
     if (options_.ram_bytes > 0) ram_ = std::make_unique<RamCache>(options_.ram_bytes);
-    if (disk_) disk_thread_ = std::thread([this] { disk_loop(); });
+  }
+
+  // One thread, so that the DiskCache's one SQLite connection is used by one job at a time.
+  static Result<std::unique_ptr<WorkerPool>> start_disk_thread() {
+    return WorkerPool::start({.threads = 1, .capacity = 0, .name = "vts-disk"});
   }
 
   ~Impl() {
@@ -63,14 +69,8 @@ class TileCache::Impl {
       std::unique_lock lock(mutex_);
       idle_cv_.wait(lock, [this] { return outstanding_ == 0; });
     }
-    if (disk_thread_.joinable()) {
-      {
-        std::lock_guard lock(disk_mutex_);
-        disk_stop_ = true;
-      }
-      disk_cv_.notify_all();
-      disk_thread_.join();
-    }
+    // Runs every disk job still queued (the writes too), then joins.
+    if (disk_thread_) disk_thread_->join();
     for (auto& w : orphans) {
       PayloadResult r;
       r.kind = PayloadResult::Kind::cancelled;
@@ -316,28 +316,34 @@ class TileCache::Impl {
   }
 
   // ---- disk stage (disk thread) ----
+  //
+  // The disk thread is a one-thread WorkerPool, which is FIFO; the priorities (reads before
+  // writes before batches of puts) stay here: each piece of work queued adds one disk_step() job,
+  // and a step takes the most urgent piece there is then. A step finding nothing left (a batch of
+  // puts took its piece) returns; every piece is taken by the time its own step has run.
 
   void post_disk(bool read, std::function<void()> job) {
     {
       std::lock_guard lock(disk_mutex_);
       (read ? disk_reads_ : disk_writes_).push_back(std::move(job));
     }
-    disk_cv_.notify_one();
+    schedule_disk_step();
+  }
+
+  void schedule_disk_step() {
+    // false only once the destructor has joined the thread: nothing is queued then.
+    disk_thread_->submit([this] { disk_step(); });
   }
 
   // Reads first: a viewer waits for them; writes only make the next run faster.
-  void disk_loop() {
+  void disk_step() {
     constexpr std::size_t kMaxBatch = 128;
     constexpr std::size_t kMaxBatchBytes = 8u << 20;
+    std::function<void()> job;
     std::vector<Put> batch;
-    std::unique_lock lock(disk_mutex_);
-    for (;;) {
-      disk_cv_.wait(lock, [this] { return disk_stop_ || !disk_idle(); });
-      if (disk_idle()) {
-        if (disk_stop_) return;
-        continue;
-      }
-      std::function<void()> job;
+    {
+      std::lock_guard lock(disk_mutex_);
+      if (disk_idle()) return;
       if (!disk_reads_.empty() || !disk_writes_.empty()) {
         auto& q = disk_reads_.empty() ? disk_writes_ : disk_reads_;
         job = std::move(q.front());
@@ -351,18 +357,17 @@ class TileCache::Impl {
         }
       }
       disk_busy_ = true;
-      lock.unlock();
-      {
-        std::lock_guard use(disk_use_mutex_);
-        if (job)
-          job();
-        else
-          write_puts(batch);
-      }
-      lock.lock();
-      disk_busy_ = false;
-      if (disk_idle()) disk_idle_cv_.notify_all();
     }
+    {
+      std::lock_guard use(disk_use_mutex_);
+      if (job)
+        job();
+      else
+        write_puts(batch);
+    }
+    std::lock_guard lock(disk_mutex_);
+    disk_busy_ = false;
+    if (disk_idle()) disk_idle_cv_.notify_all();
   }
 
   void disk_read(TileId id, std::uint64_t serial) {
@@ -470,7 +475,7 @@ class TileCache::Impl {
       std::lock_guard lock(disk_mutex_);
       disk_puts_.push_back(Put{id, std::move(tile), pin});
     }
-    disk_cv_.notify_one();
+    schedule_disk_step();
   }
 
   // On the disk thread: many tiles in one transaction (one commit, not one per tile).
@@ -684,12 +689,12 @@ class TileCache::Impl {
   bool spell_reported_ = false;  // the current failing spell has had a line
 
   // Disk stage: one thread (SQLite has one connection per DiskCache), reads before writes.
-  std::thread disk_thread_;
+  std::unique_ptr<WorkerPool> disk_thread_;  // "vts-disk"; joined by the destructor
   std::mutex disk_mutex_, disk_use_mutex_;
-  std::condition_variable disk_cv_, disk_idle_cv_;
+  std::condition_variable disk_idle_cv_;
   std::deque<std::function<void()>> disk_reads_, disk_writes_;
   std::deque<Put> disk_puts_;
-  bool disk_busy_ = false, disk_stop_ = false;
+  bool disk_busy_ = false;
 
   struct {
     std::atomic<std::uint64_t> gets{0}, ram_hits{0}, disk_hits{0}, network_fetches{0}, absent{0},
@@ -707,13 +712,14 @@ Result<std::unique_ptr<TileCache>> TileCache::create(std::shared_ptr<TileSource>
     if (!d) return d.error();
     disk = std::move(*d);
   }
-  std::unique_ptr<Impl> impl;
-  try {
-    impl = std::make_unique<Impl>(std::move(source), std::move(options), std::move(disk));
-  } catch (const std::system_error& e) {  // the disk thread, refused by the system
-    return make_error(ErrorCode::io,
-                      std::string("cannot start the disk cache's thread: ") + e.what());
+  std::unique_ptr<WorkerPool> disk_thread;
+  if (disk) {
+    auto started = Impl::start_disk_thread();
+    if (!started) return std::move(started).error();
+    disk_thread = std::move(*started);
   }
+  auto impl = std::make_unique<Impl>(std::move(source), std::move(options), std::move(disk),
+                                     std::move(disk_thread));
   return std::unique_ptr<TileCache>(new TileCache(std::move(impl)));
 }
 

@@ -7,33 +7,26 @@
 #include <map>
 #include <mutex>
 #include <set>
-#include <system_error>
-#include <thread>
 
+#include "vts/base/worker_pool.hpp"
 #include "vts/imaging/web_image.hpp"
 
 namespace vts::client {
 
 class TileClient::Impl {
  public:
-  Impl(std::unique_ptr<TileCache> cache, TileClientOptions options)
+  // `decoders`: the pool the decodes run on, one job per payload (start_decoders).
+  Impl(std::unique_ptr<TileCache> cache, TileClientOptions options,
+       std::unique_ptr<WorkerPool> decoders)
       : cache_(std::move(cache)),
         options_(std::move(options)),
-        spec_(cache_->info().info.tile_spec()) {
-    const int n = std::max(1, options_.decode_threads);
-    try {
-      for (int i = 0; i < n; ++i) workers_.emplace_back([this] { decode_loop(); });
-    } catch (const std::system_error&) {
-      // A thread the system refused: the started ones are stopped and joined (a joinable
-      // std::thread destroyed would abort), then create() reports it.
-      {
-        std::lock_guard lock(mutex_);
-        stop_ = true;
-      }
-      decode_cv_.notify_all();
-      for (auto& w : workers_) w.join();
-      throw;
-    }
+        spec_(cache_->info().info.tile_spec()),
+        decoders_(std::move(decoders)) {}
+
+  static Result<std::unique_ptr<WorkerPool>> start_decoders(const TileClientOptions& o) {
+    return WorkerPool::start({.threads = unsigned(std::max(1, o.decode_threads)),
+                              .capacity = 0,  // on_payload must not block: payloads wait here
+                              .name = "vts-decode"});
   }
 
   ~Impl() {
@@ -45,9 +38,10 @@ class TileClient::Impl {
         if (slot.handle) to_cancel.push_back(slot.handle);
     }
     space_cv_.notify_all();
-    decode_cv_.notify_all();
     for (auto h : to_cancel) cache_->cancel(h);
-    for (auto& w : workers_) w.join();
+    // The decodes still queued see stop_ and return at once; a payload arriving later is refused
+    // by the closed pool.
+    decoders_->join();
     cache_.reset();  // runs the last callbacks (cancelled) while this object still lives
   }
 
@@ -132,11 +126,6 @@ class TileClient::Impl {
     TileCache::Handle handle = 0;
     bool fetched = false;  // the payload is here (being decoded)
   };
-  struct Job {
-    TileId id;
-    std::uint64_t serial = 0;
-    PayloadResult payload;
-  };
 
   void on_payload(TileId id, std::uint64_t serial, PayloadResult&& r) {
     std::unique_lock lock(mutex_);
@@ -146,9 +135,11 @@ class TileClient::Impl {
       case PayloadResult::Kind::ok:
         it->second.fetched = true;
         it->second.handle = 0;
-        decode_queue_.push_back(Job{id, serial, std::move(r)});
-        lock.unlock();
-        decode_cv_.notify_one();
+        // Queued under the lock, in the order the payloads came (the pool is unbounded: this
+        // never blocks). The job holds the payload, compressed, until a decoder is free.
+        decoders_->submit([this, id, serial, payload = std::move(r)]() mutable {
+          decode_one(id, serial, std::move(payload));
+        });
         return;
       case PayloadResult::Kind::cancelled:
         inflight_.erase(it);
@@ -170,46 +161,44 @@ class TileClient::Impl {
     }
   }
 
-  void decode_loop() {
-    std::unique_lock lock(mutex_);
-    for (;;) {
-      decode_cv_.wait(lock, [this] { return stop_ || !decode_queue_.empty(); });
-      if (stop_) return;
-      Job job = std::move(decode_queue_.front());
-      decode_queue_.pop_front();
-      lock.unlock();
-      TileEvent e;
-      e.id = job.id;
-      e.from = job.payload.from;
-      auto image = decode(job.payload.tile->payload);
-      if (image) {
-        e.kind = TileEvent::Kind::decoded;
-        e.image = std::move(*image);
-      } else {
-        e.kind = TileEvent::Kind::error;
-        e.error = image.error();
-      }
-      job.payload.tile.reset();
-      lock.lock();
-      // Back-pressure: wait for room unless the queue is empty (a tile larger than the whole
-      // budget still gets through, alone).
-      space_cv_.wait(lock, [&] {
-        return stop_ || events_.empty() ||
-               queued_bytes_ + e.image.pixels.size() <= options_.decoded_bytes;
-      });
-      if (stop_) return;
-      auto it = inflight_.find(job.id);
-      if (it != inflight_.end() && it->second.serial == job.serial) inflight_.erase(it);
-      if (e.kind == TileEvent::Kind::decoded) {
-        delivered_.insert(job.id);
-        stats_.decoded++;
-      } else {
-        stats_.decode_errors++;
-      }
-      queued_bytes_ += e.image.pixels.size();
-      events_.push_back(std::move(e));
-      events_cv_.notify_all();
+  // One job on the decoders: decodes the payload, then waits for room in the event queue.
+  void decode_one(TileId id, std::uint64_t serial, PayloadResult payload) {
+    {
+      std::lock_guard lock(mutex_);
+      if (stop_) return;  // closing: what is still queued is dropped undecoded
     }
+    TileEvent e;
+    e.id = id;
+    e.from = payload.from;
+    auto image = decode(payload.tile->payload);
+    if (image) {
+      e.kind = TileEvent::Kind::decoded;
+      e.image = std::move(*image);
+    } else {
+      e.kind = TileEvent::Kind::error;
+      e.error = image.error();
+    }
+    payload.tile.reset();
+    std::unique_lock lock(mutex_);
+    // Back-pressure: wait for room unless the queue is empty (a tile larger than the whole
+    // budget still gets through, alone). A decoder waiting here takes no further job, so the
+    // payloads behind it wait compressed in the pool's queue.
+    space_cv_.wait(lock, [&] {
+      return stop_ || events_.empty() ||
+             queued_bytes_ + e.image.pixels.size() <= options_.decoded_bytes;
+    });
+    if (stop_) return;
+    auto it = inflight_.find(id);
+    if (it != inflight_.end() && it->second.serial == serial) inflight_.erase(it);
+    if (e.kind == TileEvent::Kind::decoded) {
+      delivered_.insert(id);
+      stats_.decoded++;
+    } else {
+      stats_.decode_errors++;
+    }
+    queued_bytes_ += e.image.pixels.size();
+    events_.push_back(std::move(e));
+    events_cv_.notify_all();
   }
 
   // The tileset's size and codec bound the decode (the cache refused other tiles already). An
@@ -230,28 +219,25 @@ class TileClient::Impl {
   const TileSpec spec_;                                      // what the tileset's tiles are
   const bool image_ = !cache_->info().image_format.empty();  // standard image tiles
   mutable std::mutex mutex_;
-  std::condition_variable decode_cv_, space_cv_, events_cv_;
+  std::condition_variable space_cv_, events_cv_;
   std::map<TileId, Slot> inflight_;
   std::set<TileId> delivered_;
-  std::deque<Job> decode_queue_;
   std::deque<TileEvent> events_;
   std::size_t queued_bytes_ = 0;
   std::uint64_t next_serial_ = 1;
   bool stop_ = false;
   Stats stats_;
-  std::vector<std::thread> workers_;
+  // "vts-decode": joined by the destructor before the members its jobs use go away.
+  std::unique_ptr<WorkerPool> decoders_;
 };
 
 Result<std::unique_ptr<TileClient>> TileClient::create(std::shared_ptr<TileSource> source,
                                                        TileClientOptions options) {
   auto cache = TileCache::create(std::move(source), options.cache);
   if (!cache) return cache.error();
-  std::unique_ptr<Impl> impl;
-  try {
-    impl = std::make_unique<Impl>(std::move(*cache), std::move(options));
-  } catch (const std::system_error& e) {
-    return make_error(ErrorCode::io, std::string("cannot start a tile decode thread: ") + e.what());
-  }
+  auto decoders = Impl::start_decoders(options);
+  if (!decoders) return std::move(decoders).error();
+  auto impl = std::make_unique<Impl>(std::move(*cache), std::move(options), std::move(*decoders));
   return std::unique_ptr<TileClient>(new TileClient(std::move(impl)));
 }
 

@@ -1,4 +1,5 @@
-// Tile payload framing (skippable header frame + one zstd frame) and the lossless codec.
+// Tile payload framing (skippable header frame + one zstd frame, pack_tile()) and the lossless
+// codec.
 // Byte layout of the header frame, all little-endian:
 //
 //   offset size  field
@@ -234,8 +235,6 @@ class LosslessCodec final : public Codec {
  public:
   CodecId id() const override { return CodecId::lossless; }
   PixelFormat decoded_format() const override { return PixelFormat::rgba8; }
-  Result<std::vector<std::uint8_t>> encode(const TileImage& image,
-                                           const EncodeOptions& options) const override;
   Result<TileImage> decode(std::span<const std::uint8_t> payload) const override;
 };
 
@@ -296,11 +295,9 @@ Status detail::compress_payload(const std::uint8_t* body, std::size_t body_size,
   return {};
 }
 
-namespace {
-
-Result<std::vector<std::uint8_t>> LosslessCodec::encode(const TileImage& image,
-                                                        const EncodeOptions& options) const {
-  if (Status s = detail::check_encode_input(image, "lossless"); !s) return s.error();
+Result<std::vector<std::uint8_t>> encode_lossless(const TileImage& image,
+                                                  const LosslessOptions& options) {
+  if (Status s = check_encode_input(image, CodecId::lossless); !s) return s.error();
   const std::size_t body_size = std::size_t(image.width) * image.height * 4;
   if (Status s = detail::check_zstd_level(options.zstd_level); !s) return s.error();
 
@@ -347,6 +344,39 @@ Result<std::vector<std::uint8_t>> LosslessCodec::encode(const TileImage& image,
   return std::vector<std::uint8_t>(best.begin(), best.end());
 }
 
+Result<std::vector<std::uint8_t>> pack_tile(CodecId codec, std::uint32_t width,
+                                            std::uint32_t height,
+                                            std::span<const std::uint8_t> body, int zstd_level) {
+  if (codec != CodecId::lossless && codec != CodecId::bc1)
+    return make_error(ErrorCode::invalid_argument,
+                      "pack_tile: unknown codec " + std::to_string(static_cast<int>(codec)));
+  if (width == 0 || height == 0 || width > TileHeader::kMaxDimension ||
+      height > TileHeader::kMaxDimension)
+    return make_error(ErrorCode::invalid_argument, "tile size " + std::to_string(width) + "x" +
+                                                       std::to_string(height) + " outside 1.." +
+                                                       std::to_string(TileHeader::kMaxDimension));
+  TileHeader header;
+  header.codec = codec;
+  header.format = codec == CodecId::bc1 ? PixelFormat::bc1 : PixelFormat::rgba8;
+  header.filter = Filter::none;
+  header.width = width;
+  header.height = height;
+  const std::uint64_t expected = expected_body_size(codec, header.format, width, height);
+  if (body.size() != expected)
+    return make_error(ErrorCode::invalid_argument,
+                      std::string(codec_name(codec)) + " body of " + std::to_string(width) + "x" +
+                          std::to_string(height) + " texels needs " + std::to_string(expected) +
+                          " bytes, has " + std::to_string(body.size()));
+  if (Status s = detail::check_zstd_level(zstd_level); !s) return s.error();
+  const TrimScratchOnExit trim;
+  std::vector<std::uint8_t>& packed = scratch(0);
+  if (Status s = detail::compress_payload(body.data(), body.size(), zstd_level, header, packed); !s)
+    return s.error();
+  return std::vector<std::uint8_t>(packed.begin(), packed.end());  // capacity == size, as above
+}
+
+namespace {
+
 Result<TileImage> LosslessCodec::decode(std::span<const std::uint8_t> payload) const {
   auto header = verify_impl(payload);
   if (!header) return std::move(header).error();
@@ -376,25 +406,6 @@ Result<CodecId> parse_codec_name(std::string_view name) {
   if (name == "bc1") return CodecId::bc1;
   return make_error(ErrorCode::unsupported,
                     "unknown codec \"" + std::string(name) + "\" (known: lossless, bc1)");
-}
-
-const char* bc1_quality_name(Bc1Quality q) noexcept {
-  switch (q) {
-    case Bc1Quality::fast:
-      return "fast";
-    case Bc1Quality::high:
-      return "high";
-    case Bc1Quality::best:
-      return "best";
-  }
-  return "unknown";
-}
-
-Result<Bc1Quality> parse_bc1_quality(std::string_view name) {
-  for (Bc1Quality q : {Bc1Quality::fast, Bc1Quality::high, Bc1Quality::best})
-    if (name == bc1_quality_name(q)) return q;
-  return make_error(ErrorCode::invalid_argument,
-                    "unknown bc1 quality \"" + std::string(name) + "\" (known: fast, high, best)");
 }
 
 const char* filter_name(Filter f) noexcept {
@@ -510,10 +521,12 @@ Status check_zstd_level(int level) {
   return {};
 }
 
-Status check_encode_input(const TileImage& image, const char* codec) {
+}  // namespace detail
+
+Status check_encode_input(const TileImage& image, CodecId codec) {
   if (image.format != PixelFormat::rgba8)
     return make_error(ErrorCode::invalid_argument,
-                      std::string(codec) + " codec encodes rgba8 images only");
+                      std::string(codec_name(codec)) + " codec encodes rgba8 images only");
   if (image.width == 0 || image.height == 0 || image.width > TileHeader::kMaxDimension ||
       image.height > TileHeader::kMaxDimension)
     return make_error(ErrorCode::invalid_argument, "tile size " + std::to_string(image.width) +
@@ -528,6 +541,8 @@ Status check_encode_input(const TileImage& image, const char* codec) {
                           " rgba8 needs " + std::to_string(bytes));
   return {};
 }
+
+namespace detail {
 
 Result<TileHeader> verify_payload(std::span<const std::uint8_t> payload) {
   return verify_impl(payload);

@@ -1,23 +1,10 @@
-// The bc1 codec: each 4x4 block of texels becomes 8 bytes of BC1 (S3TC DXT1) — two 5:6:5 endpoint
-// colours and sixteen 2-bit indices — and the blocks, row by row, are the body of the usual
-// payload (header frame + one zstd frame, docs/FORMAT.md). GPUs sample BC1 directly, so a tile
-// costs 4 bits per texel in the physical texture instead of 32, and the client does no pixel work
-// beyond zstd.
-//
-// Encoders: stb_dxt (Bc1Quality::fast) and libsquish (high: cluster fit, best: iterative cluster
-// fit), both from Debian. stb_dxt has no punch-through alpha, so a block holding a texel with
-// alpha < 128 goes to libsquish's range fit in fast mode; libsquish makes such texels transparent
-// (the 3-colour mode's fourth code) and keeps alpha >= 128 opaque. The colour error is measured
-// with equal weights for R, G and B (what PSNR over RGB measures), on the sRGB-encoded values
-// the texture stores.
-#include <squish.h>
-
-#include <cstring>  // stb_dxt.h uses memcpy without including it
-
-#define STB_DXT_IMPLEMENTATION
-#define STB_DXT_STATIC
-#include <stb/stb_dxt.h>
-
+// The bc1 codec, as a reader sees it: each 4x4 block of texels is 8 bytes of BC1 (S3TC DXT1) —
+// two 5:6:5 endpoint colours and sixteen 2-bit indices — and the blocks, row by row, are the body
+// of the usual payload (header frame + one zstd frame, docs/FORMAT.md). GPUs sample BC1 directly,
+// so a tile costs 4 bits per texel in the physical texture instead of 32, and the client does no
+// pixel work beyond zstd. Decoding stops at the blocks; bc1_to_rgba8() widens them to texels for
+// the CPU references. The encoder (stb_dxt, libsquish) is the builder's
+// (builder/src/tile_encoder.cpp): readers of tiles never link it.
 #include <algorithm>
 #include <cstring>
 #include <string>
@@ -30,90 +17,48 @@ namespace vts {
 inline namespace protocol {
 namespace {
 
-constexpr std::size_t kBlockBytes = 8;
+constexpr std::size_t kBc1BlockBytes = 8;
 
-std::size_t blocks_across(std::uint32_t texels) {
+std::size_t bc1_blocks_across(std::uint32_t texels) {
   return (std::size_t(texels) + 3) / 4;
 }
 
-// The 4x4 texels of block (bx, by) as 64 bytes of RGBA, and the mask of those inside the image
-// (bit 4 * row + column). Texels past the right or bottom edge repeat the edge, so an encoder
-// without masks sees no stray colours.
-int gather_block(const TileImage& image, std::size_t bx, std::size_t by, std::uint8_t out[64]) {
-  int mask = 0;
-  for (int j = 0; j < 4; ++j) {
-    const std::size_t y = by * 4 + std::size_t(j);
-    const std::size_t sy = std::min<std::size_t>(y, image.height - 1);
-    for (int i = 0; i < 4; ++i) {
-      const std::size_t x = bx * 4 + std::size_t(i);
-      const std::size_t sx = std::min<std::size_t>(x, image.width - 1);
-      std::memcpy(out + 4 * (4 * j + i), image.pixels.data() + 4 * (sy * image.width + sx), 4);
-      if (x < image.width && y < image.height) mask |= 1 << (4 * j + i);
-    }
-  }
-  return mask;
+// A 5:6:5 endpoint (little-endian) widened to 8 bits a channel by bit replication, opaque.
+std::uint16_t unpack_565(const std::uint8_t* p, std::uint8_t rgba[4]) {
+  const std::uint16_t v = static_cast<std::uint16_t>(p[0] | p[1] << 8);
+  const int r = v >> 11 & 0x1f, g = v >> 5 & 0x3f, b = v & 0x1f;
+  rgba[0] = static_cast<std::uint8_t>(r << 3 | r >> 2);
+  rgba[1] = static_cast<std::uint8_t>(g << 2 | g >> 4);
+  rgba[2] = static_cast<std::uint8_t>(b << 3 | b >> 2);
+  rgba[3] = 255;
+  return v;
 }
 
-bool has_transparent_texel(const std::uint8_t rgba[64], int mask) {
-  for (int k = 0; k < 16; ++k)
-    if ((mask >> k & 1) && rgba[4 * k + 3] < 128) return true;
-  return false;
-}
-
-void encode_block(const std::uint8_t rgba[64], int mask, Bc1Quality quality, std::uint8_t* out) {
-  if (quality == Bc1Quality::fast && !has_transparent_texel(rgba, mask)) {
-    stb_compress_dxt_block(out, rgba, /*alpha=*/0, STB_DXT_HIGHQUAL);
-    return;
+// One block into 16 RGBA texels, row-major. The two derived colours are computed as libsquish's
+// decoder computes them (DecompressColour: truncating integer division), so the CPU references
+// match the images the accuracy tables and GL tests were calibrated against.
+void decode_bc1_block(const std::uint8_t block[8], std::uint8_t out[64]) {
+  std::uint8_t palette[4][4];
+  const std::uint16_t c0 = unpack_565(block, palette[0]);
+  const std::uint16_t c1 = unpack_565(block + 2, palette[1]);
+  const bool four_colours = c0 > c1;
+  for (int i = 0; i < 3; ++i) {
+    const int a = palette[0][i], b = palette[1][i];
+    palette[2][i] = static_cast<std::uint8_t>(four_colours ? (2 * a + b) / 3 : (a + b) / 2);
+    palette[3][i] = static_cast<std::uint8_t>(four_colours ? (a + 2 * b) / 3 : 0);
   }
-  int flags = squish::kDxt1;
-  switch (quality) {
-    case Bc1Quality::fast:
-      flags |= squish::kColourRangeFit;
-      break;
-    case Bc1Quality::high:
-      flags |= squish::kColourClusterFit;
-      break;
-    case Bc1Quality::best:
-      flags |= squish::kColourIterativeClusterFit;
-      break;
+  palette[2][3] = 255;
+  palette[3][3] = four_colours ? 255 : 0;
+  for (int k = 0; k < 16; ++k) {
+    const int code = block[4 + k / 4] >> (2 * (k % 4)) & 3;
+    std::memcpy(out + 4 * k, palette[code], 4);
   }
-  squish::CompressMasked(rgba, mask, out, flags);
 }
 
 class Bc1Codec final : public Codec {
  public:
   CodecId id() const override { return CodecId::bc1; }
   PixelFormat decoded_format() const override { return PixelFormat::bc1; }
-
-  Result<std::vector<std::uint8_t>> encode(const TileImage& image,
-                                           const EncodeOptions& options) const override {
-    if (Status s = detail::check_encode_input(image, "bc1"); !s) return s.error();
-    if (Status s = detail::check_zstd_level(options.zstd_level); !s) return s.error();
-
-    const std::size_t bw = blocks_across(image.width), bh = blocks_across(image.height);
-    thread_local std::vector<std::uint8_t> blocks;
-    blocks.resize(bw * bh * kBlockBytes);
-    std::uint8_t texels[64];
-    for (std::size_t by = 0; by < bh; ++by) {
-      for (std::size_t bx = 0; bx < bw; ++bx) {
-        const int mask = gather_block(image, bx, by, texels);
-        encode_block(texels, mask, options.bc1, blocks.data() + (by * bw + bx) * kBlockBytes);
-      }
-    }
-    TileHeader header;
-    header.codec = CodecId::bc1;
-    header.format = PixelFormat::bc1;
-    header.filter = Filter::none;
-    header.width = image.width;
-    header.height = image.height;
-    std::vector<std::uint8_t> payload;
-    if (Status s = detail::compress_payload(blocks.data(), blocks.size(), options.zstd_level,
-                                            header, payload);
-        !s)
-      return s.error();
-    if (blocks.capacity() > (std::size_t(8) << 20)) std::vector<std::uint8_t>().swap(blocks);
-    return payload;
-  }
 
   Result<TileImage> decode(std::span<const std::uint8_t> payload) const override {
     auto header = detail::verify_payload(payload);
@@ -150,12 +95,12 @@ Result<TileImage> bc1_to_rgba8(const TileImage& image) {
                                                        "x" + std::to_string(image.height) +
                                                        " outside 1.." +
                                                        std::to_string(TileHeader::kMaxDimension));
-  const std::size_t bw = blocks_across(image.width), bh = blocks_across(image.height);
-  if (image.pixels.size() != bw * bh * kBlockBytes)
+  const std::size_t bw = bc1_blocks_across(image.width), bh = bc1_blocks_across(image.height);
+  if (image.pixels.size() != bw * bh * kBc1BlockBytes)
     return make_error(ErrorCode::invalid_argument,
                       "bc1 image of " + std::to_string(image.width) + "x" +
                           std::to_string(image.height) + " needs " +
-                          std::to_string(bw * bh * kBlockBytes) + " bytes, has " +
+                          std::to_string(bw * bh * kBc1BlockBytes) + " bytes, has " +
                           std::to_string(image.pixels.size()));
   TileImage out;
   out.width = image.width;
@@ -165,7 +110,7 @@ Result<TileImage> bc1_to_rgba8(const TileImage& image) {
   std::uint8_t texels[64];
   for (std::size_t by = 0; by < bh; ++by) {
     for (std::size_t bx = 0; bx < bw; ++bx) {
-      squish::Decompress(texels, image.pixels.data() + (by * bw + bx) * kBlockBytes, squish::kDxt1);
+      decode_bc1_block(image.pixels.data() + (by * bw + bx) * kBc1BlockBytes, texels);
       const std::size_t rows = std::min<std::size_t>(4, image.height - by * 4);
       const std::size_t cols = std::min<std::size_t>(4, image.width - bx * 4);
       for (std::size_t j = 0; j < rows; ++j)

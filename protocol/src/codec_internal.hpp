@@ -39,9 +39,6 @@ Result<TileImage> decode_lossless_body(const TileHeader& header,
 
 // ---- shared by the codecs -----------------------------------------------------------------------
 
-// invalid_argument naming what is wrong unless `image` is rgba8 of 1..kMaxDimension texels a side
-// holding exactly width * height * 4 bytes: what every codec's encode() takes.
-Status check_encode_input(const TileImage& image, const char* codec);
 // invalid_argument naming the range when `level` is not a zstd level.
 Status check_zstd_level(int level);
 // Compresses `body` (body_size bytes) at zstd `level` into `out`: the header frame (the given
@@ -57,7 +54,7 @@ Result<TileHeader> verify_payload(std::span<const std::uint8_t> payload);
 Status decompress_body(const TileHeader& header, std::span<const std::uint8_t> body,
                        std::vector<std::uint8_t>& dst);
 
-// The bc1 codec singleton (codec_bc1.cpp).
+// The bc1 codec singleton (codec_bc1.cpp): decode only, the encoder is the builder's.
 const Codec& bc1_codec();
 
 }  // namespace detail

@@ -22,7 +22,7 @@ void check_round_trip(const vts::TileImage& image, vts::Filter filter) {
   using namespace vts;
   const FilterChoice choice =
       filter == Filter::gradient ? FilterChoice::gradient : FilterChoice::none;
-  auto payload = find_codec(CodecId::lossless)->encode(image, EncodeOptions{1, choice});
+  auto payload = encode_lossless(image, LosslessOptions{1, choice});
   check(payload.ok());
   auto again = decode_tile(*payload);
   check(again.ok() && again->pixels == image.pixels);

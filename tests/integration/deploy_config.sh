@@ -207,6 +207,12 @@ for entry in os.environ["VTS_NEEDED"].split():
     if os.environ["SERVER_ONLY"] != "1" and pkg.startswith(("libopenimageio", "libgdal")):
         continue
     check(pkg in runtime_pkgs, f"Dockerfile: runtime stage lacks {pkg} (for {lib})")
+if os.environ["SERVER_ONLY"] == "1":
+    # And no dead weight: every library package the image installs is one the binary needs.
+    wanted = {entry.split("=", 1)[1] for entry in os.environ["VTS_NEEDED"].split()}
+    for pkg in sorted(runtime_pkgs):
+        if pkg.startswith("lib"):
+            check(pkg in wanted, f"Dockerfile: runtime stage installs {pkg}, which vts does not need")
 for gl in ("libgl1", "libglfw3", "libepoxy0", "libglx0", "libegl1"):
     check(gl not in runtime_pkgs, f"Dockerfile: GL package {gl} in the runtime image")
 for pkg in runtime_pkgs:

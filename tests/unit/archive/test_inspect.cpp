@@ -18,7 +18,7 @@ std::vector<std::uint8_t> encode_tile(std::uint32_t size, std::uint8_t fill) {
   TileImage img;
   img.width = img.height = size;
   img.pixels.assign(std::size_t{size} * size * 4, fill);
-  auto p = find_codec(CodecId::lossless)->encode(img, {});
+  auto p = encode_lossless(img);
   EXPECT_TRUE(p.ok());
   return *p;
 }

@@ -64,7 +64,7 @@ Source make_source(const TempDir& dir, std::optional<Georeference> geo = {}, std
       for (std::uint32_t x = 0; x < g.tiles_x(z); ++x) {
         const TileId id{static_cast<std::uint8_t>(z), x, y};
         if (id == kAbsent) continue;
-        auto payload = find_codec(CodecId::lossless)->encode(stored_tile(g, id), {}).value();
+        auto payload = encode_lossless(stored_tile(g, id)).value();
         EXPECT_TRUE(writer->add_tile(id, payload));
       }
   EXPECT_TRUE(writer->finish(s.info.to_json()));

@@ -1,9 +1,12 @@
-// The builder's thread pool (builder/src/work_queue.hpp): a thread the system refuses to start is
-// an error value, and the threads already started are joined (no std::terminate).
+// The builder's threads (builder/src/work_queue.hpp): the encoder pool and the readers'
+// ThreadGroup. A thread the system refuses to start is an error value, and the threads already
+// started are joined (no std::terminate).
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <future>
 #include <string>
+#include <thread>
 
 #include "vts/test/address_space.hpp"
 #include "work_queue.hpp"
@@ -14,27 +17,50 @@ namespace {
 using test::AddressSpaceLimit;
 using test::sanitized;
 
-TEST(WorkQueue, RunsEverySubmittedJobBeforeItsThreadsAreJoined) {
-  auto q = WorkQueue::start(4, 2);
+TEST(Encoders, RunEverySubmittedJobBeforeTheirThreadsAreJoined) {
+  auto q = start_encoders(4);
   ASSERT_TRUE(q) << q.error().message;
+  EXPECT_EQ((*q)->threads(), 4u);
   std::atomic<int> done{0};
-  for (int i = 0; i < 100; ++i) (*q)->submit([&] { ++done; });
-  (*q)->close_and_join();
+  for (int i = 0; i < 100; ++i) ASSERT_TRUE((*q)->submit([&] { ++done; }));
+  (*q)->join();
   EXPECT_EQ(done.load(), 100);
 }
 
-TEST(WorkQueue, ThreadsTheSystemRefusesAreAnIoErrorNotAnAbort) {
+// What bounds the builder's memory: 4 tiles per encoder wait, then submit() blocks.
+TEST(Encoders, QueueFourJobsPerThreadWhileTheyAreBusy) {
+  auto q = start_encoders(2);
+  ASSERT_TRUE(q) << q.error().message;
+  std::promise<void> release;
+  std::shared_future<void> released = release.get_future().share();
+  std::atomic<int> running{0};
+  for (int i = 0; i < 2; ++i)
+    ASSERT_TRUE((*q)->submit([&running, released] {
+      ++running;
+      released.wait();
+    }));
+  while (running.load() < 2) std::this_thread::yield();  // both encoders hold a job
+  int queued = 0;
+  while (queued < 100 && (*q)->try_submit([] {})) ++queued;
+  EXPECT_EQ(queued, 8);
+  release.set_value();
+  (*q)->join();
+}
+
+// The integration tests (stops_and_thread_limits.sh) grep "cannot start a thread" from
+// `vts build` and `vts export`; the pool's own tests cover the joining of those started.
+TEST(Encoders, ThreadsTheSystemRefusesAreAnIoErrorNamingThePool) {
   if (sanitized()) GTEST_SKIP() << "sanitizers reserve terabytes of address space";
-  Result<std::unique_ptr<WorkQueue>> q = make_error(ErrorCode::internal, "not run");
+  Result<std::unique_ptr<WorkerPool>> q = make_error(ErrorCode::internal, "not run");
   {
     // Room for a few 8 MiB stacks, not for 512: some start, then one fails.
     AddressSpaceLimit limit(48u << 20);
     ASSERT_TRUE(limit.ok());
-    q = WorkQueue::start(512, 16);
+    q = start_encoders(512);
   }
   ASSERT_FALSE(q);
   EXPECT_EQ(q.error().code, ErrorCode::io);
-  EXPECT_NE(q.error().message.find("cannot start a thread"), std::string::npos)
+  EXPECT_NE(q.error().message.find("cannot start a thread (vts-encode)"), std::string::npos)
       << q.error().message;
 }
 

@@ -313,10 +313,9 @@ struct ForgedArchive {
   explicit ForgedArchive(const fs::path& dir)
       : good(dir / "good.pmtiles"), forged(dir / "f.pmtiles") {
     build_cache_archive(good);
-    vts::TileImage img;
-    img.width = img.height = 264;
-    img.pixels.assign(264u * 264u * 4u, 0x80);
-    auto bc1 = vts::find_codec(vts::CodecId::bc1)->encode(img, {});
+    // 66 x 66 blocks of one byte value, framed as the builder's bc1 encoder frames its blocks.
+    const std::vector<std::uint8_t> blocks(66u * 66u * 8u, 0x80);
+    auto bc1 = vts::pack_tile(vts::CodecId::bc1, 264, 264, blocks, 3);
     EXPECT_TRUE(bc1.ok());
     vts::test::copy_archive_replacing(good, forged,
                                       {{kSmall, vts::test::flat_tile(64, 64, 7)},
@@ -624,7 +623,7 @@ TEST(TileClient, ADecodeThreadTheSystemRefusesIsAnIoErrorNotAnAbort) {
   }
   ASSERT_FALSE(client.ok());
   EXPECT_EQ(client.error().code, vts::ErrorCode::io);
-  EXPECT_NE(client.error().message.find("cannot start a tile decode thread"), std::string::npos)
+  EXPECT_NE(client.error().message.find("cannot start a thread (vts-decode)"), std::string::npos)
       << client.error().message;
 }
 

@@ -73,7 +73,7 @@ TileImage dithered_image(std::uint32_t w, std::uint32_t h) {
 }
 
 Bytes encode(const TileImage& img, FilterChoice filter, int level = 3) {
-  auto r = find_codec(CodecId::lossless)->encode(img, EncodeOptions{level, filter});
+  auto r = encode_lossless(img, LosslessOptions{level, filter});
   EXPECT_TRUE(r.ok()) << r.error().to_string();
   return r.ok() ? std::move(r).value() : Bytes{};
 }
@@ -249,7 +249,6 @@ TEST(LosslessCodec, PayloadIsAPlainZstdStreamOfTheBody) {
 }
 
 TEST(LosslessCodec, EncodeRejectsMalformedImages) {
-  const Codec* codec = find_codec(CodecId::lossless);
   TileImage wrong_size = smooth_image(8, 8);
   wrong_size.pixels.pop_back();
   TileImage empty = make_image(0, 8);
@@ -260,13 +259,51 @@ TEST(LosslessCodec, EncodeRejectsMalformedImages) {
   TileImage bc1 = smooth_image(8, 8);
   bc1.format = PixelFormat::bc1;
   for (const TileImage* img : {&wrong_size, &empty, &huge, &bc1}) {
-    auto r = codec->encode(*img, {});
+    auto r = encode_lossless(*img);
     ASSERT_FALSE(r.ok());
     EXPECT_EQ(r.error().code, ErrorCode::invalid_argument) << r.error().to_string();
   }
-  auto bad_level = codec->encode(smooth_image(8, 8), EncodeOptions{ZSTD_maxCLevel() + 1});
+  auto bad_level = encode_lossless(smooth_image(8, 8), LosslessOptions{ZSTD_maxCLevel() + 1});
   ASSERT_FALSE(bad_level.ok());
   EXPECT_EQ(bad_level.error().code, ErrorCode::invalid_argument);
+}
+
+TEST(PackTile, FramesAnUnfilteredBodyAsTheLosslessEncoderDoes) {
+  // The framing an encoder outside this library (the builder's bc1) relies on: the same header,
+  // checksum and zstd frame as the lossless encoder's own, byte for byte.
+  const TileImage img = smooth_image(33, 17);
+  auto packed = pack_tile(CodecId::lossless, 33, 17, img.pixels, 5);
+  ASSERT_TRUE(packed.ok()) << packed.error().to_string();
+  EXPECT_EQ(*packed, encode(img, FilterChoice::none, 5));
+  EXPECT_EQ(packed->capacity(), packed->size());
+  auto d = decode_tile(*packed);
+  ASSERT_TRUE(d.ok()) << d.error().to_string();
+  EXPECT_EQ(d->pixels, img.pixels);
+}
+
+TEST(PackTile, RejectsWhatNoTileCouldHold) {
+  const Bytes rgba(8 * 8 * 4, 7), blocks(2 * 2 * 8, 7);
+  struct Case {
+    CodecId codec;
+    std::uint32_t w, h;
+    const Bytes* body;
+    int level;
+    const char* says;
+  };
+  const Case cases[] = {
+      {static_cast<CodecId>(9), 8, 8, &rgba, 3, "unknown codec 9"},
+      {CodecId::lossless, 0, 8, &rgba, 3, "outside 1.."},
+      {CodecId::bc1, TileHeader::kMaxDimension + 4, 8, &blocks, 3, "outside 1.."},
+      {CodecId::lossless, 8, 8, &blocks, 3, "needs 256 bytes, has 32"},
+      {CodecId::bc1, 8, 8, &rgba, 3, "needs 32 bytes, has 256"},
+      {CodecId::bc1, 8, 8, &blocks, ZSTD_maxCLevel() + 1, "zstd level"},
+  };
+  for (const Case& c : cases) {
+    auto r = pack_tile(c.codec, c.w, c.h, *c.body, c.level);
+    ASSERT_FALSE(r.ok()) << c.says;
+    EXPECT_EQ(r.error().code, ErrorCode::invalid_argument) << r.error().to_string();
+    EXPECT_NE(r.error().message.find(c.says), std::string::npos) << r.error().message;
+  }
 }
 
 TEST(LosslessCodec, AnyFlippedBodyByteFailsTheChecksum) {
@@ -511,7 +548,7 @@ TEST(LosslessCodec, EncodesAndDecodesConcurrentlyFromManyThreads) {
       for (int i = 0; i < 20; ++i) {
         const TileImage img =
             (i % 2) ? smooth_image(64 + t, 48, t * 100 + i) : random_image(40, 40 + t, t * 100 + i);
-        auto p = find_codec(CodecId::lossless)->encode(img, {});
+        auto p = encode_lossless(img);
         if (!p.ok()) {
           ++failures[t];
           continue;

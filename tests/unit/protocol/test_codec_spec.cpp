@@ -16,11 +16,13 @@ using Bytes = std::vector<std::uint8_t>;
 
 const TileSpec kSpec{264, 264, CodecId::lossless};  // a tileset of 256 + 2 x 4 texel tiles
 
+// A well-formed tile of `codec`, side x side texels (bc1: blocks of one byte value, framed as the
+// builder's encoder frames them; this library has no bc1 encoder).
 Bytes encoded(CodecId codec, std::uint32_t side) {
-  TileImage img;
-  img.width = img.height = side;
-  img.pixels.assign(std::size_t(side) * side * 4, 0x5A);
-  auto p = find_codec(codec)->encode(img, {});
+  const std::size_t blocks = (std::size_t(side) + 3) / 4;
+  const Bytes body(codec == CodecId::bc1 ? blocks * blocks * 8 : std::size_t(side) * side * 4,
+                   0x5A);
+  auto p = pack_tile(codec, side, side, body, 3);
   EXPECT_TRUE(p.ok()) << p.error().to_string();
   return p.ok() ? *p : Bytes{};
 }

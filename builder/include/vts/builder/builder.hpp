@@ -35,6 +35,7 @@
 #include "vts/archive/pmtiles.hpp"
 #include "vts/base/result.hpp"
 #include "vts/builder/downsample.hpp"
+#include "vts/builder/tile_encoder.hpp"
 #include "vts/protocol/codec.hpp"
 #include "vts/protocol/geometry.hpp"
 #include "vts/protocol/tileset.hpp"

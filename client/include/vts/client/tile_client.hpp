@@ -3,10 +3,10 @@
 // request(id) fetches one tile through the cache, at its level's priority (coarser levels
 // first, then urgency); the root is pinned in RAM. Which tiles to ask for, ancestors included,
 // is the caller's policy (the renderer's TileStream). Payloads are decoded (header, checksum,
-// zstd, filter) by `decode_threads` workers; decoded tiles wait in a queue bounded by
-// `decoded_bytes` (the renderer's upload queue drains it with poll()). When the queue is full the
-// workers stop (back-pressure) and payloads wait undecoded, compressed, so memory stays bounded by
-// what was requested.
+// zstd, filter) by `decode_threads` workers ("vts-decode"); decoded tiles wait in a queue bounded
+// by `decoded_bytes` (the renderer's upload queue drains it with poll()). When the queue is full
+// the workers stop (back-pressure) and payloads wait undecoded, compressed, so memory stays bounded
+// by what was requested.
 //
 // Every request ends in exactly one Event: the decoded tile, or why there is none (absent,
 // error), unless it was cancelled first. A delivered tile is not asked for again until the

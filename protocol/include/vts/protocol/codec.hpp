@@ -11,7 +11,10 @@
 // without decoding. Every decode verifies the checksum and checks every declared size against
 // hard limits before allocating; hostile bytes yield an Error, never a crash.
 //
-// Codecs are stateless singletons; encode() and decode() are thread-safe.
+// This library decodes every codec, encodes `lossless` (the exact inverse of its decoder) and
+// frames texels an encoder has already made into a payload (pack_tile()). The bc1 block encoders
+// (stb_dxt, libsquish) live with their only user, the builder (vts/builder/tile_encoder.hpp), so
+// nothing that merely reads tiles links them. Every function here is thread-safe.
 #pragma once
 
 #include <cstdint>
@@ -33,20 +36,10 @@ enum class Filter : std::uint8_t {
       1,  // planar R,G,B,A, each byte predicted by clamp(left + up - upleft), residual mod 256
 };
 enum class FilterChoice : std::uint8_t { none, gradient, automatic };
-// How hard the bc1 codec searches for each 4x4 block's two endpoint colours. Every mode writes the
-// same format; they differ in encode time and error (docs/ACCURACY.md, table 1):
-//   fast: stb_dxt (stb_compress_dxt_block, STB_DXT_HIGHQUAL): the principal axis by power
-//         iteration, endpoints refined twice by least squares;
-//   high: libsquish cluster fit: searches the orderings of the 16 texels along the
-//         principal axis;
-//   best: libsquish iterative cluster fit: repeats the cluster fit with the refined axis.
-enum class Bc1Quality : std::uint8_t { fast, high, best };
 
 const char* codec_name(CodecId id) noexcept;
 Result<CodecId> parse_codec_name(std::string_view name);
 const char* filter_name(Filter f) noexcept;
-const char* bc1_quality_name(Bc1Quality q) noexcept;
-Result<Bc1Quality> parse_bc1_quality(std::string_view name);
 
 // Decoded texels. rgba8: width*height*4 bytes, rows top to bottom, no padding, sRGB-encoded colour
 // with straight (not premultiplied) alpha. bc1: ceil(w/4)*ceil(h/4) blocks of 8 bytes.
@@ -57,12 +50,10 @@ struct TileImage {
   std::vector<std::uint8_t> pixels;
 };
 
-struct EncodeOptions {
+// The lossless encoder's settings.
+struct LosslessOptions {
   int zstd_level = 3;  // 1..19 (negative fast levels also accepted by zstd)
-  FilterChoice filter = FilterChoice::automatic;  // lossless: automatic keeps the smaller of
-                                                  // none / gradient; bc1 takes no filter
-  Bc1Quality bc1 = Bc1Quality::fast;              // bc1 only (docs/ACCURACY.md: fast is 40x quicker
-                                                  // than high for 0.3 dB less on the Earth)
+  FilterChoice filter = FilterChoice::automatic;  // automatic keeps the smaller of none / gradient
 };
 
 // What the skippable header frame says. parse_tile_header() reads it without decompressing.
@@ -104,25 +95,47 @@ Status check_tile_against(const TileHeader& header, const TileSpec& spec);
 // verify_tile() + check_tile_against().
 Result<TileHeader> verify_tile(std::span<const std::uint8_t> payload, const TileSpec& spec);
 
+// A codec as a reader sees it: stateless singletons (find_codec()).
 class Codec {
  public:
   virtual ~Codec() = default;
   virtual CodecId id() const = 0;
   virtual PixelFormat decoded_format() const = 0;
-  // `image` must be rgba8 of the tileset's stored size. Returns the complete payload.
-  virtual Result<std::vector<std::uint8_t>> encode(const TileImage& image,
-                                                   const EncodeOptions& options) const = 0;
   // Verifies the header and checksum, then decodes into the codec's decoded_format().
   virtual Result<TileImage> decode(std::span<const std::uint8_t> payload) const = 0;
 };
+
+// invalid_argument naming what is wrong (and `codec`) unless `image` is rgba8 of
+// 1..TileHeader::kMaxDimension texels a side holding exactly width * height * 4 bytes: what every
+// encoder takes, checked before it reads a texel.
+Status check_encode_input(const TileImage& image, CodecId codec);
+
+// Encodes an rgba8 image (check_encode_input()) as a lossless payload: the filter `options` asks
+// for (automatic: whichever of none and gradient compresses smaller, a tie going to none), then
+// zstd at options.zstd_level. invalid_argument on a bad image or zstd level. The returned
+// vector's capacity is its size.
+Result<std::vector<std::uint8_t>> encode_lossless(const TileImage& image,
+                                                  const LosslessOptions& options = {});
+
+// Frames a body an encoder has already made into a complete payload: the header frame (codec,
+// its pixel format — lossless: rgba8, bc1: bc1 —, filter none, width x height, the checksum)
+// followed by `body` compressed at `zstd_level`. The inverse of Codec::decode() for a body
+// without a filter: bc1 blocks (ceil(w/4) * ceil(h/4) * 8 bytes, row-major) or unfiltered rgba8.
+// invalid_argument when the codec is unknown, a side is outside 1..kMaxDimension, body's size is
+// not the codec's for that size, or zstd_level is not a zstd level. The returned vector's capacity
+// is its size.
+Result<std::vector<std::uint8_t>> pack_tile(CodecId codec, std::uint32_t width,
+                                            std::uint32_t height,
+                                            std::span<const std::uint8_t> body, int zstd_level);
 
 // The rgba8 image a bc1 image decodes to (width x height texels, the partial blocks of a size
 // that is not a multiple of 4 cropped): what a GPU sampling GL_COMPRESSED_SRGB_ALPHA_S3TC_DXT1
 // reads, before the sRGB decode. A block's two 5:6:5 endpoints are widened to 8 bits by bit
 // replication; c0 > c1 selects four colours (c0, c1, (2 c0 + c1) / 3, (c0 + 2 c1) / 3), else three
-// and transparent black. The interpolants follow libsquish's integer rounding; GPUs may differ
-// by one code (the S3TC specification leaves the rounding open). invalid_argument when `image`
-// is not bc1 or its byte count does not match its size.
+// and transparent black. The interpolants round as libsquish's decoder does (integer division,
+// bit for bit; tests/unit/builder checks it against libsquish); GPUs may differ by one code (the
+// S3TC specification leaves the rounding open). invalid_argument when `image` is not bc1 or its
+// byte count does not match its size.
 Result<TileImage> bc1_to_rgba8(const TileImage& image);
 
 // The codec singleton for an id; nullptr when not implemented in this build.
