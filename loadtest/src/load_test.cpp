@@ -3,7 +3,6 @@
 #include <time.h>
 
 #include <algorithm>
-#include <condition_variable>
 #include <deque>
 #include <memory>
 #include <mutex>
@@ -12,6 +11,7 @@
 #include <unordered_map>
 #include <utility>
 
+#include "vts/base/worker_pool.hpp"
 #include "vts/client/tile_cache.hpp"
 #include "vts/imaging/web_image.hpp"
 #include "vts/renderer/tile_stream.hpp"
@@ -48,6 +48,13 @@ std::string error_kind(const client::PayloadResult& r) {
   if (has(": TLS: ")) return "tls";
   return error_code_name(r.error->code);
 }
+
+Clock::time_point now_of(const LoadTestOptions& o) {
+  return o.now ? o.now() : Clock::now();
+}
+
+// How often the calling thread looks whether the loops are done, or the drain is.
+constexpr auto kPoll = std::chrono::milliseconds(5);
 
 // Everything measured, shared by all viewers (one short lock per completed request).
 class Metrics {
@@ -251,9 +258,18 @@ class Engine {
   Clock::time_point start;
   std::vector<std::unique_ptr<Viewer>> viewers;
 
-  // Open loop: requests waiting for a slot.
+  // The run's clock (LoadTestOptions::now / sleep_until, else the steady clock).
+  Clock::time_point now() const { return now_of(options); }
+  void sleep_until(Clock::time_point t) const {
+    if (options.sleep_until)
+      options.sleep_until(t);
+    else
+      std::this_thread::sleep_until(t);
+  }
+
+  // Open loop: requests waiting for their slot, which the dispatcher takes one a slot (a rate, not
+  // a job queue: nothing runs them as they come).
   std::mutex queue_mutex;
-  std::condition_variable queue_cv;
   std::deque<std::pair<Viewer*, std::shared_ptr<Request>>> queue;
   std::atomic<bool> issuing{true};
 
@@ -335,7 +351,7 @@ Status Viewer::frame(std::uint64_t f, Clock::time_point due) {
       const Ns full = direct == 0 ? Ns(0) : std::max(Ns(0), Ns(last - move_start_));
       engine_.metrics.move_done(first_visible_, full);
       move_open_ = false;
-    } else if (Clock::now() - move_start_ > engine_.options.view_timeout) {
+    } else if (engine_.now() - move_start_ > engine_.options.view_timeout) {
       ++moves_incomplete_;
       move_open_ = false;
     }
@@ -344,7 +360,6 @@ Status Viewer::frame(std::uint64_t f, Clock::time_point due) {
   if (engine_.options.rate > 0) {
     std::lock_guard lock(engine_.queue_mutex);
     for (auto& r : to_issue) engine_.queue.emplace_back(this, std::move(r));
-    engine_.queue_cv.notify_one();
   } else {
     for (auto& r : to_issue) issue(r);
   }
@@ -370,7 +385,7 @@ bool Viewer::issue(const std::shared_ptr<Request>& req) {
     std::lock_guard lock(mutex_);
     if (req->cancelled) return false;
     req->issued = true;
-    req->sent = Clock::now();
+    req->sent = engine_.now();
   }
   client::GetOptions o;
   o.level = req->id.z;
@@ -397,7 +412,7 @@ void Viewer::done(const std::shared_ptr<Request>& req, client::PayloadResult&& r
     }
     return;
   }
-  const auto now = Clock::now();  // the answer's arrival: --decode's time is not the server's
+  const auto now = engine_.now();  // the answer's arrival: --decode's time is not the server's
   // --decode: an image tile that does not decode shows nothing; it is an error, not resident.
   const char* kind = nullptr;
   if (engine_.options.decode && r.kind == client::PayloadResult::Kind::ok && r.tile &&
@@ -466,6 +481,121 @@ Status check(const LoadTestOptions& o) {
   return {};
 }
 
+// The run in time, and what its loops count: shared by the loops and the calling thread.
+struct Run {
+  Clock::time_point start, end;
+  Clock::duration frame_period{};
+  double fps = 30;
+  int threads = 1;
+
+  // start + s, to the clock's tick (each time from the start, so no rounding adds up).
+  Clock::time_point at(double s) const {
+    return start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(s));
+  }
+  std::atomic<std::uint64_t> late_frames{0};
+  std::uint64_t idle_slots = 0, startup_slots = 0;  // the dispatcher's; read once it has ended
+  std::atomic<unsigned> drivers{0}, loops{0};       // still running
+  std::atomic<bool> loops_done{false};
+  Clock::time_point loops_end{};  // when the last loop ended; written before loops_done
+
+  void loop_ended(const Engine& engine) {
+    if (loops.fetch_sub(1) != 1) return;
+    loops_end = engine.now();
+    loops_done = true;
+  }
+};
+
+// Driver `t`: the frames of viewers t, t + threads, ..., each at its due time.
+void drive(Engine& engine, Run& run, int t) {
+  for (std::uint64_t f = 0;;) {
+    const auto due = run.at(double(f) / run.fps);
+    if (engine.stopped()) break;
+    if (due >= run.end) {
+      engine.sleep_until(run.end);  // the run lasts its duration, whatever the frame rate
+      break;
+    }
+    engine.sleep_until(due);
+    const auto now = engine.now();
+    if (now >= run.end) break;
+    if (now - due > run.frame_period) {
+      // Behind by more than a frame (the load generator is the bottleneck): like a renderer
+      // whose frame rate drops, skip to the frame due now instead of replaying a backlog.
+      const auto behind =
+          std::uint64_t(std::chrono::duration<double>(now - run.start).count() * run.fps);
+      run.late_frames.fetch_add(behind - f);
+      f = behind;
+      continue;
+    }
+    const std::uint64_t frame = f++;
+    for (std::size_t v = std::size_t(t); v < engine.viewers.size(); v += std::size_t(run.threads)) {
+      if (engine.stopped()) break;
+      if (auto st = engine.viewers[v]->frame(frame, due); !st) {
+        engine.fail(st.error());
+        break;
+      }
+    }
+  }
+}
+
+// Open loop: one request per slot, slot k at start + k / rate.
+void dispatch(Engine& engine, Run& run) {
+  bool sent_any = false;
+  for (std::uint64_t k = 0;; ++k) {
+    const auto slot = run.at(double(k) / engine.options.rate);
+    if (slot >= run.end || engine.stopped()) break;
+    engine.sleep_until(slot);
+    // The next request still wanted; one the view drops between the pop and the send is not
+    // spent: the slot goes to the one after it.
+    bool sent = false;
+    for (;;) {
+      std::pair<Viewer*, std::shared_ptr<Request>> item{nullptr, nullptr};
+      {
+        std::lock_guard lock(engine.queue_mutex);
+        while (!engine.queue.empty() && !item.first) {
+          item = std::move(engine.queue.front());
+          engine.queue.pop_front();
+          if (item.second->cancelled) item = {nullptr, nullptr};
+        }
+      }
+      if (!item.first) break;
+      if ((sent = item.first->send(item.second, slot))) break;
+    }
+    if (!sent) {
+      // Before the first request the viewers are still working out their first frame: the
+      // generator starting up, not a demand that fails to fill the rate.
+      ++(sent_any ? run.idle_slots : run.startup_slots);
+      continue;
+    }
+    sent_any = true;
+  }
+}
+
+// Progress about once a second, from the calling thread, between its polls.
+class Reporter {
+ public:
+  Reporter(Engine& engine, Run& run)
+      : engine_(engine), run_(run), next_(run.start + std::chrono::seconds(1)) {}
+
+  // Waits `poll` (less when a report falls due first), then reports if one is due.
+  void wait(Clock::duration poll) {
+    const auto& progress = engine_.options.progress;
+    const auto until = engine_.now() + poll;
+    engine_.sleep_until(progress ? std::min(next_, until) : until);
+    const auto now = engine_.now();
+    if (!progress || now < next_) return;
+    next_ += std::chrono::seconds(1);
+    LoadProgress p = engine_.metrics.progress(now);
+    for (auto& v : engine_.viewers) p.in_flight += v->in_flight();
+    p.late_frames = run_.late_frames.load();
+    progress(p);
+  }
+
+ private:
+  Engine& engine_;
+  Run& run_;
+  Clock::time_point next_;
+};
+
 }  // namespace
 
 Result<LoadTestResult> run_load_test(const LoadTestOptions& options, const DemandFn& demand) {
@@ -489,129 +619,65 @@ Result<LoadTestResult> run_load_test(const LoadTestOptions& options, const Deman
     caches.push_back(std::move(*cache));
   }
 
-  const auto start = Clock::now() + std::chrono::milliseconds(20);
-  const auto end = start + std::chrono::duration_cast<Clock::duration>(
-                               std::chrono::duration<double>(options.duration_s));
+  const auto start = now_of(options) + std::chrono::milliseconds(20);
   Engine engine(options, demand, start);
   for (std::uint32_t v = 0; v < options.viewers; ++v)
     engine.viewers.push_back(
         std::make_unique<Viewer>(engine, v, std::move(caches[v]), stream_options(options, v)));
 
-  const int threads = std::max(
+  Run run;
+  run.start = start;
+  run.end = run.at(options.duration_s);
+  run.fps = options.fps;
+  run.frame_period =
+      std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / options.fps));
+  run.threads = std::max(
       1, std::min<int>(options.threads > 0 ? options.threads
                                            : int(std::max(1u, std::thread::hardware_concurrency())),
                        int(options.viewers)));
-  const auto frame_period =
-      std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / options.fps));
-  std::atomic<std::uint64_t> late_frames{0};
 
-  std::vector<std::thread> drivers;
-  for (int t = 0; t < threads; ++t) {
-    drivers.emplace_back([&, t] {
-      for (std::uint64_t f = 0;;) {
-        const auto due = start + frame_period * std::int64_t(f);
-        if (due >= end || engine.stopped()) break;
-        std::this_thread::sleep_until(due);
-        const auto now = Clock::now();
-        if (now >= end) break;
-        if (now - due > frame_period) {
-          // Behind by more than a frame (the load generator is the bottleneck): like a renderer
-          // whose frame rate drops, skip to the frame due now instead of replaying a backlog.
-          const auto behind = std::uint64_t((now - start) / frame_period);
-          late_frames.fetch_add(behind - f);
-          f = behind;
-          continue;
-        }
-        const std::uint64_t frame = f++;
-        for (std::size_t v = std::size_t(t); v < engine.viewers.size(); v += std::size_t(threads)) {
-          if (engine.stopped()) break;
-          if (auto st = engine.viewers[v]->frame(frame, due); !st) {
-            engine.fail(st.error());
-            break;
-          }
-        }
-      }
+  // The loops, one thread each: the drivers and, in open loop, the dispatcher. Each thread ends
+  // with its loop (the pool is closed once they are queued).
+  const unsigned loops = unsigned(run.threads) + (options.rate > 0 ? 1u : 0u);
+  auto pool = WorkerPool::start({.threads = loops, .capacity = 0, .name = "vts-loadtest"});
+  if (!pool) return pool.error();
+  run.drivers = unsigned(run.threads);
+  run.loops = loops;
+  for (int t = 0; t < run.threads; ++t)
+    (*pool)->submit([&engine, &run, t] {
+      drive(engine, run, t);
+      // The last driver ends the issuing: the dispatcher sends no slot after it.
+      if (run.drivers.fetch_sub(1) == 1) engine.issuing = false;
+      run.loop_ended(engine);
     });
-  }
-
-  // Open loop: one request per slot, slot k at start + k / rate.
-  std::uint64_t idle_slots = 0, startup_slots = 0;
-  std::thread dispatcher;
-  if (options.rate > 0) {
-    dispatcher = std::thread([&] {
-      const double period_s = 1.0 / options.rate;
-      bool sent_any = false;
-      for (std::uint64_t k = 0;; ++k) {
-        const auto slot = start + std::chrono::duration_cast<Clock::duration>(
-                                      std::chrono::duration<double>(period_s * double(k)));
-        if (slot >= end || engine.stopped()) break;
-        std::this_thread::sleep_until(slot);
-        // The next request still wanted; one the view drops between the pop and the send is
-        // not spent: the slot goes to the one after it.
-        bool sent = false;
-        for (;;) {
-          std::pair<Viewer*, std::shared_ptr<Request>> item{nullptr, nullptr};
-          {
-            std::lock_guard lock(engine.queue_mutex);
-            while (!engine.queue.empty() && !item.first) {
-              item = std::move(engine.queue.front());
-              engine.queue.pop_front();
-              if (item.second->cancelled) item = {nullptr, nullptr};
-            }
-          }
-          if (!item.first) break;
-          if ((sent = item.first->send(item.second, slot))) break;
-        }
-        if (!sent) {
-          // Before the first request the viewers are still working out their first frame: the
-          // generator starting up, not a demand that fails to fill the rate.
-          ++(sent_any ? idle_slots : startup_slots);
-          continue;
-        }
-        sent_any = true;
-      }
+  if (options.rate > 0)
+    (*pool)->submit([&engine, &run] {
+      dispatch(engine, run);
+      run.loop_ended(engine);
     });
-  }
+  (*pool)->close();
 
-  // Progress, about once a second, until the drivers are done.
-  std::atomic<bool> drivers_done{false};
-  std::thread reporter;
-  if (options.progress) {
-    reporter = std::thread([&] {
-      auto next = start + std::chrono::seconds(1);
-      while (!drivers_done.load()) {
-        std::this_thread::sleep_until(std::min(next, Clock::now() + std::chrono::milliseconds(50)));
-        if (Clock::now() < next) continue;
-        next += std::chrono::seconds(1);
-        LoadProgress p = engine.metrics.progress(Clock::now());
-        for (auto& v : engine.viewers) p.in_flight += v->in_flight();
-        p.late_frames = late_frames.load();
-        options.progress(p);
-      }
-    });
-  }
-
-  for (auto& d : drivers) d.join();
-  engine.issuing = false;
-  if (dispatcher.joinable()) dispatcher.join();
+  // This thread reports progress, about once a second, until the loops are done and the drain
+  // is over.
+  Reporter reporter(engine, run);
+  while (!run.loops_done.load()) reporter.wait(kPoll);
+  (*pool)->join();
   {
     // Requests still waiting for a slot were never sent: the drain does not wait for them.
     std::lock_guard lock(engine.queue_mutex);
     for (auto& [viewer, req] : engine.queue) viewer->unqueue(req);
     engine.queue.clear();
   }
-  const auto measured_end = std::min(Clock::now(), end);
+  const auto measured_end = std::min(run.loops_end, run.end);
 
   // Drain: what is on its way may still arrive (and count); then the rest is abandoned.
-  const auto drain_until = Clock::now() + options.drain_timeout;
+  const auto drain_until = engine.now() + options.drain_timeout;
   for (;;) {
     std::size_t n = 0;
     for (auto& v : engine.viewers) n += v->in_flight();
-    if (n == 0 || Clock::now() >= drain_until || (options.stop && options.stop->load())) break;
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    if (n == 0 || engine.now() >= drain_until || (options.stop && options.stop->load())) break;
+    reporter.wait(kPoll);
   }
-  drivers_done = true;
-  if (reporter.joinable()) reporter.join();
 
   LoadTestResult result;
   for (auto& v : engine.viewers) {
@@ -626,9 +692,9 @@ Result<LoadTestResult> run_load_test(const LoadTestOptions& options, const Deman
   for (auto& v : engine.viewers) revalidated += v->cache().stats().not_modified;
   for (auto& v : engine.viewers) result.run.frames += v->frames;  // viewer-frames
   if (result.run.frames) result.run.demand_cpu_ms_per_frame /= double(result.run.frames);
-  result.run.late_frames = late_frames.load();
-  result.run.idle_slots = idle_slots;
-  result.run.startup_slots = startup_slots;
+  result.run.late_frames = run.late_frames.load();
+  result.run.idle_slots = run.idle_slots;
+  result.run.startup_slots = run.startup_slots;
   engine.viewers.clear();  // closes every client stack (flushes disk caches)
 
   if (engine.error) return *engine.error;
@@ -639,7 +705,7 @@ Result<LoadTestResult> run_load_test(const LoadTestOptions& options, const Deman
   r.target = options.target;
   r.command_line = options.command_line;
   r.start = std::chrono::system_clock::now() -
-            std::chrono::duration_cast<std::chrono::system_clock::duration>(Clock::now() - start);
+            std::chrono::duration_cast<std::chrono::system_clock::duration>(engine.now() - start);
   r.duration_s = std::max(0.0, std::chrono::duration<double>(measured_end - start).count());
   r.viewers = options.viewers;
   r.path = options.path_name;

@@ -20,7 +20,6 @@ source "$(dirname "${BASH_SOURCE[0]}")/deploy_lib.sh"
 require_tool "$NODE"
 require_tool "$OIIOTOOL"
 t_start=$(date +%s%N)
-elapsed_ms() { echo $((($(date +%s%N) - t_start) / 1000000)); }
 
 note "archives: earth v1, earth v2 (the image flipped: same pyramid, other pixels), a larger synthetic one"
 build_earth "$WORK/earth_v1.pmtiles"

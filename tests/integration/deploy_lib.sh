@@ -46,6 +46,9 @@ free_port() {
   done
 }
 
+# elapsed_ms: milliseconds since $t_start (nanoseconds since the epoch, which the script sets).
+elapsed_ms() { echo $((($(date +%s%N) - ${t_start:?set t_start first}) / 1000000)); }
+
 # make_cert DIR: a throw-away self-signed certificate for 127.0.0.1: DIR/cert.pem, DIR/key.pem.
 make_cert() {
   mkdir -p "$1"

@@ -19,7 +19,6 @@ require_tool "$NODE"
 [[ -f $PMTILES_JS/node_modules/pmtiles/package.json ]] ||
   fail "npm package pmtiles is not installed in $PMTILES_JS (run scripts/setup.sh)"
 t_start=$(date +%s%N)
-elapsed_ms() { echo $((($(date +%s%N) - t_start) / 1000000)); }
 
 note "archives: earth (43 tiles) and a synthetic one with thousands of tiles"
 mkdir -p "$WORK/srv"

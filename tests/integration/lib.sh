@@ -155,6 +155,9 @@ crop_ref() {
   "$OIIOTOOL" "$1" --cut "${2}x${3}+${4}+${5}" --origin +0+0 --fullpixels -o "$6"
 }
 
+# sha FILE: the file's SHA-256, in hex.
+sha() { sha256sum "$1" | cut -d' ' -f1; }
+
 # dir_listing DIR: every entry in DIR (including dot files), one per line, sorted.
 dir_listing() {
   (cd "$1" && find . -mindepth 1 | LC_ALL=C sort)

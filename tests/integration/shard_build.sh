@@ -9,8 +9,6 @@
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 require_tool "$OIIOTOOL"
 
-sha() { sha256sum "$1" | cut -d' ' -f1; }
-
 # sharded NAME SHARDS BUILD-ARGS...: plans, builds every shard and the apex, merges into
 # $WORK/merged/NAME.pmtiles (the same stem as `vts build -o $WORK/NAME.pmtiles`: the same name in
 # the metadata); the plan is $WORK/NAME.plan.json, the parts in $WORK/NAME.parts/.

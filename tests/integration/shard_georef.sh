@@ -11,8 +11,6 @@ source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 require_tool gdal_translate
 require_tool gdalwarp
 
-sha() { sha256sum "$1" | cut -d' ' -f1; }
-
 cd "$WORK"
 T() { gdal_translate -q "$@" || fail "gdal_translate $*"; }
 T -a_srs EPSG:4326 -a_ullr -180 90 180 -90 -outsize 256 128 "$EARTH" world.tif

@@ -9,8 +9,6 @@
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 require_tool "$OIIOTOOL"
 
-sha() { sha256sum "$1" | cut -d' ' -f1; }
-
 # A 2048 x 2048 mosaic of four 1024 x 1024 cells (the Earth's halves, twice): level 2 is 4 x 4
 # tiles of 512 x 512 finest texels, so --shards 16 gives 16 shards.
 for r in 0 1; do

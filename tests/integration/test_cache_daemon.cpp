@@ -36,12 +36,17 @@
 #include "vts/server/http_server.hpp"
 #include "vts/test/archive.hpp"
 #include "vts/test/server.hpp"
+#include "vts/test/socket.hpp"
 #include "vts/test/temp_dir.hpp"
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 
 namespace {
+
+using vts::test::connect_to;
+using vts::test::read_until_closed;
+using vts::test::send_all;
 
 // ---- archives ---------------------------------------------------------------------------------
 
@@ -167,30 +172,6 @@ std::string tile_path(const std::string& name, vts::TileId t) {
          std::to_string(t.y);
 }
 
-int connect_to(std::uint16_t port) {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  if (fd < 0) return -1;
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_port = htons(port);
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  if (::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0) {
-    ::close(fd);
-    return -1;
-  }
-  return fd;
-}
-
-bool send_all(int fd, const std::string& s) {
-  std::size_t done = 0;
-  while (done < s.size()) {
-    const auto n = ::send(fd, s.data() + done, s.size() - done, MSG_NOSIGNAL);
-    if (n <= 0) return false;
-    done += std::size_t(n);
-  }
-  return true;
-}
-
 struct RawResponse {
   int status = 0;
   std::string head, body;
@@ -208,13 +189,7 @@ std::vector<RawResponse> pipelined(std::uint16_t port, const std::vector<std::st
   if (fd < 0 || !send_all(fd, requests)) return out;
   timeval tv{10, 0};
   ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
-  std::string all;
-  char buf[65536];
-  for (;;) {
-    const auto n = ::recv(fd, buf, sizeof buf, 0);
-    if (n <= 0) break;
-    all.append(buf, std::size_t(n));
-  }
+  const std::string all = read_until_closed(fd);
   ::close(fd);
   std::size_t pos = 0;
   while (pos < all.size()) {

@@ -23,12 +23,17 @@
 #include "vts/server/http_server.hpp"
 #include "vts/test/archive.hpp"
 #include "vts/test/server.hpp"
+#include "vts/test/socket.hpp"
 #include "vts/test/temp_dir.hpp"
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 
 namespace {
+
+using vts::test::connect_to;
+using vts::test::read_until_closed;
+using vts::test::send_all;
 
 // One synthetic archive for the whole file (built once, in process).
 const vts::test::TempDir& archive_dir() {
@@ -93,31 +98,6 @@ bool same_as_archive(const vts::TileId& t, const std::string& body) {
   auto want = archive().reader->get(t);
   return want && want->size() == body.size() &&
          std::equal(want->begin(), want->end(), reinterpret_cast<const std::uint8_t*>(body.data()));
-}
-
-// A raw TCP connection to 127.0.0.1:port (blocking), or -1.
-int connect_to(std::uint16_t port) {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  if (fd < 0) return -1;
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_port = htons(port);
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  if (::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0) {
-    ::close(fd);
-    return -1;
-  }
-  return fd;
-}
-
-bool send_all(int fd, const std::string& s) {
-  std::size_t done = 0;
-  while (done < s.size()) {
-    const auto n = ::send(fd, s.data() + done, s.size() - done, MSG_NOSIGNAL);
-    if (n <= 0) return false;
-    done += std::size_t(n);
-  }
-  return true;
 }
 
 // True when the peer has closed `fd` (EOF or reset) within `wait`.
@@ -276,13 +256,7 @@ TEST(HttpServer, DeepPipelineIsAnsweredInOrderUnderBackPressure) {
   const int fd = connect_to(server->port());
   ASSERT_GE(fd, 0);
   ASSERT_TRUE(send_all(fd, requests));
-  std::string all;
-  char buf[65536];
-  for (;;) {
-    const auto n = ::recv(fd, buf, sizeof buf, 0);
-    if (n <= 0) break;
-    all.append(buf, std::size_t(n));
-  }
+  const std::string all = read_until_closed(fd);
   ::close(fd);
   // Walk the responses: header, Content-Length, body — in request order.
   std::size_t pos = 0;
@@ -388,13 +362,7 @@ TEST(HttpServer, StopFinishesQueuedResponsesThenClosesAndReturns) {
   ASSERT_TRUE(send_all(fd, requests));
   std::this_thread::sleep_for(200ms);
   std::thread stopper([&] { server.stop_and_join(); });
-  std::string all;
-  std::vector<char> buf(1 << 20);
-  for (;;) {
-    const auto n = ::recv(fd, buf.data(), buf.size(), 0);
-    if (n <= 0) break;
-    all.append(buf.data(), std::size_t(n));
-  }
+  const std::string all = read_until_closed(fd);
   ::close(fd);
   stopper.join();
   // Whole responses only, each the whole archive, then EOF.

@@ -1,7 +1,9 @@
 // The load engine (run_load_test) over real archives built here, through the real client stack:
 // a local archive (tiles arrive before get() returns, so counts are exact) and, where requests
 // must stay in flight across frames, the same archive behind the real HTTP server in process.
-// Tile demand comes from hand-written DemandFns, so no renderer is involved.
+// Tile demand comes from hand-written DemandFns, so no renderer is involved. Runs whose figures
+// depend on time run in virtual time (VirtualRun): they take no wall time and their times are
+// exact; the others keep the steady clock, which is what the CLI runs on.
 #include "vts/loadtest/load_test.hpp"
 
 #include <gtest/gtest.h>
@@ -13,10 +15,8 @@
 #include <fstream>
 #include <limits>
 #include <memory>
-#include <mutex>
 #include <stdexcept>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include "vts/archive/pmtiles.hpp"
@@ -26,6 +26,7 @@
 #include "vts/test/archive.hpp"
 #include "vts/test/server.hpp"
 #include "vts/test/temp_dir.hpp"
+#include "vts/test/virtual_clock.hpp"
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
@@ -95,9 +96,32 @@ DemandFn constant(std::vector<DemandTile> tiles) {
   };
 }
 
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
+constexpr std::uint64_t nanos(std::chrono::nanoseconds d) {
+  return std::uint64_t(d.count());
 }
+
+// A run in virtual time: the run's threads (its drivers, its dispatcher in open loop and the
+// calling thread, as LoadTestOptions::sleep_until says) take turns in the order of their
+// deadlines, so a local archive answers in no time and every figure is exact.
+class VirtualRun {
+ public:
+  explicit VirtualRun(const LoadTestOptions& o)
+      : clock_(std::min(unsigned(o.threads), o.viewers) + (o.rate > 0 ? 1u : 0u) + 1u),
+        t0_(clock_.now()) {}
+
+  vts::Result<LoadTestResult> run(LoadTestOptions o, const DemandFn& demand) {
+    o.now = clock_.now_fn();
+    o.sleep_until = clock_.sleep_fn();
+    return run_load_test(o, demand);
+  }
+  vts::test::VirtualClock& clock() { return clock_; }
+  // Virtual time since the clock was made.
+  std::chrono::nanoseconds elapsed() const { return clock_.now() - t0_; }
+
+ private:
+  vts::test::VirtualClock clock_;
+  Clock::time_point t0_;
+};
 
 // `vts serve` over the suite's "served" folder, in process on 127.0.0.1 port 0.
 class Server {
@@ -124,7 +148,8 @@ TEST(LoadTest, EveryViewerStreamsItsDemandOnceAndReachesFullResolution) {
   LoadTestOptions o = local_options(3, 0.5);
   o.title = "levels 0-2";
   o.path_name = "still";
-  auto r = run_load_test(o, constant(tiles));
+  VirtualRun v(o);
+  auto r = v.run(o, constant(tiles));
   ASSERT_TRUE(r.ok()) << r.error().to_string();
   const LoadReport& rep = r->report;
   EXPECT_EQ(rep.camera_moves, 3u);
@@ -142,13 +167,14 @@ TEST(LoadTest, EveryViewerStreamsItsDemandOnceAndReachesFullResolution) {
   EXPECT_EQ(rep.ttfb.count(), 0u);  // a local archive has no first byte
   EXPECT_GT(rep.bytes, 0u);
   EXPECT_EQ(rep.cancelled, 0u);
-  EXPECT_LE(rep.first_visible.max(), rep.full_resolution.max());
-  // Frame 0 asks for everything and a local read answers at once: the view is complete within
-  // milliseconds of its due time (its arrival, not the frame that noticed it).
-  EXPECT_LT(rep.full_resolution.max(), std::uint64_t(std::chrono::nanoseconds(200ms).count()));
+  // Frame 0 asks for everything and a local read answers in no (virtual) time: the view is
+  // complete at its due time (its tiles' arrival, not the frame that noticed it, 33 ms later).
+  EXPECT_EQ(rep.full_resolution.max(), 0u);
+  EXPECT_EQ(rep.first_visible.max(), 0u);
+  EXPECT_EQ(rep.total.max(), 0u);
   EXPECT_EQ(r->run.abandoned, 0u);
-  EXPECT_GE(r->run.frames, 3u * 10);  // 15 frames due per viewer in 0.5 s at 30 fps
-  EXPECT_LE(r->run.frames, 3u * 15);
+  EXPECT_EQ(r->run.frames, 3u * 15);  // frames 0..14 are due in 0.5 s at 30 fps
+  EXPECT_EQ(r->run.late_frames, 0u);
   // Passed through.
   EXPECT_EQ(rep.title, "levels 0-2");
   EXPECT_EQ(rep.path, "still");
@@ -156,10 +182,9 @@ TEST(LoadTest, EveryViewerStreamsItsDemandOnceAndReachesFullResolution) {
   EXPECT_EQ(rep.viewers, 3u);
   EXPECT_EQ(rep.fps, 30);
   EXPECT_EQ(rep.mode, LoopMode::closed);
-  EXPECT_NEAR(rep.duration_s, 0.5, 0.1);
-  std::uint64_t per_second = 0;
-  for (const LoadSecond& s : rep.seconds) per_second += s.requests;
-  EXPECT_EQ(per_second, rep.requests);
+  EXPECT_DOUBLE_EQ(rep.duration_s, 0.5);
+  ASSERT_EQ(rep.seconds.size(), 1u);  // every request in the run's first second
+  EXPECT_EQ(rep.seconds[0].requests, rep.requests);
 }
 
 TEST(LoadTest, EveryMoveTheDemandAnnouncesIsCountedAndTimed) {
@@ -252,21 +277,17 @@ TEST(LoadTest, ResidentSetKeepsItsCapAndEvictedTilesComeBackFromRam) {
   o.cache = CacheMode::ram;
   o.resident_tiles = 8;
   o.keep_frames = 1;
-  auto r = run_load_test(o, demand);
+  VirtualRun v(o);
+  auto r = v.run(o, demand);
   ASSERT_TRUE(r.ok()) << r.error().to_string();
   const LoadReport& rep = r->report;
-  const std::uint64_t frames = r->run.frames;
-  ASSERT_GE(frames, 5u);
+  ASSERT_EQ(r->run.frames, 15u);
+  ASSERT_EQ(r->run.late_frames, 0u);
   EXPECT_EQ(rep.tiers.network, 12u);  // each tile from the source once
   EXPECT_EQ(rep.tiers.ram, rep.requests - 12);
-  EXPECT_GT(rep.tiers.ram, 0u);
   EXPECT_EQ(rep.errors, 0u);
-  // Frames 0 and 1 fetch 12 tiles, every later frame re-requests the 4 evicted ones (with a
-  // skipped frame, two frames in a row may want the same set and re-request nothing).
-  if (r->run.late_frames == 0)
-    EXPECT_EQ(rep.requests, 12 + 4 * (frames - 2));
-  else
-    EXPECT_LE(rep.requests, 12 + 4 * (frames - 2));
+  // Frames 0 and 1 fetch 12 tiles, each of the 13 later frames re-requests the 4 evicted ones.
+  EXPECT_EQ(rep.requests, 12u + 4 * 13);
 }
 
 TEST(LoadTest, DiskModeKeepsOneCachePerViewerAcrossRuns) {
@@ -290,57 +311,66 @@ TEST(LoadTest, LatencyCountsFromTheFrameDueTimeNotFromWhenTheDriverGotRoundToIt)
   // The demand of frame 0 takes 40 ms: its requests go out 40 ms after they were due, and that
   // lag is part of their queue time and total latency (no coordinated omission).
   const auto tiles = tiles_of_levels(0, 1);
+  LoadTestOptions o = local_options(1, 0.3);
+  VirtualRun v(o);
   const DemandFn demand = [&](std::uint32_t, std::uint64_t f, double) -> vts::Result<ViewerDemand> {
-    if (f == 0) std::this_thread::sleep_for(40ms);
+    if (f == 0) v.clock().spend(40ms);
     return ViewerDemand{tiles, f == 0};
   };
-  auto r = run_load_test(local_options(1, 0.3), demand);
+  auto r = v.run(o, demand);
   ASSERT_TRUE(r.ok()) << r.error().to_string();
   const LoadReport& rep = r->report;
   ASSERT_EQ(rep.requests, 5u);
-  const std::uint64_t lag = std::chrono::nanoseconds(40ms).count();
-  EXPECT_GE(rep.queue_time.min(), lag);
-  EXPECT_GE(rep.total.min(), lag);
-  EXPECT_GE(rep.full_resolution.min(), lag);
-  EXPECT_LT(rep.total.max(), std::uint64_t(std::chrono::nanoseconds(300ms).count()));
-  EXPECT_GT(r->run.demand_cpu_ms_per_frame, 0.0);
+  // The lag, and nothing else: a local read takes no virtual time.
+  EXPECT_EQ(rep.queue_time.min(), nanos(40ms));
+  EXPECT_EQ(rep.queue_time.max(), nanos(40ms));
+  EXPECT_EQ(rep.total.min(), nanos(40ms));
+  EXPECT_EQ(rep.total.max(), nanos(40ms));
+  EXPECT_EQ(rep.full_resolution.min(), nanos(40ms));
+  // Frame 1 (due at 33 ms) ran 7 ms late, less than a frame: not skipped.
+  EXPECT_EQ(r->run.late_frames, 0u);
+  EXPECT_EQ(r->run.frames, 9u);
 }
 
 TEST(LoadTest, OpenLoopSendsAtExactlyTheRateAndMeasuresFromEachSlot) {
   // Far more demand than 200 req/s can serve in 1 s: the dispatcher is never idle.
   LoadTestOptions o = local_options(2, 1.0);
   o.rate = 200;
-  const auto t0 = Clock::now();
-  auto r = run_load_test(o, constant(tiles_of_levels(0, 5)));
-  const double wall = seconds_since(t0);
+  VirtualRun v(o);
+  auto r = v.run(o, constant(tiles_of_levels(0, 5)));
   ASSERT_TRUE(r.ok()) << r.error().to_string();
   const LoadReport& rep = r->report;
   EXPECT_EQ(rep.mode, LoopMode::open);
   EXPECT_EQ(rep.rate, 200);
-  // The first slots may pass while frame 0 is still working out its 1365 tiles (start-up, however
-  // long this machine takes); from the first request on, no slot is idle, and every one of the
-  // 200 slots sent a request or passed at start-up.
+  // Slot 0 is due with frame 0: it passes at start-up when the dispatcher gets there first. From
+  // the first request on no slot is idle, and every one of the 200 slots sent a request (a local
+  // read: none is still on its way at the end).
   EXPECT_EQ(r->run.idle_slots, 0u);
-  EXPECT_EQ(rep.requests + r->run.abandoned + r->run.startup_slots, 200u);
-  EXPECT_GE(rep.requests, 100u);
+  EXPECT_LE(r->run.startup_slots, 1u);
+  EXPECT_EQ(r->run.abandoned, 0u);
+  EXPECT_EQ(rep.requests + r->run.startup_slots, 200u);
   EXPECT_EQ(rep.errors, 0u);
   // Requests waited up to a second in the queue for their slot, but latency counts from the
-  // slot: a local read takes well under 100 ms.
-  EXPECT_LT(rep.total.percentile(90), std::uint64_t(std::chrono::nanoseconds(100ms).count()));
-  EXPECT_LE(rep.queue_time.percentile(50), rep.total.percentile(50));
-  // Requests still queued when the run ends were never sent: nothing to wait for.
-  EXPECT_LT(wall, 1.5);
+  // slot: a local read takes no time.
+  EXPECT_EQ(rep.total.max(), 0u);
+  EXPECT_EQ(rep.queue_time.max(), 0u);
+  ASSERT_EQ(rep.seconds.size(), 1u);
+  EXPECT_EQ(rep.seconds[0].requests, rep.requests);
+  // Requests still queued when the run ends were never sent: nothing to wait for (the run ends
+  // within a poll of its 20 ms start-up and 1 s; a drain would wait its 2 s).
+  EXPECT_LE(v.elapsed(), 20ms + 1s + 5ms);
 }
 
 TEST(LoadTest, OpenLoopCountsSlotsItHadNothingToSendIn) {
   LoadTestOptions o = local_options(1, 0.5);
   o.rate = 100;
-  auto r = run_load_test(o, constant(tiles_of_levels(0, 1)));  // 5 tiles, then nothing to do
+  VirtualRun v(o);
+  auto r = v.run(o, constant(tiles_of_levels(0, 1)));  // 5 tiles, then nothing to do
   ASSERT_TRUE(r.ok()) << r.error().to_string();
   EXPECT_EQ(r->report.requests, 5u);
-  // 50 slots: the 5 requests, the start-up before the first, and the rest idle.
-  EXPECT_EQ(r->report.requests + r->run.idle_slots + r->run.startup_slots, 50u);
-  EXPECT_GE(r->run.idle_slots, 40u);
+  // 50 slots: the 5 requests, slot 0 when it passed before frame 0 (start-up), the rest idle.
+  EXPECT_LE(r->run.startup_slots, 1u);
+  EXPECT_EQ(r->run.idle_slots + r->run.startup_slots, 45u);
 }
 
 TEST(LoadTest, OpenLoopSpendsNoSlotOnARequestTheViewNoLongerWants) {
@@ -354,14 +384,17 @@ TEST(LoadTest, OpenLoopSpendsNoSlotOnARequestTheViewNoLongerWants) {
   };
   LoadTestOptions o = local_options(1, 0.5);
   o.rate = 100;
-  auto r = run_load_test(o, demand);
+  VirtualRun v(o);
+  auto r = v.run(o, demand);
   ASSERT_TRUE(r.ok()) << r.error().to_string();
-  // Every one of the 50 slots sent one wanted request (answered, or dropped by the view on its
-  // way) or was idle (or passed at start-up).
+  // Every one of the 50 slots sent one wanted request or was idle (or passed at start-up): a
+  // slot spent on a dropped request would leave the sum short.
   EXPECT_EQ(r->report.requests + r->report.cancelled + r->run.abandoned + r->run.idle_slots +
                 r->run.startup_slots,
             50u);
-  EXPECT_LE(r->report.requests, 32u);
+  EXPECT_EQ(r->report.cancelled + r->run.abandoned, 0u);  // a local read is never on its way
+  // The 32 tiles stay resident, so each is asked for once; the slots left over are idle.
+  EXPECT_EQ(r->report.requests, 32u);
   EXPECT_EQ(r->report.errors, 0u);
 }
 
@@ -392,12 +425,15 @@ TEST(LoadTest, AFailingTileIsRetriedAfterABackoffNotEveryFrame) {
     return ViewerDemand{{{TileId{0, 0, 0}, 0, true}, {TileId{1, 0, 0}, 0, true}},
                         f == 0 || f == 15};
   };
-  auto r = run_load_test(o, demand);
+  VirtualRun v(o);
+  auto r = v.run(o, demand);
   ASSERT_TRUE(r.ok()) << r.error().to_string();
   const LoadReport& rep = r->report;
-  // 30 frames wanted the tile; it was asked for at 0, ~0.25 and ~0.75 s (backoff 250, 500 ms).
-  EXPECT_GE(rep.errors, 2u * 2);
-  EXPECT_LE(rep.errors, 2u * 3);
+  // 30 frames wanted the tile; each viewer asked for it at frame 0, at the first frame 250 ms
+  // later (8, at 267 ms) and at the first 500 ms after that (23 at 767 ms, or 24 at 800 ms: the
+  // frame times are rounded to the clock's nanosecond); the next back-off (1 s) ends after the
+  // run.
+  EXPECT_EQ(rep.errors, 2u * 3);
   EXPECT_EQ(rep.requests, rep.errors + 2);
   ASSERT_EQ(rep.errors_by_kind.size(), 1u);
   EXPECT_EQ(rep.errors_by_kind.begin()->second, rep.errors);
@@ -416,12 +452,14 @@ TEST(LoadTest, TheDemandFunctionsErrorEndsTheRunAndIsReturned) {
     return ViewerDemand{tiles, f == 0};
   };
   LoadTestOptions o = local_options(2, 10);
-  const auto t0 = Clock::now();
-  auto r = run_load_test(o, demand);
+  VirtualRun v(o);
+  auto r = v.run(o, demand);
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.error().code, vts::ErrorCode::corrupt);
   EXPECT_EQ(r.error().message, "camera path broke");
-  EXPECT_LT(seconds_since(t0), 1.0);
+  // The run ended at frame 3 (100 ms after its 20 ms start-up; the other driver, asleep by then,
+  // at its frame 4; then one poll of the calling thread), not after its 10 s.
+  EXPECT_LE(v.elapsed(), 20ms + 134ms + 5ms);
 }
 
 TEST(LoadTest, OptionsOutOfRangeAreInvalidArguments) {
@@ -468,42 +506,46 @@ TEST(LoadTest, TheStopFlagEndsTheRunPromptlyWithWhatItHas) {
   LoadTestOptions o = local_options(2, 30);
   o.stop = &stop;
   std::atomic<int> progress_calls{0};
-  o.progress = [&](const LoadProgress& p) {
-    EXPECT_GT(p.elapsed_s, 0.9);
-    ++progress_calls;
+  o.progress = [&](const LoadProgress&) { ++progress_calls; };
+  // Stopped (as SIGINT would) while frame 9 is worked out, 300 ms into the run.
+  const DemandFn demand = [&](std::uint32_t, std::uint64_t f, double) -> vts::Result<ViewerDemand> {
+    if (f == 9) stop = true;
+    return ViewerDemand{tiles_of_levels(0, 2), f == 0};
   };
-  std::thread stopper([&] {
-    std::this_thread::sleep_for(300ms);
-    stop = true;
-  });
-  const auto t0 = Clock::now();
-  auto r = run_load_test(o, constant(tiles_of_levels(0, 2)));
-  const double wall = seconds_since(t0);
-  stopper.join();
+  VirtualRun v(o);
+  auto r = v.run(o, demand);
   ASSERT_TRUE(r.ok()) << r.error().to_string();
-  EXPECT_LT(wall, 1.0);
   EXPECT_EQ(r->report.requests, 21u * 2);
   EXPECT_EQ(r->report.camera_moves, 2u);
-  EXPECT_LT(r->report.duration_s, 1.0);
-  EXPECT_GT(r->report.duration_s, 0.2);
+  // The run ends at frame 9, not after its 30 s: the report's time is the 300 ms it ran, and the
+  // calling thread returns within a poll.
+  EXPECT_NEAR(r->report.duration_s, 0.3, 1e-6);
+  EXPECT_LE(r->run.frames, 2u * 10);
+  EXPECT_LE(v.elapsed(), 20ms + 300ms + 5ms);
   EXPECT_EQ(progress_calls.load(), 0);  // stopped before its first second
 }
 
-TEST(LoadTest, ProgressIsReportedAboutOnceASecond) {
-  std::mutex m;
+TEST(LoadTest, ProgressIsReportedOnceASecond) {
   std::vector<LoadProgress> seen;
-  LoadTestOptions o = local_options(1, 1.3);
-  o.progress = [&](const LoadProgress& p) {
-    std::lock_guard lock(m);
-    seen.push_back(p);
+  LoadTestOptions o = local_options(1, 2.5);
+  o.progress = [&](const LoadProgress& p) { seen.push_back(p); };  // the calling thread
+  // Level 1 in the first second, level 2 in the second, all tiles in the run's first frame of it.
+  const DemandFn demand = [](std::uint32_t, std::uint64_t f, double) -> vts::Result<ViewerDemand> {
+    return ViewerDemand{tiles_of_levels(f < 30 ? 1 : 2, f < 30 ? 1 : 2), f == 0 || f == 30};
   };
-  auto r = run_load_test(o, constant(tiles_of_levels(0, 2)));
+  VirtualRun v(o);
+  auto r = v.run(o, demand);
   ASSERT_TRUE(r.ok()) << r.error().to_string();
-  ASSERT_EQ(seen.size(), 1u);
-  EXPECT_NEAR(seen[0].elapsed_s, 1.0, 0.2);
-  EXPECT_EQ(seen[0].requests, 21u);
-  EXPECT_EQ(seen[0].moves_complete, 1u);
-  EXPECT_EQ(seen[0].errors, 0u);
+  ASSERT_EQ(seen.size(), 2u);
+  EXPECT_DOUBLE_EQ(seen[0].elapsed_s, 1.0);
+  EXPECT_DOUBLE_EQ(seen[1].elapsed_s, 2.0);
+  // At 1 s: frame 30 (due at 1 s) may have run already; either way second 0 had level 1's 4.
+  EXPECT_EQ(seen[0].requests_per_s, 4);
+  EXPECT_EQ(seen[1].requests, 4u + 16);
+  EXPECT_EQ(seen[1].requests_per_s, 16);  // second 1: level 2's tiles
+  EXPECT_EQ(seen[1].moves_complete, 2u);
+  EXPECT_EQ(seen[1].errors, 0u);
+  EXPECT_EQ(seen[1].late_frames, 0u);
 }
 
 }  // namespace

@@ -40,9 +40,10 @@
 // ttfb = intended time to the first response byte (network only); total = intended time to the
 // tile (or error) in hand. Cache hits have queue time and total, no ttfb.
 //
-// Thread safety: run_load_test() blocks; `demand` is called from the engine's driver threads, for
-// different viewers concurrently but never twice at once for one viewer; `progress` from one
-// reporter thread.
+// Threads: run_load_test() blocks. The run's loops run on one vts::WorkerPool: one driver per
+// thread (`threads`) and, in open loop, the dispatcher; the calling thread reports progress and
+// drains. `demand` is called from the driver threads, for different viewers concurrently but never
+// twice at once for one viewer; `progress` from the calling thread.
 #pragma once
 
 #include <atomic>
@@ -117,6 +118,13 @@ struct LoadTestOptions {
   // cache's threads, never twice at once for one viewer): what VirtualTextureOptions::trace gives
   // for the GL viewer.
   std::function<void(std::uint32_t viewer, const renderer::StreamEvent&)> trace;
+  // The run's time: every time it measures is read from `now`, and every wait (a frame's due time,
+  // an open-loop slot, the progress and drain polls) is a `sleep_until`, called from the driver
+  // threads, the dispatcher and the calling thread, and from no other thread. Unset:
+  // std::chrono::steady_clock::now and std::this_thread::sleep_until. Tests pass a virtual clock
+  // (vts::test::VirtualClock) so that a run of seconds takes none and its figures are exact.
+  std::function<std::chrono::steady_clock::time_point()> now;
+  std::function<void(std::chrono::steady_clock::time_point)> sleep_until;
 };
 
 // Extra figures of a run that LoadReport has no field for.
