@@ -8,7 +8,8 @@ inline namespace server {
 namespace http_detail {
 
 EncodeQueue::EncodeQueue(int threads, EncodeLimits limits) : limits_(limits) {
-  auto pool = WorkerPool::start({.threads = unsigned(std::max(1, threads)), .name = "vts-encode"});
+  auto pool =
+      WorkerPool::start({.threads = unsigned(std::max(1, threads)), .name = "vts-web-encode"});
   if (!pool)
     throw std::system_error(std::make_error_code(std::errc::resource_unavailable_try_again),
                             pool.error().message);

@@ -41,7 +41,7 @@ class EncodeQueue {
   };
   enum class Admit : std::uint8_t { queued, owner_full, full };
 
-  // Starts a pool of `threads` (>= 1) workers named "vts-encode". When the system refuses a
+  // Starts a pool of `threads` (>= 1) workers named "vts-web-encode". When the system refuses a
   // thread, the workers already started are joined and std::system_error is thrown.
   EncodeQueue(int threads, EncodeLimits limits);
   // stop().
