@@ -1,17 +1,16 @@
 #!/usr/bin/env bash
 # deploy/batch: the sharded build's files for Kubernetes, Slurm and one machine.
-#   - k8s/*.yaml: each document against its apiVersion/kind schema (deploy_js/validate_k8s.js,
-#     kubernetes-models: batch/v1 Job with completionMode, backoffLimitPerIndex, maxFailedIndexes,
-#     podFailurePolicy), plus python3-yaml checks of what the schema cannot see: the rules the API
-#     server adds (FailIndex needs backoffLimitPerIndex, podFailurePolicy needs restartPolicy
-#     Never, per-index retries need Indexed), the shard count placeholder and its kustomize patch,
-#     the volumes mounted where the commands read and write, one image and user everywhere, and
-#     the per-index command line — the container's command must be the one build.sbatch and
-#     local/run-shards.sh run. Broken copies must fail the schema and these checks.
+#   - the manifests k8s/render.sh writes for a small synthetic plan (k8s_render.sh checks them
+#     against the schemas and the API server's Job rules for plans of every size): each document
+#     against its apiVersion/kind schema (deploy_js/validate_k8s.js), plus python3-yaml checks of
+#     what the schema cannot see: completions = the plan's shard count, the volumes mounted where
+#     the commands read and write, one image and user everywhere, and the per-index command line —
+#     the container's command must be the one build.sbatch and local/run-shards.sh run. Broken
+#     copies must fail the schema and these checks.
 #   - the builder image's runtime packages against the DT_NEEDED entries of the vts under test;
 #   - bash -n and shellcheck on the scripts; the runner's usage errors;
-#   - once `vts plan` exists: the runner, the sbatch scripts (with SLURM_ARRAY_TASK_ID set by
-#     hand) and the Job's command vectors run for real on a small synthetic plan, each merged
+#   - the runner, the sbatch scripts (with SLURM_ARRAY_TASK_ID set by hand) and the Jobs'
+#     command vectors run for real on a small synthetic plan, each merged
 #     archive byte-identical (sha256) to a single-machine `vts build`; a deleted part is the only
 #     shard rebuilt on the next run; a runner killed (SIGKILL) mid-way resumes to the same bytes.
 # shellcheck source=lib.sh
@@ -21,35 +20,45 @@ require_tool "$PY"
 "$PY" -c 'import yaml' 2>/dev/null ||
   fail "python3 cannot import yaml (Debian package python3-yaml; run scripts/setup.sh)"
 DEPLOY=${VTS_DEPLOY_DIR:-$(cd "$(dirname "${BASH_SOURCE[0]}")/../../deploy" && pwd)}
-BATCH="$DEPLOY/batch"
 DEPLOY_JS=${DEPLOY_JS:-$(cd "$(dirname "${BASH_SOURCE[0]}")/deploy_js" && pwd)}
 t_start=$(date +%s%N)
+
+# ---- the plan and the rendered manifests ----------------------------------------------------------
+# $BATCH: a copy of deploy/batch whose k8s/ holds what render.sh writes for the synthetic plan below.
+R="$WORK/run"
+mkdir -p "$R"
+SIZE=3000x1700
+# One name for all: the name defaults to the output file's stem, which differs below.
+expect_ok "$VTS" plan --synthetic "$SIZE" --name planet -o "$R/plan.json" --shards 4
+n=$("$PY" -c 'import json,sys; print(len(json.load(open(sys.argv[1]))["shards"]))' "$R/plan.json")
+((n >= 2)) || fail "the plan has $n shards, expected several"
+mkdir -p "$WORK/batch"
+cp -r "$DEPLOY/batch"/. "$WORK/batch/"
+BATCH="$WORK/batch"
+rm -r "${BATCH:?}/k8s" # render.sh writes only into a directory of its own
+expect_ok bash "$DEPLOY/batch/k8s/render.sh" "$R/plan.json" "$BATCH/k8s" --image registry.example.org/vts-build:test
 
 # ---- consistency (python3-yaml) -----------------------------------------------------------------
 # consistency BATCH_DIR: the checks below on a deploy/batch tree (the real one or a broken copy).
 consistency() {
-  "$PY" - "$1" "$DEPLOY" <<'PYTHON'
+  "$PY" - "$1" "$DEPLOY" "$n" <<'PYTHON'
 import os, re, shlex, sys, yaml
 
-batch, deploy = sys.argv[1], sys.argv[2]
+batch, deploy, n_shards = sys.argv[1], sys.argv[2], int(sys.argv[3])
 k8s = os.path.join(batch, "k8s")
 errors = []
 def check(cond, what):
     if not cond:
         errors.append(what)
 
-docs, files = [], sorted(f for f in os.listdir(k8s) if f.endswith(".yaml"))
-for f in files:
-    if f != "kustomization.yaml":
-        docs += [d for d in yaml.safe_load_all(open(os.path.join(k8s, f))) if d]
-kust = yaml.safe_load(open(os.path.join(k8s, "kustomization.yaml")))
-check(sorted(kust.get("resources", [])) == sorted(f for f in files if f != "kustomization.yaml"),
-      "kustomization lists every manifest")
+docs = []
+for f in sorted(f for f in os.listdir(k8s) if f.endswith(".yaml")):
+    docs += [d for d in yaml.safe_load_all(open(os.path.join(k8s, f))) if d]
 by = {}
 for d in docs:
     by.setdefault(d["kind"], {})[d["metadata"]["name"]] = d
 jobs = by.get("Job", {})
-check(set(jobs) == {"vts-build-shards", "vts-build-apex", "vts-build-merge"}, f"Jobs: {sorted(jobs)}")
+check(set(jobs) == {"vts-build-plan", "vts-build-shards", "vts-build-apex", "vts-build-merge"}, f"Jobs: {sorted(jobs)}")
 pvcs = by.get("PersistentVolumeClaim", {})
 check("ReadWriteMany" in pvcs.get("vts-build", {}).get("spec", {}).get("accessModes", []),
       "PVC vts-build is ReadWriteMany (every pod writes its part to it)")
@@ -65,19 +74,8 @@ def mounts(job):  # mountPath -> (volume, subPath, readOnly)
 for name, job in jobs.items():
     spec = job["spec"]
     ps = pod(name)
-    # API server rules the OpenAPI schema does not carry (kubernetes.io/docs/concepts/workloads/controllers/job/)
-    if "podFailurePolicy" in spec:
-        check(ps.get("restartPolicy") == "Never", f"{name}: podFailurePolicy needs restartPolicy: Never")
-        for r in spec["podFailurePolicy"]["rules"]:
-            oc = r.get("onExitCodes")
-            if oc:
-                check(oc.get("containerName") in (None, ctr(name)["name"]),
-                      f"{name}: podFailurePolicy names container {oc.get('containerName')}")
-                check(0 not in oc.get("values", []), f"{name}: exit code 0 in podFailurePolicy")
-            if r["action"] == "FailIndex":
-                check("backoffLimitPerIndex" in spec, f"{name}: FailIndex needs backoffLimitPerIndex")
-    if "backoffLimitPerIndex" in spec or "maxFailedIndexes" in spec:
-        check(spec.get("completionMode") == "Indexed", f"{name}: per-index limits need completionMode: Indexed")
+    # The API server's own rules: job_rules.js (k8s_render.sh); here, that the four are suspended.
+    check(spec.get("suspend") is True, f"{name}: created suspended (resumed in order)")
     vols = {v["name"]: v for v in ps.get("volumes", [])}
     for path, (vol, sub, ro) in mounts(name).items():
         check(vol in vols, f"{name}: mount {path} names no volume {vol}")
@@ -95,7 +93,7 @@ for name, job in jobs.items():
 
 shards = jobs["vts-build-shards"]["spec"]
 check(shards.get("completionMode") == "Indexed", "shards: completionMode: Indexed")
-check(shards.get("completions") == 1, "shards: completions is the placeholder 1 (patched by kustomize)")
+check(shards.get("completions") == n_shards, f"shards: completions {shards.get('completions')}, the plan has {n_shards} shards")
 check(isinstance(shards.get("parallelism"), int) and shards["parallelism"] >= 1, "shards: parallelism")
 check(isinstance(shards.get("backoffLimitPerIndex"), int), "shards: backoffLimitPerIndex")
 check(isinstance(shards.get("maxFailedIndexes"), int), "shards: maxFailedIndexes")
@@ -105,14 +103,8 @@ check(any(r["action"] == "FailIndex" and 2 in r.get("onExitCodes", {}).get("valu
       "shards: exit code 2 (bad arguments) fails the index at once (FailIndex)")
 check(not any(4 in r.get("onExitCodes", {}).get("values", []) for r in rules),
       "shards: exit code 4 (I/O error) is retried, not failed at once")
-patches = [p for p in kust.get("patches", []) if p.get("target", {}).get("name") == "vts-build-shards"]
-ops = yaml.safe_load(patches[0]["patch"]) if patches else []
-check(ops == [{"op": "replace", "path": "/spec/completions", "value": 1}],
-      f"kustomization: one patch of the shards' /spec/completions, value 1 (got {ops})")
 req = ctr("vts-build-shards").get("resources", {}).get("requests", {})
 check(str(req.get("cpu")) == "2" and req.get("memory"), "shards: requests 2 CPU and memory")
-for name in ("vts-build-apex", "vts-build-merge"):
-    check(jobs[name]["spec"].get("suspend") is True, f"{name}: created suspended (resumed in order)")
 
 # The per-index command: the container's, build.sbatch's and the runner's, with the plan and the
 # parts directory as PLAN and PARTS.
@@ -173,9 +165,8 @@ check("--dependency=afterok:" in open(os.path.join(batch, "slurm", "finish.sbatc
 
 # The builder image: its tag is the Jobs' image, its user the Jobs' uid.
 df = open(os.path.join(batch, "Dockerfile")).read()
-check(re.search(r"docker build -f deploy/batch/Dockerfile -t (\S+) \.", df)
-      and re.search(r"-t (\S+) \.", df).group(1) == ctr("vts-build-shards")["image"],
-      "Dockerfile's tag is the Jobs' image")
+check(re.search(r"docker build -f deploy/batch/Dockerfile -t (\S+) \.", df) and "render.sh" in df
+      and "--image" in df, "Dockerfile: documents its build and render.sh --image")
 check(re.search(r"^USER 10001:10001$", df, re.M), "Dockerfile: USER 10001")
 check("-DVTS_BUILD_BUILDER=OFF" not in df, "Dockerfile: the builder image keeps the builder")
 
@@ -266,9 +257,10 @@ for pkg in kubernetes-models yaml; do
     fail "npm package $pkg is not installed in $DEPLOY_JS (run scripts/setup.sh)"
 done
 validate_k8s() { "$NODE" "$DEPLOY_JS/validate_k8s.js" "$@"; }
-note "k8s/*.yaml: each document against its apiVersion/kind schema (kubernetes-models)"
+job_rules() { "$NODE" "$DEPLOY_JS/job_rules.js" "$@"; }
+note "render.sh's manifests: each document against its apiVersion/kind schema (kubernetes-models)"
 validate_k8s "$BATCH"/k8s/*.yaml >"$LOGS/validate_k8s.log" 2>&1 ||
-  { cat "$LOGS/validate_k8s.log" >&2; fail "deploy/batch/k8s/*.yaml failed schema validation (above)"; }
+  { cat "$LOGS/validate_k8s.log" >&2; fail "render.sh's manifests failed schema validation (above)"; }
 note "$(cat "$LOGS/validate_k8s.log")"
 
 note "broken copies are rejected"
@@ -305,12 +297,12 @@ broken_copy k8s/shards-job.yaml 's/^  maxFailedIndexes:/  maxFailedIndices:/'
 expect_rejected "an unknown field maxFailedIndices" 'Job/vts-build-shards.*unknown field /spec/maxFailedIndices' \
   validate_k8s "$COPY"/k8s/*.yaml
 broken_copy k8s/shards-job.yaml 's/^  completionMode: Indexed$/  completionMode: NonIndexed/'
-expect_rejected "per-index limits on a NonIndexed Job" 'vts-build-shards: per-index limits need completionMode: Indexed' \
-  consistency "$COPY"
-broken_copy k8s/shards-job.yaml 's/^      restartPolicy: Never /      restartPolicy: OnFailure /'
-expect_rejected "podFailurePolicy with restartPolicy OnFailure" 'podFailurePolicy needs restartPolicy: Never' \
-  consistency "$COPY"
-broken_copy k8s/shards-job.yaml 's|"--out-dir", "/parts"|"--shard", "0", "--out-dir", "/parts"|'
+expect_rejected "per-index limits on a NonIndexed Job" 'shards: completionMode: Indexed' consistency "$COPY"
+expect_rejected "per-index limits on a NonIndexed Job" 'rule per-index-needs-Indexed' job_rules "$COPY"/k8s/*.yaml
+broken_copy k8s/shards-job.yaml 's/^      restartPolicy: Never$/      restartPolicy: OnFailure/'
+expect_rejected "podFailurePolicy with restartPolicy OnFailure" 'rule podFailurePolicy-restartPolicy-never' \
+  job_rules "$COPY"/k8s/*.yaml
+broken_copy k8s/shards-job.yaml 's|"--out-dir", /parts\]|"--shard", "0", "--out-dir", /parts]|'
 # shellcheck disable=SC2016  # literal backquotes and $VARS in these patterns and sed expressions
 expect_rejected "a Job command with --shard" 'shards: command is `vts build` without --shard' consistency "$COPY"
 # shellcheck disable=SC2016
@@ -324,39 +316,15 @@ expect_rejected "run-shards.sh running another command than the Job" 'run-shards
 broken_copy k8s/shards-job.yaml 's|mountPath: /parts$|mountPath: /part|'
 expect_rejected "the parts volume mounted off the command's --out-dir" 'shards: /parts is parts/, writable' \
   consistency "$COPY"
-broken_copy k8s/shards-job.yaml 's|^        value: 1 # shard count$|        value: 4 # shard count|;s|^  completions: 1 |  completions: 4 |'
-expect_rejected "completions without the placeholder" 'completions is the placeholder 1' consistency "$COPY"
+broken_copy k8s/shards-job.yaml "s|^  completions: $n\$|  completions: $((n + 1))|"
+expect_rejected "completions other than the plan's shard count" "shards: completions $((n + 1)), the plan has $n shards" \
+  consistency "$COPY"
 dropped=""
 for pkg in "${needed[@]}"; do if [[ $pkg =~ ^[a-z0-9.-]+$ ]]; then dropped=$pkg; fi; done
 [[ -n $dropped ]] || fail "no package to drop from a copy of the Dockerfile"
 broken_copy Dockerfile "s/ ${dropped//./\\.}\\b//"
 [[ $(missing_pkgs "$COPY/Dockerfile") == "$dropped" ]] || fail "the package check misses a removed $dropped"
 note "rejected: a builder image without $dropped"
-
-# ---- kustomize: the documented shard-count edit -------------------------------------------------------
-if command -v kubectl >/dev/null 2>&1; then
-  note "kubectl kustomize, after the documented sed of the shard count"
-  mkdir -p "$WORK/kz"
-  cp "$BATCH"/k8s/*.yaml "$WORK/kz/"
-  N=37
-  cmdline=$(sed -n 's/^  #   \(sed -i .*\) deploy\/batch\/k8s\/kustomization.yaml$/\1/p' "$BATCH/k8s/kustomization.yaml")
-  [[ -n $cmdline ]] || fail "kustomization.yaml documents no sed of the shard count"
-  eval "$cmdline \"\$WORK/kz/kustomization.yaml\""
-  kubectl kustomize "$WORK/kz" >"$WORK/kz.yaml" 2>"$LOGS/kustomize.err" ||
-    { cat "$LOGS/kustomize.err" >&2; fail "kubectl kustomize failed"; }
-  "$PY" - "$WORK/kz.yaml" "$N" <<'PYTHON' || fail "kustomize output (above)"
-import sys, yaml
-docs = [d for d in yaml.safe_load_all(open(sys.argv[1])) if d]
-jobs = {d["metadata"]["name"]: d for d in docs if d["kind"] == "Job"}
-assert len(docs) == 4, f"{len(docs)} objects, expected 4"
-c = jobs["vts-build-shards"]["spec"]["completions"]
-assert c == int(sys.argv[2]), f"completions {c!r} after the sed, expected {sys.argv[2]}"
-PYTHON
-  validate_k8s "$WORK/kz.yaml" >/dev/null 2>"$LOGS/kz-validate.log" ||
-    { cat "$LOGS/kz-validate.log" >&2; fail "the rendered manifests failed schema validation"; }
-else
-  note "SKIP kubectl kustomize: kubectl not installed (static checks above ran)"
-fi
 
 # ---- scripts -----------------------------------------------------------------------------------------
 SCRIPTS=("$BATCH/local/run-shards.sh" "$BATCH/slurm/build.sbatch" "$BATCH/slurm/finish.sbatch")
@@ -390,22 +358,8 @@ usage_error '--out OUT.pmtiles is required' "$WORK/noshards.json"
 usage_error 'cannot read the plan' --out "$WORK/x.pmtiles" "$WORK/missing.json"
 
 # ---- for real: a synthetic plan through the runner, the sbatch scripts and the Job's commands -------
-# An unknown subcommand with --help prints the top-level help and exits 0: ask for plan's own usage.
-if ! "$VTS" plan --help >"$LOGS/plan-help.txt" 2>&1 || ! grep -q '^Usage: vts plan' "$LOGS/plan-help.txt"; then
-  note "SKIP the runs for real: \`vts plan --help\` is not the plan command's usage (vts has no plan yet); the static checks above ran"
-  note "PASS (static part) in $((($(date +%s%N) - t_start) / 1000000)) ms"
-  exit 0
-fi
-grep -q -- '--synthetic' <<<"$("$VTS" build --help)" || fail "vts build --help names no --synthetic"
-R="$WORK/run"
-mkdir -p "$R"
-SIZE=3000x1700
-# One name for all: the name defaults to the output file's stem, which differs below.
 expect_ok "$VTS" build --synthetic "$SIZE" --name planet -o "$R/single.pmtiles"
 want=$(sha256sum <"$R/single.pmtiles")
-expect_ok "$VTS" plan --synthetic "$SIZE" --name planet -o "$R/plan.json" --shards 4
-n=$("$PY" -c 'import json,sys; print(len(json.load(open(sys.argv[1]))["shards"]))' "$R/plan.json")
-((n >= 2)) || fail "the plan has $n shards, expected several"
 
 note "run-shards.sh: $n shards, 2 at a time, then apex and merge"
 expect_ok bash "$RUNNER" --vts "$VTS" --jobs 2 --out "$R/merged.pmtiles" "$R/plan.json"
