@@ -55,6 +55,10 @@ PACKAGES=(
   # deploy/ tests: nginx templates filled by envsubst, a TLS front with a throwaway certificate,
   # compose and Kubernetes YAML checked with python3
   gettext-base openssl python3-yaml
+  # deploy/batch/slurm on a real Slurm cluster: tests/integration/slurm_cluster.sh and
+  # bench/batch_bench.sh start slurmctld, slurmd and munged of their own on loopback (as root,
+  # no systemd: the packages' own services are not used)
+  slurm-wlm munge
 )
 # Node.js may come from elsewhere (e.g. NodeSource) with its own npm: only ask Debian for what is
 # missing, so the two never fight over /usr/bin/node or /usr/bin/npm.

@@ -64,8 +64,8 @@ void print_text(const BuildArgs& a, const BuildReport& r) {
 
 // A plan fixes the build: of the options given, only those of running it may come with --plan.
 Status check_plan_options(const CLI::App& c) {
-  static const std::set<std::string> kAllowed = {"plan",    "shard", "apex",  "out-dir",
-                                                 "threads", "json",  "quiet", "help"};
+  static const std::set<std::string> kAllowed = {
+      "plan", "shard", "shard-offset", "apex", "out-dir", "threads", "json", "quiet", "help"};
   for (const CLI::Option* opt : c.get_options()) {
     if (opt->count() == 0) continue;
     const auto& names = opt->get_lnames();
@@ -81,12 +81,15 @@ int run_build(const CLI::App& c, const BuildArgs& a, const PlanBuildArgs& plan_a
     if (Status st = check_plan_options(c); !st) return report_error(st.error());
     return run_plan_build(plan_args, a);
   }
-  if (plan_args.apex || plan_args.shard || !plan_args.out_dir.empty())
-    return report_error(make_error(ErrorCode::invalid_argument,
-                                   "--shard, --apex and --out-dir need --plan PLAN.json"));
+  if (plan_args.apex || plan_args.shard || plan_args.shard_offset || !plan_args.out_dir.empty())
+    return report_error(
+        make_error(ErrorCode::invalid_argument,
+                   "--shard, --shard-offset, --apex and --out-dir need --plan PLAN.json"));
   if (a.output.empty())
     return report_error(make_error(ErrorCode::invalid_argument,
                                    "no output given: -o OUT.pmtiles (or --plan for a shard)"));
+  // Before the inputs are read: the archive is spooled beside its name, in a folder that exists.
+  if (Status st = check_output_file(a.output, "-o", {}); !st) return report_error(st.error());
   // build_pyramid checks the output against the inputs; the --input-list is the command's own.
   if (!a.input_list.empty()) {
     const std::filesystem::path list = a.input_list;

@@ -3,6 +3,7 @@
 #include <nlohmann/json.hpp>
 
 #include "commands.hpp"
+#include "plan_build.hpp"
 #include "progress.hpp"
 #include "vts/base/file_io.hpp"
 #include "vts/builder/shard.hpp"
@@ -38,9 +39,12 @@ void print_report(const MergeArgs& a, const MergeReport& r) {
 }
 
 int run_merge(const MergeArgs& a) {
-  // merge_plan checks the output against the parts; the plan is the command's own input.
-  const std::filesystem::path plan_path = a.plan;
-  if (Status st = check_output_is_not_an_input(a.output, {&plan_path, 1}); !st)
+  // merge_plan checks the output against the parts; the plan is the command's own input. The
+  // output's folder is checked before the parts are read: a planet's merge runs for hours, and
+  // the archive is written under a temporary name in that folder.
+  const std::filesystem::path out = a.output;
+  if (Status st = check_output_file(out, "-o", {a.plan}); !st) return report_error(st.error());
+  if (Status st = check_output_folder(out.parent_path(), "-o's folder", false); !st)
     return report_error(st.error());
   auto plan = load_plan(a.plan);
   if (!plan) return report_error(plan.error());

@@ -82,18 +82,24 @@ bool parse_u64(std::string_view s, std::uint64_t& out) {
   return true;
 }
 
-Result<std::optional<std::uint64_t>> array_job_index(const std::string& what) {
+const char* array_job_index_name() {
   for (const char* name :
        {"JOB_COMPLETION_INDEX", "SLURM_ARRAY_TASK_ID", "AWS_BATCH_JOB_ARRAY_INDEX"}) {
     const char* value = std::getenv(name);
-    if (!value || !*value) continue;
-    std::uint64_t index = 0;
-    if (!parse_u64(value, index))
-      return make_error(ErrorCode::invalid_argument,
-                        std::string("$") + name + "='" + value + "' is not a " + what);
-    return std::optional<std::uint64_t>(index);
+    if (value && *value) return name;
   }
-  return std::optional<std::uint64_t>();
+  return "";
+}
+
+Result<std::optional<std::uint64_t>> array_job_index(const std::string& what) {
+  const char* name = array_job_index_name();
+  if (!*name) return std::optional<std::uint64_t>();
+  const char* value = std::getenv(name);
+  std::uint64_t index = 0;
+  if (!parse_u64(value, index))
+    return make_error(ErrorCode::invalid_argument,
+                      std::string("$") + name + "='" + value + "' is not a " + what);
+  return std::optional<std::uint64_t>(index);
 }
 
 Result<std::uint64_t> parse_byte_size(const std::string& text, std::string_view flag) {

@@ -43,6 +43,8 @@ bool parse_u64(std::string_view s, std::uint64_t& out);
 // $SLURM_ARRAY_TASK_ID and $AWS_BATCH_JOB_ARRAY_INDEX that is set; nullopt when none is. A value
 // that is not an index is invalid_argument naming the variable and `what` ("shard index").
 Result<std::optional<std::uint64_t>> array_job_index(const std::string& what);
+// The name of the variable array_job_index() reads ("SLURM_ARRAY_TASK_ID"); "" when none is set.
+const char* array_job_index_name();
 // "A<sep>B" (--grid CxR, --synthetic WxH), both decimal digits only (no sign) within T's range;
 // false otherwise, leaving a and b unchanged.
 template <typename T>

@@ -103,6 +103,28 @@ JOB_COMPLETION_INDEX=x expect_refused "JOB_COMPLETION_INDEX='x' is not a shard i
   "$VTS" build --plan "$WORK/p.json" --out-dir "$WORK/parts"
 SLURM_ARRAY_TASK_ID=-1 expect_refused "SLURM_ARRAY_TASK_ID='-1' is not a generator index" \
   "$VTS" loadtest "http://127.0.0.1:1/x" --generators 2 --duration 1
+note "a shard offset that is not one, or that takes an array's index past the plan's shards"
+n=$(python3 -c 'import json,sys; print(len(json.load(open(sys.argv[1]))["shards"]))' "$WORK/p.json")
+SLURM_ARRAY_TASK_ID=0 VTS_SHARD_OFFSET=x expect_refused "VTS_SHARD_OFFSET='x' is not a shard offset" \
+  "$VTS" build --plan "$WORK/p.json" --out-dir "$WORK/parts"
+SLURM_ARRAY_TASK_ID=0 VTS_SHARD_OFFSET=-3 expect_refused "VTS_SHARD_OFFSET='-3' is not a shard offset" \
+  "$VTS" build --plan "$WORK/p.json" --out-dir "$WORK/parts"
+SLURM_ARRAY_TASK_ID=0 expect_refused "--shard-offset '-1' is not a shard offset" \
+  "$VTS" build --plan "$WORK/p.json" --out-dir "$WORK/parts" --shard-offset -1
+SLURM_ARRAY_TASK_ID=1 VTS_SHARD_OFFSET=$((n - 1)) expect_refused \
+  "shard index \$SLURM_ARRAY_TASK_ID=1 + \$VTS_SHARD_OFFSET=$((n - 1)) is out of range: the plan has $n shards" \
+  "$VTS" build --plan "$WORK/p.json" --out-dir "$WORK/parts"
+AWS_BATCH_JOB_ARRAY_INDEX=2 expect_refused \
+  "shard index \$AWS_BATCH_JOB_ARRAY_INDEX=2 + --shard-offset 9999999999999999999 is out of range" \
+  "$VTS" build --plan "$WORK/p.json" --out-dir "$WORK/parts" --shard-offset 9999999999999999999
+expect_refused "give --shard or --shard-offset, not both" \
+  "$VTS" build --plan "$WORK/p.json" --out-dir "$WORK/parts" --shard 0 --shard-offset 1
+expect_refused "--shard-offset" "$VTS" build --synthetic 512x512 -o "$WORK/x.pmtiles" --shard-offset 1
+[[ ! -e $WORK/parts ]] || fail "a refused shard wrote into --out-dir"
+# The offset is added to the array's index: task 1 of an array from shard n-2 is shard n-1.
+SLURM_ARRAY_TASK_ID=1 VTS_SHARD_OFFSET=$((n - 2)) expect_ok \
+  "$VTS" build --plan "$WORK/p.json" --out-dir "$WORK/parts" --json
+json_check "$OUT" "j.shard === $((n - 1))"
 # The defaults PROTOCOL.md §11 states.
 "$VTS" cache serve --help >"$OUT" 2>&1 || true
 grep -qE -- '--upstream-deadline .*=20$' "$OUT" || fail "--upstream-deadline default is not 20"

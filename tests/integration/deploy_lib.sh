@@ -35,17 +35,6 @@ deploy_cleanup() {
 }
 trap deploy_cleanup EXIT
 
-# free_port: a TCP port no socket uses now (nginx cannot listen on port 0 and tell us which),
-# below the kernel's ephemeral range so outgoing connections do not take it in the meantime.
-free_port() {
-  local p lo
-  lo=$(awk '{ print $1 }' /proc/sys/net/ipv4/ip_local_port_range 2>/dev/null || echo 32768)
-  while :; do
-    p=$((20000 + RANDOM % (lo - 20000)))
-    ss -Htan "sport = :$p" | grep -q . || { echo "$p"; return; }
-  done
-}
-
 # elapsed_ms: milliseconds since $t_start (nanoseconds since the epoch, which the script sets).
 elapsed_ms() { echo $((($(date +%s%N) - ${t_start:?set t_start first}) / 1000000)); }
 

@@ -158,6 +158,18 @@ crop_ref() {
 # sha FILE: the file's SHA-256, in hex.
 sha() { sha256sum "$1" | cut -d' ' -f1; }
 
+# free_port: a TCP port no socket uses now (ss says; nginx and Slurm cannot listen on port 0 and
+# tell us which), below the kernel's ephemeral range so outgoing connections do not take it in the
+# meantime.
+free_port() {
+  local p lo
+  lo=$(awk '{ print $1 }' /proc/sys/net/ipv4/ip_local_port_range 2>/dev/null || echo 32768)
+  while :; do
+    p=$((20000 + RANDOM % (lo - 20000)))
+    ss -Htan "sport = :$p" | grep -q . || { echo "$p"; return; }
+  done
+}
+
 # dir_listing DIR: every entry in DIR (including dot files), one per line, sorted.
 dir_listing() {
   (cd "$1" && find . -mindepth 1 | LC_ALL=C sort)

@@ -14,11 +14,16 @@
 #   --parts DIR   the parts (default: PLAN's directory/parts)
 #   --logs DIR    one log per shard, shard-IIIIII.log, and the joblog: a line per shard run,
 #                 "index exit_status seconds" (default: PLAN's directory/logs)
-#   --out FILE    the merged archive
+#   --out FILE    the merged archive (its folder is created if missing)
 #   --vts PATH    the vts executable (default: vts on PATH, or $VTS)
+# Before any shard runs, the folders of the parts, the logs and the archive are created if
+# missing and must take a new file (exit 2 naming the folder otherwise).
 # Exit status: 0 when the archive is written; 1 when shards failed (named, with their logs; the
 # apex and merge are not run); 2 on bad usage; otherwise the failing apex's or merge's status.
 set -euo pipefail
+# Each shard's index is JOB_COMPLETION_INDEX itself: an offset meant for an engine's arrays
+# (deploy/batch/slurm/submit.sh) left in the environment would shift every shard.
+unset VTS_SHARD_OFFSET
 
 die() {
   printf 'run-shards: %s\n' "$*" >&2
@@ -67,7 +72,16 @@ command -v "$vts" >/dev/null 2>&1 || die "no vts executable '$vts' (--vts PATH)"
 dir=$(dirname "$plan")
 parts=${parts:-$dir/parts}
 logs=${logs:-$dir/logs}
-mkdir -p "$parts" "$logs"
+# writable_folder DIR WHAT: DIR exists (created with its parents) and takes a new file.
+writable_folder() {
+  mkdir -p -- "$1" 2>/dev/null || die "cannot create the folder $1 ($2)"
+  local probe
+  probe=$(mktemp "$1/.run-shards-check.XXXXXX" 2>/dev/null) || die "cannot write in the folder $1 ($2)"
+  rm -f -- "$probe"
+}
+writable_folder "$parts" "--parts"
+writable_folder "$logs" "--logs"
+writable_folder "$(dirname -- "$out")" "the folder of --out"
 
 # The shard count: the length of the plan's "shards" array.
 n=$(python3 -c '
