@@ -28,12 +28,6 @@ namespace vts {
 inline namespace builder {
 namespace {
 
-constexpr std::size_t kBc1EncodedBlockBytes = 8;
-
-std::size_t bc1_blocks_in(std::uint32_t texels) {
-  return (std::size_t(texels) + 3) / 4;
-}
-
 // The 4x4 texels of block (bx, by) as 64 bytes of RGBA, and the mask of those inside the image
 // (bit 4 * row + column). Texels past the right or bottom edge repeat the edge, so an encoder
 // without masks sees no stray colours.
@@ -81,17 +75,16 @@ void encode_bc1_block(const std::uint8_t rgba[64], int mask, Bc1Quality quality,
 
 Result<std::vector<std::uint8_t>> encode_bc1(const TileImage& image, const EncodeOptions& options) {
   if (Status s = check_encode_input(image, CodecId::bc1); !s) return s.error();
-  const std::size_t bw = bc1_blocks_in(image.width), bh = bc1_blocks_in(image.height);
+  const std::size_t bw = bc1_blocks(image.width), bh = bc1_blocks(image.height);
   // Per thread, so that encoding millions of tiles does not allocate per tile; dropped after a
   // rare huge tile so its size is not pinned per thread for ever.
   thread_local std::vector<std::uint8_t> blocks;
-  blocks.resize(bw * bh * kBc1EncodedBlockBytes);
+  blocks.resize(bw * bh * kBc1BlockBytes);
   std::uint8_t texels[64];
   for (std::size_t by = 0; by < bh; ++by) {
     for (std::size_t bx = 0; bx < bw; ++bx) {
       const int mask = gather_bc1_block(image, bx, by, texels);
-      encode_bc1_block(texels, mask, options.bc1,
-                       blocks.data() + (by * bw + bx) * kBc1EncodedBlockBytes);
+      encode_bc1_block(texels, mask, options.bc1, blocks.data() + (by * bw + bx) * kBc1BlockBytes);
     }
   }
   auto payload = pack_tile(CodecId::bc1, image.width, image.height, blocks, options.zstd_level);

@@ -66,7 +66,7 @@ std::uint64_t expected_body_size(CodecId codec, PixelFormat format, std::uint32_
                                  std::uint32_t h) {
   if (codec == CodecId::lossless && format == PixelFormat::rgba8) return std::uint64_t(w) * h * 4;
   if (codec == CodecId::bc1 && format == PixelFormat::bc1)
-    return ((std::uint64_t(w) + 3) / 4) * ((std::uint64_t(h) + 3) / 4) * 8;
+    return std::uint64_t(bc1_blocks(w)) * bc1_blocks(h) * kBc1BlockBytes;
   return 0;
 }
 

@@ -17,12 +17,6 @@ namespace vts {
 inline namespace protocol {
 namespace {
 
-constexpr std::size_t kBc1BlockBytes = 8;
-
-std::size_t bc1_blocks_across(std::uint32_t texels) {
-  return (std::size_t(texels) + 3) / 4;
-}
-
 // A 5:6:5 endpoint (little-endian) widened to 8 bits a channel by bit replication, opaque.
 std::uint16_t unpack_565(const std::uint8_t* p, std::uint8_t rgba[4]) {
   const std::uint16_t v = static_cast<std::uint16_t>(p[0] | p[1] << 8);
@@ -95,7 +89,7 @@ Result<TileImage> bc1_to_rgba8(const TileImage& image) {
                                                        "x" + std::to_string(image.height) +
                                                        " outside 1.." +
                                                        std::to_string(TileHeader::kMaxDimension));
-  const std::size_t bw = bc1_blocks_across(image.width), bh = bc1_blocks_across(image.height);
+  const std::size_t bw = bc1_blocks(image.width), bh = bc1_blocks(image.height);
   if (image.pixels.size() != bw * bh * kBc1BlockBytes)
     return make_error(ErrorCode::invalid_argument,
                       "bc1 image of " + std::to_string(image.width) + "x" +

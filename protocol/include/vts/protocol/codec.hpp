@@ -17,6 +17,7 @@
 // nothing that merely reads tiles links them. Every function here is thread-safe.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <span>
 #include <string_view>
@@ -40,6 +41,13 @@ enum class FilterChoice : std::uint8_t { none, gradient, automatic };
 const char* codec_name(CodecId id) noexcept;
 Result<CodecId> parse_codec_name(std::string_view name);
 const char* filter_name(Filter f) noexcept;
+
+// BC1 packs 4x4 texels into a block of kBc1BlockBytes; a side of `texels` takes bc1_blocks(texels)
+// blocks (the last one partial when `texels` is not a multiple of 4).
+inline constexpr std::size_t kBc1BlockBytes = 8;
+constexpr std::size_t bc1_blocks(std::uint32_t texels) noexcept {
+  return (std::size_t(texels) + 3) / 4;
+}
 
 // Decoded texels. rgba8: width*height*4 bytes, rows top to bottom, no padding, sRGB-encoded colour
 // with straight (not premultiplied) alpha. bc1: ceil(w/4)*ceil(h/4) blocks of 8 bytes.
