@@ -65,7 +65,8 @@ void print_text(const BuildArgs& a, const BuildReport& r) {
 // A plan fixes the build: of the options given, only those of running it may come with --plan.
 Status check_plan_options(const CLI::App& c) {
   static const std::set<std::string> kAllowed = {
-      "plan", "shard", "shard-offset", "apex", "out-dir", "threads", "json", "quiet", "help"};
+      "plan",           "shard",   "shard-offset", "apex",  "out-dir",
+      "no-space-check", "threads", "json",         "quiet", "help"};
   for (const CLI::Option* opt : c.get_options()) {
     if (opt->count() == 0) continue;
     const auto& names = opt->get_lnames();
@@ -81,10 +82,11 @@ int run_build(const CLI::App& c, const BuildArgs& a, const PlanBuildArgs& plan_a
     if (Status st = check_plan_options(c); !st) return report_error(st.error());
     return run_plan_build(plan_args, a);
   }
-  if (plan_args.apex || plan_args.shard || plan_args.shard_offset || !plan_args.out_dir.empty())
-    return report_error(
-        make_error(ErrorCode::invalid_argument,
-                   "--shard, --shard-offset, --apex and --out-dir need --plan PLAN.json"));
+  if (plan_args.apex || plan_args.shard || plan_args.shard_offset || !plan_args.out_dir.empty() ||
+      plan_args.no_space_check)
+    return report_error(make_error(
+        ErrorCode::invalid_argument,
+        "--shard, --shard-offset, --apex, --out-dir and --no-space-check need --plan PLAN.json"));
   if (a.output.empty())
     return report_error(make_error(ErrorCode::invalid_argument,
                                    "no output given: -o OUT.pmtiles (or --plan for a shard)"));

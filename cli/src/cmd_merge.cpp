@@ -14,7 +14,7 @@ namespace {
 
 struct MergeArgs {
   std::string plan, parts, output;
-  bool json = false, quiet = false, no_verify = false;
+  bool json = false, quiet = false, no_verify = false, no_space_check = false;
 };
 
 void print_report(const MergeArgs& a, const MergeReport& r) {
@@ -48,6 +48,12 @@ int run_merge(const MergeArgs& a) {
     return report_error(st.error());
   auto plan = load_plan(a.plan);
   if (!plan) return report_error(plan.error());
+  // The archive is about the parts' size; it is written whole before the parts can go.
+  if (!a.no_space_check)
+    if (Status st = check_free_space(out.parent_path(), "-o's folder", "the merged archive",
+                                     estimate_plan_size(*plan).archive);
+        !st)
+      return report_error(st.error());
   ProgressBar bar("merge", "tiles", !a.quiet && !a.json);
   auto progress = [&](const archive::MergeProgress& p) {
     if (p.copying)
@@ -76,6 +82,9 @@ Runner add_merge(CLI::App& app) {
   c->add_flag("--no-verify", a->no_verify,
               "Copy payloads in the kernel (copy_file_range: shared extents on XFS/Btrfs with "
               "reflink) without checking each against its checksum; indexes are still checked");
+  c->add_flag("--no-space-check", a->no_space_check,
+              "Merge even when the archive's folder has less free space than the plan's estimate "
+              "of the archive");
   c->add_flag("--json", a->json, "Print the result as JSON");
   c->add_flag("-q,--quiet", a->quiet, "No progress bar or summary");
   return [a] { return run_merge(*a); };

@@ -6,6 +6,7 @@
 #include "build_args.hpp"
 #include "build_inputs.hpp"
 #include "commands.hpp"
+#include "progress.hpp"
 #include "vts/base/file_io.hpp"
 #include "vts/builder/shard.hpp"
 
@@ -42,6 +43,44 @@ Status check_plan_output(const PlanArgs& a, std::vector<std::filesystem::path> i
   return check_output_is_not_an_input(a.build.output, inputs);
 }
 
+// The disk a plan's parts and archive will take (estimate_plan_size): what `vts build --plan` and
+// `vts merge` check their folders for, and what a volume for the build must hold.
+nlohmann::json estimate_json(const PlanSizeEstimate& e) {
+  return {{"shard_max", e.shard_max},
+          {"apex", e.apex},
+          {"archive", e.archive},
+          {"tile_bytes", e.tile_bytes}};
+}
+
+void print_plan(const PlanArgs& a, const ShardPlan& plan) {
+  const PlanSizeEstimate e = estimate_plan_size(plan);
+  if (a.build.json) {
+    nlohmann::json j;
+    j["plan"] = a.build.output;
+    j["hash"] = plan.hash;
+    j["build_hash"] = plan.build_hash;
+    j["width"] = plan.width;
+    j["height"] = plan.height;
+    j["max_zoom"] = plan.max_zoom;
+    j["split_level"] = plan.split_level;
+    j["apex_level"] = plan.apex_level;
+    j["shards"] = plan.shards.size();
+    j["apex"] = plan.apex_level > 0;
+    j["estimated_bytes"] = estimate_json(e);
+    std::printf("%s\n", j.dump(2).c_str());
+  } else if (!a.build.quiet) {
+    std::printf("planned %s: %llu shards at split level %d of 0..%d, apex level %d%s, plan %s\n",
+                a.build.output.c_str(), (unsigned long long)plan.shards.size(), plan.split_level,
+                plan.max_zoom, plan.apex_level,
+                plan.apex_level > 0 ? " plus the apex" : " (no apex)", plan.hash.c_str());
+    std::printf(
+        "estimated disk: the archive about %s, the parts about as much (each shard's at "
+        "most %s, the apex's %s)\n",
+        human_bytes(e.archive).c_str(), human_bytes(e.shard_max).c_str(),
+        human_bytes(e.apex).c_str());
+  }
+}
+
 void print_update(const PlanArgs& a, const PlanUpdate& u) {
   const ShardPlan& p = u.plan;
   const double fraction =
@@ -57,6 +96,7 @@ void print_update(const PlanArgs& a, const PlanUpdate& u) {
     j["rebuild"] = u.shards;
     j["rebuild_fraction"] = fraction;
     j["apex"] = u.apex;
+    j["estimated_bytes"] = estimate_json(estimate_plan_size(p));
     std::printf("%s\n", j.dump(2).c_str());
     return;
   }
@@ -99,25 +139,7 @@ int run_plan(const CLI::App& c, const PlanArgs& a) {
   auto plan = make_shard_plan(*o, level, a.shards, a.apex_levels);
   if (!plan) return report_error(plan.error());
   if (Status st = save_plan(*plan, a.build.output); !st) return report_error(st.error());
-  if (a.build.json) {
-    nlohmann::json j;
-    j["plan"] = a.build.output;
-    j["hash"] = plan->hash;
-    j["build_hash"] = plan->build_hash;
-    j["width"] = plan->width;
-    j["height"] = plan->height;
-    j["max_zoom"] = plan->max_zoom;
-    j["split_level"] = plan->split_level;
-    j["apex_level"] = plan->apex_level;
-    j["shards"] = plan->shards.size();
-    j["apex"] = plan->apex_level > 0;
-    std::printf("%s\n", j.dump(2).c_str());
-  } else if (!a.build.quiet) {
-    std::printf("planned %s: %llu shards at split level %d of 0..%d, apex level %d%s, plan %s\n",
-                a.build.output.c_str(), (unsigned long long)plan->shards.size(), plan->split_level,
-                plan->max_zoom, plan->apex_level,
-                plan->apex_level > 0 ? " plus the apex" : " (no apex)", plan->hash.c_str());
-  }
+  print_plan(a, *plan);
   return 0;
 }
 

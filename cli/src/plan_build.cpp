@@ -1,6 +1,7 @@
 // vts build --plan: one shard of a sharded build, or its apex (plan_build.hpp).
 #include "plan_build.hpp"
 
+#include <sys/statvfs.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -137,6 +138,9 @@ void add_plan_build_options(CLI::App* c, PlanBuildArgs& p) {
   c->add_flag("--apex", p.apex,
               "With --plan: build the levels above the apex level from the shards' parts");
   c->add_option("--out-dir", p.out_dir, "With --plan: the directory of the parts");
+  c->add_flag("--no-space-check", p.no_space_check,
+              "With --plan: build even when --out-dir has less free space than the plan's "
+              "estimate of the part");
 }
 
 Status check_output_folder(const std::filesystem::path& dir, std::string_view what, bool create) {
@@ -163,6 +167,23 @@ Status check_output_folder(const std::filesystem::path& dir, std::string_view wh
   return {};
 }
 
+Status check_free_space(const std::filesystem::path& dir, std::string_view what,
+                        std::string_view output, std::uint64_t need) {
+  const std::filesystem::path folder = dir.empty() ? "." : dir;
+  struct statvfs fs {};
+  if (::statvfs(folder.c_str(), &fs) != 0) {
+    const int err = errno;
+    return make_error(ErrorCode::io, std::string(what) + " " + folder.string() +
+                                         ": cannot read its free space: " + std::strerror(err));
+  }
+  const std::uint64_t free = std::uint64_t{fs.f_bavail} * fs.f_frsize;
+  if (free >= need) return {};
+  return make_error(ErrorCode::io, std::string(what) + " " + folder.string() + ": " +
+                                       human_bytes(free) + " free, " + std::string(output) +
+                                       " needs about " + human_bytes(need) +
+                                       " (the plan's estimate; --no-space-check to try anyway)");
+}
+
 int run_plan_build(const PlanBuildArgs& p, const BuildArgs& a) {
   if (Status st = check_plan_build_args(p, a); !st) return report_error(st.error());
   auto plan = load_plan(p.plan);
@@ -180,6 +201,14 @@ int run_plan_build(const PlanBuildArgs& p, const BuildArgs& a) {
   // Before any work: a shard of a planet runs for minutes, and an array runs thousands of them.
   if (Status st = check_output_folder(p.out_dir, "--out-dir", true); !st)
     return report_error(st.error());
+  if (!p.no_space_check) {
+    const std::uint64_t need =
+        index ? estimate_shard_part_bytes(*plan, *index) : estimate_plan_size(*plan).apex;
+    if (Status st =
+            check_free_space(p.out_dir, "--out-dir", index ? "the part" : "the apex part", need);
+        !st)
+      return report_error(st.error());
+  }
   // The part is not the plan (build_shard/build_apex check it against the inputs and parts).
   const std::filesystem::path plan_path = p.plan;
   const std::filesystem::path part =

@@ -20,6 +20,8 @@ struct PlanBuildArgs {
   // Text, parsed when the shard is chosen: CLI11 would read "-1" as 2^64-1.
   std::optional<std::string> shard_offset;
   bool apex = false;
+  // Build even when --out-dir has less free space than the plan's estimate of the part.
+  bool no_space_check = false;
 };
 
 void add_plan_build_options(CLI::App* c, PlanBuildArgs& p);
@@ -32,5 +34,11 @@ int run_plan_build(const PlanBuildArgs& p, const BuildArgs& a);
 // (a probe file, removed at once: permissions, a read-only mount, no inodes left). Errors name
 // `what` ("--out-dir") and the folder.
 Status check_output_folder(const std::filesystem::path& dir, std::string_view what, bool create);
+
+// That the folder has `need` bytes free for an unprivileged writer (statvfs: f_bavail * f_frsize):
+// io naming `what` and the folder, the space free and `output` ("the merged archive") with its
+// estimate, pointing at --no-space-check (the estimate is the plan's, estimate_plan_size).
+Status check_free_space(const std::filesystem::path& dir, std::string_view what,
+                        std::string_view output, std::uint64_t need);
 
 }  // namespace vts::cli

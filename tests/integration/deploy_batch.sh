@@ -327,14 +327,17 @@ broken_copy Dockerfile "s/ ${dropped//./\\.}\\b//"
 note "rejected: a builder image without $dropped"
 
 # ---- scripts -----------------------------------------------------------------------------------------
-SCRIPTS=("$BATCH/local/run-shards.sh" "$BATCH/slurm/build.sbatch" "$BATCH/slurm/finish.sbatch")
+SCRIPTS=("$BATCH/local/run-shards.sh" "$BATCH/slurm/submit.sh" "$BATCH/slurm/build.sbatch"
+  "$BATCH/slurm/finish.sbatch")
 for s in "${SCRIPTS[@]}"; do
   bash -n "$s" || fail "bash -n $s"
   [[ -x $s ]] || fail "$s is not executable"
 done
+bash -n "$BATCH/lib.sh" || fail "bash -n $BATCH/lib.sh"
 if command -v shellcheck >/dev/null 2>&1; then
   note "shellcheck $(shellcheck --version | sed -n 's/^version: //p')"
-  shellcheck "${SCRIPTS[@]}" || fail "shellcheck found problems (above)"
+  # -x: follow what they source (deploy/batch/lib.sh), found next to each script.
+  shellcheck -x "${SCRIPTS[@]}" || fail "shellcheck found problems (above)"
 else
   note "SKIP shellcheck: not installed (Debian package shellcheck)"
 fi
@@ -417,17 +420,7 @@ VTS=$VTS expect_ok bash "$BATCH/slurm/finish.sbatch" "$R/plan.json" "$R/sparts" 
 note "the Jobs' command vectors, verbatim but for the mount paths (JOB_COMPLETION_INDEX per shard)"
 mkdir -p "$R/k/plan" "$R/k/parts" "$R/k/out"
 cp "$R/plan.json" "$R/k/plan/plan.json"
-job_cmd() { # JOB: its container command, /plan /parts /out mapped into $R/k, one word a line
-  "$PY" - "$BATCH/k8s/$1-job.yaml" "$R/k" <<'PYTHON'
-import sys, yaml
-c = yaml.safe_load(open(sys.argv[1]))["spec"]["template"]["spec"]["containers"][0]["command"]
-for w in c:
-    for m in ("/plan/", "/parts", "/out/"):
-        if w == m or w.startswith(m if m.endswith("/") else m + "/"):
-            w = sys.argv[2] + w
-    print(w)
-PYTHON
-}
+job_cmd() { k8s_job_command "$BATCH/k8s/$1-job.yaml" "$R/k"; } # JOB: its command, run in $R/k
 mapfile -t shard_cmd < <(job_cmd shards)
 mapfile -t apex_cmd < <(job_cmd apex)
 mapfile -t merge_cmd < <(job_cmd merge)

@@ -6,7 +6,8 @@
 #     Kubernetes 1.33 OpenAPI schemas (validate_k8s.js, kubernetes-models 4.5.1, pinned in
 #     deploy_js/package-lock.json) and the Job rules the API server adds (job_rules.js); the
 #     figures from the plan: completions, parallelism, maxFailedIndexes, the image everywhere, the
-#     storage class, the claim's size (recomputed here from docs/PLANET.md's tile count);
+#     storage class, the claim's size (recomputed here from docs/PLANET.md's tile count); the
+#     archive estimate render.sh sizes it from equals `vts plan --json`'s, dense, sparse, each codec;
 #   - every rule of job_rules.js broken in turn in a copy of a rendered manifest that the schema
 #     still accepts, and refused with the rule's id; the shards Job of before render.sh (completions
 #     1 < maxFailedIndexes 16) refused; each rule in docs/DEPLOY.md's table;
@@ -42,6 +43,25 @@ expect_ok "$VTS" plan --synthetic 33554432x16777216 -o "$P/planet9.json" --split
 shards() { "$PY" -c 'import json,sys; print(len(json.load(open(sys.argv[1]))["shards"]))' "$1"; }
 for want in one:1 eight:8 planet:32768 planet9:131072; do
   [[ $(shards "$P/${want%%:*}.json") == "${want#*:}" ]] || fail "${want%%:*}.json: $(shards "$P/${want%%:*}.json") shards, expected ${want#*:}"
+done
+
+# The claim's archive estimate is vts's (`vts plan --json`'s "estimated_bytes"): render.sh keeps its
+# own copy of the rule (it runs where vts need not be), so the two are compared, lossless with and
+# without the filter and bc1, for 1 and 8 shards and the planets.
+note "render.sh --estimate agrees with vts plan --json's estimated_bytes"
+expect_ok "$VTS" plan "$EARTH" --name earth -o "$P/eight-nf.json" --shards 4 --filter none -q
+expect_ok "$VTS" plan "$EARTH" --name earth -o "$P/eight-bc1.json" --shards 4 --codec bc1 -q
+# sparse: a planet whose tiles below level 3 lie in one corner (the apex counts ancestors only)
+expect_ok "$VTS" plan --synthetic 33554432x16777216 --region 0,0,3000000,2000000 --region-level 3 \
+  -o "$P/sparse.json" --split-level 8 -q
+for name in one eight eight-nf eight-bc1 planet planet9 sparse; do
+  # The same plan again, printed (vts prints the estimate of the plan it writes).
+  expect_ok "$VTS" plan --update "$P/$name.json" -o "$WORK/again.json" --json
+  vts_est=$(json_get "$OUT" '[j.estimated_bytes.archive, j.estimated_bytes.tile_bytes].join(" ")')
+  expect_ok bash "$RENDER" --estimate "$P/$name.json"
+  render_est=$(json_get "$OUT" '[j.archive, j.tile_bytes].join(" ")')
+  [[ $vts_est == "$render_est" && ${vts_est%% *} -gt 0 ]] ||
+    fail "$name.json: vts estimates '$vts_est' (archive, per tile), render.sh '$render_est'"
 done
 
 # ---- render, schema, rules, figures -------------------------------------------------------------
@@ -218,18 +238,7 @@ tar -C "$common" -cf - -T "$R/eight/plan/upload.txt" | tar -xf - -C "$V/inputs"
 cp "$R/eight/plan/plan.local.json" "$V/plan/"
 # inputs.txt names /inputs/...: the pods' paths; here they lie under $V/inputs.
 sed "s|^/inputs/|$V/inputs/|" "$R/eight/plan/inputs.txt" >"$V/plan/inputs.txt"
-job_cmd() { # FILE: its container command, /plan /parts /out mapped into $V, one word a line
-  "$PY" - "$1" "$V" <<'PYTHON'
-import sys, yaml
-c = yaml.safe_load(open(sys.argv[1]))["spec"]["template"]["spec"]["containers"][0]["command"]
-for w in c:
-    for m in ("/plan/", "/parts", "/out/"):
-        if w == m or w.startswith(m if m.endswith("/") else m + "/"):
-            w = sys.argv[2] + w
-    print(w)
-PYTHON
-}
-for j in shards apex merge; do mapfile -t "cmd_$j" < <(job_cmd "$R/eight/$j-job.yaml"); done
+for j in shards apex merge; do mapfile -t "cmd_$j" < <(k8s_job_command "$R/eight/$j-job.yaml" "$V"); done
 # The plan Job's shell script, its /plan/ and /tmp/ in $V, `vts` the one under test.
 plan_script=$("$PY" -c 'import sys, yaml; print(yaml.safe_load(open(sys.argv[1]))["spec"]["template"]["spec"]["containers"][0]["command"][2])' \
   "$R/eight/plan-job.yaml")

@@ -170,6 +170,21 @@ free_port() {
   done
 }
 
+# k8s_job_command JOB.yaml ROOT: the Job's container command, one word a line, with the volume's
+# paths (/plan/..., /parts, /out/...) moved under ROOT: the command a rendered Job runs, to run
+# here on a folder laid out like the volume.
+k8s_job_command() {
+  "${PYTHON3:-python3}" - "$1" "$2" <<'PYTHON'
+import sys, yaml
+c = yaml.safe_load(open(sys.argv[1]))["spec"]["template"]["spec"]["containers"][0]["command"]
+for w in c:
+    for m in ("/plan/", "/parts", "/out/"):
+        if w == m or w.startswith(m if m.endswith("/") else m + "/"):
+            w = sys.argv[2] + w
+    print(w)
+PYTHON
+}
+
 # dir_listing DIR: every entry in DIR (including dot files), one per line, sorted.
 dir_listing() {
   (cd "$1" && find . -mindepth 1 | LC_ALL=C sort)

@@ -5,13 +5,18 @@
 # `mkdir -p` would: what a user of `--out out/planet.pmtiles` expects) and refuses at once, exit
 # 2, one that cannot be created or written; `vts build --plan` creates --out-dir likewise; `vts
 # merge -o` and `vts build -o` want the archive's folder to exist (as every vts command that writes
-# a file does) and to take a file.
+# a file does) and to take a file. Each vts command also refuses at once (exit 4) a folder with
+# less free space than the plan's estimate of what it writes there, naming the folder, the space
+# and the estimate, unless given --no-space-check.
 # shellcheck source=lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 RUNNER=$(cd "$(dirname "${BASH_SOURCE[0]}")/../../deploy/batch/local" && pwd)/run-shards.sh
 
 expect_ok "$VTS" plan --synthetic 1000x500 --shards 4 -o "$WORK/plan.json" --json
 n=$(json_get "$OUT" "j.shards")
+archive_est=$(json_get "$OUT" "j.estimated_bytes.archive")
+shard_est=$(json_get "$OUT" "j.estimated_bytes.shard_max")
+apex_est=$(json_get "$OUT" "j.estimated_bytes.apex")
 mkdir -p "$WORK/ref"
 expect_ok "$VTS" build --synthetic 1000x500 -o "$WORK/ref/x.pmtiles" -q
 touch "$WORK/afile"
@@ -85,4 +90,52 @@ if mount -t tmpfs -o ro,size=1m tmpfs "$WORK/ro" 2>/dev/null; then
 else
   note "SKIP the read-only folder: this machine does not let the test mount a tmpfs"
 fi
+
+# A folder with less free space than the plan's estimate: a 64 KiB tmpfs, below this plan's
+# estimates of the archive, a shard's part and the apex's (the test's own premise, checked).
+((archive_est > 65536 && shard_est > 65536 && apex_est > 65536)) ||
+  fail "the plan's estimates ($archive_est, $shard_est, $apex_est bytes) fit in 64 KiB: no test"
+mkdir -p "$WORK/tiny"
+if mount -t tmpfs -o size=64k tmpfs "$WORK/tiny" 2>/dev/null; then
+  note "less free space than the plan's estimate: refused at once (exit 4), naming it and both sizes"
+  tiny_status=0
+  (
+    trap 'umount "$WORK/tiny"' EXIT
+    refused "-o's folder $WORK/tiny: 64.0 KiB free, the merged archive needs about 370.4 KiB (the plan's estimate; --no-space-check to try anyway)" \
+      "$VTS" merge --plan "$WORK/plan.json" "$WORK/parts" -o "$WORK/tiny/x.pmtiles"
+    ((RC == 4)) || fail "vts merge into a folder too small exited $RC, expected 4 (io)"
+    refused "--out-dir $WORK/tiny: 64.0 KiB free, the part needs about" \
+      "$VTS" build --plan "$WORK/plan.json" --shard 0 --out-dir "$WORK/tiny"
+    ((RC == 4)) || fail "vts build --plan --shard into a folder too small exited $RC, expected 4"
+    refused "--out-dir $WORK/tiny: 64.0 KiB free, the apex part needs about" \
+      "$VTS" build --plan "$WORK/plan.json" --apex --out-dir "$WORK/tiny"
+    ((RC == 4)) || fail "vts build --plan --apex into a folder too small exited $RC, expected 4"
+    [[ -z $(ls -A "$WORK/tiny") ]] || fail "a refused command wrote into the folder: $(ls -A "$WORK/tiny")"
+
+    note "--no-space-check: the merge goes on (this archive is far smaller than the estimate)"
+    expect_ok "$VTS" merge --plan "$WORK/plan.json" "$WORK/parts" -o "$WORK/tiny/x.pmtiles" \
+      --no-space-check -q
+    [[ $(sha "$WORK/tiny/x.pmtiles") == $(sha "$WORK/ref/x.pmtiles") ]] ||
+      fail "the merge with --no-space-check differs from vts build's archive"
+    rm -f "$WORK/tiny/x.pmtiles"
+
+    note "--no-space-check on a full folder: the clean error of a full disk, nothing left behind"
+    head -c 1m /dev/zero >"$WORK/tiny/fill" 2>/dev/null || true
+    expect_clean_failure "$VTS" merge --plan "$WORK/plan.json" "$WORK/parts" \
+      -o "$WORK/tiny/x.pmtiles" --no-space-check
+    grep -q 'No space left on device' "$ERR" || { show_output; fail "the merge's error is not ENOSPC"; }
+    if grep -q "the plan's estimate" "$ERR"; then fail "--no-space-check still checked"; fi
+    expect_clean_failure "$VTS" build --plan "$WORK/plan.json" --shard 0 --out-dir "$WORK/tiny" \
+      --no-space-check
+    grep -q 'No space left on device' "$ERR" || { show_output; fail "the shard's error is not ENOSPC"; }
+    [[ $(ls -A "$WORK/tiny") == fill ]] || fail "a failed command left files: $(ls -A "$WORK/tiny")"
+  ) || tiny_status=$?
+  ((tiny_status == 0)) || exit "$tiny_status"
+else
+  note "SKIP the folder too small: this machine does not let the test mount a tmpfs"
+fi
+
+note "--no-space-check needs --plan (vts build)"
+refused "--no-space-check need --plan" \
+  "$VTS" build --synthetic 1000x500 -o "$WORK/y.pmtiles" --no-space-check
 note "PASS"

@@ -1,6 +1,9 @@
 #!/usr/bin/env bash
 # render.sh PLAN.json OUT_DIR --image REF [--storage-class NAME] [--claim-size SIZE]
 #           [--parallelism P] [--max-failed-indexes K] [--name PREFIX]
+# render.sh --estimate PLAN.json   prints the archive estimate the claim is sized from, as JSON
+#                                  ({"archive": bytes, "tile_bytes": bytes}; `vts plan --json`'s
+#                                  "estimated_bytes" has the same figures)
 #
 # Writes the Kubernetes manifests of a sharded build for one plan (docs/DEPLOY.md §9), ready for
 # `kubectl apply -f OUT_DIR`: every figure the API server checks comes from the plan, so nothing is
@@ -31,7 +34,8 @@ exec "$PY" - "$@" <<'PYTHON'
 import json, math, os, re, sys
 
 USAGE = ("usage: render.sh PLAN.json OUT_DIR --image REF [--storage-class NAME] [--claim-size SIZE]\n"
-         "                 [--parallelism P] [--max-failed-indexes K] [--name PREFIX]")
+         "                 [--parallelism P] [--max-failed-indexes K] [--name PREFIX]\n"
+         "       render.sh --estimate PLAN.json")
 # The API server's limits these manifests are kept within (docs/DEPLOY.md §9, the rules table).
 LABEL_MAX = 63                 # a Job's name is its pods' job-name label value
 INDEXED_SOFT_LIMIT = 100_000   # completions above it: parallelism and maxFailedIndexes <= 10 000
@@ -43,7 +47,8 @@ YAML_WORDS = {"true", "false", "null", "yes", "no", "on", "off", "y", "n"}  # qu
 QUANTITY = re.compile(r"^[1-9][0-9]*(Ki|Mi|Gi|Ti|Pi|Ei)?$")
 # Bytes per stored tile of S x S texels (docs/PLANET.md, "Bytes"; measured at S = 264): bc1 is at
 # most S²/2; lossless as measured, scaled by S² (the measured image is smoother than real imagery:
-# give --claim-size where a better figure is known).
+# give --claim-size where a better figure is known). vts has the same rule (builder/src/
+# shard_size.cpp, estimate_plan_size): tests/integration/k8s_render.sh checks the two agree.
 LOSSLESS_FILTERED, LOSSLESS_UNFILTERED, MEASURED_S = 34_478, 66_475, 264
 OUTPUTS = ("volume.yaml", "load-pod.yaml", "plan-job.yaml", "shards-job.yaml", "apex-job.yaml", "merge-job.yaml")
 EXIT_CODES_FINAL = [2, 3, 5, 6]  # vts: bad arguments, not found, corrupt input, unsupported
@@ -107,13 +112,16 @@ def load_plan(path):
         die(f"{path}: a plan without geometry, options, split and apex levels or inputs")
     if not plan["shards"]:
         die(f"{path}: the plan has no shards (nothing to build)")
+    if not all(isinstance(t, list) and len(t) == 2 and all(isinstance(v, int) and v >= 0 for v in t)
+               for t in plan["shards"]):
+        die(f"{path}: a shard that is not [x, y]")
     if len(plan["shards"]) > INT32_MAX:
         die(f"{path}: {len(plan['shards'])} shards: a Job's completions is a 32-bit integer")
     return plan
 
 
-def claim_bytes(plan):
-    """The volume's size: the inputs' bytes, the parts (about the archive) and the merged archive."""
+def archive_estimate(plan):
+    """The merged archive's bytes and the bytes per stored tile, estimated from the plan."""
     g, o = plan["geometry"], plan["options"]
     T, S = o["tile_size"], o["tile_size"] + 2 * o["border"]
     if o.get("codec") == "bc1":
@@ -121,15 +129,24 @@ def claim_bytes(plan):
     else:
         per_tile = LOSSLESS_UNFILTERED if o.get("filter") == "none" else LOSSLESS_FILTERED
         per_tile = math.ceil(per_tile * S * S / MEASURED_S**2)
-    maxz, L, A, n = g["max_zoom"], plan["split_level"], plan["apex_level"], len(plan["shards"])
-    def tiles(z):  # a dense level z of the plan's geometry
-        w, h = (-(-d // 2 ** (maxz - z)) for d in (g["width"], g["height"]))
-        return -(-w // T) * -(-h // T)
-    apex = sum(tiles(z) for z in range(A))
-    # shards: at most each shard's full sub-pyramid, at most the dense levels (a sparse plan: fewer)
-    shard = min(sum(tiles(z) for z in range(A, maxz + 1)), n * sum(4 ** (z - L) for z in range(A, maxz + 1)))
+    maxz, L, A = g["max_zoom"], plan["split_level"], plan["apex_level"]
+    shards = [(t[0], t[1]) for t in plan["shards"]]  # level-L tiles [x, y]
+    def own(z):  # the shards' tiles at level z >= L: each one's descendants within the image
+        w, h = (-(-(-(-d // 2 ** (maxz - z))) // T) for d in (g["width"], g["height"]))
+        span = 2 ** (z - L)
+        clip = lambda start, size: max(0, min(span, size - start * span))
+        return sum(clip(x, w) * clip(y, h) for x, y in shards)
+    # the apex: the shards' distinct ancestors above L, their own tiles from L to A
+    apex = sum(len({(x >> (L - z), y >> (L - z)) for x, y in shards}) for z in range(min(L, A)))
+    apex += sum(own(z) for z in range(L, A))
+    shard = sum(own(z) for z in range(A, maxz + 1))  # a sparse plan's shards: those with tiles
+    return (apex + shard) * per_tile, per_tile
+
+
+def claim_bytes(plan):
+    """The volume's size: the inputs' bytes, the parts (about the archive) and the merged archive."""
     inputs = sum(i.get("size", 0) for i in plan["inputs"] if isinstance(i, dict))
-    total = (inputs + 2 * (apex + shard) * per_tile) * 105 // 100  # 5%: manifests, temporaries
+    total = (inputs + 2 * archive_estimate(plan)[0]) * 105 // 100  # 5%: manifests, temporaries
     return max(1, -(-total // 2**30))  # GiB, at least 1
 
 
@@ -213,6 +230,12 @@ def job(prefix, component, spec, pod):
 
 
 def main():
+    if sys.argv[1:2] == ["--estimate"]:
+        if len(sys.argv) != 3:
+            die(f"--estimate takes one PLAN.json\n{USAGE}")
+        archive, per_tile = archive_estimate(load_plan(sys.argv[2]))
+        print(json.dumps({"archive": archive, "tile_bytes": per_tile}))
+        return
     plan_path, out_dir, opts = parse_args(sys.argv[1:])
     image, prefix, sc = opts["image"], opts["name"], opts["storage-class"]
     if not image:

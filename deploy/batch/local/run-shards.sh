@@ -9,15 +9,21 @@
 # it), so the runner is resumable: run it again after a failure, a kill or a reboot and it builds
 # only the shards without a part, then the apex and the merge again.
 #
-# usage: run-shards.sh [--jobs J] [--parts DIR] [--logs DIR] [--vts PATH] --out OUT.pmtiles PLAN
+# usage: run-shards.sh [--jobs J] [--parts DIR] [--logs DIR] [--vts PATH] [--no-space-check]
+#                      --out OUT.pmtiles PLAN
 #   --jobs J      shards at once (default: the number of CPUs / 2, at least 1; each shard uses ~2)
 #   --parts DIR   the parts (default: PLAN's directory/parts)
 #   --logs DIR    one log per shard, shard-IIIIII.log, and the joblog: a line per shard run,
 #                 "index exit_status seconds" (default: PLAN's directory/logs)
 #   --out FILE    the merged archive (its folder is created if missing)
 #   --vts PATH    the vts executable (default: vts on PATH, or $VTS)
+#   --no-space-check  passed to every vts build --plan and vts merge: run even where a folder
+#                 has less free space than the plan's estimate of what it writes there
 # Before any shard runs, the folders of the parts, the logs and the archive are created if
-# missing and must take a new file (exit 2 naming the folder otherwise).
+# missing and must take a new file (exit 2 naming the folder otherwise). Each shard, the apex and
+# the merge refuse at once a folder with less free space than the plan's estimate of their output
+# (exit 4; `vts plan --json`'s "estimated_bytes"); the script adds no check of the total, as no
+# vts command prints the estimate of an existing plan.
 # Exit status: 0 when the archive is written; 1 when shards failed (named, with their logs; the
 # apex and merge are not run); 2 on bad usage; otherwise the failing apex's or merge's status.
 set -euo pipefail
@@ -25,10 +31,13 @@ set -euo pipefail
 # (deploy/batch/slurm/submit.sh) left in the environment would shift every shard.
 unset VTS_SHARD_OFFSET
 
+BATCH_PROG=run-shards
 die() {
   printf 'run-shards: %s\n' "$*" >&2
   exit 2
 }
+# shellcheck source-path=SCRIPTDIR source=../lib.sh
+source "$(dirname "${BASH_SOURCE[0]}")/../lib.sh"
 
 # Internal: one shard, run by xargs as `run-shards.sh --run-one I` with the settings in the
 # environment. Appends "I status seconds" to the joblog; a failed shard leaves no part.
@@ -38,7 +47,7 @@ if [[ ${1:-} == --run-one ]]; then
   t0=$(date +%s)
   rc=0
   JOB_COMPLETION_INDEX=$i "$RUNNER_VTS" build --plan "$RUNNER_PLAN" --out-dir "$RUNNER_PARTS" \
-    >"$log" 2>&1 </dev/null || rc=$?
+    ${RUNNER_SPACE:+"$RUNNER_SPACE"} >"$log" 2>&1 </dev/null || rc=$?
   printf '%s %s %s\n' "$i" "$rc" "$(($(date +%s) - t0))" >>"$RUNNER_LOGS/joblog"
   if ((rc == 0)); then
     printf 'run-shards: shard %s built\n' "$i"
@@ -50,7 +59,7 @@ fi
 
 ncpu=$(nproc 2>/dev/null || echo 2)
 jobs=$((ncpu / 2 > 0 ? ncpu / 2 : 1))
-parts="" logs="" out="" plan=""
+parts="" logs="" out="" plan="" space=""
 vts=${VTS:-vts}
 while (($#)); do
   case $1 in
@@ -59,6 +68,7 @@ while (($#)); do
     --logs) logs=${2:?--logs needs a directory}; shift 2 ;;
     --out) out=${2:?--out needs a file}; shift 2 ;;
     --vts) vts=${2:?--vts needs a path}; shift 2 ;;
+    --no-space-check) space=--no-space-check; shift ;;
     -h | --help) sed -n '2,/^set -euo/{/^set -euo/d;s/^# \{0,1\}//;p}' "$0"; exit 0 ;;
     -*) die "unknown option $1 (see --help)" ;;
     *) [[ -z $plan ]] || die "one plan only (got $plan and $1)"; plan=$1; shift ;;
@@ -72,27 +82,11 @@ command -v "$vts" >/dev/null 2>&1 || die "no vts executable '$vts' (--vts PATH)"
 dir=$(dirname "$plan")
 parts=${parts:-$dir/parts}
 logs=${logs:-$dir/logs}
-# writable_folder DIR WHAT: DIR exists (created with its parents) and takes a new file.
-writable_folder() {
-  mkdir -p -- "$1" 2>/dev/null || die "cannot create the folder $1 ($2)"
-  local probe
-  probe=$(mktemp "$1/.run-shards-check.XXXXXX" 2>/dev/null) || die "cannot write in the folder $1 ($2)"
-  rm -f -- "$probe"
-}
 writable_folder "$parts" "--parts"
 writable_folder "$logs" "--logs"
 writable_folder "$(dirname -- "$out")" "the folder of --out"
 
-# The shard count: the length of the plan's "shards" array.
-n=$(python3 -c '
-import json, sys
-try:
-    shards = json.load(open(sys.argv[1]))["shards"]
-except (OSError, ValueError, KeyError, TypeError) as e:
-    sys.exit(f"run-shards: {sys.argv[1]} is not a plan with a \"shards\" array ({e!r})")
-if not isinstance(shards, list) or not shards:
-    sys.exit(f"run-shards: {sys.argv[1]}: \"shards\" is not a non-empty array")
-print(len(shards))' "$plan") || exit 2
+n=$(plan_shard_count "$plan") || exit 2
 
 todo=()
 for ((i = 0; i < n; i++)); do
@@ -101,7 +95,7 @@ done
 printf 'run-shards: %d shards, %d with a part already, %d to build, %d at a time\n' \
   "$n" "$((n - ${#todo[@]}))" "${#todo[@]}" "$jobs"
 if ((${#todo[@]})); then
-  export RUNNER_VTS=$vts RUNNER_PLAN=$plan RUNNER_PARTS=$parts RUNNER_LOGS=$logs
+  export RUNNER_VTS=$vts RUNNER_PLAN=$plan RUNNER_PARTS=$parts RUNNER_LOGS=$logs RUNNER_SPACE=$space
   printf '%s\n' "${todo[@]}" | xargs -P "$jobs" -n 1 "$BASH" "$0" --run-one
 fi
 
@@ -118,8 +112,8 @@ fi
 # The apex depends on every shard's part: rebuilt whenever a shard was, or when it is missing.
 if ((${#todo[@]})) || [[ ! -e $parts/apex.part ]]; then
   printf 'run-shards: apex\n'
-  "$vts" build --plan "$plan" --apex --out-dir "$parts"
+  "$vts" build --plan "$plan" --apex --out-dir "$parts" ${space:+"$space"}
 fi
 printf 'run-shards: merge into %s\n' "$out"
-"$vts" merge --plan "$plan" "$parts" -o "$out"
+"$vts" merge --plan "$plan" "$parts" -o "$out" ${space:+"$space"}
 printf 'run-shards: done: %s\n' "$out"

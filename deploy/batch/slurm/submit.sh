@@ -31,10 +31,13 @@
 set -euo pipefail
 
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
+BATCH_PROG=submit
 die() {
   printf 'submit: %s\n' "$*" >&2
   exit 2
 }
+# shellcheck source-path=SCRIPTDIR source=../lib.sh
+source "$here/../lib.sh"
 
 throttle="" chunk="" json=0 resubmit=""
 args=() extra=()
@@ -68,28 +71,13 @@ out=""
 ((${#args[@]} < 3)) || out=$(realpath -m -- "${args[2]}")
 [[ -r $plan ]] || die "cannot read the plan $plan"
 
-n=$(python3 -c '
-import json, sys
-try:
-    shards = json.load(open(sys.argv[1]))["shards"]
-except (OSError, ValueError, KeyError, TypeError) as e:
-    sys.exit(f"submit: {sys.argv[1]} is not a plan with a \"shards\" array ({e!r})")
-if not isinstance(shards, list) or not shards:
-    sys.exit(f"submit: {sys.argv[1]}: \"shards\" is not a non-empty array")
-print(len(shards))' "$plan") || exit 2
+n=$(plan_shard_count "$plan") || exit 2
 
 max=$(scontrol show config 2>/dev/null | awk '$1 == "MaxArraySize" { print $3 }') || true
 [[ $max =~ ^[0-9]+$ ]] || die "cannot read MaxArraySize from \`scontrol show config\` (is this a Slurm login node?)"
 chunk=${chunk:-$max}
 ((chunk <= max)) || die "--chunk $chunk: the cluster's MaxArraySize is $max (array indexes 0..$((max - 1)))"
 
-# writable_folder DIR WHAT: DIR exists (created with its parents) and takes a new file.
-writable_folder() {
-  mkdir -p -- "$1" 2>/dev/null || die "cannot create the folder $1 ($2)"
-  local probe
-  probe=$(mktemp "$1/.submit-check.XXXXXX" 2>/dev/null) || die "cannot write in the folder $1 ($2)"
-  rm -f -- "$probe"
-}
 writable_folder "$parts" "PARTS_DIR"
 [[ -z $out ]] || writable_folder "$(dirname -- "$out")" "the folder of OUT"
 

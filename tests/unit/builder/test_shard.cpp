@@ -12,6 +12,7 @@
 
 #include "cascade.hpp"
 #include "shard_geo.hpp"
+#include "synthetic_options.hpp"
 #include "vts/archive/pmtiles.hpp"
 #include "vts/test/temp_dir.hpp"
 
@@ -21,14 +22,8 @@ namespace {
 namespace fs = std::filesystem;
 namespace OIIO = OIIO_NAMESPACE;
 
-BuildOptions synthetic(std::uint64_t w, std::uint64_t h) {
-  BuildOptions o;
-  o.synthetic = SyntheticSpec{w, h, std::nullopt, 6};
-  return o;
-}
-
 TEST(ShardPlan, JsonRoundTripsAndItsHashCoversEveryField) {
-  BuildOptions o = synthetic(3000, 1700);
+  BuildOptions o = test::synthetic_options(3000, 1700);
   o.codec = CodecId::bc1;
   o.encode.bc1 = Bc1Quality::high;
   o.downsample = DownsampleFilter::lanczos3;
@@ -70,7 +65,7 @@ TEST(ShardPlan, JsonRoundTripsAndItsHashCoversEveryField) {
 
 TEST(ShardPlan, ShardsAreTheSplitLevelTilesInHilbertOrder) {
   // 3000x1700 at T = 256: levels 0..4, level 3 is 6x4 tiles.
-  auto plan = make_shard_plan(synthetic(3000, 1700), 3, 0);
+  auto plan = make_shard_plan(test::synthetic_options(3000, 1700), 3, 0);
   ASSERT_TRUE(plan);
   ASSERT_EQ(plan->shards.size(), 24u);
   for (std::size_t i = 1; i < plan->shards.size(); ++i) {
@@ -83,7 +78,7 @@ TEST(ShardPlan, ShardsAreTheSplitLevelTilesInHilbertOrder) {
 }
 
 TEST(ShardPlan, ShardCountPicksTheSmallestLevelGivingThem) {
-  const BuildOptions o = synthetic(3000, 1700);  // levels: 1, 2, 6, 24, 84 tiles
+  const BuildOptions o = test::synthetic_options(3000, 1700);  // levels: 1, 2, 6, 24, 84 tiles
   struct ShardCase {
     std::uint64_t n;
     int level;
@@ -100,7 +95,7 @@ TEST(ShardPlan, ShardCountPicksTheSmallestLevelGivingThem) {
 }
 
 TEST(ShardPlan, SparseRegionKeepsOnlyShardsWithTiles) {
-  BuildOptions o = synthetic(40000, 20000);  // levels 0..8
+  BuildOptions o = test::synthetic_options(40000, 20000);  // levels 0..8
   o.synthetic->region = TexelRect{1000, 1000, 3000, 2500};
   o.synthetic->region_level = 2;
   auto plan = make_shard_plan(o, 4, 0);
@@ -138,7 +133,7 @@ TEST(ShardPlan, ShardReadsItsCorePlusTheHaloOfItsLevels) {
   // A synthetic plan reads nothing; an image's shard reads its core plus the halo.
   const fs::path img = dir.path() / "img.png";
   {
-    auto plan = make_shard_plan(synthetic(2048, 1024), 1, 0);
+    auto plan = make_shard_plan(test::synthetic_options(2048, 1024), 1, 0);
     ASSERT_TRUE(plan);
     ShardBuildOptions so;
     so.out_dir = dir.path() / "parts";
@@ -290,7 +285,7 @@ TEST(ShardUpdate, APlainImageReachesEveryShardAndSyntheticNone) {
   auto plan = make_shard_plan(o, 1, 0);  // 512 x 512: 4 shards
   ASSERT_TRUE(plan);
   EXPECT_EQ(affected_shards(*plan, {0}).size(), plan->shards.size());
-  auto synth = make_shard_plan(synthetic(2048, 1024), 2, 0);
+  auto synth = make_shard_plan(test::synthetic_options(2048, 1024), 2, 0);
   ASSERT_TRUE(synth);
   EXPECT_TRUE(shard_inputs(*synth, 0).empty());
   auto u = update_shard_plan(*synth, {});

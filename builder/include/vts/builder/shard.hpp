@@ -104,6 +104,25 @@ Result<ShardPlan> plan_from_json(const std::string& json);
 Result<ShardPlan> load_plan(const std::filesystem::path& path);
 Status save_plan(const ShardPlan& plan, const std::filesystem::path& path);
 
+// What a plan's parts and archive will take on disk, estimated from its geometry and codec alone
+// (docs/PLANET.md, "Bytes"; deploy/batch/k8s/render.sh sizes its volume with the same rule): the
+// tiles of each level, dense, times bytes per stored tile. Not part of the plan (its hash covers
+// every field): computed from it when needed, e.g. to refuse an output folder without the room.
+struct PlanSizeEstimate {
+  std::uint64_t tile_bytes = 0;  // per stored S x S tile
+  std::uint64_t shard_max = 0;   // the largest shard's part
+  std::uint64_t apex = 0;        // the apex part (0: no apex)
+  std::uint64_t archive = 0;     // the merged archive
+};
+PlanSizeEstimate estimate_plan_size(const ShardPlan& plan);
+// Bytes per stored tile: lossless as measured, scaled by S^2 / 264^2; bc1 S^2 / 2 (its stored size,
+// an upper bound).
+std::uint64_t estimate_plan_size_tile_bytes(const ShardPlan& plan);
+// Shard `index`'s part: its sub-pyramid's tiles of levels >= the apex level (clipped to the
+// image) plus its level-A tiles again, lossless, as the attachment; 0 for an index past the
+// plan's shards.
+std::uint64_t estimate_shard_part_bytes(const ShardPlan& plan, std::size_t index);
+
 // "shard-000012.part", "apex.part".
 std::string shard_part_name(std::size_t index);
 inline constexpr const char* kApexPartName = "apex.part";
