@@ -1,7 +1,5 @@
 #include "session.hpp"
 
-#include "web_tile_cache.hpp"
-
 #include <algorithm>
 #include <atomic>
 #include <boost/asio/dispatch.hpp>

@@ -26,14 +26,7 @@ slurm_cleanup() {
 trap slurm_cleanup EXIT
 
 # show_job_logs: the jobs' own logs (they go to the folder sbatch ran in: $WORK/joblogs).
-show_job_logs() {
-  local f
-  for f in "$WORK"/joblogs/*.out; do
-    [[ -e $f ]] || continue
-    echo "---- $f:" >&2
-    tail -n 20 "$f" >&2
-  done
-}
+show_job_logs() { tail_logs "$WORK"/joblogs/*.out; }
 
 # 4 CPUs: two 2-CPU shard tasks at once (the node's resources are configured, not detected).
 slurm_start "$WORK/slurm" 5 4

@@ -30,14 +30,20 @@ slurm_poll() {
   done
 }
 
-slurm_logs() {
-  [[ -n $SLURM_DIR ]] || return 0
+# tail_logs FILE...: the last 20 lines of each non-empty FILE, on stderr.
+tail_logs() {
   local f
-  for f in "$SLURM_DIR"/log/*.log; do
+  for f in "$@"; do
     [[ -s $f ]] || continue
     echo "---- $f (last 20 lines):" >&2
     tail -n 20 "$f" >&2
   done
+}
+
+# slurm_logs: the daemons' logs.
+slurm_logs() {
+  [[ -n $SLURM_DIR ]] || return 0
+  tail_logs "$SLURM_DIR"/log/*.log
 }
 
 slurm_node_idle() { [[ $(sinfo -h -o %T 2>/dev/null) == idle ]]; }
