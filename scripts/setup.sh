@@ -28,6 +28,8 @@ PACKAGES=(
   # libraries
   libopenimageio-dev libzstd-dev libxxhash-dev zlib1g-dev nlohmann-json3-dev libcli11-dev
   libspdlog-dev libfmt-dev libboost1.81-dev libssl-dev libcurl4-openssl-dev libsqlite3-dev
+  # store/: S3's XML answers (ListObjectsV2, errors) read with Expat
+  libexpat1-dev
   # the bc1 tile codec's encoders: libsquish, and stb_dxt from libstb-dev (below)
   libsquish-dev
   # standard web images of tiles (PNG, WebP, JPEG) for web maps and `vts export`
@@ -55,6 +57,8 @@ PACKAGES=(
   # deploy/ tests: nginx templates filled by envsubst, a TLS front with a throwaway certificate,
   # compose and Kubernetes YAML checked with python3
   gettext-base openssl python3-yaml
+  # store/'s SigV4 signatures recomputed independently by AWS's botocore (store_s3.sh)
+  python3-botocore
   # deploy/batch/slurm on a real Slurm cluster: tests/integration/slurm_cluster.sh and
   # bench/batch_bench.sh start slurmctld, slurmd and munged of their own on loopback (as root,
   # no systemd: the packages' own services are not used)
@@ -138,5 +142,7 @@ npm_ci "$ROOT/server/web"
 npm_ci "$ROOT/tests/integration/pmtiles_js"
 npm_ci "$ROOT/tests/integration/deploy_js"
 npm_ci "$ROOT/tests/integration/browser_js"
+# s3rver: a real S3-protocol server on loopback for the store's test (tests/integration/store_s3.sh).
+npm_ci "$ROOT/tests/integration/s3_js"
 
 log "done"

@@ -1,5 +1,5 @@
 // The directory layout and archive assembly shared by archive::Writer and merge_parts()
-// (pmtiles_io.hpp, pmtiles_part.hpp).
+// (pmtiles_io.hpp, pmtiles_part.hpp), and the tile-id ranges of a set's archives (pmtiles.hpp).
 #include <cassert>
 
 #include "pmtiles_io.hpp"
@@ -148,3 +148,21 @@ Status write_archive(const WriterOptions& options, const std::string& metadata_j
 }
 
 }  // namespace vts::archive::detail
+
+namespace vts::archive {
+
+std::vector<TileIdRange> subtree_ranges(TileId root, std::uint8_t max_z) {
+  assert(root.z <= max_z);
+  std::vector<TileIdRange> ranges;
+  for (unsigned z = root.z; z <= max_z; ++z)
+    ranges.push_back(subtree_tile_ids(root, static_cast<std::uint8_t>(z)));
+  return ranges;
+}
+
+TileIdRange levels_above(std::uint8_t k) {
+  assert(k >= 1);
+  // Level k starts where the whole pyramid's range at level k starts.
+  return {0, subtree_tile_ids(TileId{0, 0, 0}, k).first - 1};
+}
+
+}  // namespace vts::archive

@@ -10,6 +10,7 @@
 
 #include <xxhash.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <list>
@@ -209,7 +210,11 @@ Result<PartLayout> scan_part(int fd, const std::filesystem::path& path, bool kee
   XXH3_64bits_reset(state);
   const std::uint64_t seg_offset = l.index_offset + l.records * kRecordBytes;
   const std::uint64_t att_offset = seg_offset + segments * kSegmentBytes;
-  std::vector<std::uint8_t> buf(1u << 20), tail;
+  // No larger than what is to read: a merge scans every part, most of them small, and a ranged
+  // merge (one of many over the same parts) would otherwise spend its scan zeroing buffers.
+  std::vector<std::uint8_t> buf(
+      static_cast<std::size_t>(std::min<std::uint64_t>(1u << 20, limit - l.index_offset))),
+      tail;
   std::uint64_t previous = 0;
   for (std::uint64_t at = l.index_offset; at < limit;) {
     const std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(
@@ -271,7 +276,9 @@ Result<Fd> open_part(const std::filesystem::path& path) {
 Status read_records(int fd, const std::filesystem::path& path, std::uint64_t index_offset,
                     std::uint64_t first, std::uint64_t count,
                     const std::function<bool(const PartRecord&)>& visit) {
-  std::vector<std::uint8_t> buf(kRecordBytes * 8192);
+  // Sized to the stretch: a merge calls this for every segment of every part, most of them short.
+  std::vector<std::uint8_t> buf(kRecordBytes *
+                                static_cast<std::size_t>(std::min<std::uint64_t>(count, 8192)));
   for (std::uint64_t done = 0; done < count;) {
     const std::uint64_t n = std::min<std::uint64_t>(count - done, 8192);
     if (Status s = pread_all(fd, buf.data(), n * kRecordBytes,
@@ -488,6 +495,8 @@ class Merger {
 
   Status scan() {
     if (o_.parts.empty()) return make_error(ErrorCode::invalid_argument, "no parts to merge");
+    if (Status s = check_ranges(); !s) return s;
+    std::uint64_t held = 0;  // the parts' tiles, in the ranges or not
     for (const std::string& name : o_.parts) {
       const std::filesystem::path p = name;
       Result<Fd> fd = open_part(p);
@@ -497,8 +506,16 @@ class Merger {
       if (o_.check_part)
         if (Status s = o_.check_part(l->info); !s) return s;
       const auto index = static_cast<std::uint32_t>(parts_.size());
-      for (const PartInfo::Segment& s : l->info.segments) segments_.push_back({index, s});
-      progress_.tiles_total += l->records;
+      held += l->records;
+      progress_.records_checked += l->records;
+      for (const PartInfo::Segment& s : l->info.segments) {
+        if (o_.ranges.empty()) {
+          segments_.push_back({index, s});
+          progress_.tiles_total += s.records;
+        } else if (Status st = clip(fd->get(), p, l->index_offset, index, s); !st) {
+          return st;
+        }
+      }
       parts_.push_back({name, l->index_offset});
       if (cancelled()) return make_error(ErrorCode::cancelled, "merge cancelled");
     }
@@ -513,9 +530,99 @@ class Merger {
                               files_.name(segments_[i].part) +
                               " hold overlapping tiles (tile ids " +
                               std::to_string(segments_[i].segment.first_tile_id) + "..)");
+    if (held == 0) return make_error(ErrorCode::invalid_argument, "the parts hold no tiles");
+    // Not an error of the parts: an archive of a set whose tiles have no data, which the caller
+    // skips.
     if (progress_.tiles_total == 0)
-      return make_error(ErrorCode::invalid_argument, "the parts hold no tiles");
+      return make_error(ErrorCode::not_found, "no tile of the parts lies in the ranges asked");
     if (o_.check_parts) return o_.check_parts(metadata_json_);
+    return {};
+  }
+
+  Status check_ranges() const {
+    const std::vector<TileIdRange>& r = o_.ranges;
+    for (std::size_t i = 0; i < r.size(); ++i) {
+      if (r[i].first > r[i].last)
+        return make_error(ErrorCode::invalid_argument,
+                          "tile id range " + std::to_string(r[i].first) + ".." +
+                              std::to_string(r[i].last) + " ends before it starts");
+      if (i > 0 && r[i].first <= r[i - 1].last)
+        return make_error(
+            ErrorCode::invalid_argument,
+            "tile id ranges must be sorted and disjoint: " + std::to_string(r[i].first) + ".." +
+                std::to_string(r[i].last) + " follows " + std::to_string(r[i - 1].first) + ".." +
+                std::to_string(r[i - 1].last));
+    }
+    return {};
+  }
+
+  // Index of the first record in [lo, hi) of a part whose tile id exceeds `id` (hi if none), by
+  // binary search: one pread of a record per probe, never the whole index.
+  Result<std::uint64_t> first_record_after(int fd, const std::filesystem::path& path,
+                                           std::uint64_t index_offset, std::uint64_t lo,
+                                           std::uint64_t hi, std::uint64_t id) {
+    while (lo < hi) {
+      const std::uint64_t mid = lo + (hi - lo) / 2;
+      Result<PartRecord> r = record_at(fd, path, index_offset, mid);
+      if (!r) return std::move(r).error();
+      if (r->tile_id > id)
+        hi = mid;
+      else
+        lo = mid + 1;
+    }
+    return lo;
+  }
+
+  Result<PartRecord> record_at(int fd, const std::filesystem::path& path,
+                               std::uint64_t index_offset, std::uint64_t i) {
+    std::uint8_t rec[kRecordBytes];
+    if (Status s = pread_all(fd, rec, kRecordBytes, index_offset + i * kRecordBytes, path); !s)
+      return s.error();
+    ++progress_.records_read;
+    return decode_record(rec);
+  }
+
+  // Adds the stretches of one segment of a part that lie in the ranges. A range that holds the
+  // whole segment (a shard inside the archive's sub-pyramid) costs no read.
+  Status clip(int fd, const std::filesystem::path& path, std::uint64_t index_offset,
+              std::uint32_t part, const PartInfo::Segment& seg) {
+    const std::uint64_t end = seg.first_record + seg.records;
+    // The first range that does not end before the segment starts.
+    auto r = std::lower_bound(
+        o_.ranges.begin(), o_.ranges.end(), seg.first_tile_id,
+        [](const TileIdRange& range, std::uint64_t id) { return range.last < id; });
+    // Records before `from` lie before the current range (the ranges are sorted).
+    for (std::uint64_t from = seg.first_record;
+         r != o_.ranges.end() && r->first <= seg.last_tile_id; ++r) {
+      std::uint64_t lo = from, hi = end;
+      if (r->first > seg.first_tile_id) {
+        Result<std::uint64_t> at = first_record_after(fd, path, index_offset, lo, hi, r->first - 1);
+        if (!at) return at.error();
+        lo = *at;
+      }
+      if (r->last < seg.last_tile_id) {
+        Result<std::uint64_t> at = first_record_after(fd, path, index_offset, lo, hi, r->last);
+        if (!at) return at.error();
+        hi = *at;
+      }
+      from = hi;
+      if (lo == hi) continue;
+      PartInfo::Segment piece = seg;
+      piece.first_record = lo;
+      piece.records = hi - lo;
+      if (lo != seg.first_record) {
+        Result<PartRecord> first = record_at(fd, path, index_offset, lo);
+        if (!first) return first.error();
+        piece.first_tile_id = first->tile_id;
+      }
+      if (hi != end) {
+        Result<PartRecord> last = record_at(fd, path, index_offset, hi - 1);
+        if (!last) return last.error();
+        piece.last_tile_id = last->tile_id;
+      }
+      segments_.push_back({part, piece});
+      progress_.tiles_total += piece.records;
+    }
     return {};
   }
 
@@ -563,6 +670,7 @@ class Merger {
                                });
       if (!st) return st;
       if (!inner) return inner;
+      progress_.records_read += seg.segment.records;
       if (cancelled()) return make_error(ErrorCode::cancelled, "merge cancelled");
       tick();
     }

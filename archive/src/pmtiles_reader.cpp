@@ -34,21 +34,12 @@
 #include <unordered_map>
 #include <utility>
 
+#include "vts/archive/archive_set.hpp"
 #include "vts/archive/pmtiles.hpp"
 #include "vts/base/file_io.hpp"
 
 namespace vts::archive {
 namespace {
-
-// Where a reader's bytes come from.
-class ByteSource {
- public:
-  virtual ~ByteSource() = default;
-  virtual std::uint64_t size() const = 0;
-  // Reads exactly out.size() bytes at `offset`, which the caller has checked lie within size().
-  virtual Status read(std::uint64_t offset, std::span<std::uint8_t> out) const = 0;
-  virtual Status check_unchanged() const { return {}; }
-};
 
 class BorrowedBytes final : public ByteSource {
  public:
@@ -479,6 +470,8 @@ std::size_t DirectoryCache::size() const {
 
 Result<std::shared_ptr<Reader>> Reader::open(const std::filesystem::path& path,
                                              ReaderOptions options) {
+  // A set's manifest, or its folder: the set as one reader (archive_set.hpp).
+  if (is_set_path(path)) return open_set_path(path, options);
   // Not a FIFO (open_input_file opens with O_NONBLOCK, so one never blocks), device or folder.
   struct stat st {};
   auto opened = open_input_file(path, &st);
@@ -497,6 +490,15 @@ Result<std::shared_ptr<Reader>> Reader::open(const std::filesystem::path& path,
 Result<std::shared_ptr<Reader>> Reader::open_bytes(std::span<const std::uint8_t> bytes,
                                                    ReaderOptions options) {
   return make_reader(std::make_unique<BorrowedBytes>(bytes), options);
+}
+
+Result<std::shared_ptr<Reader>> Reader::open_source(std::unique_ptr<ByteSource> source,
+                                                    ReaderOptions options) {
+  if (source == nullptr) return make_error(ErrorCode::invalid_argument, "no byte source");
+  const std::string name = source->name();
+  Result<std::shared_ptr<Reader>> r = make_reader(std::move(source), options);
+  if (!r && !name.empty()) return with_context(name, std::move(r).error());
+  return r;
 }
 
 std::string archive_version(std::span<const std::uint8_t> header,

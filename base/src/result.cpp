@@ -29,6 +29,8 @@ const char* error_code_name(ErrorCode code) noexcept {
       return "internal";
     case ErrorCode::changed:
       return "changed";
+    case ErrorCode::unavailable:
+      return "unavailable";
   }
   return "unknown";
 }
@@ -51,6 +53,7 @@ int exit_code(ErrorCode code) noexcept {
     case ErrorCode::too_large:
       return 6;
     case ErrorCode::changed:
+    case ErrorCode::unavailable:
       return 75;
     case ErrorCode::cancelled:
       return 130;
@@ -70,6 +73,7 @@ int http_status(ErrorCode code) noexcept {
       return 404;
     case ErrorCode::cancelled:
     case ErrorCode::changed:
+    case ErrorCode::unavailable:
       return 503;
     case ErrorCode::io:
     case ErrorCode::corrupt:

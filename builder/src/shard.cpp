@@ -116,6 +116,8 @@ json plan_body(const ShardPlan& p) {
   }
   j["split_level"] = p.split_level;
   j["apex_level"] = p.apex_level;
+  // Only in plans of sets, so a one-archive plan keeps the hash it always had.
+  if (p.archive_level > 0) j["archive_level"] = p.archive_level;
   if (p.geo) j["georeference"] = detail::geo_plan_to_json(*p.geo);
   json shards = json::array();
   for (const TileId& t : p.shards) shards.push_back({t.x, t.y});
@@ -270,6 +272,11 @@ Result<ShardPlan> make_shard_plan(const BuildOptions& o, std::optional<int> spli
   return plan;
 }
 
+void set_archive_level(ShardPlan& plan, int k) {
+  plan.archive_level = k;
+  plan.hash = body_hash(plan_body(plan));
+}
+
 std::string plan_to_json(const ShardPlan& plan) {
   json j = plan_body(plan);
   j["hash"] = body_hash(j);
@@ -310,6 +317,13 @@ Result<ShardPlan> plan_from_json(const std::string& text) {
     }
     p.split_level = j.at("split_level").get<int>();
     p.apex_level = j.at("apex_level").get<int>();
+    if (j.contains("archive_level")) {
+      p.archive_level = j.at("archive_level").get<int>();
+      if (p.archive_level < 1 || p.archive_level > p.max_zoom)
+        return make_error(ErrorCode::invalid_argument,
+                          "plan archive level " + std::to_string(p.archive_level) +
+                              " is outside 1.." + std::to_string(p.max_zoom));
+    }
     if (j.contains("georeference")) {
       auto geo = detail::geo_plan_from_json(j["georeference"]);
       if (!geo) return geo.error();

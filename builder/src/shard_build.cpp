@@ -371,6 +371,17 @@ Result<MergeReport> merge_plan(const ShardPlan& plan, const std::filesystem::pat
                                const std::filesystem::path& output,
                                const std::function<void(const archive::MergeProgress&)>& progress,
                                const std::atomic<bool>* cancel, bool verify) {
+  return detail::merge_plan_scoped(plan, parts_dir, output, output, {}, progress, cancel, verify);
+}
+
+namespace detail {
+
+Result<MergeReport> merge_plan_scoped(
+    const ShardPlan& plan, const std::filesystem::path& parts_dir,
+    const std::filesystem::path& output, const std::filesystem::path& named_after,
+    const std::function<void(archive::MergeOptions&)>& scope,
+    const std::function<void(const archive::MergeProgress&)>& progress,
+    const std::atomic<bool>* cancel, bool verify) {
   const auto t0 = Clock::now();
   auto geometry = detail::plan_geometry(plan);
   if (!geometry) return std::move(geometry).error();
@@ -408,7 +419,7 @@ Result<MergeReport> merge_plan(const ShardPlan& plan, const std::filesystem::pat
     if (apex)
       if (Status st = detail::check_apex_shards(plan, *apex, mo.parts.front(), attachments); !st)
         return st;
-    report.info = detail::build_tileset_info(plan.options, *p, output, content_sum);
+    report.info = detail::build_tileset_info(plan.options, *p, named_after, content_sum);
     metadata_json = report.info.to_json();
     return {};
   };
@@ -416,6 +427,7 @@ Result<MergeReport> merge_plan(const ShardPlan& plan, const std::filesystem::pat
   mo.on_progress = progress;
   mo.cancel = cancel;
   mo.verify = verify;
+  if (scope) scope(mo);
   auto stats = archive::merge_parts(mo);
   if (!stats) return std::move(stats).error();
   report.stats = *stats;
@@ -424,5 +436,6 @@ Result<MergeReport> merge_plan(const ShardPlan& plan, const std::filesystem::pat
   return report;
 }
 
+}  // namespace detail
 }  // namespace builder
 }  // namespace vts

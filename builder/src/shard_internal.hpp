@@ -20,6 +20,16 @@ TileRect shard_rect(const TileRect& level, TileId root, int z);
 std::vector<TileRect> plan_emit_rects(const ShardPlan& plan, const Geometry& g);
 Result<Geometry> plan_geometry(const ShardPlan& plan);
 
+// merge_plan(), with `scope` adjusting the merge before it runs (a set's archive: its tile-id
+// ranges, zooms and bounds; set_merge.cpp) and the tileset named after `named_after`'s stem
+// unless the plan names it (a set is named after its folder).
+Result<MergeReport> merge_plan_scoped(
+    const ShardPlan& plan, const std::filesystem::path& parts_dir,
+    const std::filesystem::path& output, const std::filesystem::path& named_after,
+    const std::function<void(archive::MergeOptions&)>& scope,
+    const std::function<void(const archive::MergeProgress&)>& progress,
+    const std::atomic<bool>* cancel, bool verify);
+
 // shard_update.cpp: what parts record of the build they belong to and how they are checked.
 // The build hash of a plan's JSON body (plan_body without build_hash and hash).
 std::string build_hash(const nlohmann::json& body);

@@ -36,16 +36,20 @@ std::pair<std::uint64_t, std::uint64_t> level_tiles(const ShardPlan& plan, int z
   return {ceil_div(ceil_div(plan.width, scale), t), ceil_div(ceil_div(plan.height, scale), t)};
 }
 
-// Shard `index`'s tiles at level z >= split level: its root's descendants, clipped to the level.
-std::uint64_t shard_level_tiles(const ShardPlan& plan, std::size_t index, int z) {
-  const TileId root = plan.shards[index];
-  const std::uint64_t span = std::uint64_t{1} << (z - plan.split_level);
+// The descendants of `root` at level z >= root.z, clipped to the level.
+std::uint64_t subtree_level_tiles(const ShardPlan& plan, TileId root, int z) {
+  const std::uint64_t span = std::uint64_t{1} << (z - root.z);
   const auto [w, h] = level_tiles(plan, z);
   const auto clip = [span](std::uint64_t start, std::uint64_t size) {
     const std::uint64_t from = start * span;
     return from >= size ? 0 : std::min(span, size - from);
   };
   return clip(root.x, w) * clip(root.y, h);
+}
+
+// Shard `index`'s tiles at level z >= split level.
+std::uint64_t shard_level_tiles(const ShardPlan& plan, std::size_t index, int z) {
+  return subtree_level_tiles(plan, plan.shards[index], z);
 }
 
 // Shard `index`'s tiles of levels from..to (all >= the split level).
@@ -90,6 +94,32 @@ std::uint64_t estimate_plan_size_tile_bytes(const ShardPlan& plan) {
   const std::uint64_t side = std::uint64_t{plan.options.tile_size} + 2 * plan.options.border;
   // BC1's stored size (8 bytes a 4x4 block) is its upper bound: zstd only shrinks it.
   return plan.options.codec == CodecId::bc1 ? side * side / 2 : lossless_tile_bytes(plan, side);
+}
+
+std::uint64_t estimate_set_archive_max(const ShardPlan& plan, int k) {
+  if (k < 1 || k > plan.max_zoom) return 0;
+  const std::uint64_t per_tile = estimate_plan_size_tile_bytes(plan);
+  std::uint64_t top = 0;
+  for (int z = 0; z < k; ++z) {
+    const auto [w, h] = level_tiles(plan, z);
+    top += w * h;
+  }
+  // The archive under level-k tile (0, 0) is the fullest: every other one is clipped as much or
+  // more by the image's right and bottom edges.
+  std::uint64_t first = 0;
+  for (int z = k; z <= plan.max_zoom; ++z)
+    first += subtree_level_tiles(plan, TileId{static_cast<std::uint8_t>(k), 0, 0}, z);
+  return std::max(top, first) * per_tile;
+}
+
+Result<int> archive_level_for_size(const ShardPlan& plan, std::uint64_t max_bytes) {
+  for (int k = 1; k <= plan.max_zoom; ++k)
+    if (estimate_set_archive_max(plan, k) <= max_bytes) return k;
+  return make_error(ErrorCode::invalid_argument,
+                    "no archive level keeps every archive of the set under " +
+                        std::to_string(max_bytes) + " bytes (the finest, " +
+                        std::to_string(plan.max_zoom) + ", needs " +
+                        std::to_string(estimate_set_archive_max(plan, plan.max_zoom)) + ")");
 }
 
 PlanSizeEstimate estimate_plan_size(const ShardPlan& plan) {

@@ -66,7 +66,9 @@ namespace detail {
 std::string build_hash(const json& body) {
   json j = body;
   j["input_count"] = j.contains("inputs") ? j["inputs"].size() : 0;
-  for (const char* key : {"inputs", "input_description", "build_hash", "hash"}) j.erase(key);
+  // The archive level says how the merge cuts the output into a set; the parts do not depend on it.
+  for (const char* key : {"inputs", "input_description", "build_hash", "hash", "archive_level"})
+    j.erase(key);
   const std::string text = j.dump();
   return hex16(XXH3_64bits(text.data(), text.size()));
 }

@@ -19,8 +19,31 @@ struct PlanArgs {
   std::uint64_t shards = 0;
   int split_level = -1;
   int apex_levels = kDefaultApexLevels;
-  std::string update;  // --update OLD-PLAN
+  std::string update;            // --update OLD-PLAN
+  int archive_level = 0;         // --archive-level K: the output is a set
+  std::string max_archive_size;  // --max-archive-size: K from the estimate
 };
+
+// --archive-level K, or the smallest K whose archives fit --max-archive-size.
+Status choose_archive_level(const PlanArgs& a, ShardPlan& plan) {
+  if (a.archive_level > 0 && !a.max_archive_size.empty())
+    return make_error(ErrorCode::invalid_argument,
+                      "give one of --archive-level and --max-archive-size, not both");
+  if (a.archive_level > 0) {
+    if (a.archive_level > plan.max_zoom)
+      return make_error(ErrorCode::invalid_argument,
+                        "--archive-level " + std::to_string(a.archive_level) +
+                            " is past the finest level, " + std::to_string(plan.max_zoom));
+    set_archive_level(plan, a.archive_level);
+  } else if (!a.max_archive_size.empty()) {
+    auto cap = parse_byte_size(a.max_archive_size, "--max-archive-size");
+    if (!cap) return cap.error();
+    auto k = archive_level_for_size(plan, *cap);
+    if (!k) return k.error();
+    set_archive_level(plan, *k);
+  }
+  return {};
+}
 
 // An update keeps the old plan's build: of the options given, only the inputs and -o may come.
 Status check_update_options(const CLI::App& c) {
@@ -67,6 +90,11 @@ void print_plan(const PlanArgs& a, const ShardPlan& plan) {
     j["shards"] = plan.shards.size();
     j["apex"] = plan.apex_level > 0;
     j["estimated_bytes"] = estimate_json(e);
+    if (plan.archive_level > 0) {
+      j["archive_level"] = plan.archive_level;
+      j["archives"] = set_archive_roots(plan).size();
+      j["estimated_bytes"]["archive_max"] = estimate_set_archive_max(plan, plan.archive_level);
+    }
     std::printf("%s\n", j.dump(2).c_str());
   } else if (!a.build.quiet) {
     std::printf("planned %s: %llu shards at split level %d of 0..%d, apex level %d%s, plan %s\n",
@@ -78,6 +106,12 @@ void print_plan(const PlanArgs& a, const ShardPlan& plan) {
         "most %s, the apex's %s)\n",
         human_bytes(e.archive).c_str(), human_bytes(e.shard_max).c_str(),
         human_bytes(e.apex).c_str());
+    if (plan.archive_level > 0)
+      std::printf(
+          "output: a set of %zu archives cut at level %d (vts merge --archive 0..%zu), "
+          "each at most about %s\n",
+          set_archive_roots(plan).size(), plan.archive_level, set_archive_roots(plan).size() - 1,
+          human_bytes(estimate_set_archive_max(plan, plan.archive_level)).c_str());
   }
 }
 
@@ -138,6 +172,7 @@ int run_plan(const CLI::App& c, const PlanArgs& a) {
   if (a.split_level >= 0) level = a.split_level;
   auto plan = make_shard_plan(*o, level, a.shards, a.apex_levels);
   if (!plan) return report_error(plan.error());
+  if (Status st = choose_archive_level(a, *plan); !st) return report_error(st.error());
   if (Status st = save_plan(*plan, a.build.output); !st) return report_error(st.error());
   print_plan(a, *plan);
   return 0;
@@ -161,6 +196,14 @@ Runner add_plan(CLI::App& app) {
                 "Shards stop this many levels above the split level, the apex makes the rest "
                 "(0: shards make their split-level tile; default 2)")
       ->check(CLI::Range(0, int(Geometry::kMaxZoom)));
+  c->add_option("--archive-level", a->archive_level,
+                "Make the output a set of archives: one per tile of this level, holding its "
+                "sub-pyramid, plus one for the levels above (each small enough for an object "
+                "store; vts merge --archive I merges archive I)")
+      ->check(CLI::Range(1, int(Geometry::kMaxZoom)));
+  c->add_option("--max-archive-size", a->max_archive_size,
+                "Make the output a set whose archives are each at most this size by the plan's "
+                "estimate (e.g. 4TiB: under S3's and GCS's 5 TiB object limit)");
   c->add_option("--update", a->update,
                 "Update this plan with new inputs (given, or its own read again): the same build, "
                 "listing the shards to rebuild");

@@ -7,6 +7,7 @@
 #include "vts/base/file_io.hpp"
 #include "vts/server/http_server.hpp"
 #include "vts/server/serve_config.hpp"
+#include "vts/store/options.hpp"
 
 namespace vts::cli {
 
@@ -18,15 +19,20 @@ namespace {
 
 struct ServeArgs {
   std::vector<std::string> paths;
-  std::string listen, admin, config, access_log, cors_origin, public_url;
+  std::string listen, admin, config, access_log, cors_origin, public_url, s3_endpoint;
   int threads = -1;
+  long long directory_cache_mib = -1;
   long long max_age = -1;
   bool print_ports = false;
   bool no_admin = false;
 };
 
-// The config file (if any), then the flags over it.
+// The config file (if any), then the flags over it; remote stores from the AWS environment
+// first (AWS_* variables, ~/.aws files), the config and the flags over it.
 Status make_options(const ServeArgs& a, HttpServerOptions& o) {
+  auto store = store::StoreOptions::from_environment();
+  if (!store) return store.error();
+  o.registry.store = std::move(*store);
   if (!a.config.empty())
     if (auto st = apply_serve_config(a.config, o); !st.ok()) return st;
   if (!a.listen.empty()) {
@@ -49,6 +55,9 @@ Status make_options(const ServeArgs& a, HttpServerOptions& o) {
   if (auto st = check_cors_origin(o.router.cors_origin); !st.ok()) return st;
   if (a.max_age >= 0) o.router.max_age_seconds = std::uint32_t(a.max_age);
   if (!a.public_url.empty()) o.router.public_base_url = a.public_url;
+  if (!a.s3_endpoint.empty()) o.registry.store.s3_endpoint = a.s3_endpoint;
+  if (a.directory_cache_mib >= 0)
+    o.registry.directory_cache_bytes = std::size_t(a.directory_cache_mib) << 20;
   return {};
 }
 
@@ -69,7 +78,7 @@ int run_serve(const ServeArgs& a) {
   HttpServerOptions o;
   if (auto st = make_options(a, o); !st.ok()) return report_error(st.error());
   raise_fd_limit_for_connections();
-  auto registry = std::make_shared<TilesetRegistry>();
+  auto registry = std::make_shared<TilesetRegistry>(o.registry);
   std::vector<std::filesystem::path> paths(a.paths.begin(), a.paths.end());
   if (auto st = registry->load(paths); !st.ok()) return report_error(st.error());
   // Served without them, as a reload would; /health and /metrics list them too.
@@ -95,7 +104,11 @@ int run_serve(const ServeArgs& a) {
 Runner add_serve(CLI::App& app) {
   auto a = std::make_shared<ServeArgs>();
   auto* cmd = app.add_subcommand("serve", "Serve tilesets over HTTP (tiles, TileJSON, archives)");
-  cmd->add_option("paths", a->paths, "Archives (*.pmtiles) or folders of archives")->required();
+  cmd->add_option("paths", a->paths,
+                  "Archives (*.pmtiles), sets (a folder or its tileset.json), folders of them; "
+                  "or the same in an object store (s3://bucket/prefix/, s3://bucket/a.pmtiles, "
+                  "https://host/set/tileset.json)")
+      ->required();
   cmd->add_option("--listen", a->listen, "HOST:PORT to serve tiles on (default 127.0.0.1:8080)");
   cmd->add_option("--admin", a->admin,
                   "HOST:PORT for /metrics and /health (default 127.0.0.1:9090)");
@@ -109,6 +122,13 @@ Runner add_serve(CLI::App& app) {
   cmd->add_option("--max-age", a->max_age, "Cache-Control max-age of unversioned tile URLs (s)")
       ->check(CLI::Range(0LL, 31536000LL));
   cmd->add_option("--public-url", a->public_url, "Base URL TileJSON hands out (default: Host)");
+  cmd->add_option("--s3-endpoint", a->s3_endpoint,
+                  "S3-compatible store's endpoint, scheme://host[:port] (default: "
+                  "AWS_ENDPOINT_URL, else AWS's)");
+  cmd->add_option("--directory-cache-mib", a->directory_cache_mib,
+                  "Each archive's cache of decoded leaf directories, MiB (default 64): for an "
+                  "archive in an object store, what makes a warm tile one ranged GET")
+      ->check(CLI::Range(0LL, 1LL << 20));
   cmd->add_flag("--print-ports", a->print_ports, "Also print 'port N' and 'admin_port N' lines");
   return [a] { return run_serve(*a); };
 }

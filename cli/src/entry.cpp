@@ -7,6 +7,8 @@
 #include <string>
 
 #include "commands.hpp"
+#include "vts/store/location.hpp"
+#include "vts/store/open.hpp"
 
 namespace vts::cli {
 
@@ -69,7 +71,11 @@ const std::atomic<bool>& install_stop_signals() {
 }
 
 Result<std::shared_ptr<archive::Reader>> open_archive(const std::string& path) {
-  auto r = archive::Reader::open(path);
+  // A local file or set, or one in an object store (credentials from the AWS environment).
+  auto options = store::is_remote(path) ? store::StoreOptions::from_environment()
+                                        : Result<store::StoreOptions>(store::StoreOptions{});
+  if (!options) return std::move(options).error();
+  auto r = store::open_reader(path, *options);
   if (!r) {
     Error e = std::move(r).error();
     e.message = "'" + path + "': " + e.message;

@@ -11,17 +11,20 @@
 #include "vts/archive/inspect.hpp"
 #include "vts/archive/pmtiles.hpp"
 #include "vts/client/source.hpp"
+#include "vts/store/open.hpp"
 
 namespace vts::client {
 namespace {
 
 class LocalSource final : public TileSource {
  public:
-  LocalSource(std::shared_ptr<archive::Reader> reader, SourceInfo info, std::string path)
-      : reader_(std::move(reader)), info_(std::move(info)), path_(std::move(path)) {}
+  LocalSource(std::shared_ptr<archive::Reader> reader, SourceInfo info, std::string path,
+              bool local)
+      : reader_(std::move(reader)), info_(std::move(info)), path_(std::move(path)), local_(local) {}
 
   const SourceInfo& info() const override { return info_; }
-  bool local() const override { return true; }
+  // A reader over an object store answers inside fetch() too, but each answer costs a request.
+  bool local() const override { return local_; }
 
   // Thread-safe: the reader's lookups are, and nothing else here changes after construction.
   Handle fetch(const SourceRequest& request, SourceCallback callback) override {
@@ -72,8 +75,23 @@ class LocalSource final : public TileSource {
   std::shared_ptr<archive::Reader> reader_;
   SourceInfo info_;
   std::string path_;
+  bool local_ = true;
   std::atomic<Handle> next_handle_{0};
 };
+
+Result<std::unique_ptr<TileSource>> reader_source(std::shared_ptr<archive::Reader> reader,
+                                                  std::string key, const std::string& name,
+                                                  bool local) {
+  Result<TilesetInfo> info = archive::archive_tileset(reader->header(), reader->metadata_json());
+  if (!info) return make_error(info.error().code, name + ": " + info.error().message);
+  SourceInfo si;
+  si.info = std::move(*info);
+  si.key = std::move(key);
+  si.version = reader->version();  // as `vts serve` computes it
+  si.description_json = reader->metadata_json();
+  return std::unique_ptr<TileSource>(
+      std::make_unique<LocalSource>(std::move(reader), std::move(si), name, local));
+}
 
 }  // namespace
 
@@ -90,18 +108,16 @@ Result<std::unique_ptr<TileSource>> open_local_archive(const std::filesystem::pa
   // Reader errors already name the path.
   Result<std::shared_ptr<archive::Reader>> reader = archive::Reader::open(absolute);
   if (!reader) return std::move(reader).error();
-  Result<TilesetInfo> info =
-      archive::archive_tileset((*reader)->header(), (*reader)->metadata_json());
-  if (!info) {
-    return make_error(info.error().code, absolute.string() + ": " + info.error().message);
-  }
-  SourceInfo si;
-  si.info = std::move(*info);
-  si.key = "file:" + absolute.string();
-  si.version = (*reader)->version();  // as `vts serve` computes it
-  si.description_json = (*reader)->metadata_json();
-  return std::unique_ptr<TileSource>(
-      std::make_unique<LocalSource>(std::move(*reader), std::move(si), absolute.string()));
+  return reader_source(std::move(*reader), "file:" + absolute.string(), absolute.string(), true);
+}
+
+Result<std::unique_ptr<TileSource>> open_store_archive(const std::string& location) {
+  auto options = store::StoreOptions::from_environment();
+  if (!options) return std::move(options).error();
+  Result<std::shared_ptr<archive::Reader>> reader = store::open_reader(location, *options);
+  if (!reader) return std::move(reader).error();
+  // The key names the object without its query (a pre-signed URL's signature expires).
+  return reader_source(std::move(*reader), location.substr(0, location.find('?')), location, false);
 }
 
 }  // namespace vts::client

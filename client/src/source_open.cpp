@@ -143,8 +143,11 @@ Result<std::unique_ptr<TileSource>> open_source(std::string_view location, Sourc
     const std::string_view path = loc.substr(0, loc.find_first_of("?#"));
     if (path.find("{z}") != std::string_view::npos) return open_template(loc, std::move(options));
     if (path.ends_with(".pmtiles")) return open_remote_archive(loc, std::move(options));
+    // A set's manifest: its archives under the same prefix, by ranged GETs.
+    if (path.ends_with("/tileset.json")) return open_store_archive(std::string(loc));
     return open_tilejson(loc, std::move(options));
   }
+  if (istarts_with(loc, "s3://")) return open_store_archive(std::string(loc));
   if (istarts_with(loc, "file:")) {
     const std::optional<std::string> path = file_url_path(loc);
     if (!path) {
@@ -166,7 +169,8 @@ Result<std::unique_ptr<TileSource>> open_source(std::string_view location, Sourc
     if (scheme) {
       return make_error(ErrorCode::invalid_argument,
                         "unsupported URL scheme in " + std::string(loc) +
-                            " (use http://, https://, file:// or a path to a .pmtiles file)");
+                            " (use http://, https://, s3://, file:// or a path to a .pmtiles "
+                            "file or a set)");
     }
   }
   return open_local_archive(std::filesystem::path(std::string(loc)));

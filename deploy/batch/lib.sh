@@ -1,6 +1,6 @@
 # shellcheck shell=bash
 # What deploy/batch/local/run-shards.sh and deploy/batch/slurm/submit.sh both do before they start
-# anything (sourced). The caller sets BATCH_PROG (its name, for messages) and defines
+# anything (sourced; plan_set.py beside it). The caller sets BATCH_PROG (its name, for messages) and defines
 # die MESSAGE (prints "$BATCH_PROG: MESSAGE", exits 2).
 
 # plan_shard_count PLAN: prints the number of shards of the plan (the length of its "shards"
@@ -16,6 +16,14 @@ except (OSError, ValueError, KeyError, TypeError) as e:
 if not isinstance(shards, list) or not shards:
     sys.exit(f"{prog}: {plan}: \"shards\" is not a non-empty array")
 print(len(shards))' "$BATCH_PROG" "$1" || exit 2
+}
+
+# plan_set_info PLAN: prints "SHARDS ARCHIVE_LEVEL ARCHIVES" (plan_set.py): the plan's shard count
+# and, for a plan of a set of archives (vts plan --archive-level K), K and the archive count N
+# (vts merge --archive 0..N-1); "0 0" for a plan of one archive. Exits 2 naming the plan when it is
+# not one.
+plan_set_info() {
+  python3 "$(dirname "${BASH_SOURCE[0]}")/plan_set.py" "$BATCH_PROG" "$1" || exit 2
 }
 
 # writable_folder DIR WHAT: DIR exists (created with its parents, as mkdir -p) and takes a new

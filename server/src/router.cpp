@@ -113,6 +113,12 @@ HttpResponse unreadable_tile(std::shared_ptr<const Tileset> t, TileId id, const 
     r.route = Route::tile;
     return r;
   }
+  if (e.code == ErrorCode::unavailable) {  // an object store that did not answer: retry
+    HttpResponse r = tile_error(503, "the store holding tileset " + t->name +
+                                         " did not answer; try again shortly (" + e.message + ")");
+    add(r, "Retry-After", "1");
+    return r;
+  }
   const int status = http_status(e.code);
   if (status == 404 && t->info.sparse) {
     HttpResponse r;
@@ -166,12 +172,13 @@ HttpResponse index_route(const TilesetRegistry& registry, const AsyncTileProvide
     entries[t->name] = {{"name", t->name},
                         {"version", t->version},
                         {"tilejson", base + "/" + t->name + ".json"},
-                        {"archive", base + "/" + t->name + ".pmtiles"},
                         {"width", t->info.geometry.width()},
                         {"height", t->info.geometry.height()},
                         {"max_zoom", t->info.geometry.max_zoom()},
                         {"codec", codec_name(t->info.codec)},
                         {"protected", is_protected(config, t->name)}};
+    // A set has no one archive to download (its archives stay where they are stored).
+    if (!t->is_set) entries[t->name]["archive"] = base + "/" + t->name + ".pmtiles";
   }
   ordered_json list = ordered_json::array();
   for (auto& [name, entry] : entries) list.push_back(std::move(entry));
@@ -193,7 +200,7 @@ HttpResponse tilejson_response(const TileJsonFields& fields, bool priv) {
 
 HttpResponse tilejson_route(const Tileset& t, const std::string& base, bool priv) {
   const std::string tiles = base + "/" + t.name + "@" + t.version + "/{z}/{x}/{y}";
-  const std::string archive = base + "/" + t.name + ".pmtiles";
+  const std::string archive = t.is_set ? std::string() : base + "/" + t.name + ".pmtiles";
   return tilejson_response({.tileset = t.name,
                             .info = &t.info,
                             .version = t.version,
@@ -222,6 +229,13 @@ HttpResponse tile_matrix_set_route(const std::string& name, const TilesetInfo& i
 
 HttpResponse archive_route(const HttpRequest& request, std::shared_ptr<const Tileset> t,
                            const RouterConfig& config, bool priv) {
+  if (t->is_set) {
+    HttpResponse e = error(404, "tileset \"" + t->name +
+                                    "\" is a set of archives, not one: read its tiles, or its "
+                                    "archives and tileset.json where they are stored");
+    e.route = Route::archive;
+    return e;
+  }
   if (Status s = t->reader->check_unchanged(); !s) {
     HttpResponse e = archive_changed(std::move(t), s.error());
     e.route = Route::archive;

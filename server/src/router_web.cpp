@@ -189,6 +189,13 @@ HttpResponse web_tile_route(const HttpRequest& request, std::shared_ptr<const Ti
       r.route = Route::tile;
       return r;
     }
+    if (e.code == ErrorCode::unavailable) {  // an object store that did not answer: retry
+      HttpResponse r =
+          tile_error(503, "the store holding tileset " + t->name +
+                              " did not answer; try again shortly (" + e.message + ")");
+      add(r, "Retry-After", "1");
+      return r;
+    }
     if (http_status(e.code) == 404 && t->info.sparse) {
       return finish(empty_tile(*t, format, config, request, cc));
     }

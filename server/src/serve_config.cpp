@@ -15,10 +15,21 @@ namespace {
 
 using nlohmann::json;
 
-constexpr std::array<std::string_view, 11> kTopKeys = {
-    "listen",     "admin",      "threads", "cors_origin",        "max_age",
-    "public_url", "access_log", "access",  "reload_interval_ms", "limits",
-    "web"};
+constexpr std::array<std::string_view, 15> kTopKeys = {"listen",
+                                                       "admin",
+                                                       "threads",
+                                                       "cors_origin",
+                                                       "max_age",
+                                                       "public_url",
+                                                       "access_log",
+                                                       "access",
+                                                       "reload_interval_ms",
+                                                       "limits",
+                                                       "web",
+                                                       "s3_endpoint",
+                                                       "directory_cache_mib",
+                                                       "store_timeout_ms",
+                                                       "store_retries"};
 constexpr std::array<std::string_view, 8> kWebKeys = {
     "png_level",    "webp_quality", "webp_lossless",      "webp_method",
     "jpeg_quality", "cache_mib",    "max_queued_encodes", "max_queued_encodes_per_connection"};
@@ -183,6 +194,28 @@ Status apply(const json& j, const std::string& file, HttpServerOptions& o) {
       return config_error(file, "reload_interval_ms is " + v.dump() +
                                     ": a whole number 0 to 31536000000 (0: no periodic check)");
     o.reload_interval = std::chrono::milliseconds(v.get<std::int64_t>());
+  }
+  if (j.contains("s3_endpoint"))
+    o.registry.store.s3_endpoint = j.at("s3_endpoint").get<std::string>();
+  if (j.contains("store_timeout_ms")) {
+    const json& v = j.at("store_timeout_ms");
+    if (!v.is_number_unsigned() || v.get<std::uint64_t>() < 100 || v.get<std::uint64_t>() > 600000)
+      return config_error(file,
+                          "store_timeout_ms is " + v.dump() + ": a whole number 100 to 600000");
+    o.registry.store.timeout = std::chrono::milliseconds(v.get<std::int64_t>());
+  }
+  if (j.contains("store_retries")) {
+    const json& v = j.at("store_retries");
+    if (!v.is_number_unsigned() || v.get<std::uint64_t>() > 10)
+      return config_error(file, "store_retries is " + v.dump() + ": a whole number 0 to 10");
+    o.registry.store.retries = v.get<int>();
+  }
+  if (j.contains("directory_cache_mib")) {
+    const json& v = j.at("directory_cache_mib");
+    if (!v.is_number_unsigned() || v.get<std::uint64_t>() > (1u << 20))
+      return config_error(file,
+                          "directory_cache_mib is " + v.dump() + ": a whole number 0 to 1048576");
+    o.registry.directory_cache_bytes = std::size_t(v.get<std::uint64_t>()) << 20;
   }
   if (j.contains("access"))
     if (auto st = apply_access(j.at("access"), file, o.router); !st.ok()) return st;

@@ -2,8 +2,13 @@
 #include "vts/server/tileset_registry.hpp"
 
 #include "tile_tag_memo.hpp"
+#include "vts/archive/archive_set.hpp"
 #include "vts/archive/inspect.hpp"
 #include "vts/base/file_io.hpp"
+#include "vts/store/open.hpp"
+#include "vts/store/store.hpp"
+
+#include <xxhash.h>
 
 #include <sys/stat.h>
 
@@ -32,7 +37,22 @@ Status validate_name(std::string_view name) {
 
 using FileIdentity = TilesetRegistry::FileIdentity;
 
-Result<FileIdentity> identify(const fs::path& path) {
+bool is_remote_path(const fs::path& p) {
+  return store::is_remote(p.native());
+}
+
+// A remote object's identity is its ETag (one HEAD): hashed into `inode`, with no size or time
+// (so it is never "recently modified": an object store replaces an object atomically).
+Result<FileIdentity> identify_remote(const fs::path& url, const store::StoreOptions& o) {
+  Result<std::string> etag = store::object_etag(url.native(), o);
+  if (!etag) return std::move(etag).error();
+  FileIdentity id;
+  id.inode = XXH3_64bits(etag->data(), etag->size());
+  return id;
+}
+
+Result<FileIdentity> identify(const fs::path& path, const store::StoreOptions& o) {
+  if (is_remote_path(path)) return identify_remote(path, o);
   struct stat st {};
   if (::stat(path.c_str(), &st) != 0) {
     return make_error(ErrorCode::not_found,
@@ -64,28 +84,55 @@ bool is_archive_name(const fs::path& p) {
   return p.extension() == ".pmtiles";
 }
 
+bool is_manifest(const fs::path& p) {
+  return p.filename() == archive::kSetManifestName;
+}
+
+// The folder whose listing names `file`: a set is listed as its folder, and served by its
+// manifest (…/planet/tileset.json is listed in …/).
+fs::path listed_in(const fs::path& file) {
+  return is_manifest(file) ? file.parent_path().parent_path() : file.parent_path();
+}
+
+// A tileset's name: an archive's file stem, a set's folder name.
+std::string tileset_name_of(const fs::path& file) {
+  return is_manifest(file) ? file.parent_path().filename().string() : file.stem().string();
+}
+
+// A folder or prefix as compared: canonical for a local one, without a trailing "/" for a URL.
+fs::path comparable(const fs::path& folder) {
+  if (!is_remote_path(folder)) {
+    std::error_code ec;
+    return fs::weakly_canonical(folder, ec);
+  }
+  std::string text = folder.native();
+  while (text.ends_with('/')) text.pop_back();
+  return text;
+}
+
 bool in_folder(const fs::path& file, const std::vector<fs::path>& folders) {
-  std::error_code ec;
-  const auto parent = fs::weakly_canonical(file.parent_path(), ec);
+  const auto parent = comparable(listed_in(file));
   for (const auto& f : folders)
-    if (fs::weakly_canonical(f, ec) == parent) return true;
+    if (comparable(f) == parent) return true;
   return false;
 }
 
 // open_tileset() without the file in its error messages (the callers name it).
-Result<std::shared_ptr<const Tileset>> open_archive(const fs::path& path) {
-  const std::string name = path.stem().string();
+Result<std::shared_ptr<const Tileset>> open_archive(const fs::path& path,
+                                                    const RegistryOptions& ro) {
+  const std::string name = tileset_name_of(path);
   if (Status s = validate_name(name); !s) return s.error();
 
   // Stat before opening: if the file is replaced in between, the recorded identity is the old
   // one, so the next reload sees a change and re-opens (never the reverse, which would pin a
   // stale archive forever).
-  auto id = identify(path);
+  auto id = identify(path, ro.store);
   if (!id) return id.error();
 
   archive::ReaderOptions options;
   options.leaf_cache_entries = 4096;
-  auto reader = archive::Reader::open(path, options);
+  options.leaf_cache_bytes = ro.directory_cache_bytes;
+  auto reader = store::open_reader(path.native(), ro.store, options);
   if (!reader) {  // the reader names the file first, "<file>: <reason>"
     Error e = reader.error();
     const std::string named = path.string() + ": ";
@@ -99,6 +146,7 @@ Result<std::shared_ptr<const Tileset>> open_archive(const fs::path& path) {
   auto t = std::make_shared<Tileset>();
   t->name = name;
   t->path = path;
+  t->is_set = is_manifest(path);
   t->reader = std::move(*reader);
   t->info = std::move(*info);
   t->version = t->reader->version();
@@ -109,27 +157,60 @@ Result<std::shared_ptr<const Tileset>> open_archive(const fs::path& path) {
   return std::shared_ptr<const Tileset>(std::move(t));
 }
 
+// False only when the file is certainly not there (an error to stat it keeps it served).
+bool file_present(const fs::path& file) {
+  std::error_code ec;
+  return fs::exists(file, ec) || ec;
+}
+
 Error naming(const fs::path& file, const Error& e) {
   return make_error(e.code, file.string() + ": " + e.message);
 }
 
 }  // namespace
 
-Result<std::shared_ptr<const Tileset>> open_tileset(const fs::path& path) {
-  auto t = open_archive(path);
+Result<std::shared_ptr<const Tileset>> open_tileset(const fs::path& path,
+                                                    const RegistryOptions& options) {
+  auto t = open_archive(path, options);
   if (!t) return naming(path, t.error());
   return t;
 }
 
 namespace {
 
-// The archives directly inside a folder (not recursive), sorted.
-Result<std::vector<fs::path>> list_archives(const fs::path& folder) {
+// The archives directly inside a folder (not recursive), and the sets in its subfolders (their
+// manifests, …/NAME/tileset.json), sorted.
+// A prefix in an object store: its .pmtiles objects, and the sets in its sub-prefixes (those
+// with a tileset.json object).
+Result<std::vector<fs::path>> list_remote_archives(const fs::path& prefix,
+                                                   const store::StoreOptions& o) {
+  auto listing = store::list_folder(prefix.native(), o);
+  if (!listing) return std::move(listing).error();
+  std::vector<fs::path> found;
+  for (const store::ObjectInfo& obj : listing->objects)
+    if (obj.key.ends_with(".pmtiles")) found.emplace_back(obj.url);
+  for (const std::string& folder : listing->folders) {
+    const std::string manifest = folder + std::string(archive::kSetManifestName);
+    auto etag = store::object_etag(manifest, o);
+    if (etag)
+      found.emplace_back(manifest);
+    else if (etag.error().code != ErrorCode::not_found)
+      return std::move(etag).error();
+  }
+  std::sort(found.begin(), found.end());
+  return found;
+}
+
+Result<std::vector<fs::path>> list_archives(const fs::path& folder, const store::StoreOptions& o) {
+  if (is_remote_path(folder)) return list_remote_archives(folder, o);
   std::vector<fs::path> found;
   std::error_code ec;
   for (fs::directory_iterator it(folder, ec), end; !ec && it != end; it.increment(ec)) {
     std::error_code type_ec;
     if (is_archive_name(it->path()) && it->is_regular_file(type_ec)) found.push_back(it->path());
+    const fs::path manifest = it->path() / archive::kSetManifestName;
+    if (it->is_directory(type_ec) && fs::is_regular_file(manifest, type_ec))
+      found.push_back(manifest);
   }
   if (ec) return make_error(ErrorCode::io, folder.string() + ": " + ec.message());
   std::sort(found.begin(), found.end());
@@ -145,9 +226,38 @@ struct LoadPlan {
   std::vector<fs::path> named, listed, folders;
 };
 
-Result<LoadPlan> plan_load(const std::vector<fs::path>& paths) {
+// A remote location: an object (archive or manifest) is named; a prefix ("…/") is a folder,
+// or a set when it holds a tileset.json.
+Status plan_remote(const fs::path& p, const store::StoreOptions& o, LoadPlan& plan) {
+  const std::string& text = p.native();
+  if (!text.ends_with('/')) {
+    plan.named.push_back(p);
+    return {};
+  }
+  const std::string manifest = text + std::string(archive::kSetManifestName);
+  if (auto etag = store::object_etag(manifest, o)) {
+    plan.named.emplace_back(manifest);
+    return {};
+  } else if (etag.error().code != ErrorCode::not_found) {
+    return etag.error();
+  }
+  auto found = list_archives(p, o);
+  if (!found) return found.error();
+  if (found->empty())
+    return make_error(ErrorCode::not_found,
+                      text + ": prefix holds no *.pmtiles archives and no sets");
+  plan.listed.insert(plan.listed.end(), found->begin(), found->end());
+  plan.folders.push_back(p);
+  return {};
+}
+
+Result<LoadPlan> plan_load(const std::vector<fs::path>& paths, const store::StoreOptions& o) {
   LoadPlan plan;
   for (const auto& p : paths) {
+    if (is_remote_path(p)) {
+      if (Status st = plan_remote(p, o, plan); !st) return st.error();
+      continue;
+    }
     std::error_code ec;
     const auto st = fs::status(p, ec);
     if (ec || !fs::exists(st)) {
@@ -157,10 +267,15 @@ Result<LoadPlan> plan_load(const std::vector<fs::path>& paths) {
       plan.named.push_back(p);
       continue;
     }
-    auto found = list_archives(p);
+    if (archive::is_set_path(p)) {  // a set's folder: the set, not its archives one by one
+      plan.named.push_back(archive::set_manifest_path(p));
+      continue;
+    }
+    auto found = list_archives(p, o);
     if (!found) return found.error();
     if (found->empty()) {
-      return make_error(ErrorCode::not_found, p.string() + ": folder holds no *.pmtiles archives");
+      return make_error(ErrorCode::not_found,
+                        p.string() + ": folder holds no *.pmtiles archives and no sets");
     }
     plan.listed.insert(plan.listed.end(), found->begin(), found->end());
     plan.folders.push_back(p);
@@ -185,13 +300,13 @@ Error nothing_to_serve(const std::vector<SkippedArchive>& skipped) {
 }  // namespace
 
 Status TilesetRegistry::load(const std::vector<fs::path>& paths) {
-  auto plan = plan_load(paths);
+  auto plan = plan_load(paths, options_.store);
   if (!plan) return plan.error();
   // Open everything first, then commit: a failed load changes nothing. Named files first, so
   // that an archive of a folder never takes a name from a file the user named.
   Map opened;
   for (const auto& f : plan->named) {
-    auto t = open_tileset(f);
+    auto t = open_tileset(f, options_);
     if (!t) return t.error();
     const std::string& name = (*t)->name;
     if (auto dup = opened.find(name); dup != opened.end())
@@ -201,9 +316,9 @@ Status TilesetRegistry::load(const std::vector<fs::path>& paths) {
   }
   std::vector<std::pair<SkippedArchive, FileIdentity>> skipped;
   for (const auto& f : plan->listed) {
-    auto id = identify(f);
+    auto id = identify(f, options_.store);
     if (!id) continue;  // gone since it was listed
-    auto t = open_archive(f);
+    auto t = open_archive(f, options_);
     if (t) {
       const std::string& name = (*t)->name;
       auto dup = opened.find(name);
@@ -247,7 +362,7 @@ TilesetRegistry::ReloadResult TilesetRegistry::reload(bool force, std::chrono::n
   std::set<fs::path> in_folders;
   bool listed_all = true;
   for (const auto& folder : folders) {
-    auto found = list_archives(folder);
+    auto found = list_archives(folder, options_.store);
     if (!found) {
       result.failures.push_back(found.error());
       listed_all = false;
@@ -291,7 +406,7 @@ void TilesetRegistry::add_new_archives(const std::set<fs::path>& in_folders, boo
   for (const auto& t : all()) known.insert(t->path);
   for (const auto& path : in_folders) {
     if (known.count(path)) continue;
-    auto id = identify(path);
+    auto id = identify(path, options_.store);
     if (!id) continue;  // gone again
     {
       std::lock_guard lock(mutex_);
@@ -302,7 +417,7 @@ void TilesetRegistry::add_new_archives(const std::set<fs::path>& in_folders, boo
       ++result.settling;
       continue;
     }
-    auto fresh = open_archive(path);
+    auto fresh = open_archive(path, options_);
     std::lock_guard lock(mutex_);
     if (!fresh) {
       result.failures.push_back(naming(path, fresh.error()));
@@ -333,8 +448,10 @@ void TilesetRegistry::refresh_loaded(const std::vector<fs::path>& folders, bool 
                                      std::chrono::nanoseconds settle, ReloadResult& result) {
   // Open outside the lock so lookups are never blocked by archive I/O.
   for (const auto& old : all()) {
-    std::error_code ec;
-    if (!fs::exists(old->path, ec) && !ec && in_folder(old->path, folders)) {
+    auto id = identify(old->path, options_.store);
+    const bool gone = is_remote_path(old->path) ? !id && id.error().code == ErrorCode::not_found
+                                                : !file_present(old->path);
+    if (gone && in_folder(old->path, folders)) {
       std::lock_guard lock(mutex_);
       auto it = tilesets_.find(old->name);
       if (it != tilesets_.end() && it->second == old) {
@@ -344,7 +461,6 @@ void TilesetRegistry::refresh_loaded(const std::vector<fs::path>& folders, bool 
       }
       continue;
     }
-    auto id = identify(old->path);
     if (!id) {
       result.failures.push_back(naming(old->path, id.error()));
       result.failures.back().message += " (tileset \"" + old->name + "\" kept as loaded)";
@@ -360,7 +476,7 @@ void TilesetRegistry::refresh_loaded(const std::vector<fs::path>& folders, bool 
       ++result.settling;
       continue;
     }
-    auto fresh = open_archive(old->path);
+    auto fresh = open_archive(old->path, options_);
     if (!fresh) {
       // The previous archive keeps answering: whole when its file was replaced by a rename, with
       // 503s (ErrorCode::changed) when it was modified in place, until a valid archive is there.

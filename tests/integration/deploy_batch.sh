@@ -12,7 +12,11 @@
 #   - the runner, the sbatch scripts (with SLURM_ARRAY_TASK_ID set by hand) and the Jobs'
 #     command vectors run for real on a small synthetic plan, each merged
 #     archive byte-identical (sha256) to a single-machine `vts build`; a deleted part is the only
-#     shard rebuilt on the next run; a runner killed (SIGKILL) mid-way resumes to the same bytes.
+#     shard rebuilt on the next run; a runner killed (SIGKILL) mid-way resumes to the same bytes;
+#   - a plan of a set of archives (vts plan --archive-level 2): the runner's parallel archive
+#     merges and manifest, and apex.sbatch + merge.sbatch per array task (VTS_ARCHIVE_OFFSET) +
+#     merge.sbatch --manifest, each set joined (vts merge --join) byte-identical to `vts build`'s;
+#     an OUT that is not what the plan makes (a file for a set, a folder for one archive) refused.
 # shellcheck source=lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 PY=${PYTHON3:-python3}
@@ -328,7 +332,7 @@ note "rejected: a builder image without $dropped"
 
 # ---- scripts -----------------------------------------------------------------------------------------
 SCRIPTS=("$BATCH/local/run-shards.sh" "$BATCH/slurm/submit.sh" "$BATCH/slurm/build.sbatch"
-  "$BATCH/slurm/finish.sbatch")
+  "$BATCH/slurm/finish.sbatch" "$BATCH/slurm/apex.sbatch" "$BATCH/slurm/merge.sbatch")
 for s in "${SCRIPTS[@]}"; do
   bash -n "$s" || fail "bash -n $s"
   [[ -x $s ]] || fail "$s is not executable"
@@ -431,5 +435,33 @@ done
 expect_ok "$VTS" "${apex_cmd[@]:1}"
 expect_ok "$VTS" "${merge_cmd[@]:1}"
 [[ $(sha256sum <"$R/k/out/planet.pmtiles") == "$want" ]] || fail "the Jobs' commands' archive differs"
+
+# ---- a set of archives ----------------------------------------------------------------------------
+# The same build cut at level 2: its parts are the plan's above (the archive level is not in the
+# build hash), so the runner goes straight to the archives' merges.
+expect_ok "$VTS" plan --synthetic "$SIZE" --name planet -o "$R/set.plan.json" --shards 4 --archive-level 2 --json
+archives=$(json_get "$OUT" j.archives)
+((archives > 3)) || fail "the set plan has $archives archives, expected several"
+note "run-shards.sh with a set plan: $archives archive merges, 2 at a time, then the manifest"
+usage_error '--out is a folder' --out "$R/set.pmtiles" "$R/set.plan.json"
+usage_error 'the plan makes one archive' --out "$R/one/" "$R/plan.json"
+expect_ok bash "$RUNNER" --vts "$VTS" --jobs 2 --out "$R/set" "$R/set.plan.json"
+grep -q "^run-shards: $archives archives (level 2) into $R/set/, 2 at a time" "$OUT" || { show_output; fail "set summary"; }
+[[ $(grep -c '^run-shards: archive [0-9]* merged$' "$OUT") == "$archives" ]] || { show_output; fail "not every archive merged"; }
+[[ -s $R/set/tileset.json && $(wc -l <"$R/logs/merge-joblog") == "$archives" ]] || fail "no manifest, or merge-joblog"
+expect_ok "$VTS" merge --join "$R/set" -o "$R/set-joined.pmtiles" -q
+[[ $(sha256sum <"$R/set-joined.pmtiles") == "$want" ]] || fail "run-shards.sh's set, joined, differs from vts build's"
+
+note "apex.sbatch, merge.sbatch per array task (two arrays: VTS_ARCHIVE_OFFSET 0 and 3), --manifest"
+VTS=$VTS expect_ok bash "$BATCH/slurm/apex.sbatch" "$R/set.plan.json" "$R/sparts"
+for ((i = 0; i < archives; i++)); do
+  off=$((i < 3 ? 0 : 3))
+  SLURM_ARRAY_TASK_ID=$((i - off)) VTS_ARCHIVE_OFFSET=$off VTS=$VTS \
+    expect_ok bash "$BATCH/slurm/merge.sbatch" "$R/set.plan.json" "$R/sparts" "$R/sset"
+done
+[[ ! -e $R/sset/tileset.json ]] || fail "an archive's merge task wrote the manifest"
+VTS=$VTS expect_ok bash "$BATCH/slurm/merge.sbatch" "$R/set.plan.json" "$R/sparts" "$R/sset/" --manifest
+expect_ok "$VTS" merge --join "$R/sset" -o "$R/sset-joined.pmtiles" -q
+[[ $(sha256sum <"$R/sset-joined.pmtiles") == "$want" ]] || fail "the sbatch scripts' set, joined, differs from vts build's"
 
 note "PASS in $((($(date +%s%N) - t_start) / 1000000)) ms"

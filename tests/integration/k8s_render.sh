@@ -13,6 +13,11 @@
 #     1 < maxFailedIndexes 16) refused; each rule in docs/DEPLOY.md's table;
 #   - the plan Job's `vts plan --update` run on the volume's layout (a directory here): the same
 #     build, the inputs at their /inputs paths; its shards, apex and merge make vts build's bytes;
+#   - a plan of a set of archives (`vts plan --archive-level K`): render.sh --estimate's archive
+#     count and largest archive equal `vts plan --json`'s (plain, sparse, georeferenced, K above
+#     and below the split level); the merge Job Indexed over the archives, then a manifest Job,
+#     valid; each merge pod's command run here for its index, then the manifest's: joined
+#     (`vts merge --join`), the set is vts build's archive byte for byte;
 #   - bad arguments and plans: exit 2, a message naming the problem, nothing written.
 # shellcheck source=lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
@@ -64,6 +69,28 @@ for name in one eight eight-nf eight-bc1 planet planet9 sparse; do
     fail "$name.json: vts estimates '$vts_est' (archive, per tile), render.sh '$render_est'"
 done
 
+# A set's archive count and largest archive: render.sh keeps vts's rule (deploy/batch/plan_set.py).
+note "render.sh --estimate agrees with vts plan --json on a set's archives and largest archive"
+# name K SPLIT-ARGS BUILD-ARGS...: K below and above the split level, dense, sparse, georeferenced.
+set_plans=(
+  "set:2:--shards 4:$EARTH --name earth"
+  "set-fine:3:--split-level 1:$EARTH --name earth"
+  "set-sparse:5:--split-level 4:--synthetic 33554432x33554432 --region 1048000,1048000,1049200,1048800 --region-level 3 --codec bc1"
+  "set-crs84:4:--split-level 2:--synthetic 16384x8192 --tiling WorldCRS84Quad --bbox=-10,-5,30,40"
+  "set-merc:5:--split-level 1:--synthetic 16384x16384 --tiling WebMercatorQuad --bbox=100,-60,179,70 --filter none"
+)
+for s in "${set_plans[@]}"; do
+  IFS=: read -r name k split build <<<"$s"
+  # shellcheck disable=SC2086 # the words of the plan's arguments
+  expect_ok "$VTS" plan $build -o "$P/$name.json" $split --archive-level "$k" --json
+  cp "$OUT" "$P/$name.out"
+  vts_set=$(json_get "$OUT" '[j.archive_level, j.archives, j.estimated_bytes.archive_max, j.estimated_bytes.archive].join(" ")')
+  expect_ok bash "$RENDER" --estimate "$P/$name.json"
+  render_set=$(json_get "$OUT" '[j.archive_level, j.archives, j.archive_max, j.archive].join(" ")')
+  [[ $vts_set == "$render_set" ]] ||
+    fail "$name.json: vts says '$vts_set' (level, archives, largest, all), render.sh '$render_set'"
+done
+
 # ---- render, schema, rules, figures -------------------------------------------------------------
 schema() { "$NODE" "$DEPLOY_JS/validate_k8s.js" "$@"; }
 rules() { "$NODE" "$DEPLOY_JS/job_rules.js" "$@"; }
@@ -82,9 +109,12 @@ render_ok "$P/eight.json" "$R/eight" --storage-class nfs-rwx
 render_ok "$P/planet.json" "$R/planet" --storage-class filestore-rwx
 render_ok "$P/planet9.json" "$R/planet9" --parallelism 20000 --max-failed-indexes 50000 --name planet9
 render_ok "$P/eight.json" "$R/eight-sized" --claim-size 3Ti --parallelism 3 --max-failed-indexes 0
+render_ok "$P/set.json" "$R/set" --merge-parallelism 4
+render_ok "$P/set-fine.json" "$R/set-fine"
 
 note "the figures come from the plan"
-"$PY" - "$R" "$IMAGE" "$EARTH" <<'PYTHON' || fail "rendered figures (above)"
+"$PY" - "$R" "$IMAGE" "$EARTH" "$(json_get "$P/set.out" j.archives)" "$(json_get "$P/set-fine.out" j.archives)" <<'PYTHON' ||
+  fail "rendered figures (above)"
 import math, os, sys, yaml
 R, image, earth = sys.argv[1], sys.argv[2], sys.argv[3]
 errors = []
@@ -145,6 +175,24 @@ for d, prefix, n, par, mfi, sc, claim in cases:
     check(open(os.path.join(R, d, "plan", "plan.local.json"), "rb").read() ==
           open(os.path.join(os.path.dirname(R), "plans", {"one": "one", "planet9": "planet9", "planet": "planet"}.get(d, "eight") + ".json"), "rb").read(),
           f"{d}: plan/plan.local.json is not the plan")
+# A set: the merge Job Indexed over its archives (vts plan --json's count), then the manifest Job.
+for d, n_archives, par in (("set", int(sys.argv[4]), 4), ("set-fine", int(sys.argv[5]), 16)):
+    o = load(os.path.join(R, d))
+    want = {("PersistentVolumeClaim", "vts-build"), ("Pod", "vts-build-load")} | \
+        {("Job", f"vts-build-{c}") for c in ("plan", "shards", "apex", "merge", "manifest")}
+    check(set(o) == want, f"{d}: objects {sorted(o)}")
+    if set(o) != want:
+        continue
+    s = o[("Job", "vts-build-merge")]["spec"]
+    got = (s.get("completionMode"), s.get("completions"), s.get("parallelism"), s.get("maxFailedIndexes"))
+    check(got == ("Indexed", n_archives, min(par, n_archives), min(16, n_archives)),
+          f"{d}: merge (mode, completions, parallelism, maxFailedIndexes) {got}, {n_archives} archives")
+    cmd = s["template"]["spec"]["containers"][0]["command"]
+    check(cmd == ["vts", "merge", "--plan", "/plan/plan.json", "/parts", "-o", "/out/set/", "--archive",
+                  "$(JOB_COMPLETION_INDEX)"], f"{d}: merge command {cmd}")
+    cmd = o[("Job", "vts-build-manifest")]["spec"]["template"]["spec"]["containers"][0]["command"]
+    check(cmd == ["vts", "merge", "--plan", "/plan/plan.json", "/parts", "-o", "/out/set/", "--manifest"],
+          f"{d}: manifest command {cmd}")
 for e in errors:
     print("k8s_render: " + e, file=sys.stderr)
 sys.exit(1 if errors else 0)
@@ -280,6 +328,25 @@ expect_ok "$VTS" build "$EARTH" --name earth -o "$WORK/single.pmtiles"
 [[ $(sha256sum <"$V/out/planet.pmtiles") == $(sha256sum <"$WORK/single.pmtiles") ]] ||
   fail "the rendered Jobs' archive differs from vts build's"
 
+note "the set's merge pods, one per index, then the manifest Job, on the same parts: joined, vts build's bytes"
+# The set plan is the 8-shard build cut at level 2 (the archive level is not in the build hash:
+# the parts above are its parts).
+cp "$P/set.json" "$V/plan/plan.json"
+n_archives=$(json_get "$P/set.out" j.archives)
+((n_archives > 1)) || fail "set.json: $n_archives archives"
+mapfile -t cmd_set < <(k8s_job_command "$R/set/merge-job.yaml" "$V")
+mapfile -t cmd_manifest < <(k8s_job_command "$R/set/manifest-job.yaml" "$V")
+for ((i = n_archives - 1; i >= 0; i--)); do
+  # The pod's command as the kubelet runs it: $(JOB_COMPLETION_INDEX) expanded to the index.
+  args=("${cmd_set[@]:1}")
+  expect_ok "$VTS" "${args[@]/"\$(JOB_COMPLETION_INDEX)"/$i}" -q
+  [[ ! -e $V/out/set/tileset.json ]] || fail "a merge pod wrote the manifest"
+done
+expect_ok "$VTS" "${cmd_manifest[@]:1}"
+expect_ok "$VTS" merge --join "$V/out/set" -o "$WORK/joined.pmtiles" -q
+[[ $(sha256sum <"$WORK/joined.pmtiles") == $(sha256sum <"$WORK/single.pmtiles") ]] ||
+  fail "the rendered set Jobs' archives, joined, differ from vts build's"
+
 # ---- refused --------------------------------------------------------------------------------------------
 note "render.sh refuses bad arguments and plans: exit 2, the problem named, nothing written"
 printf 'not json' >"$P/garbage.json"
@@ -323,6 +390,10 @@ fi
 # Rendering again into its own directory replaces its files.
 render_ok "$P/one.json" "$R/eight"
 grep -q '^  completions: 1$' "$R/eight/shards-job.yaml" || fail "a second rendering did not replace shards-job.yaml"
+# A plan of one archive rendered where a set's were: no manifest Job is left to apply.
+render_ok "$P/one.json" "$R/set"
+[[ ! -e $R/set/manifest-job.yaml ]] || fail "a rendering of one archive left the set's manifest-job.yaml"
+refused '--merge-parallelism is for a plan of a set' "$P/eight.json" --image "$IMAGE" --merge-parallelism 4
 # The longest name that fits: 50 + "-shards-32767" = 63 characters.
 render_ok "$P/planet.json" "$R/longest" --name "$(printf 'p%.0s' {1..50})"
 

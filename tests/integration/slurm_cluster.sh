@@ -7,6 +7,11 @@
 # Then one shard's task is cancelled while it runs: the finish job is then never satisfied
 # (DependencyNeverSatisfied), and the user's recovery — scancel it, `submit.sh --resubmit K` with
 # the archive — rebuilds that shard alone and merges the same bytes again.
+# Last, a plan of a set of archives (vts plan --archive-level 2: 9 archives, more than
+# MaxArraySize): apex.sbatch after the shard arrays, merge.sbatch as arrays of 5 (with
+# VTS_ARCHIVE_OFFSET) after the apex, merge.sbatch --manifest after every merge array; the set
+# joined (`vts merge --join`) is vts build's archive byte for byte; an archive removed and merged
+# again alone (`submit.sh --resubmit-merge I`) with a new manifest gives the same set.
 # shellcheck source=lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 # shellcheck source=slurm_lib.sh
@@ -139,4 +144,64 @@ done
 [[ $(sha "$WORK/out2/earth.pmtiles") == "$want" ]] || fail "the recovered build's archive differs from vts build's"
 [[ $(parts_stat | grep -v "shard-00000$victim.part") == "$before" ]] ||
   fail "a part other than shard $victim's changed: $(diff <(echo "$before") <(parts_stat))"
-note "PASS: chunked arrays, afterok, a cancelled shard resubmitted alone: the same archive"
+
+note "a plan of a set: the shards, the apex, the merges as arrays of 5, the manifest after them"
+expect_ok "$VTS" plan "$EARTH" --name earth -o "$WORK/set.plan.json" --shards 8 --archive-level 2 --json
+archives=$(json_get "$OUT" j.archives)
+((archives > 5)) || fail "the set plan has $archives archives, not more than MaxArraySize 5"
+t0=$SECONDS
+expect_ok bash "$SUBMIT" --json --throttle 2 "$WORK/set.plan.json" "$WORK/sparts" "$WORK/set/"
+cp "$OUT" "$WORK/submit-set.json"
+json_check "$WORK/submit-set.json" "j.archive_level === 2 && j.archives === $archives &&
+  j.merges.length === $(((archives + 4) / 5)) && j.merges.every((m, i) => m.first_archive === 5 * i) &&
+  j.merges.reduce((s, m) => s + m.archives, 0) === $archives && /^[0-9]+$/.test(j.apex) &&
+  /^[0-9]+$/.test(j.manifest) && j.finish === j.manifest"
+mapfile -t arrays < <(json_get "$WORK/submit-set.json" "j.arrays.map(a => a.job).join('\n')")
+mapfile -t merges < <(json_get "$WORK/submit-set.json" "j.merges.map(m => m.job).join('\n')")
+apex=$(json_get "$WORK/submit-set.json" "j.apex")
+manifest=$(json_get "$WORK/submit-set.json" "j.manifest")
+dep=$(scontrol -o show job "$apex" | grep -o 'Dependency=[^ ]*')
+for j in "${arrays[@]}"; do
+  grep -q "afterok:${j}_\*" <<<"$dep" || fail "the apex job's $dep does not wait for shard array $j"
+done
+for j in "${merges[@]}"; do
+  dep=$(scontrol -o show job "$j" | grep -o 'Dependency=[^ ]*' | head -n 1)
+  grep -q "afterok:${apex}[(]" <<<"$dep" || fail "merge array $j's $dep does not wait for the apex $apex"
+done
+dep=$(scontrol -o show job "$manifest" | grep -o 'Dependency=[^ ]*')
+for j in "${merges[@]}"; do
+  grep -q "afterok:${j}_\*" <<<"$dep" || fail "the manifest job's $dep does not wait for merge array $j"
+done
+slurm_wait_jobs "$JOB_TIMEOUT" "${arrays[@]}" "$apex" "${merges[@]}" "$manifest"
+for j in "${arrays[@]}" "$apex" "${merges[@]}" "$manifest"; do
+  bad=$(slurm_job_states "$j" | grep -v ' COMPLETED$') && { show_job_logs; fail "job $j: $bad"; }
+done
+[[ $(slurm_job_states "${merges[0]}" | wc -l) == 5 ]] || fail "the first merge array ran $(slurm_job_states "${merges[0]}")"
+[[ -s $WORK/set/tileset.json ]] || { show_job_logs; fail "no tileset.json after the manifest job"; }
+expect_ok "$VTS" merge --join "$WORK/set" -o "$WORK/set-joined.pmtiles" -q
+[[ $(sha "$WORK/set-joined.pmtiles") == "$want" ]] || fail "the Slurm build's set, joined, differs from vts build's"
+note "the set's $archives archives merged as Slurm arrays: joined, byte-identical to vts build ($((SECONDS - t0)) s)"
+
+note "an archive merged again alone: submit.sh --resubmit-merge, then a new manifest"
+redo=6 # the second merge array's task 1
+name=$(json_get "$WORK/set/tileset.json" "j.archives[$redo].name")
+rm "$WORK/set/$name" "$WORK/set/tileset.json"
+run bash "$SUBMIT" --resubmit-merge "$archives" "$WORK/set.plan.json" "$WORK/sparts" "$WORK/set/"
+if ((RC != 2)) || ! grep -q "the plan has $archives archives" "$ERR"; then
+  show_output
+  fail "submit.sh --resubmit-merge $archives (past the set's archives): expected exit 2 naming the count"
+fi
+expect_ok bash "$SUBMIT" --json --resubmit-merge "$redo" "$WORK/set.plan.json" "$WORK/sparts" "$WORK/set/"
+cp "$OUT" "$WORK/remerge.json"
+json_check "$WORK/remerge.json" "j.arrays.length === 0 && j.merges.length === 1 &&
+  j.merges[0].first_archive === 5 && j.merges[0].tasks === '1' && /^[0-9]+$/.test(j.manifest)"
+again=$(json_get "$WORK/remerge.json" "j.merges[0].job")
+manifest=$(json_get "$WORK/remerge.json" "j.manifest")
+slurm_wait_jobs "$JOB_TIMEOUT" "$again" "$manifest"
+for j in "$again" "$manifest"; do
+  bad=$(slurm_job_states "$j" | grep -v ' COMPLETED$') && { show_job_logs; fail "job $j: $bad"; }
+done
+[[ -s $WORK/set/$name && -s $WORK/set/tileset.json ]] || fail "the archive merged again or the manifest is missing"
+expect_ok "$VTS" merge --join "$WORK/set" -o "$WORK/set-joined2.pmtiles" -q
+[[ $(sha "$WORK/set-joined2.pmtiles") == "$want" ]] || fail "the set after --resubmit-merge differs from vts build's"
+note "PASS: chunked arrays, afterok, a cancelled shard resubmitted alone, a set's merges as arrays: the same archive"

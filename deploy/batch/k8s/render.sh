@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # render.sh PLAN.json OUT_DIR --image REF [--storage-class NAME] [--claim-size SIZE]
-#           [--parallelism P] [--max-failed-indexes K] [--name PREFIX]
+#           [--parallelism P] [--max-failed-indexes K] [--merge-parallelism M] [--name PREFIX]
 # render.sh --estimate PLAN.json   prints the archive estimate the claim is sized from, as JSON
-#                                  ({"archive": bytes, "tile_bytes": bytes}; `vts plan --json`'s
-#                                  "estimated_bytes" has the same figures)
+#                                  ({"archive": bytes, "tile_bytes": bytes}; for a plan of a set
+#                                  also "archive_level", "archives" and "archive_max": `vts plan
+#                                  --json` prints the same figures)
 #
 # Writes the Kubernetes manifests of a sharded build for one plan (docs/DEPLOY.md §9), ready for
 # `kubectl apply -f OUT_DIR`: every figure the API server checks comes from the plan, so nothing is
@@ -18,14 +19,21 @@
 #                     shard runs)
 #   shards-job.yaml   PREFIX-shards: Indexed, completions = the plan's shard count
 #   apex-job.yaml, merge-job.yaml
+#                     for a plan of a set of archives (vts plan --archive-level K: N archives),
+#                     merge-job.yaml is Indexed, completions N, M at once (--merge-parallelism,
+#                     default min(N, 16)): pod I runs vts merge --archive I into /out/set/; then
+#   manifest-job.yaml PREFIX-manifest: vts merge --manifest, the set's /out/set/tileset.json
 #   plan/             plan.local.json (the plan), inputs.txt (each input's path in the pods),
 #                     upload.txt (each input's path relative to the directory copied); not
 #                     manifests: `kubectl apply -f OUT_DIR` does not descend into it
-# The four Jobs are created suspended and resumed in order (the steps are printed at the end).
+# The Jobs are created suspended and resumed in order (the steps are printed at the end).
 # An input path the plan holds relative is taken from the current directory (where vts plan ran).
 # Exit 2 with a message naming the problem on a bad argument or a plan it cannot render.
 set -euo pipefail
 PY=${PYTHON3:-python3}
+# plan_set.py (the archive count and estimate of a set, vts's rule) lies in the folder above.
+VTS_BATCH_DIR=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+export VTS_BATCH_DIR
 command -v "$PY" >/dev/null 2>&1 || {
   echo "render.sh: needs python3" >&2
   exit 2
@@ -33,8 +41,12 @@ command -v "$PY" >/dev/null 2>&1 || {
 exec "$PY" - "$@" <<'PYTHON'
 import json, math, os, re, sys
 
+sys.path.insert(0, os.environ["VTS_BATCH_DIR"])
+import plan_set  # noqa: E402 (deploy/batch/plan_set.py)
+
 USAGE = ("usage: render.sh PLAN.json OUT_DIR --image REF [--storage-class NAME] [--claim-size SIZE]\n"
-         "                 [--parallelism P] [--max-failed-indexes K] [--name PREFIX]\n"
+         "                 [--parallelism P] [--max-failed-indexes K] [--merge-parallelism M]\n"
+         "                 [--name PREFIX]\n"
          "       render.sh --estimate PLAN.json")
 # The API server's limits these manifests are kept within (docs/DEPLOY.md §9, the rules table).
 LABEL_MAX = 63                 # a Job's name is its pods' job-name label value
@@ -50,7 +62,10 @@ QUANTITY = re.compile(r"^[1-9][0-9]*(Ki|Mi|Gi|Ti|Pi|Ei)?$")
 # give --claim-size where a better figure is known). vts has the same rule (builder/src/
 # shard_size.cpp, estimate_plan_size): tests/integration/k8s_render.sh checks the two agree.
 LOSSLESS_FILTERED, LOSSLESS_UNFILTERED, MEASURED_S = 34_478, 66_475, 264
-OUTPUTS = ("volume.yaml", "load-pod.yaml", "plan-job.yaml", "shards-job.yaml", "apex-job.yaml", "merge-job.yaml")
+OUTPUTS = ("volume.yaml", "load-pod.yaml", "plan-job.yaml", "shards-job.yaml", "apex-job.yaml", "merge-job.yaml",
+           "manifest-job.yaml")
+MERGE_PARALLELISM = 16  # a set's archive merges at once, by default (at most N)
+SET_DIR = "/out/set/"
 EXIT_CODES_FINAL = [2, 3, 5, 6]  # vts: bad arguments, not found, corrupt input, unsupported
 
 
@@ -61,7 +76,7 @@ def die(msg):
 
 def parse_args(argv):
     opts = {"image": None, "storage-class": None, "claim-size": None, "parallelism": "256",
-            "max-failed-indexes": "16", "name": "vts-build"}
+            "max-failed-indexes": "16", "merge-parallelism": None, "name": "vts-build"}
     pos, i = [], 0
     while i < len(argv):
         a = argv[i]
@@ -117,6 +132,9 @@ def load_plan(path):
         die(f"{path}: a shard that is not [x, y]")
     if len(plan["shards"]) > INT32_MAX:
         die(f"{path}: {len(plan['shards'])} shards: a Job's completions is a 32-bit integer")
+    k = plan.get("archive_level", 0)
+    if not isinstance(k, int) or isinstance(k, bool) or not 0 <= k <= g["max_zoom"]:
+        die(f"{path}: archive_level {k!r} is not a level of 0..{g['max_zoom']}")
     return plan
 
 
@@ -233,8 +251,13 @@ def main():
     if sys.argv[1:2] == ["--estimate"]:
         if len(sys.argv) != 3:
             die(f"--estimate takes one PLAN.json\n{USAGE}")
-        archive, per_tile = archive_estimate(load_plan(sys.argv[2]))
-        print(json.dumps({"archive": archive, "tile_bytes": per_tile}))
+        plan = load_plan(sys.argv[2])
+        archive, per_tile = archive_estimate(plan)
+        est = {"archive": archive, "tile_bytes": per_tile}
+        if plan_set.archive_count(plan):
+            est.update(archive_level=plan["archive_level"], archives=plan_set.archive_count(plan),
+                       archive_max=plan_set.archive_max(plan))
+        print(json.dumps(est))
         return
     plan_path, out_dir, opts = parse_args(sys.argv[1:])
     image, prefix, sc = opts["image"], opts["name"], opts["storage-class"]
@@ -251,13 +274,21 @@ def main():
     max_failed = positive(opts, "max-failed-indexes", zero_ok=True)
     plan = load_plan(plan_path)
     n = len(plan["shards"])
+    archives = plan_set.archive_count(plan)  # 0: one archive
+    if archives > INT32_MAX:
+        die(f"{plan_path}: {archives} archives: a Job's completions is a 32-bit integer")
+    if opts["merge-parallelism"] is not None and not archives:
+        die("--merge-parallelism is for a plan of a set of archives (vts plan --archive-level K)")
+    merge_parallelism = min(positive(opts, "merge-parallelism") if opts["merge-parallelism"] else MERGE_PARALLELISM,
+                            max(archives, 1))
     if not DNS_LABEL.match(prefix):
         die(f"--name {prefix!r} is not a DNS-1123 label (lower-case letters, digits, '-')")
-    # The longest name the API server checks: the shards Job's last pod hostname, NAME-(N-1).
-    longest = f"{prefix}-shards-{n - 1}"
-    if len(longest) > LABEL_MAX:
-        die(f"--name {prefix!r} is too long for {n} shards: the shards' last pod hostname {longest} "
-            f"has {len(longest)} characters, at most {LABEL_MAX}")
+    # The longest names the API server checks: an Indexed Job's last pod hostname, NAME-(N-1).
+    for component, count, what, whose in (("shards", n, "shards", "shards'"), ("merge", archives, "archives", "merges'")):
+        longest = f"{prefix}-{component}-{count - 1}"
+        if count and len(longest) > LABEL_MAX:
+            die(f"--name {prefix!r} is too long for {count} {what}: the {whose} last pod hostname {longest} "
+                f"has {len(longest)} characters, at most {LABEL_MAX}")
     parallelism, max_failed = min(parallelism, n), min(max_failed, n)
     if n > INDEXED_SOFT_LIMIT:
         parallelism = min(parallelism, HIGH_COMPLETIONS_CAP)
@@ -295,7 +326,8 @@ def main():
     write(out_dir, "volume.yaml", f"""
 The build's working volume, shared by every pod: ReadWriteMany (NFS, CephFS, EFS, Filestore,
 Azure Files, ...). inputs/ (read-only in the Jobs), plan/, parts/ (each part written under a
-temporary name, fsynced and renamed: a part that exists is complete), out/ (the archive).
+temporary name, fsynced and renamed: a part that exists is complete), out/ (the archive, or a
+set's archives and manifest in out/set/).
 Size: the inputs' bytes ({len(paths)} in the plan) + twice the archive estimated from the plan's
 geometry and codec (parts and archive side by side), + 5% (render.sh --claim-size overrides it).""",
           {"apiVersion": "v1", "kind": "PersistentVolumeClaim", "metadata": meta(prefix, "build"),
@@ -345,12 +377,48 @@ idempotent: a retry writes the same part.""",
               pod_spec(prefix, image, ["vts", "build", "--plan", "/plan/plan.json", "--apex", "--out-dir", "/parts"],
                        [("plan", True), ("parts", False)])))
 
-    write(out_dir, "merge-job.yaml", """
+    merge_mounts = [("plan", True), ("parts", True), ("out", False)]
+    if not archives:
+        write(out_dir, "merge-job.yaml", """
 The merge: the parts and the apex into one archive, byte-identical to a single-machine
 `vts build` of the plan; its memory does not grow with the shard count (docs/PLANET.md).""",
-          job(prefix, "merge", {"backoffLimit": 2, "podFailurePolicy": failure_policy("FailJob")},
-              pod_spec(prefix, image, ["vts", "merge", "--plan", "/plan/plan.json", "/parts", "-o", "/out/planet.pmtiles"],
-                       [("plan", True), ("parts", True), ("out", False)], memory=("512Mi", "1Gi"), cpu="1")))
+              job(prefix, "merge", {"backoffLimit": 2, "podFailurePolicy": failure_policy("FailJob")},
+                  pod_spec(prefix, image, ["vts", "merge", "--plan", "/plan/plan.json", "/parts", "-o", "/out/planet.pmtiles"],
+                           merge_mounts, memory=("512Mi", "1Gi"), cpu="1")))
+        stale = ["manifest-job.yaml"]
+    else:
+        merge_failed = min(positive(opts, "max-failed-indexes", zero_ok=True), archives)
+        if archives > INDEXED_SOFT_LIMIT:
+            merge_parallelism = min(merge_parallelism, HIGH_COMPLETIONS_CAP)
+            merge_failed = min(merge_failed, HIGH_COMPLETIONS_CAP)
+        write(out_dir, "merge-job.yaml", f"""
+The merges of the set of {archives} archives (archive level {plan['archive_level']}, docs/PLANET.md): one pod
+per index I (JOB_COMPLETION_INDEX), `vts merge --archive I` into {SET_DIR}, the archive's tiles byte for
+byte the one-file merge's; {merge_parallelism} at once. A failed pod is retried for its own index
+(backoffLimitPerIndex); the Job stops once more than {merge_failed} indexes have failed; exit codes as
+the shards'. An archive without tiles (a sparse plan) leaves a marker, NAME.pmtiles.empty.""",
+              job(prefix, "merge", {"completionMode": "Indexed", "completions": archives,
+                                    "parallelism": merge_parallelism, "backoffLimitPerIndex": 2,
+                                    "maxFailedIndexes": merge_failed,
+                                    "podFailurePolicy": failure_policy("FailIndex")},
+                  # $(JOB_COMPLETION_INDEX): the kubelet expands it from the variable the Job
+                  # controller sets in every container of an Indexed Job's pods.
+                  pod_spec(prefix, image, ["vts", "merge", "--plan", "/plan/plan.json", "/parts", "-o", SET_DIR,
+                                           "--archive", "$(JOB_COMPLETION_INDEX)"],
+                           merge_mounts, memory=("512Mi", "1Gi"), cpu="1")))
+        write(out_dir, "manifest-job.yaml", f"""
+The set's manifest, {SET_DIR}tileset.json, once every archive is merged: it names each one (its
+version is the set's). An archive not merged fails it (exit 3, naming the --archive index).""",
+              job(prefix, "manifest", {"backoffLimit": 2, "podFailurePolicy": failure_policy("FailJob")},
+                  pod_spec(prefix, image, ["vts", "merge", "--plan", "/plan/plan.json", "/parts", "-o", SET_DIR,
+                                           "--manifest"],
+                           merge_mounts, memory=("256Mi", "512Mi"), cpu="1")))
+        stale = []
+    for f in stale:  # a file of an earlier rendering into this directory: kubectl apply would take it
+        try:
+            os.remove(os.path.join(out_dir, f))
+        except FileNotFoundError:
+            pass
 
     q = lambda s: "'" + s.replace("'", "'\\''") + "'"
     steps = [f"kubectl apply -f {q(out_dir)}",
@@ -360,13 +428,15 @@ The merge: the parts and the apex into one archive, byte-identical to a single-m
                      f"kubectl exec -i {prefix}-load -- tar -xf - -C /build/inputs")
     steps.append(f"tar -C {q(out_dir + '/plan')} -cf - plan.local.json inputs.txt | "
                  f"kubectl exec -i {prefix}-load -- tar -xf - -C /build/plan")
-    for component, hours in (("plan", 6), ("shards", 48), ("apex", 6), ("merge", 48)):
+    for component, hours in (("plan", 6), ("shards", 48), ("apex", 6), ("merge", 48)) + \
+            ((("manifest", 1),) if archives else ()):
         steps.append(f"kubectl patch job {prefix}-{component} --type=merge -p '{{\"spec\":{{\"suspend\":false}}}}'")
         steps.append(f"kubectl wait --for=condition=complete --timeout={hours}h job/{prefix}-{component}")
         if component == "plan":
             steps.append(f"kubectl delete pod {prefix}-load")
     print(f"render.sh: {n} shard{'s' * (n != 1)}, {parallelism} at once, at most {max_failed} failed indexes; "
-          f"claim {prefix} {claim}{' of class ' + sc if sc else ''}; image {image}; in {out_dir}")
+          + (f"a set of {archives} archives, {merge_parallelism} merges at once, into {SET_DIR}; " if archives else "")
+          + f"claim {prefix} {claim}{' of class ' + sc if sc else ''}; image {image}; in {out_dir}")
     print("then, in order (a wait that times out means that Job failed: kubectl describe job NAME):")
     for s in steps:
         print("  " + s)

@@ -30,6 +30,7 @@ TEST(ErrorTable, EveryCodeHasItsOwnNameExitStatusAndHttpStatus) {
       {ErrorCode::cancelled, "cancelled", 130, 503},
       {ErrorCode::internal, "internal", 70, 500},
       {ErrorCode::changed, "changed", 75, 503},
+      {ErrorCode::unavailable, "unavailable", 75, 503},
   };
   std::set<std::string> names;
   for (const Row& r : rows) {

@@ -292,8 +292,8 @@ TEST_F(SourceLocal, TileWithoutAValidHeaderIsAnErrorNotACrash) {
 
 TEST(SourceLocalOpen, MeaninglessLocationsAreInvalidArguments) {
   for (const char* location :
-       {"", "   ", "s3://bucket/earth.pmtiles", "ftp://host/earth.pmtiles", "file://otherhost/x",
-        "file:relative/x.pmtiles", "file:///bad%zzescape.pmtiles"}) {
+       {"", "   ", "s3://", "s3:///no-bucket.pmtiles", "ftp://host/earth.pmtiles",
+        "file://otherhost/x", "file:relative/x.pmtiles", "file:///bad%zzescape.pmtiles"}) {
     auto s = vts::client::open_source(location);
     ASSERT_FALSE(s.ok()) << location;
     EXPECT_EQ(s.error().code, vts::ErrorCode::invalid_argument) << s.error().to_string();

@@ -52,6 +52,12 @@ struct TileIdRange {
   bool operator==(const TileIdRange&) const = default;
 };
 TileIdRange subtree_tile_ids(TileId root, std::uint8_t z);
+// The ids of root's sub-pyramid at every level root.z..max_z (max_z <= 31), one range per level,
+// sorted and disjoint: the MergeOptions::ranges of one archive of a set split at level root.z.
+std::vector<TileIdRange> subtree_ranges(TileId root, std::uint8_t max_z);
+// The ids of every tile with z < k (1 <= k <= 31): {0, first id of level k - 1}, the ranges of
+// the top archive of a set split at level k.
+TileIdRange levels_above(std::uint8_t k);
 
 struct Header {
   std::uint64_t root_dir_offset = 0, root_dir_length = 0;
@@ -210,6 +216,21 @@ struct ReaderOptions {
   std::size_t max_tile_bytes = 256u << 20;      // a larger tile entry is too_large
 };
 
+// Where a reader's bytes come from: a file, borrowed bytes, or an object in a remote store
+// (store/: s3://, https://). Implementations are thread-safe.
+class ByteSource {
+ public:
+  virtual ~ByteSource() = default;
+  virtual std::uint64_t size() const = 0;
+  // Reads exactly out.size() bytes at `offset`, which the caller has checked lie within size():
+  // changed when the bytes are no longer those opened (a file modified in place, an object
+  // replaced), unavailable when a remote store did not answer, io otherwise.
+  virtual Status read(std::uint64_t offset, std::span<std::uint8_t> out) const = 0;
+  virtual Status check_unchanged() const { return {}; }
+  // What to call it in messages (a path or URL); may be empty.
+  virtual std::string name() const { return {}; }
+};
+
 // Reads an archive from a file with pread(2), never through a mapping, so that another process
 // truncating or overwriting the file in place cannot fault the reader's process (or from
 // borrowed bytes). Construction validates the header against the file size, reads and decodes
@@ -219,6 +240,9 @@ struct ReaderOptions {
 // ErrorCode::changed instead (and every later one: a changed reader stays changed). Replacing the
 // file by renaming another over its path is not a change: the reader keeps reading the file it
 // opened. All const member functions are thread-safe.
+//
+// open() of a set's manifest (tileset.json) or of its folder opens the set as one reader
+// (archive_set.hpp).
 class Reader {
  public:
   static Result<std::shared_ptr<Reader>> open(const std::filesystem::path& path,
@@ -226,6 +250,9 @@ class Reader {
   // The bytes must outlive the reader (used by fuzzers and tests).
   static Result<std::shared_ptr<Reader>> open_bytes(std::span<const std::uint8_t> bytes,
                                                     ReaderOptions options = {});
+  // Reads through any byte source (a remote object: store/); errors name source->name().
+  static Result<std::shared_ptr<Reader>> open_source(std::unique_ptr<ByteSource> source,
+                                                     ReaderOptions options = {});
   virtual ~Reader() = default;
 
   virtual const Header& header() const = 0;

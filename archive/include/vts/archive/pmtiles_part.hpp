@@ -110,6 +110,13 @@ struct MergeProgress {
   std::uint64_t bytes_copied = 0, bytes_total = 0;
   bool copying = false;  // second pass: writing the archive
   double seconds = 0;
+  // Index records read to find and walk the tiles merged: the binary searches that clip the
+  // parts to MergeOptions::ranges, then each merged tile's record once per pass (two passes). So
+  // about twice the tiles merged, whatever the number of parts.
+  std::uint64_t records_read = 0;
+  // Index records read to check the parts' checksums when they are opened: every part's whole
+  // index, even in a ranged merge, since one checksum covers a part's index with its manifest.
+  std::uint64_t records_checked = 0;
 };
 
 struct MergeOptions {
@@ -123,6 +130,15 @@ struct MergeOptions {
   // copied in the kernel (copy_file_range; extents shared on XFS/Btrfs with reflink), and only
   // the parts' indexes and manifests are checked.
   bool verify = true;
+  // The tiles to merge: inclusive tile-id ranges, sorted and disjoint (else invalid_argument);
+  // empty: every tile of the parts. The merge writes the archive Writer writes from the parts'
+  // tiles in the ranges, so an archive of a set (one per tile R of level K with data, holding
+  // subtree_ranges(R, maxz), and one of levels_above(K)) is made from the same parts as the
+  // one-file archive, and its tiles are that archive's. Each part is clipped by binary search
+  // over its index, so a merge of 1/P of the tiles reads about 1/P of the index records and
+  // payloads (beyond the checksum of every part's index: MergeProgress::records_checked). When
+  // no tile of the parts lies in the ranges: not_found, and nothing is written.
+  std::vector<TileIdRange> ranges;
   std::function<void(const MergeProgress&)> on_progress;  // about ten times a second
   const std::atomic<bool>* cancel = nullptr;
   // Called for each part once it is checked, with its manifest and attachment (which the merge
@@ -133,7 +149,8 @@ struct MergeOptions {
   std::function<Status(std::string& metadata_json)> check_parts;
 };
 
-// Writes the archive Writer would write from the parts' tiles, in bounded memory (about 64 MiB
+// Writes the archive Writer would write from the parts' tiles (those in options.ranges, when
+// given; WriterStats and MergeProgress count only those), in bounded memory (about 64 MiB
 // for the small-payload table plus 4 MiB buffers, whatever the number of tiles and parts), using
 // temporary files beside the output for the directories. A missing, truncated or corrupt part, or
 // two parts holding the same tile, is an error naming the part; the output is then untouched.

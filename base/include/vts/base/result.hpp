@@ -26,17 +26,18 @@ enum class ErrorCode : std::uint8_t {
   cancelled = 9,         // the operation was interrupted (SIGINT during a build)
   internal = 10,         // a bug: an invariant did not hold
   changed = 11,          // a file modified in place while it was being read; reopen and retry
+  unavailable = 12,      // a remote store that timed out, dropped or answered 5xx; retry later
 };
 
 // Short stable name of an error code ("corrupt", "checksum", ...), for messages and --json.
 const char* error_code_name(ErrorCode code) noexcept;
 // Process exit code for an error: 0 for ok, 2 for invalid_argument, 3 for not_found, 4 for io,
-// 5 for corrupt/truncated/checksum, 6 for unsupported/too_large, 75 for changed (EX_TEMPFAIL: try
-// again), 130 for cancelled, 70 internal.
+// 5 for corrupt/truncated/checksum, 6 for unsupported/too_large, 75 for changed and unavailable
+// (EX_TEMPFAIL: try again), 130 for cancelled, 70 internal.
 int exit_code(ErrorCode code) noexcept;
 // HTTP status for a request that failed with this code while a server read its own data: 200 for
-// ok, 400 invalid_argument, 404 not_found, 503 cancelled and changed (an archive being replaced:
-// retry), and 500 for everything else (unreadable
+// ok, 400 invalid_argument, 404 not_found, 503 cancelled, changed and unavailable (an archive being
+// replaced, a store that is down: retry), and 500 for everything else (unreadable
 // or damaged data on the server is never the client's fault).
 int http_status(ErrorCode code) noexcept;
 

@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "vts/archive/archive_set.hpp"
 #include "vts/archive/pmtiles_part.hpp"
 #include "vts/builder/builder.hpp"
 
@@ -67,6 +68,10 @@ struct ShardPlan {
   int split_level = 0;
   // A = min(L + k, max_zoom): shards write levels >= A, the apex levels < A (none when A = 0).
   int apex_level = 0;
+  // The output is a set of archives (archive/archive_set.hpp) cut at this level K >= 1: one per
+  // level-K tile, plus the top. 0: one archive. Not part of the build hash: parts do not depend on
+  // it, so a plan may be given one (vts plan --archive-level) after its shards are built.
+  int archive_level = 0;
   std::optional<GeoPlan> geo;
   std::vector<TileId> shards;  // level-L tiles, in Hilbert tile-id order; shard I is shards[I]
   // 16 hex digits: XXH3-64 of the plan without its inputs (paths, sizes, fingerprints; their
@@ -197,6 +202,58 @@ Result<MergeReport> merge_plan(const ShardPlan& plan, const std::filesystem::pat
                                const std::filesystem::path& output,
                                const std::function<void(const archive::MergeProgress&)>& progress,
                                const std::atomic<bool>* cancel, bool verify = true);
+
+// ---- Sets (archive/archive_set.hpp; docs/PLANET.md, "The planet as a set")
+
+// The archives of the plan's set, in the manifest's order: the top (nullopt), then each tile of
+// level K = plan.archive_level that the image covers and some shard reaches, in tile-id order.
+// Empty for a plan of one archive (archive_level 0). `vts merge --archive I` merges entry I.
+std::vector<std::optional<TileId>> set_archive_roots(const ShardPlan& plan);
+// Makes the plan's output a set cut at level k (0: one archive) and updates its hash (its build
+// hash stays: the parts do not depend on the archive level).
+void set_archive_level(ShardPlan& plan, int k);
+
+// What the largest archive of a set cut at level k would take (estimate_plan_size's rule, dense
+// within each archive's sub-pyramid), and the smallest k >= 1 whose largest archive is at most
+// max_bytes (invalid_argument when even the finest level's archives are larger).
+std::uint64_t estimate_set_archive_max(const ShardPlan& plan, int k);
+Result<int> archive_level_for_size(const ShardPlan& plan, std::uint64_t max_bytes);
+
+struct SetArchiveReport {
+  std::size_t index = 0;
+  std::string name;            // the archive's file name in the set's folder
+  std::optional<TileId> root;  // nullopt for the top
+  bool empty = false;          // no tile of the parts lies in it: nothing but a marker written
+  MergeReport merge;
+};
+
+// Merges archive `index` of the plan's set (set_archive_roots) from the parts in parts_dir into
+// out_dir/<name>: merge_plan restricted to the archive's tiles, zooms and bounds, so each tile is
+// byte for byte the one-file archive's. An archive in which the parts have no tile (a sparse
+// plan) writes the marker out_dir/<name>.empty instead, so write_set_manifest() can tell it from
+// one not merged yet.
+Result<SetArchiveReport> merge_set_archive(
+    const ShardPlan& plan, const std::filesystem::path& parts_dir,
+    const std::filesystem::path& out_dir, std::size_t index,
+    const std::function<void(const archive::MergeProgress&)>& progress,
+    const std::atomic<bool>* cancel, bool verify = true);
+
+// Writes out_dir/tileset.json (atomically) naming every archive of the set merged there, then
+// removes the .empty markers. An archive neither there nor marked empty is not_found naming it
+// and the `vts merge --archive` index that makes it; an archive that is not the plan's
+// (another build) is invalid_argument.
+Result<archive::SetManifest> write_set_manifest(const ShardPlan& plan,
+                                                const std::filesystem::path& out_dir);
+
+struct JoinProgress {
+  std::uint64_t tiles_done = 0, tiles_total = 0;
+};
+// `vts merge --join`: every tile of the set at `set` (its folder or manifest) into one archive at
+// `output`, the archive a one-file merge of the same parts writes, byte for byte.
+Result<archive::WriterStats> join_set(const std::filesystem::path& set,
+                                      const std::filesystem::path& output,
+                                      const std::function<void(const JoinProgress&)>& progress,
+                                      const std::atomic<bool>* cancel);
 
 }  // namespace builder
 }  // namespace vts

@@ -197,6 +197,10 @@ Result<std::unique_ptr<TileSource>> open_image_template(const ImageLayout& layou
 // The three kinds of source, for callers that know which one they want (open_source picks one
 // from the location's form). Same blocking and error behaviour as open_source().
 Result<std::unique_ptr<TileSource>> open_local_archive(const std::filesystem::path& path);
+// An archive or a set in an object store or on a web server read by ranged GETs (store/open.hpp):
+// s3://bucket/key.pmtiles, s3://bucket/set/tileset.json, https://host/set/tileset.json. Reads
+// are synchronous, as for a local archive; credentials and endpoint from the AWS environment.
+Result<std::unique_ptr<TileSource>> open_store_archive(const std::string& location);
 Result<std::unique_ptr<TileSource>> open_tilejson(std::string_view url, SourceOptions options = {});
 Result<std::unique_ptr<TileSource>> open_remote_archive(std::string_view url,
                                                         SourceOptions options = {});

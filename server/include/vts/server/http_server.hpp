@@ -73,6 +73,10 @@ struct HttpServerOptions {
   HttpServerLimits limits;
   RouterConfig router;
   std::chrono::milliseconds reload_interval{2000};  // 0 = no periodic check
+  // Remote tilesets (s3://, https://) and each archive's directory cache: what the registry is
+  // made with (config keys s3_endpoint, directory_cache_mib; flags --s3-endpoint,
+  // --directory-cache-mib).
+  RegistryOptions registry;
   bool handle_signals = true;  // SIGTERM/SIGINT → stop(), SIGHUP → reload(true)
   std::string access_log;      // "" = off, "-" = stdout, else a file (appended)
   // Tilesets that are not archives (the cache daemon, `vts cache serve`): looked up when a name

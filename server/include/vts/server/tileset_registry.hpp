@@ -19,6 +19,7 @@
 #include "vts/archive/pmtiles.hpp"
 #include "vts/base/result.hpp"
 #include "vts/protocol/tileset.hpp"
+#include "vts/store/options.hpp"
 
 namespace vts {
 inline namespace server {
@@ -29,7 +30,9 @@ class TileTagMemo;
 
 struct Tileset {
   std::string name;
+  // The archive file, or a set's manifest (…/NAME/tileset.json; archive/archive_set.hpp).
   std::filesystem::path path;
+  bool is_set = false;  // a set of archives read as one: no /{name}.pmtiles to download
   std::shared_ptr<archive::Reader> reader;
   TilesetInfo info;
   // 16 lowercase hex digits identifying the archive's content (XXH3-64 of its header, root
@@ -44,9 +47,19 @@ struct Tileset {
   std::shared_ptr<http_detail::TileTagMemo> tags;
 };
 
-// Opens one archive as a tileset named after its file stem; validates metadata. Errors name the
-// file ("<path>: <reason>").
-Result<std::shared_ptr<const Tileset>> open_tileset(const std::filesystem::path& path);
+// Where a registry reads remote tilesets from, and how much of each archive it keeps.
+struct RegistryOptions {
+  store::StoreOptions store;  // s3:// and https:// (credentials, endpoint, timeouts)
+  // Each archive's cache of decoded leaf directories, in bytes (`directory_cache_mb`): for a
+  // remote archive, what makes a warm tile one ranged GET.
+  std::size_t directory_cache_bytes = std::size_t{64} << 20;
+};
+
+// Opens one archive (a file, or an s3:// or http(s):// object) or one set (its tileset.json, or
+// a local set's folder) as a tileset named after the archive's stem or the set's folder;
+// validates metadata. Errors name the location ("<path>: <reason>").
+Result<std::shared_ptr<const Tileset>> open_tileset(const std::filesystem::path& path,
+                                                    const RegistryOptions& options = {});
 
 // An archive file a registry does not serve as it is on disk: it does not open as a valid
 // archive, its stem is not a valid tileset name, or its name is taken (a served tileset whose new
@@ -60,6 +73,8 @@ struct SkippedArchive {
 // Thread-safe registry. Readers take snapshots; writers replace entries atomically.
 class TilesetRegistry {
  public:
+  explicit TilesetRegistry(RegistryOptions options = {}) : options_(std::move(options)) {}
+
   // Adds every archive named by `paths`: a *.pmtiles file, or a folder whose *.pmtiles files
   // (not recursive) are each a tileset. A file named in `paths` must open: load fails on the
   // first one that does not (or whose name is taken), changing nothing. An archive found in a
@@ -131,6 +146,7 @@ class TilesetRegistry {
   void refuse(const std::filesystem::path& file, const FileIdentity& id, Error error);
   void forget_gone_refusals(const std::set<std::filesystem::path>& in_folders);
 
+  const RegistryOptions options_;
   std::vector<std::filesystem::path> folders_;        // loaded as folders
   std::map<std::filesystem::path, Refusal> refused_;  // archive files refused, as seen
 };
