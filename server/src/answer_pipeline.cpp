@@ -1,6 +1,7 @@
 // The one answer pipeline (docs/ARCHITECTURE.md "One answer pipeline"): route() answers what it can
 // at once and plans the rest (PendingAnswer); finish_pending() carries a plan out, in the same
 // order for every kind of answer:
+//   0. a tile of an archive in an object store, read on the store-read pool;
 //   1. the provider's tile (vts cache serve), mapped to its answer by the router
 //      (answer_provided), which may be a web image to make;
 //   2. the web image: the cache (a hit, or the flight another request leads), else this request
@@ -14,6 +15,8 @@
 #include <future>
 
 #include "router_internal.hpp"
+#include "vts/base/worker_pool.hpp"
+#include "vts/protocol/codec.hpp"
 #include "web_tile_cache.hpp"
 
 namespace vts {
@@ -136,12 +139,69 @@ void make_image(HttpResponse marker, const std::shared_ptr<const PendingAnswer>&
       std::move(interest));
 }
 
+// The threads that read tiles from object stores: each read waits on the network (a ranged GET of
+// a few milliseconds), so many more threads than cores, and never the I/O threads. Bounded: a
+// flood over it is shed with 503. Started on first use, for the process's life.
+constexpr unsigned kStoreReadThreads = 32;
+constexpr std::size_t kStoreReadQueue = 4096;
+
+base::WorkerPool* store_reads() {
+  static const std::unique_ptr<base::WorkerPool> pool = [] {
+    auto started = base::WorkerPool::start(
+        {.threads = kStoreReadThreads, .capacity = kStoreReadQueue, .name = "vts-store-read"});
+    return started ? std::move(*started) : nullptr;
+  }();
+  return pool.get();
+}
+
+// Step 0 (then 3): the tile from its archive in a store, on the store-read pool.
+void read_stored(HttpResponse marker, const std::shared_ptr<const PendingAnswer>& p,
+                 std::stop_token interest, Done done) {
+  auto job = [marker, p, interest, done]() mutable {
+    if (interest.stop_requested()) {  // nobody waits for it any more: no request to the store
+      return done(finished(marker, tile_error(503, "the request was abandoned")));
+    }
+    auto payload = p->stored->reader->get(p->id);
+    // A store's bytes are checked whole before they are sent: an object replaced while it is read
+    // (a store whose writes are not atomic, a file copied over behind a web server) can answer the
+    // old ETag with new bytes. Hashing a tile is microseconds against the request's milliseconds.
+    // Directories read mid-replacement fail the same way: both are answered 503 and the tileset
+    // reloaded (a store object that is damaged for good stays 503 until it is replaced).
+    Status whole;
+    if (!payload) {
+      whole = payload.error();
+    } else if (auto checked = verify_tile(*payload); !checked) {
+      whole = checked.error();
+    }
+    if (!whole &&
+        (whole.error().code == ErrorCode::corrupt || whole.error().code == ErrorCode::truncated ||
+         whole.error().code == ErrorCode::checksum)) {
+      HttpResponse r = archive_changed(
+          p->stored, make_error(ErrorCode::changed, "tile " + p->id.to_string() +
+                                                        " read from the store is not whole (" +
+                                                        whole.error().message + ")"));
+      return done(finished(marker, std::move(r)));
+    }
+    done(finished(marker, stored_tile_answer(p->stored, p->id, std::move(payload), p->if_none_match,
+                                             p->cache_control)));
+  };
+  base::WorkerPool* pool = store_reads();
+  if (pool == nullptr) return job();  // no thread could start: read here rather than fail
+  if (!pool->try_submit(job)) {
+    HttpResponse r = tile_error(503, "the server has " + std::to_string(kStoreReadQueue) +
+                                         " tile reads from object stores waiting; retry shortly");
+    add(r, "Retry-After", "1");
+    done(finished(marker, std::move(r)));
+  }
+}
+
 }  // namespace
 
 void finish_pending(HttpResponse marker, AsyncTileProvider* provider, std::stop_token interest,
                     Done done) {
   std::shared_ptr<const PendingAnswer> p = std::move(marker.pending);
   assert(p);
+  if (p->stored) return read_stored(std::move(marker), p, std::move(interest), std::move(done));
   if (!p->provided) return make_image(std::move(marker), p, std::move(interest), std::move(done));
   if (provider == nullptr) {  // route() plans a fetch only from the provider it was given
     return done(finished(marker, tile_error(500, "no tile provider to fetch " + p->id.to_string() +

@@ -322,6 +322,27 @@ HttpResponse payload_response(std::span<const std::uint8_t> payload, std::string
   return r;
 }
 
+}  // namespace
+
+namespace router_detail {
+
+HttpResponse stored_tile_answer(std::shared_ptr<const Tileset> t, TileId id,
+                                Result<std::vector<std::uint8_t>> payload,
+                                std::string_view if_none_match, const std::string& cc) {
+  if (!payload) return unreadable_tile(std::move(t), id, payload.error(), cc);
+  const std::uint64_t tile_id = archive::zxy_to_tile_id(id.z, id.x, id.y);
+  auto bytes = std::make_shared<const std::vector<std::uint8_t>>(std::move(*payload));
+  HttpResponse r =
+      payload_response(*bytes, if_none_match, cc, 500, id, t->name, t->tags.get(), tile_id);
+  if (!r.view.empty()) r.keep = std::move(bytes);
+  r.hold = std::move(t);  // names the tileset in access logs
+  return r;
+}
+
+}  // namespace router_detail
+
+namespace {
+
 HttpResponse tile_route(const HttpRequest& request, std::shared_ptr<const Tileset> t,
                         std::string_view version, std::span<const std::string_view> zxy,
                         const RouterConfig& config, bool priv) {
@@ -349,9 +370,10 @@ HttpResponse tile_route(const HttpRequest& request, std::shared_ptr<const Tilese
       }
     }
   }
-  if (!request.if_none_match.empty()) {
+  if (!request.if_none_match.empty() && !t->remote) {
     // The ETag is in the tile's header frame: read that first, the whole payload only when the
-    // client's copy is not current.
+    // client's copy is not current. (From a store, where each read is a request, the payload is
+    // read once.)
     auto entry = t->reader->find_entry(tile_id);
     if (!entry) return unreadable_tile(std::move(t), id, entry.error(), cc);
     std::array<std::uint8_t, TileHeader::kFrameBytes> frame;
@@ -366,14 +388,21 @@ HttpResponse tile_route(const HttpRequest& request, std::shared_ptr<const Tilese
       return r;
     }
   }
+  if (t->remote) {  // a request to a store: the answer pipeline reads it off the I/O thread
+    auto plan = std::make_shared<PendingAnswer>();
+    plan->stored = t;
+    plan->id = id;
+    plan->if_none_match = std::string(request.if_none_match);
+    plan->cache_control = cc;
+    plan->connection = request.connection;
+    HttpResponse r;
+    r.route = Route::tile;
+    r.hold = std::move(t);
+    r.pending = std::move(plan);
+    return r;
+  }
   auto payload = t->reader->get(id);
-  if (!payload) return unreadable_tile(std::move(t), id, payload.error(), cc);
-  auto bytes = std::make_shared<const std::vector<std::uint8_t>>(std::move(*payload));
-  HttpResponse r =
-      payload_response(*bytes, request.if_none_match, cc, 500, id, t->name, memo, tile_id);
-  if (!r.view.empty()) r.keep = std::move(bytes);
-  r.hold = std::move(t);  // names the tileset in access logs
-  return r;
+  return stored_tile_answer(std::move(t), id, std::move(payload), request.if_none_match, cc);
 }
 
 // Versioned URLs of a provided tileset: the version must be the one the provider reports (the

@@ -30,6 +30,13 @@ inline constexpr std::uint32_t kImmutableMaxAge = 31536000;  // of versioned til
 
 // Tile answers shared by the native and the web tile routes (router.cpp).
 HttpResponse tile_error(int status, std::string message);
+// The answer to a request for tile `id` of the archive tileset `t` from its stored payload (or
+// the error reading it): 200 with the payload, 304 when `if_none_match` names its tag, 204/404/
+// 500/503 as the error says. What route() answers for a local archive, and the answer pipeline
+// for one in an object store.
+HttpResponse stored_tile_answer(std::shared_ptr<const Tileset> t, TileId id,
+                                Result<std::vector<std::uint8_t>> payload,
+                                std::string_view if_none_match, const std::string& cc);
 // 404 with Vts-Error: version-not-current.
 HttpResponse not_current(std::string_view version, const std::string& name,
                          const std::string& current);

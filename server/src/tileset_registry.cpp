@@ -147,6 +147,7 @@ Result<std::shared_ptr<const Tileset>> open_archive(const fs::path& path,
   t->name = name;
   t->path = path;
   t->is_set = is_manifest(path);
+  t->remote = is_remote_path(path);
   t->reader = std::move(*reader);
   t->info = std::move(*info);
   t->version = t->reader->version();

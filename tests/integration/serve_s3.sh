@@ -90,7 +90,7 @@ grep -q 'bucket "nobucket" does not exist' "$ERR" || { show_output; fail "missin
 
 note "vts serve s3://tiles/maps/ beside a local folder: every tile as the local file's"
 cat >"$WORK/serve.json" <<JSON
-{"reload_interval_ms": 200, "store_timeout_ms": 1000, "store_retries": 1}
+{"reload_interval_ms": 200, "store_timeout_ms": 1000, "store_retries": 1, "threads": 1}
 JSON
 start_server "s3://tiles/maps/" "$WORK/local" --config "$WORK/serve.json"
 curl -sf "$BASE/" >"$WORK/index.json"
@@ -121,7 +121,9 @@ set_of bc1 "${SYN[@]}" --codec bc1
 new_version=$(json_get "$WORK/bc1/tileset.json" "j.version")
 (while :; do
   while read -r _ z x y _; do
-    curl -s -o /dev/null -w '%{http_code}\n' "$BASE/planet/$z/$x/$y"
+    code=$(curl -s -o "$WORK/body.bin" -w '%{http_code}' "$BASE/planet/$z/$x/$y")
+    echo "$code"
+    [[ $code == 200 || $code == 503 ]] || cat "$WORK/body.bin" >>"$WORK/errors.txt"
   done <"$WORK/ref.tiles"
 done >"$WORK/codes.txt") &
 LOAD_PID=$!
@@ -135,21 +137,36 @@ kill "$LOAD_PID"
 wait "$LOAD_PID" 2>/dev/null || true
 [[ $(json_get "$WORK/planet.json" "j.version") == "$new_version" ]] || fail "the new set was not loaded"
 if grep -vE '^(200|503)$' "$WORK/codes.txt" | sort | uniq -c >&2; then
+  cat "$WORK/errors.txt" >&2
   fail "requests during the replacement got other answers than 200 or 503"
 fi
 note "   $(grep -c . "$WORK/codes.txt") requests during the replacement: $(grep -c '^503$' "$WORK/codes.txt" || true) answered 503"
 tiles_equal planet bc1ref
 
-note "a stopped store: 503 with Retry-After, no hang"
+note "a stopped store: 503 with Retry-After, no hang; local tiles meanwhile answered at once"
 kill -STOP "$S3_PID"
 start=$(date +%s%N)
-code=$(curl -s -o /dev/null -D "$WORK/h.txt" -w '%{http_code}' -m 30 "$BASE/one/0/0/0")
+curl -s -o /dev/null -D "$WORK/h.txt" -w '%{http_code}' -m 30 "$BASE/one/0/0/0" >"$WORK/code.txt" &
+STALLED=$!
+# Once the server holds that request's connection (the metrics request is the other one), a local
+# tile must still come at once: with one
+# I/O thread, the store's reads wait on their own pool, not on it.
+for ((i = 0; i < 100; i++)); do
+  grep -qx 'vts_http_open_connections 2' <(curl -sf "$ADMIN_BASE/metrics") && break
+  sleep 0.05
+done
+grep -qx 'vts_http_open_connections 2' <(curl -sf "$ADMIN_BASE/metrics") ||
+  fail "the stalled request's connection is not open"
+local_ms=$(curl -s -o /dev/null -w '%{time_total}' -m 5 "$BASE/ref/0/0/0" | awk '{print int($1 * 1000)}')
+wait "$STALLED" || true
+code=$(cat "$WORK/code.txt")
 ms=$((($(date +%s%N) - start) / 1000000))
 kill -CONT "$S3_PID"
+((local_ms < 1000)) || fail "a local tile took $local_ms ms while a store read was stalled"
 [[ $code == 503 ]] || fail "a stopped store answered $code"
 grep -qi '^retry-after: 1' "$WORK/h.txt" || fail "no Retry-After"
 ((ms < 10000)) || fail "the 503 took $ms ms"
-note "   503 after $ms ms"
+note "   503 after $ms ms; a local tile meanwhile in $local_ms ms"
 expect_status 200 "$BASE/one/0/0/0"
 stop_server
 echo ok

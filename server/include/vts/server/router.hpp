@@ -105,6 +105,9 @@ struct WebImageJob {
 
 // route()'s plan for an answer it cannot give at once: the answer pipeline (finish_pending())
 // carries it out, in order (docs/ARCHITECTURE.md "One answer pipeline"):
+//   0. with `stored`: tile `id` read from that tileset's archive in an object store (one ranged
+//      GET) on the store-read pool, never on an I/O thread, then answered as route() answers a
+//      local archive's tile;
 //   1. with `provided`: the provider's tile `id` (vts cache serve), from which the answer
 //      follows: the tile itself, a status, or (with `web`) a web image job;
 //   2. with `image`: the web image from the cache, or encoded on the cache's shared encode pool
@@ -112,6 +115,7 @@ struct WebImageJob {
 //   3. one finish: the final response with the marker's CORS headers, HEAD flag and tileset.
 // A plain value: route() starts nothing.
 struct PendingAnswer {
+  std::shared_ptr<const Tileset> stored;
   std::shared_ptr<const ProvidedTileset> provided;
   TileId id;
   std::optional<imaging::WebFormat> web;  // step 1's tile wanted as this web image

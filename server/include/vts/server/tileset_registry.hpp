@@ -33,6 +33,9 @@ struct Tileset {
   // The archive file, or a set's manifest (…/NAME/tileset.json; archive/archive_set.hpp).
   std::filesystem::path path;
   bool is_set = false;  // a set of archives read as one: no /{name}.pmtiles to download
+  // Read from an object store or web server (s3://, https://): each tile read is a request, made
+  // on the answer pipeline's store-read pool, never on an I/O thread.
+  bool remote = false;
   std::shared_ptr<archive::Reader> reader;
   TilesetInfo info;
   // 16 lowercase hex digits identifying the archive's content (XXH3-64 of its header, root
