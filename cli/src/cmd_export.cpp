@@ -45,7 +45,10 @@ Result<ExportOptions> export_options(const ExportArgs& a) {
   o.layout = a.layout == "xyz" ? ExportLayout::xyz : ExportLayout::pmtiles;
   o.output = a.output;
   o.threads = a.threads;
-  o.source_name = std::filesystem::path(a.archive).filename().string();
+  // The archive's file name; a set's folder ("planet/" names "planet").
+  std::filesystem::path source = a.archive;
+  if (!source.has_filename()) source = source.parent_path();
+  o.source_name = source.filename().string();
   return o;
 }
 
@@ -80,12 +83,8 @@ int run_export(const ExportArgs& a) {
   const std::filesystem::path archive = a.archive;
   if (Status s = check_output_is_not_an_input(a.output, {&archive, 1}); !s)
     return report_error(s.error());
-  auto reader = archive::Reader::open(a.archive);
-  if (!reader) {
-    Error e = std::move(reader).error();
-    e.message = "'" + a.archive + "': " + e.message;
-    return report_error(e);
-  }
+  auto reader = open_archive(a.archive);  // a file, a set, or either in an object store
+  if (!reader) return report_error(reader.error());
   auto info = archive::archive_tileset((*reader)->header(), (*reader)->metadata_json());
   if (!info) {
     Error e = info.error();

@@ -117,6 +117,12 @@ expect_ok "$VTS" info "$WORK/set" --json
 json_check "$OUT" "j.tiles === $(wc -l <"$WORK/ref.tiles") || \
   j.addressed_tiles === $(wc -l <"$WORK/ref.tiles")" "info counts every archive's tiles"
 
+note "export takes the set: the same web tiles as from the one-file archive"
+expect_ok "$VTS" export "$WORK/set/" -o "$WORK/set_png.pmtiles" --format png -q
+expect_ok "$VTS" export "$WORK/ref/t.pmtiles" -o "$WORK/ref_png.pmtiles" --format png -q
+cmp -s <("$PMTILES_DUMP" tiles "$WORK/set_png.pmtiles") <("$PMTILES_DUMP" tiles "$WORK/ref_png.pmtiles") ||
+  fail "the set's web tiles differ from the one-file archive's"
+
 note "a damaged set: an archive replaced by another build's, a hostile manifest"
 cp -r "$WORK/set" "$WORK/bad"
 cp "$WORK/set/top.pmtiles" "$WORK/bad/${archives[2]}"

@@ -169,4 +169,23 @@ grep -qi '^retry-after: 1' "$WORK/h.txt" || fail "no Retry-After"
 note "   503 after $ms ms; a local tile meanwhile in $local_ms ms"
 expect_status 200 "$BASE/one/0/0/0"
 stop_server
+
+note "a prefix holding a tileset.json is that set; the clients read s3:// sets (vts warm)"
+start_server "s3://tiles/maps/planet/" --config "$WORK/serve.json"
+curl -sf "$BASE/" >"$WORK/index.json"
+json_check "$WORK/index.json" "j.length === 1 && j[0].name === 'planet' && j[0].version === '$new_version'"
+stop_server
+expect_ok "$VTS" warm "s3://tiles/maps/planet/tileset.json" --cache-dir "$WORK/cache" --json
+json_check "$OUT" "j.complete && j.failed === 0 && j.from_network === $ntiles && \
+  j.cache.pinned_tiles === $ntiles" "warm fetched every tile of the set"
+
+note "a set on a web server (nginx with Range, deploy/nginx/vts-static.conf.template)"
+mkdir -p "$WORK/www"
+cp -r "$WORK/lossless" "$WORK/www/planet"
+start_static_nginx "$WORK/www"
+wait_http "$S/planet/tileset.json"
+expect_status 404 "$S/planet/"
+start_server "$S/planet/tileset.json" "$WORK/local" --config "$WORK/serve.json"
+tiles_equal planet ref
+stop_server
 echo ok
