@@ -219,7 +219,7 @@ run_wrk() {
   local name=$1 url=$2 script=$3 list=$4 mode=$5 log="$T/wrk_$1.txt" n errs cpus="" p t0=() t1
   shift 5
   for p in "$@"; do t0+=("$(ticks "$p")"); done
-  wrk -t2 -c"$CONNS" -d"$DURATION" --latency -s "$script" "$url" -- "$list" "$mode" >"$log" 2>&1 ||
+  wrk -t"$((CONNS < 2 ? CONNS : 2))" -c"$CONNS" -d"$DURATION" --latency -s "$script" "$url" -- "$list" "$mode" >"$log" 2>&1 ||
     die "wrk failed: $(cat "$log")"
   n=$(awk '/requests in/ { print $1 }' "$log")
   local i=0
@@ -242,21 +242,31 @@ for ((r = 1; r <= RUNS; r++)); do
   run_wrk local-set "http://127.0.0.1:$LOCAL_PORT" "$LUA" "$T/earth_set.tiles" tiles "$LOCAL_PID"
   run_wrk store-set "http://127.0.0.1:$REMOTE_PORT" "$LUA" "$T/earth_set.tiles" tiles "$REMOTE_PID" "$S3_PID"
   run_wrk s3rver "$S3" "$T/s3_range.lua" "$T/direct.ranges" range "$S3_PID"
+  CONNS_SAVED=$CONNS CONNS=1
+  run_wrk s3rver-1 "$S3" "$T/s3_range.lua" "$T/direct.ranges" range "$S3_PID"
+  CONNS=$CONNS_SAVED
 done
+# The connections vts serve holds to s3rver while loaded (ss, in the middle of a short run).
+wrk -t2 -c"$CONNS" -d4s -s "$LUA" "http://127.0.0.1:$REMOTE_PORT" -- "$T/earth.tiles" tiles >/dev/null 2>&1 &
+WRK_PID=$!
+sleep 2
+STORE_CONNS=$(ss -tnH state established "( sport = :$S3_PORT )" | wc -l)
+wait "$WRK_PID" || true
 
 median() { # NAME: the result line with the median req/s
   awk -v n="$1" '$1 == n' "$RES" | sort -k2,2g | awk '{ l[NR] = $0 } END { print l[int((NR + 1) / 2)] }'
 }
 report() {
-  local lo so ls ss dr
+  local lo so ls ss dr d1
   lo=$(median local-one) so=$(median store-one) ls=$(median local-set) ss=$(median store-set)
-  dr=$(median s3rver)
-  local r_lo p_lo e_lo c_lo r_so p_so e_so c_so c_so_s3 r_ls p_ls e_ls c_ls r_ss p_ss e_ss c_ss c_ss_s3 r_dr p_dr e_dr c_dr
+  dr=$(median s3rver) d1=$(median s3rver-1)
+  local r_d1 p_d1 e_d1 c_d1 r_lo p_lo e_lo c_lo r_so p_so e_so c_so c_so_s3 r_ls p_ls e_ls c_ls r_ss p_ss e_ss c_ss c_ss_s3 r_dr p_dr e_dr c_dr
   read -r _ r_lo _ p_lo e_lo c_lo <<<"$lo"
   read -r _ r_so _ p_so e_so c_so c_so_s3 <<<"$so"
   read -r _ r_ls _ p_ls e_ls c_ls <<<"$ls"
   read -r _ r_ss _ p_ss e_ss c_ss c_ss_s3 <<<"$ss"
   read -r _ r_dr _ p_dr e_dr c_dr <<<"$dr"
+  read -r _ r_d1 _ p_d1 e_d1 c_d1 <<<"$d1"
   echo "## Serving from an object store ($(date -u '+%Y-%m-%d'))"
   echo
   machine_info
@@ -271,5 +281,8 @@ report() {
   echo "| vts serve DIR, set | $r_ls | $p_ls | $e_ls | $c_ls | 1.00 | $(ratio "$r_ls" "$r_dr") |"
   echo "| vts serve s3://, set | $r_ss | $p_ss | $e_ss | $c_ss; $c_ss_s3 | **$(ratio "$r_ss" "$r_ls")** | **$(ratio "$r_ss" "$r_dr")** |"
   echo "| s3rver direct, ranged GET | $r_dr | $p_dr | $e_dr | -; $c_dr | $(ratio "$r_dr" "$r_lo") | 1.00 |"
+  echo "| s3rver direct, one connection (wrk -c1) | $r_d1 | $p_d1 | $e_d1 | -; $c_d1 | $(ratio "$r_d1" "$r_lo") | $(ratio "$r_d1" "$r_dr") |"
+  echo
+  echo "vts serve held $STORE_CONNS connection(s) to s3rver under wrk -c$CONNS (ss, mid-run)."
 }
 if [[ -n $OUT_FILE ]]; then report | tee "$OUT_FILE"; else report; fi

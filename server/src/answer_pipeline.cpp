@@ -154,7 +154,8 @@ base::WorkerPool* store_reads() {
   return pool.get();
 }
 
-// Step 0 (then 3): the tile from its archive in a store, on the store-read pool.
+// Step 0 (then 2 for a web image, then 3): the tile from its archive in a store, on the
+// store-read pool.
 void read_stored(HttpResponse marker, const std::shared_ptr<const PendingAnswer>& p,
                  std::stop_token interest, Done done) {
   auto job = [marker, p, interest, done]() mutable {
@@ -182,8 +183,11 @@ void read_stored(HttpResponse marker, const std::shared_ptr<const PendingAnswer>
                                                         whole.error().message + ")"));
       return done(finished(marker, std::move(r)));
     }
-    done(finished(marker, stored_tile_answer(p->stored, p->id, std::move(payload), p->if_none_match,
-                                             p->cache_control)));
+    HttpResponse r = p->answer_stored ? p->answer_stored(std::move(payload))
+                                      : stored_tile_answer(p->stored, p->id, std::move(payload),
+                                                           p->if_none_match, p->cache_control);
+    if (r.pending) return make_image(std::move(marker), r.pending, interest, std::move(done));
+    done(finished(marker, std::move(r)));
   };
   base::WorkerPool* pool = store_reads();
   if (pool == nullptr) return job();  // no thread could start: read here rather than fail

@@ -339,6 +339,23 @@ HttpResponse stored_tile_answer(std::shared_ptr<const Tileset> t, TileId id,
   return r;
 }
 
+HttpResponse stored_read_plan(
+    std::shared_ptr<const Tileset> t, TileId id, const HttpRequest& request, const std::string& cc,
+    std::function<HttpResponse(Result<std::vector<std::uint8_t>>)> answer) {
+  auto plan = std::make_shared<PendingAnswer>();
+  plan->stored = t;
+  plan->answer_stored = std::move(answer);
+  plan->id = id;
+  plan->if_none_match = std::string(request.if_none_match);
+  plan->cache_control = cc;
+  plan->connection = request.connection;
+  HttpResponse r;
+  r.route = Route::tile;
+  r.hold = std::move(t);
+  r.pending = std::move(plan);
+  return r;
+}
+
 }  // namespace router_detail
 
 namespace {
@@ -388,19 +405,8 @@ HttpResponse tile_route(const HttpRequest& request, std::shared_ptr<const Tilese
       return r;
     }
   }
-  if (t->remote) {  // a request to a store: the answer pipeline reads it off the I/O thread
-    auto plan = std::make_shared<PendingAnswer>();
-    plan->stored = t;
-    plan->id = id;
-    plan->if_none_match = std::string(request.if_none_match);
-    plan->cache_control = cc;
-    plan->connection = request.connection;
-    HttpResponse r;
-    r.route = Route::tile;
-    r.hold = std::move(t);
-    r.pending = std::move(plan);
-    return r;
-  }
+  // A request to a store: the answer pipeline reads it off the I/O thread.
+  if (t->remote) return stored_read_plan(std::move(t), id, request, cc);
   auto payload = t->reader->get(id);
   return stored_tile_answer(std::move(t), id, std::move(payload), request.if_none_match, cc);
 }

@@ -37,6 +37,11 @@ HttpResponse tile_error(int status, std::string message);
 HttpResponse stored_tile_answer(std::shared_ptr<const Tileset> t, TileId id,
                                 Result<std::vector<std::uint8_t>> payload,
                                 std::string_view if_none_match, const std::string& cc);
+// The plan for a tile of a remote tileset (Tileset::remote): read on the answer pipeline's
+// store-read pool, then answered by `answer` (unset: stored_tile_answer()).
+HttpResponse stored_read_plan(
+    std::shared_ptr<const Tileset> t, TileId id, const HttpRequest& request, const std::string& cc,
+    std::function<HttpResponse(Result<std::vector<std::uint8_t>>)> answer = {});
 // 404 with Vts-Error: version-not-current.
 HttpResponse not_current(std::string_view version, const std::string& name,
                          const std::string& current);

@@ -181,50 +181,63 @@ HttpResponse web_tile_route(const HttpRequest& request, std::shared_ptr<const Ti
       return finish(std::move(r));
     }
   }
-  auto payload = t->reader->get(id);
-  if (!payload) {
-    const Error& e = payload.error();
-    if (e.code == ErrorCode::changed) {
-      HttpResponse r = archive_changed(t, e);
-      r.route = Route::tile;
+  // What the stored tile gives: the image to encode, or the status its error means. Built here,
+  // run now for a local archive, or by the answer pipeline once a store has answered.
+  RouterConfig web_config;  // only the web settings: the closure may outlive this call
+  web_config.web = config.web;
+  auto answer = [t, id, format, key, etag_of, web_config, inm = std::string(request.if_none_match),
+                 cc, owner = request.connection,
+                 tile_id](Result<std::vector<std::uint8_t>> payload) -> HttpResponse {
+    auto held = [&t](HttpResponse r) {
+      r.hold = t;  // names the tileset in access logs
       return r;
+    };
+    if (!payload) {
+      const Error& e = payload.error();
+      if (e.code == ErrorCode::changed) {
+        HttpResponse r = archive_changed(t, e);
+        r.route = Route::tile;
+        return r;
+      }
+      if (e.code == ErrorCode::unavailable) {  // an object store that did not answer: retry
+        HttpResponse r =
+            tile_error(503, "the store holding tileset " + t->name +
+                                " did not answer; try again shortly (" + e.message + ")");
+        add(r, "Retry-After", "1");
+        return r;
+      }
+      if (http_status(e.code) == 404 && t->info.sparse) {
+        return held(web_filler(t->info.geometry.tile_size(), format, web_config, inm, cc, owner));
+      }
+      if (http_status(e.code) == 404) {
+        return tile_error(404, "tile " + id.to_string() + " is missing from the archive of " +
+                                   t->name + " (archive incomplete)");
+      }
+      return tile_error(http_status(e.code),
+                        "archive of " + t->name + " is damaged: " + e.to_string());
     }
-    if (e.code == ErrorCode::unavailable) {  // an object store that did not answer: retry
-      HttpResponse r =
-          tile_error(503, "the store holding tileset " + t->name +
-                              " did not answer; try again shortly (" + e.message + ")");
-      add(r, "Retry-After", "1");
-      return r;
+    auto header = parse_tile_header(*payload);
+    if (!header) {
+      return tile_error(500, "tile " + id.to_string() + " of " + t->name +
+                                 " is damaged: " + header.error().to_string());
     }
-    if (http_status(e.code) == 404 && t->info.sparse) {
-      return finish(empty_tile(*t, format, config, request, cc));
-    }
-    if (http_status(e.code) == 404) {
-      return tile_error(404, "tile " + id.to_string() + " is missing from the archive of " +
-                                 t->name + " (archive incomplete)");
-    }
-    return tile_error(http_status(e.code),
-                      "archive of " + t->name + " is damaged: " + e.to_string());
-  }
-  auto header = parse_tile_header(*payload);
-  if (!header) {
-    return tile_error(500, "tile " + id.to_string() + " of " + t->name +
-                               " is damaged: " + header.error().to_string());
-  }
-  if (memo) memo->remember(tile_id, header->checksum);
-  Encoder encode = [stored_payload =
-                        std::make_shared<const std::vector<std::uint8_t>>(std::move(*payload)),
-                    tileset = t, id, format,
-                    options = config.web.encode]() -> Result<std::vector<std::uint8_t>> {
-    auto stored = decode_tile(*stored_payload);
-    if (!stored) return stored.error();
-    auto content = imaging::tile_content(*stored, tileset->info.geometry, id);
-    if (!content) return content.error();
-    return imaging::encode_web_image(*content, format, options);
+    if (http_detail::TileTagMemo* tags = t->tags.get()) tags->remember(tile_id, header->checksum);
+    Encoder encode = [stored_payload =
+                          std::make_shared<const std::vector<std::uint8_t>>(std::move(*payload)),
+                      tileset = t, id, format,
+                      options = web_config.web.encode]() -> Result<std::vector<std::uint8_t>> {
+      auto stored = decode_tile(*stored_payload);
+      if (!stored) return stored.error();
+      auto content = imaging::tile_content(*stored, tileset->info.geometry, id);
+      if (!content) return content.error();
+      return imaging::encode_web_image(*content, format, options);
+    };
+    return held(encoded(web_config, key, etag_of(header->checksum),
+                        imaging::web_format_content_type(format).data(), std::move(encode), inm, cc,
+                        owner));
   };
-  return finish(encoded(config, key, etag_of(header->checksum),
-                        imaging::web_format_content_type(format).data(), std::move(encode),
-                        request.if_none_match, cc, request.connection));
+  if (t->remote) return finish(stored_read_plan(t, id, request, cc, std::move(answer)));
+  return answer(t->reader->get(id));
 }
 
 HttpResponse web_mercator_tile_route(const HttpRequest& request, std::shared_ptr<const Tileset> t,

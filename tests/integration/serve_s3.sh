@@ -114,6 +114,11 @@ before=$(requests 'maps/planet/[^ ]*\.pmtiles ')
 while read -r _ z x y _; do curl -sf -o /dev/null "$BASE/planet/$z/$x/$y"; done <"$WORK/ref.tiles"
 warm=$(($(requests 'maps/planet/[^ ]*\.pmtiles ') - before))
 note "   $ntiles tiles: $cold GETs cold (set and archive), $warm warm for the set"
+# Web images of the set's tiles (read on the store-read pool, then encoded): the local ones.
+while read -r _ z x y _; do
+  [[ $(curl -sf "$BASE/planet/$z/$x/$y.png" | sha256sum) == $(curl -sf "$BASE/ref/$z/$x/$y.png" | sha256sum) ]] ||
+    fail "the PNG of tile $z/$x/$y of the set differs from the local archive's"
+done < <(head -8 "$WORK/ref.tiles")
 ((warm == ntiles)) || fail "$warm GETs for $ntiles warm tiles of the set (one each expected)"
 
 note "a set replaced in the bucket is reloaded whole: never a mix, then the new set"

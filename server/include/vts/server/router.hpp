@@ -103,6 +103,8 @@ struct WebImageJob {
   std::function<Result<std::vector<std::uint8_t>>()> encode;
 };
 
+struct HttpResponse;
+
 // route()'s plan for an answer it cannot give at once: the answer pipeline (finish_pending())
 // carries it out, in order (docs/ARCHITECTURE.md "One answer pipeline"):
 //   0. with `stored`: tile `id` read from that tileset's archive in an object store (one ranged
@@ -116,6 +118,9 @@ struct WebImageJob {
 // A plain value: route() starts nothing.
 struct PendingAnswer {
   std::shared_ptr<const Tileset> stored;
+  // Step 0's answer from the stored payload (or the error reading it): the tile itself, a status,
+  // or a web image job for step 2. Unset: the tile as route() answers a local archive's.
+  std::function<HttpResponse(Result<std::vector<std::uint8_t>>)> answer_stored;
   std::shared_ptr<const ProvidedTileset> provided;
   TileId id;
   std::optional<imaging::WebFormat> web;  // step 1's tile wanted as this web image
