@@ -171,7 +171,9 @@ class Server final : public HttpServer, public SessionHost {
   std::string metrics_text() const override {
     return prometheus_text(metrics_, registry_->size(), registry_->skipped().size(),
                            options_.provider.get()) +
-           web_metrics_text(*options_.router.web.cache);
+           web_metrics_text(*options_.router.web.cache) +
+           (options_.registry.store.counters ? store_metrics_text(*options_.registry.store.counters)
+                                             : std::string());
   }
 
   // -- SessionHost --

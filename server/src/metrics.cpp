@@ -114,6 +114,22 @@ std::string prometheus_text(const Metrics& m, std::size_t tilesets_loaded,
   return out;
 }
 
+std::string store_metrics_text(const store::Counters& c) {
+  const store::Counters::Snapshot n = c.snapshot();
+  std::string out;
+  append_single(out, "vts_store_requests_total", "counter",
+                "Requests to object stores and web servers holding remote tilesets (retries and "
+                "reload checks included).",
+                double(n.requests));
+  append_single(out, "vts_store_bytes_total", "counter", "Body bytes received from object stores.",
+                double(n.bytes));
+  append_single(out, "vts_store_retries_total", "counter",
+                "Store requests repeated after a 5xx, a drop or a timeout.", double(n.retries));
+  append_single(out, "vts_store_coalesced_reads_total", "counter",
+                "Store reads that shared a GET another thread had in flight.", double(n.coalesced));
+  return out;
+}
+
 }  // namespace http_detail
 }  // namespace server
 }  // namespace vts

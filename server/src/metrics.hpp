@@ -10,6 +10,7 @@
 
 #include "vts/protocol/tile_provider.hpp"
 #include "vts/server/router.hpp"
+#include "vts/store/options.hpp"
 
 namespace vts {
 inline namespace server {
@@ -40,6 +41,10 @@ struct Metrics {
 
 // The exposition: every counter above, the tileset gauges (served; archive files skipped, as
 // TilesetRegistry::skipped() lists them), then the provider's own text.
+// The object-store requests of remote tilesets (store::Counters): requests, body bytes, retries,
+// reads that shared another's GET.
+std::string store_metrics_text(const store::Counters& c);
+
 std::string prometheus_text(const Metrics& m, std::size_t tilesets_loaded,
                             std::size_t archives_skipped, const AsyncTileProvider* provider);
 

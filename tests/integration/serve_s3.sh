@@ -120,6 +120,11 @@ while read -r _ z x y _; do
     fail "the PNG of tile $z/$x/$y of the set differs from the local archive's"
 done < <(head -8 "$WORK/ref.tiles")
 ((warm == ntiles)) || fail "$warm GETs for $ntiles warm tiles of the set (one each expected)"
+# The server counts what the store counted.
+curl -sf "$ADMIN_BASE/metrics" >"$WORK/metrics.txt"
+ours=$(sed -nE 's/^vts_store_requests_total ([0-9]+)$/\1/p' "$WORK/metrics.txt")
+theirs=$(requests)
+((ours > 0 && ours <= theirs)) || fail "vts_store_requests_total is '$ours', s3rver logged $theirs"
 
 note "a set replaced in the bucket is reloaded whole: never a mix, then the new set"
 set_of bc1 "${SYN[@]}" --codec bc1
