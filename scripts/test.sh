@@ -230,7 +230,7 @@ else
   # Every test of those libraries: the load tests that assert rates and latencies run on a virtual
   # clock (LoadTestOptions::now / sleep_until), so TSan's slowdown does not change their figures.
   sanitizer_build "TSan" build-tsan "" -DVTS_SANITIZE=thread \
-    "-DVTS_UNIT_TESTS=server;client;loadtest"
+    "-DVTS_UNIT_TESTS=store;server;client;loadtest"
 fi
 
 # --- summary ---------------------------------------------------------------------------------------

@@ -13,6 +13,7 @@
 
 #include <gtest/gtest.h>
 
+#include "mixed_payloads.hpp"
 #include "vts/archive/pmtiles.hpp"
 #include "vts/archive/pmtiles_part.hpp"
 #include "vts/test/files.hpp"
@@ -35,28 +36,11 @@ constexpr std::size_t kLeaf = 64;  // small leaves, so that the set's archives h
 Tiles pyramid(int max_z, std::uint32_t seed, TileId empty_root) {
   std::mt19937 rng(seed);
   Tiles tiles;
-  const Bytes big_repeat(3000, 7), small_a(40, 1), small_b(900, 2);
   for (int z = 0; z <= max_z; ++z) {
     const auto level = static_cast<std::uint8_t>(z);
     for (std::uint64_t id = subtree_tile_ids(TileId{}, level).first;
          id <= subtree_tile_ids(TileId{}, level).last; ++id) {
-      const unsigned kind = rng() % 10;
-      Bytes b;
-      if (kind < 2) {
-        b = small_a;
-      } else if (kind == 2) {
-        b = small_b;
-      } else if (kind == 3) {
-        b = big_repeat;
-      } else if (kind == 4 && !tiles.empty() && tiles.rbegin()->first + 1 == id) {
-        b = tiles.rbegin()->second;  // the same as the tile before: a run
-      } else if (kind == 5) {
-        continue;
-      } else {
-        b.resize(1100 + rng() % 3000);
-        for (auto& v : b) v = static_cast<std::uint8_t>(rng());
-      }
-      tiles[id] = b;
+      if (auto b = vts::archive::test::mixed_payload(rng, tiles, id)) tiles[id] = std::move(*b);
     }
   }
   for (std::uint8_t z = empty_root.z; z <= max_z; ++z) {

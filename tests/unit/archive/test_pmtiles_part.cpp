@@ -10,6 +10,7 @@
 
 #include <gtest/gtest.h>
 
+#include "mixed_payloads.hpp"
 #include "vts/archive/pmtiles.hpp"
 #include "vts/archive/pmtiles_part.hpp"
 #include "vts/test/files.hpp"
@@ -44,29 +45,13 @@ class PartTempDir : public vts::test::TempDir {
 std::map<std::uint64_t, Bytes> make_tiles(int max_z, std::uint32_t seed) {
   std::mt19937 rng(seed);
   std::map<std::uint64_t, Bytes> tiles;
-  const Bytes big_repeat(3000, 7), small_a(40, 1), small_b(900, 2);
+  const Bytes big_repeat(3000, 7);
   for (int z = 0; z <= max_z; ++z) {
     const std::uint32_t n = 1u << z;
     for (std::uint32_t y = 0; y < n; ++y)
       for (std::uint32_t x = 0; x < n; ++x) {
         const std::uint64_t id = zxy_to_tile_id(static_cast<std::uint8_t>(z), x, y);
-        const unsigned kind = rng() % 10;
-        Bytes b;
-        if (kind < 2) {
-          b = small_a;
-        } else if (kind == 2) {
-          b = small_b;
-        } else if (kind == 3) {
-          b = big_repeat;
-        } else if (kind == 4 && !tiles.empty() && tiles.rbegin()->first + 1 == id) {
-          b = tiles.rbegin()->second;  // the same as the tile before: a run
-        } else if (kind == 5) {
-          continue;  // sparse
-        } else {
-          b.resize(1100 + rng() % 3000);
-          for (auto& v : b) v = static_cast<std::uint8_t>(rng());
-        }
-        tiles[id] = b;
+        if (auto b = vts::archive::test::mixed_payload(rng, tiles, id)) tiles[id] = std::move(*b);
       }
   }
   // A long run of one large payload across the middle of the finest level.
