@@ -171,8 +171,12 @@ struct PartLayout {
 };
 
 // Reads and checks a part's footer and every section after its payloads (streamed: the index may
-// be large). Keeps the attachment only when asked.
-Result<PartLayout> scan_part(int fd, const std::filesystem::path& path, bool keep_attachment) {
+// be large). Keeps the attachment only when asked. Without `check_index`, reads only the footer,
+// the attachment and the manifest, unchecked (their checksum covers the index): for a part a
+// ranged merge does not take tiles from (MergeOptions::index_needed), which the merges that do
+// take its tiles check whole.
+Result<PartLayout> scan_part(int fd, const std::filesystem::path& path, bool keep_attachment,
+                             bool check_index = true) {
   struct stat st {};
   if (::fstat(fd, &st) != 0) return io_error("cannot stat", path, errno);
   const auto size = static_cast<std::uint64_t>(st.st_size);
@@ -205,11 +209,19 @@ Result<PartLayout> scan_part(int fd, const std::filesystem::path& path, bool kee
   l.index_offset = l.info.data_bytes;
   l.info.tiles = l.records;
 
+  const std::uint64_t seg_offset = l.index_offset + l.records * kRecordBytes;
+  const std::uint64_t att_offset = seg_offset + segments * kSegmentBytes;
+  if (!check_index) {
+    std::vector<std::uint8_t> tail(static_cast<std::size_t>(limit - att_offset));
+    if (Status s = pread_all(fd, tail.data(), tail.size(), att_offset, path); !s) return s.error();
+    if (keep_attachment)
+      l.info.attachment.assign(tail.begin(), tail.begin() + static_cast<std::ptrdiff_t>(att));
+    l.info.manifest_json.assign(tail.begin() + static_cast<std::ptrdiff_t>(att), tail.end());
+    return l;
+  }
   XXH3_state_t* state = XXH3_createState();
   std::unique_ptr<XXH3_state_t, decltype(&XXH3_freeState)> guard(state, XXH3_freeState);
   XXH3_64bits_reset(state);
-  const std::uint64_t seg_offset = l.index_offset + l.records * kRecordBytes;
-  const std::uint64_t att_offset = seg_offset + segments * kSegmentBytes;
   // No larger than what is to read: a merge scans every part, most of them small, and a ranged
   // merge (one of many over the same parts) would otherwise spend its scan zeroing buffers.
   std::vector<std::uint8_t> buf(
@@ -497,14 +509,21 @@ class Merger {
     if (o_.parts.empty()) return make_error(ErrorCode::invalid_argument, "no parts to merge");
     if (Status s = check_ranges(); !s) return s;
     std::uint64_t held = 0;  // the parts' tiles, in the ranges or not
-    for (const std::string& name : o_.parts) {
+    if (!o_.index_needed.empty() && o_.index_needed.size() != o_.parts.size())
+      return make_error(ErrorCode::invalid_argument,
+                        "index_needed names " + std::to_string(o_.index_needed.size()) +
+                            " parts, the merge has " + std::to_string(o_.parts.size()));
+    for (std::size_t i = 0; i < o_.parts.size(); ++i) {
+      const std::string& name = o_.parts[i];
       const std::filesystem::path p = name;
       Result<Fd> fd = open_part(p);
       if (!fd) return fd.error();
-      Result<PartLayout> l = scan_part(fd->get(), p, static_cast<bool>(o_.check_part));
+      const bool needed = o_.index_needed.empty() || o_.index_needed[i];
+      Result<PartLayout> l = scan_part(fd->get(), p, static_cast<bool>(o_.check_part), needed);
       if (!l) return l.error();
       if (o_.check_part)
         if (Status s = o_.check_part(l->info); !s) return s;
+      if (!needed) continue;  // its manifest checked, its tiles in none of the ranges
       const auto index = static_cast<std::uint32_t>(parts_.size());
       held += l->records;
       progress_.records_checked += l->records;

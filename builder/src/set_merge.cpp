@@ -29,9 +29,30 @@ LonLatBounds clipped(const LonLatBounds& all, const LonLatBounds& tile) {
           std::min(all.east, tile.east), std::min(all.north, tile.north)};
 }
 
-// What merge_set_archive() changes in the one-file merge: the tiles, zooms and header bounds.
+// Whether `a` is `b` or one of its ancestors.
+bool covers(TileId a, TileId b) {
+  return a.z <= b.z && (b.x >> (b.z - a.z)) == a.x && (b.y >> (b.z - a.z)) == a.y;
+}
+
+// Which of the merge's parts (the apex first when the plan has one, then the shards in order, as
+// merge_plan lists them) hold tiles of the archive of `root`: a shard's part holds its
+// sub-pyramid's levels from the apex level down, the apex part the levels above it. The others
+// are read for their manifests only (MergeOptions::index_needed).
+std::vector<bool> parts_needed(const ShardPlan& plan, const std::optional<TileId>& root) {
+  const int k = plan.archive_level, a = plan.apex_level;
+  std::vector<bool> needed;
+  if (a > 0) needed.push_back(!root || a > k);  // levels < a: the top's, and k..a-1 of each
+  for (const TileId& s : plan.shards)
+    needed.push_back(root ? covers(s, *root) || covers(*root, s) : a < k);
+  return needed;
+}
+
+// What merge_set_archive() changes in the one-file merge: the tiles, zooms and header bounds,
+// and which parts' indexes it reads.
 void scope_to(const ShardPlan& plan, const std::optional<TileId>& root, archive::MergeOptions& mo) {
   const int k = plan.archive_level;
+  mo.index_needed = parts_needed(plan, root);
+  if (mo.index_needed.size() != mo.parts.size()) mo.index_needed.clear();  // read them all
   if (!root) {
     mo.ranges = {archive::levels_above(static_cast<std::uint8_t>(k))};
     mo.archive.min_zoom = 0;

@@ -4,6 +4,7 @@
 // the parts' indexes.
 #include <algorithm>
 #include <bit>
+#include <cstdio>
 #include <filesystem>
 #include <map>
 #include <optional>
@@ -306,6 +307,61 @@ TEST(MergeRanges, ReadsAboutItsShareOfTheIndexWhateverTheNumberOfParts) {
     }
     EXPECT_LE(static_cast<double>(total), 1.10 * static_cast<double>(one.last.records_read));
   }
+}
+
+// A ranged merge told which parts can hold its tiles (MergeOptions::index_needed) checks only
+// those parts' indexes; every part's manifest is still seen by check_part, and the archive is the
+// same bytes.
+TEST(MergeRanges, PartsNotNeededAreReadForTheirManifestsOnly) {
+  RangesTempDir dir;
+  constexpr int kMaxZ = 7, kSplit = 3, kLevel = 2;
+  const Tiles tiles = dense_pyramid(kMaxZ);
+  const auto parts = cut_into_parts(dir.path() / "parts", tiles, kMaxZ, kSplit);
+  const TileId root{kLevel, 1, 0};
+  std::vector<bool> needed;
+  std::uint64_t needed_tiles = 0;
+  for (const fs::path& p : parts) {
+    // "apex.part" holds the levels above the split (here also levels 2..), "shard-X-Y.part" the
+    // sub-pyramid of (kSplit, X, Y).
+    bool in = p.filename() == "apex.part";
+    std::uint32_t x = 0, y = 0;
+    if (std::sscanf(p.filename().c_str(), "shard-%u-%u.part", &x, &y) == 2)
+      in = (x >> (kSplit - kLevel)) == root.x && (y >> (kSplit - kLevel)) == root.y;
+    needed.push_back(in);
+    if (in) needed_tiles += read_part_info(p)->tiles;
+  }
+  const auto ranges = subtree_ranges(root, kMaxZ);
+  auto merge = [&](const fs::path& out, bool hint, MergeProgress& last, std::size_t& seen) {
+    MergeOptions m;
+    m.parts.assign(parts.begin(), parts.end());
+    m.archive = options_for(out, kMaxZ);
+    m.metadata_json = kMetadata;
+    m.ranges = ranges;
+    if (hint) m.index_needed = needed;
+    m.on_progress = [&](const MergeProgress& p) { last = p; };
+    m.check_part = [&](const PartInfo& info) {
+      EXPECT_FALSE(info.manifest_json.empty()) << info.path;
+      ++seen;
+      return Status{};
+    };
+    return merge_parts(m);
+  };
+  MergeProgress all_last, hinted_last;
+  std::size_t all_seen = 0, hinted_seen = 0;
+  ASSERT_TRUE(merge(dir.path() / "all.pmtiles", false, all_last, all_seen));
+  ASSERT_TRUE(merge(dir.path() / "hinted.pmtiles", true, hinted_last, hinted_seen));
+  EXPECT_EQ(read_bytes(dir.path() / "hinted.pmtiles"), read_bytes(dir.path() / "all.pmtiles"));
+  EXPECT_EQ(all_seen, parts.size());
+  EXPECT_EQ(hinted_seen, parts.size());
+  EXPECT_EQ(all_last.records_checked, tiles.size());
+  EXPECT_EQ(hinted_last.records_checked, needed_tiles);
+  EXPECT_LT(needed_tiles * 3, tiles.size());  // about a quarter of the parts' records
+  // A hint of the wrong size is a caller's bug, refused.
+  needed.pop_back();
+  MergeProgress ignored;
+  std::size_t n = 0;
+  EXPECT_EQ(merge(dir.path() / "bad.pmtiles", true, ignored, n).error().code,
+            ErrorCode::invalid_argument);
 }
 
 TEST(MergeRanges, HelpersNameEachLevelOfASubPyramidAndTheLevelsAbove) {

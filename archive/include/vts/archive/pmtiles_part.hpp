@@ -115,7 +115,8 @@ struct MergeProgress {
   // about twice the tiles merged, whatever the number of parts.
   std::uint64_t records_read = 0;
   // Index records read to check the parts' checksums when they are opened: every part's whole
-  // index, even in a ranged merge, since one checksum covers a part's index with its manifest.
+  // index (one checksum covers a part's index with its manifest), but those of the parts
+  // MergeOptions::index_needed leaves out.
   std::uint64_t records_checked = 0;
 };
 
@@ -136,9 +137,17 @@ struct MergeOptions {
   // subtree_ranges(R, maxz), and one of levels_above(K)) is made from the same parts as the
   // one-file archive, and its tiles are that archive's. Each part is clipped by binary search
   // over its index, so a merge of 1/P of the tiles reads about 1/P of the index records and
-  // payloads (beyond the checksum of every part's index: MergeProgress::records_checked). When
+  // payloads (beyond the checksum of each part's index: MergeProgress::records_checked; see
+  // index_needed). When
   // no tile of the parts lies in the ranges: not_found, and nothing is written.
   std::vector<TileIdRange> ranges;
+  // With ranges: which parts (by position in `parts`) may hold tiles in them, as the caller knows
+  // from where each part's tiles lie (a shard's sub-pyramid); empty: all. A part not needed is
+  // opened for its manifest and attachment only (check_part sees them), its index neither read
+  // nor checked: so a merge of one of P archives reads only its parts' indexes, not all of them.
+  // Its checksum is checked by the merges that take its tiles, so a damaged part still fails the
+  // set. A part that was needed after all is corrupt input the other merges report.
+  std::vector<bool> index_needed;
   std::function<void(const MergeProgress&)> on_progress;  // about ten times a second
   const std::atomic<bool>* cancel = nullptr;
   // Called for each part once it is checked, with its manifest and attachment (which the merge
