@@ -52,9 +52,11 @@ upload_set() {
   put_object "$1/tileset.json" "$2/tileset.json"
 }
 
-# requests [PATTERN]: the requests s3rver has logged so far ("info: /KEY STATUS ...", the bucket
-# left out) for keys matching PATTERN.
-requests() { grep -cE "info.*: /${1:-}" "$LOGS/s3rver.log" || true; }
+# requests [PATTERN]: the requests s3rver has logged so far for keys matching PATTERN: "info:
+# /KEY STATUS ..." for a GET, "info: s/KEY STATUS ..." for a HEAD (s3rver 3.7.1's log lines).
+requests() { grep -cE "info.*: s?/${1:-}" "$LOGS/s3rver.log" || true; }
+# answered: every request s3rver has answered (a log line with a status), whatever its key.
+answered() { grep -cE 'info.*: [^ ]* [0-9]{3} ' "$LOGS/s3rver.log" || true; }
 
 note "a set and an archive, local and in the bucket"
 # The Earth: tiles of tens of KiB, so that a tile lies beyond the first 16 KiB of its archive
@@ -109,10 +111,15 @@ before=$(requests)
 tiles_equal planet ref
 tiles_equal one ref
 cold=$(($(requests) - before))
-# The set's archives only: the reload loop's HEADs go to its tileset.json.
+# The set's archives only: the reload loop's HEADs go to its tileset.json and to one.pmtiles.
+store_requests() { curl -sf "$ADMIN_BASE/metrics" | sed -nE 's/^vts_store_requests_total ([0-9]+)$/\1/p'; }
+ours_before=$(store_requests)
+all_before=$(answered)
 before=$(requests 'maps/planet/[^ ]*\.pmtiles ')
 while read -r _ z x y _; do curl -sf -o /dev/null "$BASE/planet/$z/$x/$y"; done <"$WORK/ref.tiles"
 warm=$(($(requests 'maps/planet/[^ ]*\.pmtiles ') - before))
+ours=$(($(store_requests) - ours_before))
+all=$(($(answered) - all_before))
 note "   $ntiles tiles: $cold GETs cold (set and archive), $warm warm for the set"
 # Web images of the set's tiles (read on the store-read pool, then encoded): the local ones.
 while read -r _ z x y _; do
@@ -120,11 +127,10 @@ while read -r _ z x y _; do
     fail "the PNG of tile $z/$x/$y of the set differs from the local archive's"
 done < <(head -8 "$WORK/ref.tiles")
 ((warm == ntiles)) || fail "$warm GETs for $ntiles warm tiles of the set (one each expected)"
-# The server counts what the store counted.
-curl -sf "$ADMIN_BASE/metrics" >"$WORK/metrics.txt"
-ours=$(sed -nE 's/^vts_store_requests_total ([0-9]+)$/\1/p' "$WORK/metrics.txt")
-theirs=$(requests)
-((ours > 0 && ours <= theirs)) || fail "vts_store_requests_total is '$ours', s3rver logged $theirs"
+# The server counts what the store answered over the warm pass: the tiles' GETs, and the reload
+# loop's HEADs and listings (a few of which may be in flight at either end, seen by one side only).
+((ours >= warm && ours <= all + 3 && all <= ours + 3)) ||
+  fail "vts_store_requests_total grew by $ours over a pass in which s3rver answered $all requests"
 
 note "a set replaced in the bucket is reloaded whole: never a mix, then the new set"
 set_of bc1 "${SYN[@]}" --codec bc1
