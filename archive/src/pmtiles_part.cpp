@@ -553,7 +553,7 @@ class Merger {
     // Not an error of the parts: an archive of a set whose tiles have no data, which the caller
     // skips.
     if (progress_.tiles_total == 0)
-      return make_error(ErrorCode::not_found, "no tile of the parts lies in the ranges asked");
+      return make_error(ErrorCode::not_found, std::string(kNoTileInRanges));
     if (o_.check_parts) return o_.check_parts(metadata_json_);
     return {};
   }

@@ -130,7 +130,7 @@ Result<SetArchiveReport> merge_set_archive(
       plan, parts_dir, out_dir / r.name, folder,
       [&](archive::MergeOptions& mo) { scope_to(plan, r.root, mo); }, progress, cancel, verify);
   if (!merged && merged.error().code == ErrorCode::not_found &&
-      merged.error().message.find("ranges") != std::string::npos) {
+      merged.error().message == archive::kNoTileInRanges) {
     // No tile of the parts in this archive: remember that it was merged, empty.
     if (Status st = write_file_atomically(marker, ""); !st) return st.error();
     r.empty = true;

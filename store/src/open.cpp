@@ -31,11 +31,6 @@ Result<std::shared_ptr<archive::Reader>> open_remote_archive(const std::string& 
 
 }  // namespace
 
-bool is_set_location(std::string_view location) {
-  if (ends_with_manifest(location)) return true;
-  return !is_remote(location) && archive::is_set_path(std::filesystem::path(std::string(location)));
-}
-
 Result<std::shared_ptr<archive::Reader>> open_reader(const std::string& location,
                                                      const StoreOptions& options,
                                                      const archive::ReaderOptions& reader) {

@@ -30,6 +30,7 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "vts/archive/pmtiles.hpp"
@@ -39,6 +40,9 @@ namespace vts::archive {
 inline constexpr std::uint32_t kSmallPayloadBytes = 1024;
 inline constexpr std::size_t kSmallPayloadTable = std::size_t{1} << 20;
 inline constexpr std::size_t kLeafEntries = 4096;
+// The message of merge_parts()'s not_found when no tile of the parts lies in MergeOptions::ranges
+// (a set's archive with no data), so a caller tells it from a missing part.
+inline constexpr std::string_view kNoTileInRanges = "no tile of the parts lies in the ranges asked";
 
 struct PartStats {
   std::uint64_t tiles = 0;        // add_tile() calls

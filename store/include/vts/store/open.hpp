@@ -13,10 +13,6 @@
 
 namespace vts::store {
 
-// True for a location naming a set's manifest (a file or object named tileset.json), or a local
-// folder holding one.
-bool is_set_location(std::string_view location);
-
 // Opens the archive or set at `location`:
 //   - a local path: archive::Reader::open (an archive, a set's folder or its manifest);
 //   - s3://… or http(s)://… naming a .pmtiles object: one GET of its first block
