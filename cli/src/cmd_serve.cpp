@@ -1,12 +1,14 @@
 // vts serve: host tilesets over HTTP (server/include/vts/server/http_server.hpp). Glue only: the
 // config file is parsed by the server library (serve_config.hpp); flags override it.
 
+#include <algorithm>
 #include <cstdio>
 
 #include "commands.hpp"
 #include "vts/base/file_io.hpp"
 #include "vts/server/http_server.hpp"
 #include "vts/server/serve_config.hpp"
+#include "vts/store/location.hpp"
 #include "vts/store/options.hpp"
 
 namespace vts::cli {
@@ -28,11 +30,15 @@ struct ServeArgs {
 };
 
 // The config file (if any), then the flags over it; remote stores from the AWS environment
-// first (AWS_* variables, ~/.aws files), the config and the flags over it.
+// first (AWS_* variables, ~/.aws files), the config and the flags over it. Only when a location
+// is remote: a damaged ~/.aws must not stop a server of local files.
 Status make_options(const ServeArgs& a, HttpServerOptions& o) {
-  auto store = store::StoreOptions::from_environment();
-  if (!store) return store.error();
-  o.registry.store = std::move(*store);
+  if (std::any_of(a.paths.begin(), a.paths.end(),
+                  [](const std::string& p) { return store::is_remote(p); })) {
+    auto store = store::StoreOptions::from_environment();
+    if (!store) return store.error();
+    o.registry.store = std::move(*store);
+  }
   if (!a.config.empty())
     if (auto st = apply_serve_config(a.config, o); !st.ok()) return st;
   if (!a.listen.empty()) {
