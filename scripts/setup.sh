@@ -59,6 +59,9 @@ PACKAGES=(
   gettext-base openssl python3-yaml
   # store/'s SigV4 signatures recomputed independently by AWS's botocore (store_s3.sh)
   python3-botocore
+  # GIS clients of the WMTS and OGC API - Tiles routes (tests/integration/gis_*.sh): OWSLib
+  # reads the capabilities as QGIS and other Python GIS tools do (GDAL's drivers are the others)
+  python3-owslib
   # deploy/batch/slurm on a real Slurm cluster: tests/integration/slurm_cluster.sh and
   # bench/batch_bench.sh start slurmctld, slurmd and munged of their own on loopback (as root,
   # no systemd: the packages' own services are not used)
