@@ -134,10 +134,14 @@ Result<TilesetInfo> archive_tileset(const archive::Header& header,
 }
 
 Result<ArchiveSummary> summarize_archive(const archive::Reader& reader) {
-  ArchiveSummary s;
   auto info = archive_tileset(reader.header(), reader.metadata_json());
   if (!info) return std::move(info).error();
-  s.info = std::move(info).value();
+  return summarize_archive(reader, *info);
+}
+
+Result<ArchiveSummary> summarize_archive(const archive::Reader& reader, const TilesetInfo& info) {
+  ArchiveSummary s;
+  s.info = info;
   s.header = reader.header();
   s.file_bytes = reader.size();
   const Geometry& g = s.info.geometry;
@@ -169,10 +173,23 @@ Result<ArchiveSummary> summarize_archive(const archive::Reader& reader) {
 Result<VerifyReport> verify_archive(
     const archive::Reader& reader, unsigned threads,
     const std::function<void(std::uint64_t, std::uint64_t)>& on_progress) {
-  VerifyReport report;
   auto info = archive_tileset(reader.header(), reader.metadata_json());
   if (!info) return std::move(info).error();
-  const Geometry& g = info->geometry;
+  const TileSpec spec = info->tile_spec();
+  // Size, codec and pixel format against the tileset (before the decode allocates).
+  const PayloadCheck decodes = [&spec](std::span<const std::uint8_t> payload) -> Status {
+    auto img = decode_tile(payload, spec);
+    if (!img) return img.error();
+    return {};
+  };
+  return verify_archive(reader, *info, decodes, threads, on_progress);
+}
+
+Result<VerifyReport> verify_archive(
+    const archive::Reader& reader, const TilesetInfo& info, const PayloadCheck& check,
+    unsigned threads, const std::function<void(std::uint64_t, std::uint64_t)>& on_progress) {
+  VerifyReport report;
+  const Geometry& g = info.geometry;
   const Pyramid pyramid(g);
   if (reader.header().max_zoom != g.max_zoom())
     report.structural_error = "header max_zoom " + std::to_string(reader.header().max_zoom) +
@@ -229,10 +246,8 @@ Result<VerifyReport> verify_archive(
       std::optional<Error> err;
       if (!bytes) {
         err = bytes.error();
-      } else {
-        // Size, codec and pixel format against the tileset (before the decode allocates).
-        auto img = decode_tile(*bytes, info->tile_spec());
-        if (!img) err = img.error();
+      } else if (Status s = check(*bytes); !s) {
+        err = s.error();
       }
       if (err) {
         std::lock_guard lock(m);

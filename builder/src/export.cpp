@@ -15,10 +15,11 @@
 #include <nlohmann/json.hpp>
 #include <thread>
 
+#include "export_pipeline.hpp"
 #include "vts/archive/inspect.hpp"
+#include "vts/base/file_io.hpp"
 #include "vts/imaging/web_mercator.hpp"
 #include "vts/protocol/json_input.hpp"
-#include "work_queue.hpp"
 
 namespace vts {
 inline namespace builder {
@@ -28,14 +29,9 @@ namespace {
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 
-// Where output tiles go: a PMTiles writer or a folder.
-class TileSink {
- public:
-  virtual ~TileSink() = default;
-  // Thread-safe.
-  virtual Status put(TileId id, std::span<const std::uint8_t> bytes) = 0;
-  virtual Result<archive::WriterStats> finish(const std::string& metadata_json) = 0;
-};
+using detail::Counters;
+using detail::Feeder;
+using detail::TileSink;
 
 class ArchiveSink final : public TileSink {
  public:
@@ -208,30 +204,6 @@ LonLatLevel export_center(const TilesetInfo& info, const LonLatBounds& b) {
   return {(b.west + b.east) / 2, (b.south + b.north) / 2, z};
 }
 
-// The first error of any worker, and the flag that stops the walk.
-class FirstError {
- public:
-  void set(Error e) {
-    std::lock_guard lock(mutex_);
-    if (!error_) error_ = std::move(e);
-    failed_.store(true);
-  }
-  bool failed() const { return failed_.load(); }
-  std::optional<Error> take() {
-    std::lock_guard lock(mutex_);
-    return std::move(error_);
-  }
-
- private:
-  std::mutex mutex_;
-  std::optional<Error> error_;
-  std::atomic<bool> failed_{false};
-};
-
-struct Counters {
-  std::atomic<std::uint64_t> done{0}, written{0}, skipped{0};
-};
-
 // One directory entry: its payload decoded once, then one output tile per tile id of its run
 // (tiles of one run with the same clipped content size give the same output: encoded once).
 class EntryJob {
@@ -367,39 +339,42 @@ class ColumnJob {
   Counters& counters_;
 };
 
-Status check_tiling(const TilesetInfo& info, Tiling wanted) {
-  if (wanted == Tiling::none) return {};
-  if (wanted != Tiling::web_mercator_quad)
-    return make_error(ErrorCode::invalid_argument,
-                      "--tiling " + std::string(tiling_name(wanted)) +
-                          " is not an export grid; the choices are the archive's own grid "
-                          "(default) and WebMercatorQuad");
-  if (!info.georeference)
-    return make_error(ErrorCode::invalid_argument,
-                      "--tiling WebMercatorQuad needs a georeferenced archive; this one is a plain "
-                      "image (export it on its own grid: leave out --tiling)");
-  return {};
-}
-
 // What the export writes: the zoom range and bounds of its grid, and whether tiles are
 // reprojected (WorldCRS84Quad source, WebMercatorQuad output).
 struct Plan {
   int min_zoom = 0, max_zoom = 0;
   LonLatBounds bounds;
   bool reproject = false;
+  Tiling grid = Tiling::none;
 };
 
-Result<Plan> make_plan(const TilesetInfo& info, Tiling wanted) {
+Result<Plan> make_plan(const TilesetInfo& info, Tiling grid) {
   Plan p;
   p.max_zoom = info.geometry.max_zoom();
   p.bounds = export_bounds(info);
-  if (wanted == Tiling::web_mercator_quad &&
-      info.georeference->tiling == Tiling::world_crs84_quad) {
+  p.grid = grid;
+  if (grid == Tiling::web_mercator_quad && info.georeference->tiling == Tiling::world_crs84_quad) {
     auto range = imaging::web_mercator_range(info);
     if (!range) return range.error();
-    p = {range->min_zoom, range->max_zoom, range->bounds, true};
+    p = {range->min_zoom, range->max_zoom, range->bounds, true, grid};
   }
   return p;
+}
+
+Result<std::unique_ptr<TileSink>> open_mbtiles(const TilesetInfo& info, const ExportOptions& o,
+                                               const Plan& plan, const fs::path& temporary) {
+  detail::MbtilesMetadata m;
+  m.name = info.name;
+  m.description = info.description;
+  m.format = std::string(imaging::web_format_extension(o.format));
+  m.bounds = plan.bounds;
+  const LonLatLevel c = export_center(info, plan.bounds);
+  m.center_lon = c.lon;
+  m.center_lat = c.lat;
+  m.center_zoom = std::clamp(c.level, plan.min_zoom, plan.max_zoom);
+  m.min_zoom = plan.min_zoom;
+  m.max_zoom = plan.max_zoom;
+  return detail::open_mbtiles_sink(temporary, m);
 }
 
 Result<std::unique_ptr<TileSink>> open_sink(const TilesetInfo& info, const ExportOptions& o,
@@ -426,64 +401,12 @@ Result<std::unique_ptr<TileSink>> open_sink(const TilesetInfo& info, const Expor
   return std::unique_ptr<TileSink>(std::make_unique<ArchiveSink>(std::move(writer).value()));
 }
 
-// The pool both walks feed from the calling thread: the first error stops them, so do
-// cancellation; progress is reported from the calling thread.
-class Feeder {
- public:
-  Feeder(const ExportOptions& o, const Counters& c, std::uint64_t total)
-      : options_(o), counters_(c), total_(total) {
-    auto q = detail::start_encoders(threads(o));
-    if (q)
-      queue_ = std::move(q).value();
-    else
-      first_.set(std::move(q).error());
-  }
-
-  // Queues the job (blocking while the queue is full); false when the walk should stop (an
-  // error, the pool's threads not starting included, or cancellation).
-  bool submit(std::function<Status()> job) {
-    if (first_.failed()) return false;
-    if (options_.cancel && options_.cancel->load()) {
-      first_.set(make_error(ErrorCode::cancelled, "export cancelled"));
-      return false;
-    }
-    queue_->submit([this, job = std::move(job)] {
-      if (first_.failed()) return;
-      if (Status s = job(); !s) first_.set(s.error());
-    });
-    if (options_.on_progress && Clock::now() - last_ > std::chrono::milliseconds(100)) {
-      last_ = Clock::now();
-      options_.on_progress(counters_.done.load(), total_);
-    }
-    return true;
-  }
-  // Waits for the queued jobs; the first error, else the walk's own status.
-  Status finish(Status walked) {
-    if (queue_) queue_->join();
-    if (auto e = first_.take()) return *e;
-    if (!walked) return walked;
-    if (options_.on_progress) options_.on_progress(counters_.done.load(), total_);
-    return {};
-  }
-
- private:
-  static unsigned threads(const ExportOptions& o) {
-    return o.threads ? o.threads : std::max(1u, std::thread::hardware_concurrency());
-  }
-  const ExportOptions& options_;
-  const Counters& counters_;
-  std::uint64_t total_;
-  Clock::time_point last_ = Clock::now();
-  FirstError first_;
-  // Last: joined before the members its jobs use go away. Null when its threads did not start.
-  std::unique_ptr<WorkerPool> queue_;
-};
-
 // The archive's own grid: walks the source directory, one job per entry.
 Status walk_entries(const archive::Reader& reader, const TilesetInfo& info, const ExportOptions& o,
                     TileSink& sink, Counters& counters) {
   EntryJob job(reader, info, o, sink, counters);
-  Feeder feeder(o, counters, reader.header().addressed_tiles);
+  const detail::FeederOptions fo{o.threads, o.cancel, o.on_progress};
+  Feeder feeder(fo, counters, reader.header().addressed_tiles);
   Status walked = reader.for_each_entry(
       [&](const archive::Entry& e) { return feeder.submit([&job, e] { return job.run(e); }); });
   return feeder.finish(walked);
@@ -500,7 +423,8 @@ Status walk_reprojected(const archive::Reader& reader, const TilesetInfo& info,
   for (int z = plan.min_zoom; z <= plan.max_zoom; ++z)
     total += footprint_tiles(Tiling::web_mercator_quad, *web, z, plan.bounds).count();
   ColumnJob job(reader, info, o, sink, counters);
-  Feeder feeder(o, counters, total);
+  const detail::FeederOptions fo{o.threads, o.cancel, o.on_progress};
+  Feeder feeder(fo, counters, total);
   for (int z = plan.min_zoom; z <= plan.max_zoom; ++z) {
     const TileRect r = footprint_tiles(Tiling::web_mercator_quad, *web, z, plan.bounds);
     for (std::uint32_t x = r.x0; x < r.x1; ++x)
@@ -511,6 +435,32 @@ Status walk_reprojected(const archive::Reader& reader, const TilesetInfo& info,
 }
 
 }  // namespace
+
+Result<Tiling> export_grid(const TilesetInfo& info, ExportLayout layout,
+                           std::optional<Tiling> wanted) {
+  const Tiling own = info.georeference ? info.georeference->tiling : Tiling::none;
+  if (layout == ExportLayout::mbtiles && own == Tiling::none)
+    return make_error(ErrorCode::invalid_argument,
+                      "MBTiles needs a georeferenced archive (its tiles are Web Mercator); this "
+                      "one is a plain image: export it as pmtiles or xyz");
+  if (!wanted)  // web maps draw every tile as Web Mercator
+    return own == Tiling::none ? Tiling::none : Tiling::web_mercator_quad;
+  if (*wanted == Tiling::none) wanted = own;  // "native"
+  if (layout == ExportLayout::mbtiles && *wanted != Tiling::web_mercator_quad)
+    return make_error(ErrorCode::invalid_argument,
+                      "MBTiles holds WebMercatorQuad tiles only; leave out --tiling");
+  if (own == Tiling::none && *wanted != Tiling::none)
+    return make_error(ErrorCode::invalid_argument,
+                      "--tiling " + std::string(tiling_name(*wanted)) +
+                          " needs a georeferenced archive; this one is a plain image (export it on "
+                          "its own grid: leave out --tiling)");
+  if (*wanted != own && *wanted != Tiling::web_mercator_quad)
+    return make_error(ErrorCode::invalid_argument,
+                      "--tiling " + std::string(tiling_name(*wanted)) +
+                          " is not an export grid of this " + std::string(tiling_name(own)) +
+                          " archive; the choices are its own grid (native) and WebMercatorQuad");
+  return *wanted;
+}
 
 LonLatBounds export_bounds(const TilesetInfo& info) {
   if (info.georeference) return info.georeference->bounds;
@@ -561,33 +511,51 @@ Result<ExportReport> export_web_tiles(const archive::Reader& reader, const Tiles
                                       const ExportOptions& o) {
   const auto t0 = Clock::now();
   if (Status s = validate(o.encode); !s) return s.error();
-  if (Status s = check_tiling(info, o.tiling); !s) return s.error();
+  auto grid = export_grid(info, o.layout, o.tiling);
+  if (!grid) return grid.error();
   if (o.output.empty()) return make_error(ErrorCode::invalid_argument, "no output given");
-  auto plan = make_plan(info, o.tiling);
+  auto plan = make_plan(info, *grid);
   if (!plan) return plan.error();
   ExportReport r;
   r.bounds = plan->bounds;
   r.min_zoom = plan->min_zoom;
   r.max_zoom = plan->max_zoom;
-  const Tiling grid = plan->reproject     ? Tiling::web_mercator_quad
-                      : info.georeference ? info.georeference->tiling
-                                          : Tiling::none;
-  auto sink = open_sink(info, o, *plan);
-  if (!sink) return sink.error();
+  r.grid = *grid;
   Counters counters;
-  Status walked = plan->reproject ? walk_reprojected(reader, info, o, *plan, **sink, counters)
-                                  : walk_entries(reader, info, o, **sink, counters);
-  if (!walked) return walked.error();
-  auto stats = (*sink)->finish(export_metadata_json(info, reader.metadata_json(), o.source_name,
-                                                    reader.version(), o.format, r.bounds,
-                                                    r.min_zoom, r.max_zoom, grid));
-  if (!stats) return stats.error();
+  // Walks the tiles into a sink and finishes it.
+  const auto write = [&](TileSink& sink) -> Result<archive::WriterStats> {
+    Status walked = plan->reproject ? walk_reprojected(reader, info, o, *plan, sink, counters)
+                                    : walk_entries(reader, info, o, sink, counters);
+    if (!walked) return walked.error();
+    return sink.finish(export_metadata_json(info, reader.metadata_json(), o.source_name,
+                                            reader.version(), o.format, r.bounds, r.min_zoom,
+                                            r.max_zoom, r.grid));
+  };
+  std::optional<Result<archive::WriterStats>> stats;
+  if (o.layout == ExportLayout::mbtiles) {
+    // SQLite writes by name: into the temporary that replaces the output once complete.
+    Status st = write_file_atomically(o.output, [&](int, const fs::path& tmp) -> Status {
+      auto sink = open_mbtiles(info, o, *plan, tmp);
+      if (!sink) return sink.error();
+      stats = write(**sink);
+      return *stats ? Status{} : Status{stats->error()};
+    });
+    if (!st) return st.error();
+    std::error_code ec;
+    (*stats)->file_bytes = fs::file_size(o.output, ec);
+  } else {
+    auto sink = open_sink(info, o, *plan);
+    if (!sink) return sink.error();
+    stats = write(**sink);
+    if (!*stats) return stats->error();
+  }
+  const archive::WriterStats& written = **stats;
   r.source_tiles = counters.done.load();
   r.tiles_written = counters.written.load();
   r.tiles_skipped = counters.skipped.load();
-  r.unique_tiles = stats->tile_contents;
-  r.tile_bytes = stats->tile_bytes;
-  r.file_bytes = stats->file_bytes;
+  r.unique_tiles = written.tile_contents;
+  r.tile_bytes = written.tile_bytes;
+  r.file_bytes = written.file_bytes;
   r.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
   return r;
 }

@@ -4,6 +4,7 @@
 
 #include <cstring>
 
+#include "gdal_output.hpp"
 #include "vts/archive/inspect.hpp"
 
 namespace vts {
@@ -55,13 +56,26 @@ class Output {
       return make_error(ErrorCode::io, "writing '" + path_.string() + "': " + out_->geterror());
     return {};
   }
-  Status finish() {
+  // Closes the file, adds the georeference (when there is one) and renames it into place.
+  Status finish(const std::optional<GeoTiffRegion>& georef) {
     const bool ok = out_->close();
     out_.reset();
     std::error_code ec;
     if (!ok) {
       std::filesystem::remove(tmp_, ec);
       return make_error(ErrorCode::io, "writing '" + path_.string() + "' failed");
+    }
+    std::filesystem::path side;  // a PAM .aux.xml for formats without GeoTIFF tags
+    if (georef) {
+      if (Status st = detail::add_georeference(tmp_, *georef, &side); !st) {
+        std::filesystem::remove(tmp_, ec);
+        std::filesystem::remove(tmp_.string() + ".aux.xml", ec);
+        return st;
+      }
+      if (!side.empty()) std::filesystem::rename(side, path_.string() + ".aux.xml", ec);
+      if (ec)
+        return make_error(ErrorCode::io,
+                          "renaming to '" + path_.string() + ".aux.xml': " + ec.message());
     }
     std::filesystem::rename(tmp_, path_, ec);
     if (ec)
@@ -100,7 +114,16 @@ Status extract_tile(const archive::Reader& reader, const TilesetInfo& info, Tile
   auto out = Output::open(o, img.width, img.height);
   if (!out) return std::move(out).error();
   if (auto st = out->write_rows(0, img.height, img.pixels.data()); !st) return st;
-  return out->finish();
+  std::optional<GeoTiffRegion> georef;
+  if (info.georeference) {
+    georef = level_rect_georeference(info, id.z, g.content_rect(id));
+    if (o.with_border) {  // the border starts B texels up and left (it may lie beyond the level)
+      const double shift = g.border() * georef->geotransform[1];
+      georef->geotransform[0] -= shift;
+      georef->geotransform[3] += shift;
+    }
+  }
+  return out->finish(georef);
 }
 
 Status extract_level(const archive::Reader& reader, const TilesetInfo& info, int z,
@@ -143,7 +166,9 @@ Status extract_level(const archive::Reader& reader, const TilesetInfo& info, int
     }
     if (auto st = out->write_rows(y0, rows, strip.data()); !st) return st;
   }
-  return out->finish();
+  std::optional<GeoTiffRegion> georef;
+  if (info.georeference) georef = level_rect_georeference(info, z, {0, 0, w, h});
+  return out->finish(georef);
 }
 
 }  // namespace builder

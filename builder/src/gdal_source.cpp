@@ -7,6 +7,7 @@
 #include <cstring>
 #include <limits>
 #include <mutex>
+#include <numbers>
 
 #include <cpl_error.h>
 #include <cpl_minixml.h>
@@ -16,6 +17,8 @@
 #include <gdal_utils.h>
 #include <ogr_srs_api.h>
 
+#include "gdal_output.hpp"
+#include "lonlat_pieces.hpp"
 #include "vts/base/file_io.hpp"
 
 namespace vts {
@@ -46,23 +49,6 @@ Result<Resampling> parse_resampling(std::string_view text) {
 namespace detail {
 
 namespace {
-
-void register_gdal() {
-  static std::once_flag once;
-  std::call_once(once, [] {
-    GDALAllRegister();
-    // GDAL's block cache defaults to 5 % of RAM (1.2 GiB here), which would be most of a build's
-    // memory. Strips aligned to the warped blocks read each block once, so 64 MiB (the source
-    // tiles a block's warp reads) costs no time (an 80000-pixel-wide build: 2.2 s, 414 MiB
-    // peak, vs 2.0 s, 578 MiB with 256 MiB). GDAL_CACHEMAX in the environment still rules.
-    if (!std::getenv("GDAL_CACHEMAX")) GDALSetCacheMax64(GIntBig{64} << 20);
-    // A VRT's raw band (VRTRawRasterBand) reads any local file as pixels: an input handed to a
-    // build could put /etc/passwd into the tiles. Off unless the environment turns it on
-    // (GDAL_VRT_ENABLE_RAWRASTERBAND=YES); check_vrt_sources refuses it too (GDAL < 3.7).
-    if (!std::getenv("GDAL_VRT_ENABLE_RAWRASTERBAND"))
-      CPLSetConfigOption("GDAL_VRT_ENABLE_RAWRASTERBAND", "NO");
-  });
-}
 
 // The deepest chain of VRTs naming VRTs as sources that check_vrt_sources follows.
 constexpr int kMaxVrtDepth = 16;
@@ -141,29 +127,6 @@ Status check_vrt_sources(const std::filesystem::path& vrt, int depth = 0) {
   return {};
 }
 
-// Collects GDAL's error messages on this thread instead of letting GDAL print them.
-class ErrorCapture {
- public:
-  ErrorCapture() {
-    CPLPushErrorHandlerEx(&ErrorCapture::handle, this);
-    CPLErrorReset();
-  }
-  ~ErrorCapture() { CPLPopErrorHandler(); }
-  ErrorCapture(const ErrorCapture&) = delete;
-  ErrorCapture& operator=(const ErrorCapture&) = delete;
-  bool failed() const { return CPLGetLastErrorType() >= CE_Failure; }
-  std::string text() const { return messages_.empty() ? "GDAL reported no reason" : messages_; }
-
- private:
-  static void CPL_STDCALL handle(CPLErr level, CPLErrorNum, const char* msg) {
-    auto* self = static_cast<ErrorCapture*>(CPLGetErrorHandlerUserData());
-    if (level < CE_Failure || !self || self->messages_.size() > 400) return;
-    if (!self->messages_.empty()) self->messages_ += "; ";
-    self->messages_ += msg ? msg : "?";
-  }
-  std::string messages_;
-};
-
 using SrsPtr = std::unique_ptr<void, void (*)(OGRSpatialReferenceH)>;
 
 // WGS 84 in longitude, latitude order.
@@ -207,17 +170,34 @@ struct GdalSource::Input {
   bool integer = true;          // integer data
   std::uint64_t pixels = 0;
   std::vector<std::pair<double, double>> observed;  // per data band: approximate min, max
-  LonLatBounds bounds;                              // its extent in degrees, clipped to the scheme
-  TexelRect texels;                                 // the grid texels it touches
-  double pixel_size = 0;                            // in the scheme's CRS units
+  // Its extent in degrees, clipped to the scheme: one piece, or two when it crosses the
+  // antimeridian (lonlat_pieces.hpp); `bounds` holds them all (every longitude for two).
+  std::vector<LonLatBounds> pieces;
+  LonLatBounds bounds;
+  std::vector<TexelRect> texels;  // the grid texels each piece touches
+  // A geographic raster crossing the antimeridian: the source column where it lies (else NaN).
+  // Each piece is then warped from its own side of the raster (cut_columns), so no warped block
+  // meets the place where GDAL wraps the raster's longitudes: a block there takes the whole raster
+  // as its source window and blurs (GDAL widens its kernel by the window's scale).
+  double seam_column = NAN;
+  double pixel_size = 0;  // in the scheme's CRS units
   std::string description;
+  std::string warning;  // what probing found to tell the user (probe_input), or empty
   // While open (GdalSource::acquire).
   GDALDatasetH src = nullptr;
   GDALDatasetH selected = nullptr;  // a VRT of the chosen bands of `src` (with --bands)
   GDALDatasetH warped = nullptr;    // a VRT of the whole grid at the max level
-  int bands = 0;                    // of `warped`: the data bands + alpha
+  // With a seam: per piece, a VRT of its side of the raster's columns, and its warped VRT.
+  std::vector<GDALDatasetH> sides, warped_sides;
+  int bands = 0;  // of `warped`: the data bands + alpha
   std::uint64_t last_use = 0;
+  GDALDatasetH warped_piece(std::size_t k) const {
+    return warped_sides.empty() ? warped : warped_sides[k];
+  }
   void close() {
+    for (GDALDatasetH d : warped_sides) GDALClose(d);
+    for (GDALDatasetH d : sides) GDALClose(d);
+    warped_sides.clear(), sides.clear();
     if (warped) GDALClose(warped);
     if (selected) GDALClose(selected);
     if (src) GDALClose(src);
@@ -231,7 +211,7 @@ bool gdal_is_georeferenced(const std::filesystem::path& path) {
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) return false;
   register_gdal();
-  ErrorCapture quiet;
+  GdalErrors quiet;
   // A VRT is GDAL's alone, and opening it opens its sources: GdalSource::open checks them first
   // (and reports a VRT without a georeference).
   if (is_vrt(path)) return true;
@@ -250,8 +230,9 @@ namespace {
 // projected edge can peak between any fixed samples (a UTM edge's latitude at the zone's central
 // meridian: OCTTransformBounds' 21 points per edge missed 0.008 degrees), so each edge is sampled
 // at 1024 points and every extreme refined between its neighbours by golden-section search.
+// Latitudes only for an extent crossing the antimeridian: its longitudes peak at +-180 there.
 void widen_to_edge_extremes(OGRCoordinateTransformationH ct, const double gt[6], int w, int h,
-                            LonLatBounds& b) {
+                            LonLatBounds& b, bool longitudes) {
   const double corner[4][2] = {{0, 0}, {double(w), 0}, {double(w), double(h)}, {0, double(h)}};
   for (int e = 0; e < 4; ++e) {
     const double* p0 = corner[e];
@@ -265,7 +246,7 @@ void widen_to_edge_extremes(OGRCoordinateTransformationH ct, const double gt[6],
       return k == 0 ? x : y;
     };
     constexpr int kSamples = 1024;
-    for (int k = 0; k < 2; ++k)
+    for (int k = longitudes ? 0 : 1; k < 2; ++k)
       for (const double sign : {-1.0, 1.0}) {  // minimum, maximum
         int best = -1;
         double best_v = -INFINITY;
@@ -354,6 +335,99 @@ Status check_unmapped(const GdalSource::Input& in, GDALDataType type) {
                         "0..255, or --range auto (the mosaic's 2%..98% percentiles per band)");
 }
 
+// The source pixel (column, row) at `p` (degrees), nullopt where PROJ cannot take it there. A
+// longitude a whole turn away is the same place, and the one on the raster is taken (a file in
+// EPSG:4326 from 150 to 210 holds -170 as 190); off every raster, the nearest point of it.
+std::optional<std::pair<double, double>> source_pixel_at(GDALDatasetH ds, const double gt[6],
+                                                         const SrsPtr& lonlat, LonLat p) {
+  double inv[6];
+  if (!GDALInvGeoTransform(const_cast<double*>(gt), inv)) return std::nullopt;
+  OGRSpatialReferenceH src = OSRClone(GDALGetSpatialRef(ds));
+  OSRSetAxisMappingStrategy(src, OAMS_TRADITIONAL_GIS_ORDER);
+  OGRCoordinateTransformationH ct = OCTNewCoordinateTransformation(lonlat.get(), src);
+  OSRDestroySpatialReference(src);
+  const double w = GDALGetRasterXSize(ds), h = GDALGetRasterYSize(ds);
+  std::optional<std::pair<double, double>> first;
+  for (const double turn : {0.0, 360.0, -360.0}) {
+    double x = p.lon + turn, y = p.lat, z = 0;
+    int ok = 0;
+    if (!ct || !OCTTransformEx(ct, 1, &x, &y, &z, &ok) || !ok) continue;
+    const double px = inv[0] + x * inv[1] + y * inv[2], py = inv[3] + x * inv[4] + y * inv[5];
+    if (px >= 0 && px <= w && py >= 0 && py <= h) {
+      first = {px, py};
+      break;
+    }
+    if (!first) first = {std::clamp(px, 0.0, w), std::clamp(py, 0.0, h)};
+  }
+  if (ct) OCTDestroyCoordinateTransformation(ct);
+  CPLErrorReset();  // a failed candidate is no error of the input's
+  return first;
+}
+
+// The input's pixel size on the scheme's CRS, at resolution_point() of its pieces (the equator
+// when it spans it): GDALSuggestedWarpOutput's rule (the diagonal of the footprint on the target
+// over the diagonal in pixels) applied to a copy of the raster's shape one pixel long at that
+// point. For the whole raster GDAL's rule is degenerate where the target stretches without bound
+// (a +-90 degree input on Web Mercator: one 256-texel tile); at one point it is the resolution
+// there, and for a small input it is what GDAL suggests. nullopt where PROJ cannot take it.
+std::optional<double> input_pixel_size(GDALDatasetH ds, const double gt[6], const SrsPtr& lonlat,
+                                       const std::vector<LonLatBounds>& pieces, Tiling t) {
+  const std::string dst = std::string("DST_SRS=") + scheme_epsg(t);
+  const char* topts[] = {dst.c_str(), nullptr};
+  void* tr = GDALCreateGenImgProjTransformer2(ds, nullptr, const_cast<char**>(topts));
+  if (!tr) return std::nullopt;
+  const double w = GDALGetRasterXSize(ds), h = GDALGetRasterYSize(ds);
+  const auto [cx, cy] =
+      source_pixel_at(ds, gt, lonlat, resolution_point(pieces)).value_or(std::pair{w / 2, h / 2});
+  const double sx = w / std::max(w, h), sy = h / std::max(w, h);
+  double x[4] = {cx - sx / 2, cx + sx / 2, cx - sx / 2, cx + sx / 2};
+  double y[4] = {cy - sy / 2, cy - sy / 2, cy + sy / 2, cy + sy / 2};
+  double z[4] = {0, 0, 0, 0};
+  int ok[4] = {0, 0, 0, 0};
+  const bool done = GDALGenImgProjTransform(tr, FALSE, 4, x, y, z, ok) != 0;
+  GDALDestroyGenImgProjTransformer(tr);
+  if (!done || !(ok[0] && ok[1] && ok[2] && ok[3])) return std::nullopt;
+  // A step across the antimeridian comes back a whole turn away (179.9 .. -179.9).
+  const double turn = t == Tiling::web_mercator_quad ? 2 * kWebMercatorHalfSide : 360.0;
+  for (double& v : x) v -= turn * std::round((v - x[0]) / turn);
+  const auto [x0, x1] = std::minmax_element(x, x + 4);
+  const auto [y0, y1] = std::minmax_element(y, y + 4);
+  const double size = std::hypot(*x1 - *x0, *y1 - *y0) / std::hypot(sx, sy);
+  if (!std::isfinite(size) || !(size > 0)) return std::nullopt;
+  return size;
+}
+
+// Whether GDAL's warp onto the scheme's grid reads any of the raster inside `piece`: a 5 x 5 grid
+// of points across it taken back to source pixels as the warper takes them (its transformer,
+// target to source, which wraps a geographic source's longitudes to its own range). False for
+// the part of an EPSG:3857 raster past x = 20037508 m: PROJ puts 190 degrees at -170.
+bool piece_reached(GDALDatasetH ds, Tiling t, const LonLatBounds& piece) {
+  const std::string dst = std::string("DST_SRS=") + scheme_epsg(t);
+  const char* topts[] = {dst.c_str(), nullptr};
+  void* tr = GDALCreateGenImgProjTransformer2(ds, nullptr, const_cast<char**>(topts));
+  if (!tr) return false;
+  constexpr int kSide = 5;
+  double x[kSide * kSide], y[kSide * kSide], z[kSide * kSide] = {};
+  int ok[kSide * kSide] = {};
+  for (int i = 0; i < kSide * kSide; ++i) {
+    const double lon = piece.west + (piece.east - piece.west) * (i % kSide + 0.5) / kSide;
+    const double lat = piece.south + (piece.north - piece.south) * (i / kSide + 0.5) / kSide;
+    x[i] = lon, y[i] = lat;
+    if (t == Tiling::web_mercator_quad) {  // spherical Mercator, EPSG:3857's formulas
+      x[i] = lon / 180 * kWebMercatorHalfSide;
+      y[i] = std::log(std::tan(std::numbers::pi / 4 + lat * std::numbers::pi / 360)) /
+             std::numbers::pi * kWebMercatorHalfSide;
+    }
+  }
+  GDALGenImgProjTransform(tr, TRUE, kSide * kSide, x, y, z, ok);
+  GDALDestroyGenImgProjTransformer(tr);
+  CPLErrorReset();  // points PROJ cannot take are not reached, no error of the input's
+  const double w = GDALGetRasterXSize(ds), h = GDALGetRasterYSize(ds);
+  for (int i = 0; i < kSide * kSide; ++i)
+    if (ok[i] && x[i] >= 0 && x[i] <= w && y[i] >= 0 && y[i] <= h) return true;
+  return false;
+}
+
 // Opens one input, checks what the build needs of it (a georeference, its bands; its extent in
 // degrees and its pixel size in the scheme's CRS, its approximate values) and closes it.
 Status probe_input(GdalSource::Input& in, const GdalSourceOptions& o, const SrsPtr& lonlat) {
@@ -367,7 +441,7 @@ Status probe_input(GdalSource::Input& in, const GdalSourceOptions& o, const SrsP
   std::error_code ec;
   if (std::filesystem::file_size(in.path, ec) == 0 && !ec)
     return make_error(ErrorCode::truncated, "input '" + name + "' is truncated: empty");
-  ErrorCapture errors;
+  GdalErrors errors;
   if (!GDALIdentifyDriverEx(name.c_str(), GDAL_OF_RASTER, nullptr, nullptr))
     return make_error(ErrorCode::invalid_argument, name + ": not a raster GDAL reads");
   if (is_vrt(in.path))
@@ -416,28 +490,37 @@ Status probe_input(GdalSource::Input& in, const GdalSourceOptions& o, const SrsP
   OSRSetAxisMappingStrategy(src_srs, OAMS_TRADITIONAL_GIS_ORDER);
   OGRCoordinateTransformationH ct = OCTNewCoordinateTransformation(src_srs, lonlat.get());
   OSRDestroySpatialReference(src_srs);
-  LonLatBounds& b = in.bounds;
+  LonLatBounds b;
   const bool ok = ct && OCTTransformBounds(ct, min_x, min_y, max_x, max_y, &b.west, &b.south,
                                            &b.east, &b.north, 21);
-  if (ok && b.west <= b.east) widen_to_edge_extremes(ct, gt, w, h, b);
+  if (ok) widen_to_edge_extremes(ct, gt, w, h, b, b.west <= b.east);
   if (ct) OCTDestroyCoordinateTransformation(ct);
   if (!ok)
     return make_error(ErrorCode::invalid_argument,
                       name + ": its extent cannot be transformed to degrees: " + errors.text());
-  // Its pixel size on the scheme's CRS: what gdalwarp would choose without -tr.
-  const std::string dst = std::string("DST_SRS=") + scheme_epsg(o.tiling);
-  const char* topts[] = {dst.c_str(), nullptr};
-  void* tr = GDALCreateGenImgProjTransformer2(ds.get(), nullptr, const_cast<char**>(topts));
-  double ogt[6];
-  int pixels = 0, lines = 0;
-  const bool sized = tr && GDALSuggestedWarpOutput(ds.get(), GDALGenImgProjTransform, tr, ogt,
-                                                   &pixels, &lines) == CE_None;
-  if (tr) GDALDestroyGenImgProjTransformer(tr);
-  if (!sized)
+  // Cut at the antimeridian: a piece crossing it, or a 0..360 grid, is placed in two pieces.
+  in.pieces = clip_pieces(split_at_antimeridian(b), scheme_extent(o.tiling));
+  in.bounds = pieces_hull(in.pieces);
+  if (in.pieces.empty()) return {};  // open() refuses it, naming the scheme
+  // Its pixel size on the scheme's CRS, where it is measured (input_pixel_size).
+  const std::optional<double> size = input_pixel_size(ds.get(), gt, lonlat, in.pieces, o.tiling);
+  if (!size)
     return make_error(
         ErrorCode::invalid_argument,
         name + ": cannot be transformed to " + scheme_epsg(o.tiling) + ": " + errors.text());
-  in.pixel_size = ogt[1];
+  in.pixel_size = *size;
+  if (in.pieces.size() == 2 && OSRIsGeographic(srs) && gt[1] > 0 && gt[2] == 0 && gt[4] == 0)
+    for (double lon = -180; lon <= 540 && std::isnan(in.seam_column); lon += 360)
+      if (const double c = (lon - gt[0]) / gt[1]; c > 0 && c < w) in.seam_column = c;
+  // A piece of a crossing input that GDAL's warp cannot reach (a projected raster whose x goes
+  // past its CRS's 180 degrees) would be silently empty: said, as gdalwarp leaves it out too.
+  for (const LonLatBounds& piece : in.pieces)
+    if (in.pieces.size() > 1 && !piece_reached(ds.get(), o.tiling, piece))
+      in.warning = name + ": its part at longitudes " + fmt_value(piece.west) + " .. " +
+                   fmt_value(piece.east) +
+                   " lies beyond its CRS's own range of x (past 180 degrees); GDAL's warp, as "
+                   "gdalwarp, leaves it out: reproject it (gdalwarp -t_srs) or fix its "
+                   "georeference";
   in.description = short_name(in.path) + " " + std::to_string(w) + "x" + std::to_string(h) + " " +
                    std::to_string(in.src_bands) + "ch " + GDALGetDataTypeName(type);
   return {};
@@ -483,11 +566,24 @@ Status select_bands(GdalSource::Input& in) {
   return {};
 }
 
+// Columns [c0, c1) of `ds`, every row, as a VRT keeping their georeference (gdal_translate
+// -srcwin); nullptr when GDAL cannot make it.
+GDALDatasetH source_columns(GDALDatasetH ds, int c0, int c1, int h) {
+  std::vector<std::string> args = {
+      "-of", "VRT", "-srcwin", std::to_string(c0), "0", std::to_string(c1 - c0), std::to_string(h)};
+  std::vector<char*> argv = argv_of(args);
+  GDALTranslateOptions* to = GDALTranslateOptionsNew(argv.data(), nullptr);
+  int usage_error = 0;
+  GDALDatasetH out = to ? GDALTranslate("", ds, to, &usage_error) : nullptr;
+  if (to) GDALTranslateOptionsFree(to);
+  return out;
+}
+
 // gdalwarp onto the grid (`width` x `height` texels at level z): a VRT dataset (nothing is
 // computed until it is read).
 Status warp_input(GdalSource::Input& in, const GdalSourceOptions& o, std::uint64_t width,
                   std::uint64_t height, int z) {
-  ErrorCapture errors;
+  GdalErrors errors;
   in.src =
       GDALOpenEx(in.path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY, nullptr, nullptr, nullptr);
   if (!in.src)
@@ -527,14 +623,35 @@ Status warp_input(GdalSource::Input& in, const GdalSourceOptions& o, std::uint64
   if (in.alpha_band && !in.tagged_alpha) args.push_back("-srcalpha");
   std::vector<char*> argv = argv_of(args);
   GDALWarpAppOptions* wo = GDALWarpAppOptionsNew(argv.data(), nullptr);
+  if (!wo) return make_error(ErrorCode::internal, in.path.string() + ": bad warp options");
   int usage_error = 0;
   GDALDatasetH from = in.selected ? in.selected : in.src;
-  in.warped = wo ? GDALWarp("", nullptr, 1, &from, wo, &usage_error) : nullptr;
-  if (wo) GDALWarpAppOptionsFree(wo);
-  if (!in.warped)
+  if (std::isnan(in.seam_column)) {
+    in.warped = GDALWarp("", nullptr, 1, &from, wo, &usage_error);
+  } else {
+    // Each side with a margin past the seam of the kernel's reach (4 source pixels, times the
+    // texel's size in pixels when the level is coarser): the texels by the seam see what
+    // gdalwarp's see.
+    const double texel = level_cell_size(o.tiling, o.tile_size, z) / in.pixel_size;
+    const int pad = 4 + int(std::ceil(4 * std::max(1.0, texel)));
+    const int w = GDALGetRasterXSize(from), h = GDALGetRasterYSize(from);
+    const int cut = int(std::floor(in.seam_column));
+    const std::pair<int, int> sides[2] = {{0, std::min(w, cut + 1 + pad)},
+                                          {std::max(0, cut - pad), w}};
+    for (const auto& [c0, c1] : sides) {
+      in.sides.push_back(source_columns(from, c0, c1, h));
+      GDALDatasetH side = in.sides.back();
+      in.warped_sides.push_back(side ? GDALWarp("", nullptr, 1, &side, wo, &usage_error) : nullptr);
+      if (!in.warped_sides.back()) break;
+    }
+  }
+  GDALWarpAppOptionsFree(wo);
+  GDALDatasetH any = in.warped_sides.empty() ? in.warped : in.warped_sides.back();
+  if (!any)
     return make_error(ErrorCode::corrupt, in.path.string() + ": cannot warp: " + errors.text());
-  in.bands = GDALGetRasterCount(in.warped);
-  if (in.bands != int(in.data_bands.size()) + 1)
+  in.bands = GDALGetRasterCount(any);
+  if (in.bands != int(in.data_bands.size()) + 1 ||
+      (!in.warped_sides.empty() && GDALGetRasterCount(in.warped_sides[0]) != in.bands))
     return make_error(ErrorCode::internal, in.path.string() + ": the warped VRT has " +
                                                std::to_string(in.bands) + " bands");
   return {};
@@ -621,21 +738,15 @@ Result<std::unique_ptr<GdalSource>> GdalSource::open(
   s->options_.max_open = std::max<std::size_t>(1, options.max_open);
   const SrsPtr lonlat = lonlat_srs();
   double finest = INFINITY;
-  const LonLatBounds extent = scheme_extent(options.tiling);
   bool first = true;
   for (const auto& path : inputs) {
     auto in = std::make_unique<Input>();
     in->path = path;
     if (Status st = probe_input(*in, options, lonlat); !st) return st.error();
     if (options.on_probe) options.on_probe(s->inputs_.size() + 1, inputs.size());
-    LonLatBounds& b = in->bounds;
-    if (b.west > b.east)
-      return make_error(ErrorCode::unsupported, path.string() + ": crosses the antimeridian (" +
-                                                    fmt(b.west) + " .. " + fmt(b.east) +
-                                                    " degrees); not supported: split it in two");
-    b = {std::max(b.west, extent.west), std::max(b.south, extent.south),
-         std::min(b.east, extent.east), std::min(b.north, extent.north)};
-    if (!(b.west < b.east && b.south < b.north))
+    // Its pieces (probe_input): two for one crossing the antimeridian, placed side by side.
+    const LonLatBounds& b = in->bounds;
+    if (in->pieces.empty())
       return make_error(ErrorCode::invalid_argument, path.string() + ": lies outside " +
                                                          std::string(tiling_name(options.tiling)) +
                                                          "'s extent");
@@ -650,6 +761,9 @@ Result<std::unique_ptr<GdalSource>> GdalSource::open(
   if (options.bounds) s->bounds_ = *options.bounds;
   if (options.value_ranges.empty() && !options.auto_range && !options.ranges)
     s->warnings_ = narrow_values_warnings(s->inputs_);
+  for (const auto& in : s->inputs_)
+    if (!in->warning.empty() && s->warnings_.size() < kMaxWarnings)
+      s->warnings_.push_back(in->warning);
   auto level = pick_level(options, finest);
   if (!level) return level.error();
   s->max_level_ = *level;
@@ -675,7 +789,9 @@ Result<std::unique_ptr<GdalSource>> GdalSource::open(
   }
   std::size_t described = 0;
   for (auto& in : s->inputs_) {
-    in->texels = footprint_texels(options.tiling, *g, in->bounds);
+    in->texels.clear();
+    for (const LonLatBounds& piece : in->pieces)
+      in->texels.push_back(footprint_texels(options.tiling, *g, piece));
     // Warped once here, so that an input GDAL cannot warp is refused before the build starts.
     if (Status st = s->acquire(*in); !st) return st.error();
     if (++described > 3) continue;
@@ -704,7 +820,7 @@ Status GdalSource::choose_auto_ranges() {
     for (std::size_t k = 0; k < in->observed.size(); ++k)
       ranges_[k] = {std::min(ranges_[k].first, in->observed[k].first),
                     std::max(ranges_[k].second, in->observed[k].second)};
-  ErrorCapture errors;
+  GdalErrors errors;
   for (std::size_t k = 0; k < nb; ++k) {
     auto [gmin, gmax] = ranges_[k];
     if (gmin > gmax)
@@ -757,7 +873,7 @@ Status GdalSource::choose_auto_ranges() {
 
 Status GdalSource::acquire(Input& in) {
   in.last_use = ++tick_;
-  if (in.warped) return {};
+  if (in.warped || !in.warped_sides.empty()) return {};
   if (open_.size() >= options_.max_open) {
     auto lru = std::min_element(open_.begin(), open_.end(), [](const Input* a, const Input* b) {
       return a->last_use < b->last_use;
@@ -807,9 +923,11 @@ std::vector<GdalSource*> GdalSource::split(unsigned n) {
       copy->tagged_alpha = in->tagged_alpha;
       copy->integer = in->integer;
       copy->pixels = in->pixels;
+      copy->pieces = in->pieces;
       copy->bounds = in->bounds;
       copy->texels = in->texels;
       copy->pixel_size = in->pixel_size;
+      copy->seam_column = in->seam_column;
       c->inputs_.push_back(std::move(copy));
     }
     readers.push_back(c.get());
@@ -820,61 +938,67 @@ std::vector<GdalSource*> GdalSource::split(unsigned n) {
 
 Status GdalSource::read_window(std::uint64_t x0, std::uint64_t x1, std::uint64_t y,
                                std::uint32_t count, std::uint8_t* out) {
+  std::memset(out, 0, std::size_t(x1 - x0) * count * 4);
+  for (auto& in : inputs_)
+    for (std::size_t k = 0; k < in->texels.size(); ++k)
+      if (Status st = read_piece(*in, k, x0, x1, y, count, out); !st) return st;
+  return {};
+}
+
+Status GdalSource::read_piece(Input& in, std::size_t piece, std::uint64_t x0, std::uint64_t x1,
+                              std::uint64_t y, std::uint32_t count, std::uint8_t* out) {
+  const TexelRect& r = in.texels[piece];
+  const std::uint64_t y0 = std::max(y, r.y0), y1 = std::min(y + count, r.y1);
+  const std::uint64_t c0 = std::max(x0, r.x0), c1 = std::min(x1, r.x1);
+  if (y0 >= y1 || c0 >= c1) return {};
   const std::uint64_t out_w = x1 - x0;
-  std::memset(out, 0, std::size_t(out_w) * count * 4);
-  ErrorCapture errors;
+  GdalErrors errors;
   double lo[3] = {0, 0, 0}, scale[3] = {1, 1, 1};
   for (std::size_t k = 0; k < 3 && !ranges_.empty(); ++k) {
-    const auto& r = ranges_[std::min(k, ranges_.size() - 1)];
-    lo[k] = r.first;
-    scale[k] = 255.0 / (r.second - r.first);
+    const auto& range = ranges_[std::min(k, ranges_.size() - 1)];
+    lo[k] = range.first;
+    scale[k] = 255.0 / (range.second - range.first);
   }
-  for (auto& in : inputs_) {
-    const TexelRect& r = in->texels;
-    const std::uint64_t y0 = std::max(y, r.y0), y1 = std::min(y + count, r.y1);
-    const std::uint64_t c0 = std::max(x0, r.x0), c1 = std::min(x1, r.x1);
-    if (y0 >= y1 || c0 >= c1) continue;
-    if (Status st = acquire(*in); !st) return st;
-    const std::uint64_t w = c1 - c0, h = y1 - y0;
-    const int nb = in->bands;
-    // GDAL's line spacing is an int: a window row of floats must fit in one.
-    const std::uint64_t line_bytes = w * std::uint64_t(nb) * 4;
-    if (line_bytes > std::uint64_t(std::numeric_limits<int>::max()))
-      return make_error(ErrorCode::too_large, in->path.string() + ": a window row of " +
-                                                  std::to_string(w) + " texels is beyond GDAL's " +
-                                                  "int line spacing");
-    scratch_.resize(std::size_t(w) * h * std::size_t(nb));
-    CPLErrorReset();
-    const CPLErr err =
-        GDALDatasetRasterIO(in->warped, GF_Read, int(c0), int(y0), int(w), int(h), scratch_.data(),
-                            int(w), int(h), GDT_Float32, nb, nullptr, nb * 4, int(line_bytes), 4);
-    if (err != CE_None || errors.failed())
-      return make_error(ErrorCode::corrupt, in->path.string() + ": reading grid rows " +
-                                                std::to_string(y0) + ".." + std::to_string(y1) +
-                                                ": " + errors.text());
-    for (std::uint64_t row = 0; row < h; ++row) {
-      const float* src = scratch_.data() + row * w * nb;
-      std::uint8_t* dst = out + ((y0 - y + row) * out_w + (c0 - x0)) * 4;
-      for (std::uint64_t x = 0; x < w; ++x, src += nb, dst += 4) {
-        const double a = std::clamp(double(src[nb - 1]), 0.0, 255.0) / 255.0;
-        if (a <= 0) continue;
-        double c[3];
-        for (int k = 0; k < 3; ++k) {
-          const int from = nb == 2 ? 0 : k;  // grey: its one band and its range
-          const double v = (src[from] - lo[from]) * scale[from];
-          c[k] = std::clamp(v, 0.0, 255.0);
-        }
-        if (a >= 1 || dst[3] == 0) {  // nothing under it shows: no blending (most texels)
-          for (int k = 0; k < 3; ++k) dst[k] = std::uint8_t(c[k] + 0.5);
-          dst[3] = std::uint8_t(a * 255 + 0.5);
-          continue;
-        }
-        // Over: later inputs win where they are opaque.
-        const double da = dst[3] / 255.0, oa = a + da * (1 - a);
-        for (int k = 0; k < 3; ++k)
-          dst[k] = std::uint8_t(std::lround((c[k] * a + dst[k] * da * (1 - a)) / oa));
-        dst[3] = std::uint8_t(std::lround(oa * 255));
+  if (Status st = acquire(in); !st) return st;
+  const std::uint64_t w = c1 - c0, h = y1 - y0;
+  const int nb = in.bands;
+  // GDAL's line spacing is an int: a window row of floats must fit in one.
+  const std::uint64_t line_bytes = w * std::uint64_t(nb) * 4;
+  if (line_bytes > std::uint64_t(std::numeric_limits<int>::max()))
+    return make_error(ErrorCode::too_large, in.path.string() + ": a window row of " +
+                                                std::to_string(w) + " texels is beyond GDAL's " +
+                                                "int line spacing");
+  scratch_.resize(std::size_t(w) * h * std::size_t(nb));
+  CPLErrorReset();
+  const CPLErr err = GDALDatasetRasterIO(in.warped_piece(piece), GF_Read, int(c0), int(y0), int(w),
+                                         int(h), scratch_.data(), int(w), int(h), GDT_Float32, nb,
+                                         nullptr, nb * 4, int(line_bytes), 4);
+  if (err != CE_None || errors.failed())
+    return make_error(ErrorCode::corrupt, in.path.string() + ": reading grid rows " +
+                                              std::to_string(y0) + ".." + std::to_string(y1) +
+                                              ": " + errors.text());
+  for (std::uint64_t row = 0; row < h; ++row) {
+    const float* src = scratch_.data() + row * w * nb;
+    std::uint8_t* dst = out + ((y0 - y + row) * out_w + (c0 - x0)) * 4;
+    for (std::uint64_t x = 0; x < w; ++x, src += nb, dst += 4) {
+      const double a = std::clamp(double(src[nb - 1]), 0.0, 255.0) / 255.0;
+      if (a <= 0) continue;
+      double c[3];
+      for (int k = 0; k < 3; ++k) {
+        const int from = nb == 2 ? 0 : k;  // grey: its one band and its range
+        const double v = (src[from] - lo[from]) * scale[from];
+        c[k] = std::clamp(v, 0.0, 255.0);
       }
+      if (a >= 1 || dst[3] == 0) {  // nothing under it shows: no blending (most texels)
+        for (int k = 0; k < 3; ++k) dst[k] = std::uint8_t(c[k] + 0.5);
+        dst[3] = std::uint8_t(a * 255 + 0.5);
+        continue;
+      }
+      // Over: later inputs win where they are opaque.
+      const double da = dst[3] / 255.0, oa = a + da * (1 - a);
+      for (int k = 0; k < 3; ++k)
+        dst[k] = std::uint8_t(std::lround((c[k] * a + dst[k] * da * (1 - a)) / oa));
+      dst[3] = std::uint8_t(std::lround(oa * 255));
     }
   }
   return {};

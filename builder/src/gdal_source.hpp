@@ -76,6 +76,10 @@ class GdalSource {
   // outside the scheme), too_large (a grid wider than kMaxGeoreferencedWidth), corrupt (GDAL cannot
   // open or warp it).
   // Without a range, an input whose values span under 1/16 of 0..255 gets a warning (warnings()).
+  // The level (without options.max_level) follows each input's resolution where it is measured
+  // (its middle, or the equator when it spans it; gdal_source.cpp input_pixel_size), and an input
+  // crossing the antimeridian (west > east in degrees, longitudes past 180, a 0..360 grid) is
+  // placed in two pieces, one each side of it, both warped by GDAL as gdalwarp warps it.
   static Result<std::unique_ptr<GdalSource>> open(const std::vector<std::filesystem::path>& inputs,
                                                   const GdalSourceOptions& options);
   // Virtual, as the members below that the build calls: the build reaches this class through
@@ -85,7 +89,8 @@ class GdalSource {
   std::uint64_t width() const { return width_; }
   std::uint64_t height() const { return height_; }
   int max_level() const { return max_level_; }
-  // The union of the inputs' extents in degrees, clipped to the scheme's extent.
+  // The union of the inputs' extents in degrees, clipped to the scheme's extent; west < east
+  // always: an input crossing the antimeridian (placed in two pieces) makes it every longitude.
   const LonLatBounds& bounds() const { return bounds_; }
   std::string description() const { return description_; }
   // What the build should tell its user: inputs whose values use under 1/16 of 0..255, each named
@@ -94,7 +99,8 @@ class GdalSource {
   static constexpr std::size_t kMaxWarnings = 10;
   // The value mapping in use, one MIN,MAX per data band (1 or 3), or empty (values as they are).
   const std::vector<std::pair<double, double>>& value_ranges() const { return ranges_; }
-  // Each input's extent in degrees, clipped to the scheme's extent (the inputs' order).
+  // Each input's extent in degrees, clipped to the scheme's extent (the inputs' order); every
+  // longitude, its latitudes, for one crossing the antimeridian (what a plan records of it).
   virtual std::vector<LonLatBounds> input_bounds() const;
   // The most inputs that were open at once so far.
   std::size_t peak_open() const { return peak_open_; }
@@ -117,6 +123,9 @@ class GdalSource {
   // input first when max_open are open.
   Status acquire(Input& in);
   Status choose_auto_ranges();
+  // read_window's part of one piece of an input (its grid texels): composited over `out`.
+  Status read_piece(Input& in, std::size_t piece, std::uint64_t x0, std::uint64_t x1,
+                    std::uint64_t y, std::uint32_t count, std::uint8_t* out);
 
   GdalSourceOptions options_;
   std::vector<std::unique_ptr<Input>> inputs_;

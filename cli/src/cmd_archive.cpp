@@ -1,11 +1,15 @@
-// vts info / verify: inspect an archive.
+// vts info / verify: inspect an archive: ours, or a stock raster PMTiles (PNG/JPEG/WebP tiles
+// without our metadata, such as `vts export` writes), described and checked as the client reads it.
 #include <cstdio>
 #include <nlohmann/json.hpp>
+#include <optional>
 
 #include "commands.hpp"
 #include "progress.hpp"
+#include "stock_archive.hpp"
 #include "vts/archive/inspect.hpp"
 #include "vts/base/file_io.hpp"
+#include "vts/client/image_tiles.hpp"
 
 namespace vts::cli {
 
@@ -94,6 +98,17 @@ void print_info_text(const std::string& path, const archive::ArchiveSummary& s) 
 int run_info(const std::string& path, bool json) {
   auto reader = open_archive(path);
   if (!reader) return report_error(reader.error());
+  if (auto stock = stock_archive(**reader, path)) {
+    if (!*stock) return report_error(stock->error());
+    auto summary = archive::summarize_archive(**reader, (*stock)->info);
+    if (!summary) {
+      Error e = summary.error();
+      e.message = "'" + path + "': " + e.message;
+      return report_error(e);
+    }
+    print_stock_info(path, **stock, *summary, json);
+    return 0;
+  }
   auto summary = archive::summarize_archive(**reader);
   if (!summary) {
     Error e = summary.error();
@@ -110,9 +125,24 @@ int run_info(const std::string& path, bool json) {
 int run_verify(const std::string& path, bool json, unsigned threads) {
   auto reader = open_archive(path);
   if (!reader) return report_error(reader.error());
+  auto stock = stock_archive(**reader, path);
+  if (stock && !*stock) return report_error(stock->error());
   ProgressBar bar("verify", "payloads", !json);
-  auto report = archive::verify_archive(
-      **reader, threads, [&](std::uint64_t done, std::uint64_t total) { bar.update(done, total); });
+  const auto progress = [&](std::uint64_t done, std::uint64_t total) { bar.update(done, total); };
+  Result<archive::VerifyReport> report = archive::VerifyReport{};
+  if (stock) {
+    // Every tile must decode as the image type the header declares, at the tile size: what the
+    // client's decoders accept (client::decode_image_tile).
+    const client::SourceInfo& si = **stock;
+    const archive::PayloadCheck decodes = [&si](std::span<const std::uint8_t> payload) -> Status {
+      auto img = client::decode_image_tile(payload, si.image_format, si.image_tile_size);
+      if (!img) return img.error();
+      return {};
+    };
+    report = archive::verify_archive(**reader, si.info, decodes, threads, progress);
+  } else {
+    report = archive::verify_archive(**reader, threads, progress);
+  }
   bar.finish();
   if (!report) {
     Error e = report.error();
@@ -122,6 +152,7 @@ int run_verify(const std::string& path, bool json, unsigned threads) {
   const archive::VerifyReport& r = *report;
   if (json) {
     nlohmann::json j{{"path", path},
+                     {"kind", stock ? "stock-raster" : "vtstream"},
                      {"ok", r.ok()},
                      {"tiles_checked", r.tiles_checked},
                      {"payloads_checked", r.payloads_checked},
@@ -141,7 +172,12 @@ int run_verify(const std::string& path, bool json, unsigned threads) {
                  r.first_bad ? r.first_bad->to_string().c_str() : "?", r.first_error.c_str());
     return exit_code(ErrorCode::corrupt);
   }
-  if (!json)
+  if (!json && stock)
+    std::printf("%s: ok, %llu tiles (%llu distinct payloads) decode as %u px %s images; %s\n",
+                path.c_str(), (unsigned long long)r.tiles_checked,
+                (unsigned long long)r.payloads_checked, (*stock)->image_tile_size,
+                (*stock)->image_format.c_str(), stock_kind(**stock).c_str());
+  else if (!json)
     std::printf("%s: ok, %llu tiles (%llu distinct payloads) verified\n", path.c_str(),
                 (unsigned long long)r.tiles_checked, (unsigned long long)r.payloads_checked);
   return 0;
@@ -152,7 +188,9 @@ int run_verify(const std::string& path, bool json, unsigned threads) {
 Runner add_info(CLI::App& app) {
   auto path = std::make_shared<std::string>();
   auto json = std::make_shared<bool>(false);
-  CLI::App* c = app.add_subcommand("info", "Describe an archive: geometry, tiles per level, bytes");
+  CLI::App* c = app.add_subcommand(
+      "info",
+      "Describe an archive (ours or a stock raster PMTiles): geometry, tiles per level, bytes");
   c->add_option("archive", *path, "Archive (.pmtiles)")->required();
   c->add_flag("--json", *json, "Print as JSON");
   return [path, json] { return run_info(*path, *json); };
@@ -162,8 +200,9 @@ Runner add_verify(CLI::App& app) {
   auto path = std::make_shared<std::string>();
   auto json = std::make_shared<bool>(false);
   auto threads = std::make_shared<unsigned>(0);
-  CLI::App* c = app.add_subcommand(
-      "verify", "Check every directory and decode every tile (checksums); exit 0 only if all good");
+  CLI::App* c = app.add_subcommand("verify",
+                                   "Check every directory and decode every tile (checksums; a "
+                                   "stock raster archive's images); exit 0 only if all good");
   c->add_option("archive", *path, "Archive (.pmtiles)")->required();
   c->add_option("--threads", *threads, "Decoder threads (0 = all cores)")
       ->check(CLI::Range(0u, kMaxThreads));

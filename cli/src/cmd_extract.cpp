@@ -70,7 +70,10 @@ Runner add_extract_command(CLI::App& app, std::function<int(const ExtractArgs&)>
   c->add_option("archive", a->archive, "Archive (.pmtiles)")->required();
   c->add_option("tile", a->tile, "Tile as Z/X/Y");
   c->add_option("--level", a->level, "Extract the whole level Z");
-  c->add_option("-o,--output", a->output, "Output image; format from the extension")->required();
+  c->add_option("-o,--output", a->output,
+                "Output image; format from the extension. From a georeferenced archive a .tif "
+                "gets GeoTIFF tags, other formats (a level, or a tile not as PNG) an .aux.xml")
+      ->required();
   c->add_flag("--with-border", a->with_border, "Include the tile's border texels");
   c->add_option("--channels", a->channels, "4 = RGBA, 3 = RGB")
       ->check(CLI::IsMember({3, 4}))

@@ -44,20 +44,11 @@ struct LoadArgs {
 std::function<void(const loadtest::LoadProgress&)> progress_printer(const LoadArgs& a, bool bar) {
   if (a.quiet) return {};
   return [bar, json = a.json, duration = a.duration](const loadtest::LoadProgress& p) {
-    char line[256];
-    std::snprintf(
-        line, sizeof line,
-        "[%5.0fs/%.0fs] %llu requests (%.0f/s), %llu errors, %llu in flight, p99 %s, "
-        "%llu moves at full resolution%s",
-        p.elapsed_s, duration, static_cast<unsigned long long>(p.requests), p.requests_per_s,
-        static_cast<unsigned long long>(p.errors), static_cast<unsigned long long>(p.in_flight),
-        loadtest::duration_text(double(p.p99_ns)).c_str(),
-        static_cast<unsigned long long>(p.moves_complete),
-        p.late_frames ? (", " + std::to_string(p.late_frames) + " late frames").c_str() : "");
+    const std::string line = loadtest::progress_text(p, duration);
     if (bar)
-      std::fprintf(stderr, "\r\033[K%s", line);
+      std::fprintf(stderr, "\r\033[K%s", line.c_str());
     else if (!json)
-      std::fprintf(stderr, "%s\n", line);
+      std::fprintf(stderr, "%s\n", line.c_str());
   };
 }
 
@@ -154,7 +145,7 @@ int run(LoadArgs& a) {
   result->report.target = a.url;
   const loadtest::LoadReport* base = baseline ? &*baseline : nullptr;
   if (!a.report.empty())
-    if (auto st = loadtest::write_html_report(result->report, a.report, base); !st)
+    if (auto st = write_gated_report(result->report, a.report, base, *gates); !st)
       return report_error(st.error());
   const int code = print_result(a, *result, *gates);
   return stop.load() ? 130 : code;

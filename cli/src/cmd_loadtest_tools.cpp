@@ -76,7 +76,7 @@ int run_merge(const MergeArgs& m) {
   merged->command_line = command_line();
   if (!m.title.empty()) merged->title = m.title;
   if (!m.report.empty())
-    if (auto st = loadtest::write_html_report(*merged, m.report); !st)
+    if (auto st = write_gated_report(*merged, m.report, nullptr, *gates); !st)
       return report_error(st.error());
   if (m.json) {
     nlohmann::json j = loadtest::to_json(*merged);

@@ -185,8 +185,8 @@ Runner add_view(CLI::App& app) {
   CLI::App* c = app.add_subcommand(
       "view", "View a tileset through the sparse virtual texture (window, or --headless)");
   c->add_option("source", a->source,
-                "Tileset: a local archive, http://host:port/NAME (vts serve or vts cache serve), "
-                "a TileJSON URL, a {z}/{x}/{y} image template or a remote .pmtiles URL")
+                "Tileset: a local archive (ours or stock raster PMTiles), http://host:port/NAME "
+                "(vts serve or cache serve), a TileJSON, a {z}/{x}/{y} template or a .pmtiles URL")
       ->required();
   add_image_target_options(c, a->image);
   c->add_option("--cache-dir", a->cache_dir, "Disk cache folder (as vts warm fills it)");

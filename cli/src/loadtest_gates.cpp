@@ -34,6 +34,13 @@ Result<std::vector<loadtest::Gate>> parse_gates(const GateArgs& g) {
   return gates;
 }
 
+Status write_gated_report(const loadtest::LoadReport& report, const std::string& dir,
+                          const loadtest::LoadReport* baseline,
+                          const std::vector<loadtest::Gate>& gates) {
+  const auto verdict = loadtest::evaluate_gates(report, gates);
+  return loadtest::write_html_report(report, dir, baseline, &verdict);
+}
+
 int check_gates(const loadtest::LoadReport& report, const std::vector<loadtest::Gate>& gates,
                 nlohmann::json* json) {
   const auto results = loadtest::evaluate_gates(report, gates);

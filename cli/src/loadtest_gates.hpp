@@ -27,6 +27,10 @@ Result<std::vector<loadtest::Gate>> parse_gates(const GateArgs& g);
 // reason to stderr when one failed. Returns 0, or 1 when a gate failed.
 int check_gates(const loadtest::LoadReport& report, const std::vector<loadtest::Gate>& gates,
                 nlohmann::json* json);
+// --report DIR: the HTML report with the gates' verdict at its top (write_html_report).
+Status write_gated_report(const loadtest::LoadReport& report, const std::string& dir,
+                          const loadtest::LoadReport* baseline,
+                          const std::vector<loadtest::Gate>& gates);
 
 struct GeneratorArgs {
   std::uint32_t generators = 1;

@@ -7,6 +7,7 @@
 
 #include "vts/archive/pmtiles.hpp"
 #include "vts/base/result.hpp"
+#include "vts/client/image_tiles.hpp"
 #include "vts/client/source.hpp"
 
 namespace vts::client {
@@ -20,13 +21,6 @@ Result<ImageLayout> read_image_tilejson(std::span<const std::uint8_t> body, cons
 
 // The image format a URL template's path suffix names: "png", "jpeg", "webp" or "image".
 std::string format_from_suffix(const std::string& url_template);
-
-// A stock PMTiles archive of standard images (tile type png, jpeg or webp; no "vtstream"
-// metadata) as an image tileset: zoom range and bounds from the header (options override them),
-// tile size from the metadata's "tileSize" (default 256). unsupported for another tile type.
-Result<SourceInfo> stock_archive_info(const archive::Header& header,
-                                      const std::string& metadata_json, std::string key,
-                                      const SourceOptions& options);
 
 // The validator of a stock archive's tile, which has no tile header: the archive version and the
 // tile's place in it ('"' + version + '-' + offset + '-' + length + '"').

@@ -3,11 +3,15 @@
 // in place since it was opened answers with ErrorCode::changed, never with mixed bytes). The
 // answers mirror what `vts serve` would send for the same archive (docs/PROTOCOL.md §3): the same
 // bytes, the same ETag, absent where the server answers 204 or 404, an error where it answers 500.
+// A stock raster archive (PNG/JPEG/WebP tiles, no "vtstream" metadata, e.g. `vts export`'s) opens
+// as an image tileset, as the remote-archive source opens it: its tiles have no tile header, so
+// their ETag is stock_tile_etag() of the archive version and the tile's place in the file.
 
 #include <atomic>
 #include <system_error>
 #include <utility>
 
+#include "image_layout.hpp"
 #include "vts/archive/inspect.hpp"
 #include "vts/archive/pmtiles.hpp"
 #include "vts/client/source.hpp"
@@ -46,6 +50,10 @@ class LocalSource final : public TileSource {
       t.kind = SourceTile::Kind::absent;
       return t;
     }
+    if (!info_.image_format.empty() && !image_tile_exists(info_, id)) {
+      t.kind = SourceTile::Kind::absent;  // below min_zoom or outside the bounds
+      return t;
+    }
     Result<std::vector<std::uint8_t>> payload = reader_->get(id);
     if (!payload) {
       if (payload.error().code == ErrorCode::not_found) {
@@ -56,7 +64,7 @@ class LocalSource final : public TileSource {
                            path_ + ": tile " + id.to_string() + ": " + payload.error().message);
       return t;
     }
-    Result<std::string> etag = tile_etag(*payload);
+    Result<std::string> etag = info_.image_format.empty() ? tile_etag(*payload) : stock_etag(id);
     if (!etag) {
       t.error = make_error(etag.error().code, path_ + ": tile " + id.to_string() +
                                                   " is damaged: " + etag.error().message);
@@ -72,6 +80,14 @@ class LocalSource final : public TileSource {
     return t;
   }
 
+  // A stock archive's tile: the validator the remote-archive source computes for the same tile.
+  Result<std::string> stock_etag(TileId id) const {
+    Result<archive::Entry> e = reader_->find_entry(archive::zxy_to_tile_id(id.z, id.x, id.y));
+    if (!e) return std::move(e).error();
+    return stock_tile_etag(info_.version, reader_->header().tile_data_offset + e->offset,
+                           e->length);
+  }
+
   std::shared_ptr<archive::Reader> reader_;
   SourceInfo info_;
   std::string path_;
@@ -79,23 +95,34 @@ class LocalSource final : public TileSource {
   std::atomic<Handle> next_handle_{0};
 };
 
+// Our archive, or else a stock raster one (as open_remote_archive() decides).
 Result<std::unique_ptr<TileSource>> reader_source(std::shared_ptr<archive::Reader> reader,
                                                   std::string key, const std::string& name,
-                                                  bool local) {
-  Result<TilesetInfo> info = archive::archive_tileset(reader->header(), reader->metadata_json());
-  if (!info) return make_error(info.error().code, name + ": " + info.error().message);
+                                                  bool local, const SourceOptions& options) {
+  const archive::Header& h = reader->header();
+  Result<TilesetInfo> info = archive::archive_tileset(h, reader->metadata_json());
+  const bool stock =
+      !info && info.error().code == ErrorCode::unsupported && is_stock_image_archive(h);
+  if (!info && !stock) return make_error(info.error().code, name + ": " + info.error().message);
   SourceInfo si;
-  si.info = std::move(*info);
-  si.key = std::move(key);
+  if (stock) {
+    auto image = stock_archive_info(h, reader->metadata_json(), key, options);
+    if (!image) return std::move(image).error();
+    si = std::move(*image);
+  } else {
+    si.info = std::move(*info);
+    si.key = std::move(key);
+    si.description_json = reader->metadata_json();
+  }
   si.version = reader->version();  // as `vts serve` computes it
-  si.description_json = reader->metadata_json();
   return std::unique_ptr<TileSource>(
       std::make_unique<LocalSource>(std::move(reader), std::move(si), name, local));
 }
 
 }  // namespace
 
-Result<std::unique_ptr<TileSource>> open_local_archive(const std::filesystem::path& path) {
+Result<std::unique_ptr<TileSource>> open_local_archive(const std::filesystem::path& path,
+                                                       const SourceOptions& options) {
   if (path.empty()) return make_error(ErrorCode::invalid_argument, "empty archive path");
   std::error_code ec;
   std::filesystem::path absolute = std::filesystem::absolute(path, ec);
@@ -108,7 +135,8 @@ Result<std::unique_ptr<TileSource>> open_local_archive(const std::filesystem::pa
   // Reader errors already name the path.
   Result<std::shared_ptr<archive::Reader>> reader = archive::Reader::open(absolute);
   if (!reader) return std::move(reader).error();
-  return reader_source(std::move(*reader), "file:" + absolute.string(), absolute.string(), true);
+  return reader_source(std::move(*reader), "file:" + absolute.string(), absolute.string(), true,
+                       options);
 }
 
 Result<std::unique_ptr<TileSource>> open_store_archive(const std::string& location) {
@@ -117,7 +145,8 @@ Result<std::unique_ptr<TileSource>> open_store_archive(const std::string& locati
   Result<std::shared_ptr<archive::Reader>> reader = store::open_reader(location, *options);
   if (!reader) return std::move(reader).error();
   // The key names the object without its query (a pre-signed URL's signature expires).
-  return reader_source(std::move(*reader), location.substr(0, location.find('?')), location, false);
+  return reader_source(std::move(*reader), location.substr(0, location.find('?')), location, false,
+                       {});
 }
 
 }  // namespace vts::client

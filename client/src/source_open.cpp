@@ -155,7 +155,7 @@ Result<std::unique_ptr<TileSource>> open_source(std::string_view location, Sourc
                         "malformed file URL " + std::string(loc) +
                             " (expected file:///absolute/path, percent-encoded)");
     }
-    return open_local_archive(*path);
+    return open_local_archive(*path, options);
   }
   // A scheme we do not speak ("s3://", "ftp://") is more likely a mistake than a local file of
   // that name.
@@ -173,7 +173,7 @@ Result<std::unique_ptr<TileSource>> open_source(std::string_view location, Sourc
                             "file or a set)");
     }
   }
-  return open_local_archive(std::filesystem::path(std::string(loc)));
+  return open_local_archive(std::filesystem::path(std::string(loc)), options);
 }
 
 std::unique_ptr<TileSource> offline_source(SourceInfo info) {

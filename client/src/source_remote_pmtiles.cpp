@@ -472,12 +472,6 @@ Error ignores_range(const std::string& url, std::int64_t size, std::uint64_t max
           "`vts serve`, an object store) or raise --max-download");
 }
 
-// Raster tile types a stock archive may hold (image tilesets, image_layout.hpp).
-bool is_stock_image(const archive::Header& h) {
-  return h.tile_type == archive::TileType::png || h.tile_type == archive::TileType::jpeg ||
-         h.tile_type == archive::TileType::webp;
-}
-
 Error in_archive(const std::string& url, Error e) {
   e.message = url + ": " + e.message;
   return e;
@@ -569,7 +563,8 @@ Result<std::unique_ptr<TileSource>> open_remote_archive(std::string_view url_vie
   std::string metadata_json(decoded_metadata->begin(), decoded_metadata->end());
   Result<TilesetInfo> info = archive::archive_tileset(h, metadata_json);
   // A stock archive of standard images (no "vtstream" metadata): an image tileset.
-  const bool stock = !info && info.error().code == ErrorCode::unsupported && is_stock_image(h);
+  const bool stock =
+      !info && info.error().code == ErrorCode::unsupported && is_stock_image_archive(h);
   if (!info && !stock) return in_archive(url, std::move(info).error());
 
   Opened opened;

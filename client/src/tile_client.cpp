@@ -9,7 +9,7 @@
 #include <set>
 
 #include "vts/base/worker_pool.hpp"
-#include "vts/imaging/web_image.hpp"
+#include "vts/client/image_tiles.hpp"
 
 namespace vts::client {
 
@@ -202,16 +202,11 @@ class TileClient::Impl {
   }
 
   // The tileset's size and codec bound the decode (the cache refused other tiles already). An
-  // image tileset's PNG/JPEG/WebP tiles must decode to its stored size (T x T, no border).
+  // image tileset's PNG/JPEG/WebP tiles must decode to its stored size (T x T, no border); any of
+  // the three is taken whatever the tileset declares, as web maps do (`vts verify` is strict).
   Result<TileImage> decode(std::span<const std::uint8_t> payload) const {
     if (!image_) return decode_tile(payload, spec_);
-    auto image = imaging::decode_web_image(payload);
-    if (image && (image->width != spec_.width || image->height != spec_.height))
-      return make_error(ErrorCode::corrupt, "image tile of " + std::to_string(image->width) + "x" +
-                                                std::to_string(image->height) +
-                                                " pixels in a tileset of " +
-                                                std::to_string(spec_.width) + " px tiles");
-    return image;
+    return decode_image_tile(payload, "image", spec_.width);
   }
 
   std::unique_ptr<TileCache> cache_;

@@ -562,7 +562,30 @@ figure { margin: 0; }
 svg.plot { display: block; max-width: 100%; height: auto; background: #fff;
            font-family: system-ui, Helvetica, Arial, sans-serif; }
 footer { margin-top: 3em; color: #888; font-size: 0.85em; }
+section.gates { margin: 1em 0; padding: 0.4em 1em; border-left: 6px solid #2e7d32;
+                background: #edf7ee; }
+section.gates.failed { border-left-color: #c62828; background: #fdecea; }
+section.gates h2 { margin-top: 0.3em; border: none; }
+td.pass { color: #2e7d32; font-weight: bold; }
+td.fail { color: #c62828; font-weight: bold; }
 )";
+
+// The gates of the run (--slo, --max-error-rate) with their measured values: the first thing on
+// the page, red when one failed, so a CI artefact says at once which gate stopped the pipeline.
+std::string gates_html(const std::vector<GateResult>& gates) {
+  const bool failed =
+      std::any_of(gates.begin(), gates.end(), [](const GateResult& g) { return !g.held; });
+  std::string s = std::string("<section class=\"gates") + (failed ? " failed" : "") +
+                  "\" id=\"gates\">\n<h2>" + (failed ? "Gates: FAILED" : "Gates: passed") +
+                  "</h2>\n";
+  s += "<table class=\"gates\">\n<tr><th>gate</th><th>measured</th><th>result</th></tr>\n";
+  for (const GateResult& g : gates) {
+    s += "<tr><td>" + html_escape(g.gate.text) + "</td><td class=\"num\">" +
+         html_escape(g.gate.metric + " = " + format_metric(g.measured, g.gate.kind)) + "</td>" +
+         (g.held ? "<td class=\"pass\">pass</td>" : "<td class=\"fail\">FAIL</td>") + "</tr>\n";
+  }
+  return s + "</table>\n</section>\n";
+}
 
 }  // namespace
 
@@ -653,7 +676,8 @@ std::string summary_table(const LoadReport& r) {
   return out;
 }
 
-std::string html_report(const LoadReport& r, const LoadReport* baseline) {
+std::string html_report(const LoadReport& r, const LoadReport* baseline,
+                        const std::vector<GateResult>* gates) {
   const std::string title = r.title.empty() ? "vts loadtest report" : r.title;
   std::string s;
   s += "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n";
@@ -667,6 +691,7 @@ std::string html_report(const LoadReport& r, const LoadReport* baseline) {
   s += "<h1 id=\"title\">" + html_escape(title) + "</h1>\n";
   s += "<p class=\"sub\">vts loadtest report &middot; " + html_escape(format_time(r.start, false)) +
        "</p>\n";
+  if (gates && !gates->empty()) s += gates_html(*gates);
 
   s += "<table class=\"run\">\n";
   auto run_row = [&](const char* key, const std::string& value) {
@@ -708,8 +733,8 @@ std::string html_report(const LoadReport& r, const LoadReport* baseline) {
   return s;
 }
 
-Status write_html_report(const LoadReport& report, const fs::path& dir,
-                         const LoadReport* baseline) {
+Status write_html_report(const LoadReport& report, const fs::path& dir, const LoadReport* baseline,
+                         const std::vector<GateResult>* gates) {
   std::error_code ec;
   fs::create_directories(dir, ec);
   if (ec) {
@@ -719,7 +744,7 @@ Status write_html_report(const LoadReport& report, const fs::path& dir,
   if (!fs::is_directory(dir, ec)) {
     return make_error(ErrorCode::io, "the report folder " + dir.string() + " is not a folder");
   }
-  return write_file_atomically(dir / "index.html", html_report(report, baseline));
+  return write_file_atomically(dir / "index.html", html_report(report, baseline, gates));
 }
 
 }  // namespace vts::loadtest

@@ -3,6 +3,7 @@
 #include <time.h>
 
 #include <algorithm>
+#include <cstdio>
 #include <deque>
 #include <memory>
 #include <mutex>
@@ -713,6 +714,21 @@ Result<LoadTestResult> run_load_test(const LoadTestOptions& options, const Deman
   r.mode = options.rate > 0 ? LoopMode::open : LoopMode::closed;
   r.rate = options.rate;
   return result;
+}
+
+std::string progress_text(const LoadProgress& p, double duration_s) {
+  char line[256];
+  std::snprintf(
+      line, sizeof line,
+      "[%5.0fs/%.0fs] %llu requests (%.0f/s), %llu errors, %llu in flight, %s, "
+      "%llu moves at full resolution%s",
+      p.elapsed_s, duration_s, static_cast<unsigned long long>(p.requests), p.requests_per_s,
+      static_cast<unsigned long long>(p.errors), static_cast<unsigned long long>(p.in_flight),
+      p.requests_per_s > 0 ? ("p99 " + duration_text(double(p.p99_ns))).c_str()
+                           : "no responses this second",
+      static_cast<unsigned long long>(p.moves_complete),
+      p.late_frames ? (", " + std::to_string(p.late_frames) + " late frames").c_str() : "");
+  return line;
 }
 
 }  // namespace vts::loadtest

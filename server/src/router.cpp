@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <array>
 #include <cassert>
+#include <cctype>
 #include <charconv>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -145,10 +146,42 @@ std::string base_url(const HttpRequest& request, const RouterConfig& config) {
   return "http://" + std::string(request.host);
 }
 
-bool is_protected(const RouterConfig& config, std::string_view name) {
-  auto it = config.access.find(name);
-  return it != config.access.end() &&
-         (!it->second.bearer_tokens.empty() || !it->second.hmac_keys.empty());
+// The URLs each kind of client takes, for one index entry: our clients the native TileJSON (and
+// the archive), web maps the web TileJSON (always on a grid they draw right), GIS tools the WMTS
+// capabilities, the OGC API collection and an XYZ template in Web Mercator. `can_reproject`:
+// an archive tileset (vts serve); a cache daemon's provided tilesets have no Web Mercator route
+// for a WorldCRS84Quad grid and no OGC routes.
+ordered_json index_entry(const std::string& name, const std::string& version,
+                         const TilesetInfo& info, bool can_reproject, const RouterConfig& config,
+                         const std::string& base) {
+  const Geometry& g = info.geometry;
+  const Tiling native = info.georeference ? info.georeference->tiling : Tiling::none;
+  ordered_json e = {{"name", name},
+                    {"version", version},
+                    {"tilejson", base + "/" + name + ".json"},
+                    {"width", g.width()},
+                    {"height", g.height()},
+                    {"max_zoom", g.max_zoom()},
+                    {"codec", codec_name(info.codec)},
+                    {"protected", is_protected(config, name)},
+                    {"tiling", tiling_name(native)}};
+  const bool web_mercator = native != Tiling::world_crs84_quad || can_reproject;
+  if (web_mercator) {
+    e["web_map"] = {{"tilejson", base + "/" + name + ".json?format=webp"},
+                    {"tiling", native == Tiling::none ? "none" : "WebMercatorQuad"}};
+  }
+  if (native != Tiling::none && can_reproject) {
+    const std::string xyz = native == Tiling::world_crs84_quad ? "/WebMercatorQuad" : "";
+    ordered_json gis = ordered_json::object();
+    if (!is_protected(config, name)) {  // the OGC routes offer no protected tileset (§15)
+      gis["wmts"] = base + "/wmts/1.0.0/WMTSCapabilities.xml";
+      gis["ogcapi"] = base + "/ogcapi/collections/" + name;
+    }
+    gis["xyz"] = base + "/" + name + xyz + "/{z}/{x}/{y}.png";
+    gis["tilematrixset"] = base + "/" + name + "/tilematrixset.json";
+    e["gis"] = std::move(gis);
+  }
+  return e;
 }
 
 HttpResponse index_route(const TilesetRegistry& registry, const AsyncTileProvider* provider,
@@ -157,28 +190,14 @@ HttpResponse index_route(const TilesetRegistry& registry, const AsyncTileProvide
   if (provider != nullptr) {
     // Inserted first so that a registry tileset of the same name replaces it, as in lookups.
     for (const auto& t : provider->all()) {
-      if (!t) continue;
-      entries[t->name] = {{"name", t->name},
-                          {"version", t->version},
-                          {"tilejson", base + "/" + t->name + ".json"},
-                          {"width", t->info.geometry.width()},
-                          {"height", t->info.geometry.height()},
-                          {"max_zoom", t->info.geometry.max_zoom()},
-                          {"codec", codec_name(t->info.codec)},
-                          {"protected", is_protected(config, t->name)}};
+      if (t) entries[t->name] = index_entry(t->name, t->version, t->info, false, config, base);
     }
   }
   for (const auto& t : registry.all()) {
-    entries[t->name] = {{"name", t->name},
-                        {"version", t->version},
-                        {"tilejson", base + "/" + t->name + ".json"},
-                        {"width", t->info.geometry.width()},
-                        {"height", t->info.geometry.height()},
-                        {"max_zoom", t->info.geometry.max_zoom()},
-                        {"codec", codec_name(t->info.codec)},
-                        {"protected", is_protected(config, t->name)}};
+    ordered_json e = index_entry(t->name, t->version, t->info, true, config, base);
     // A set has no one archive to download (its archives stay where they are stored).
-    if (!t->is_set) entries[t->name]["archive"] = base + "/" + t->name + ".pmtiles";
+    if (!t->is_set) e["archive"] = base + "/" + t->name + ".pmtiles";
+    entries[t->name] = std::move(e);
   }
   ordered_json list = ordered_json::array();
   for (auto& [name, entry] : entries) list.push_back(std::move(entry));
@@ -580,21 +599,13 @@ HttpResponse serve_archive(const HttpRequest& request, std::shared_ptr<const Til
 HttpResponse provided_web(const HttpRequest& request, std::shared_ptr<const ProvidedTileset> t,
                           const Target& target, const Address& a, const RouterConfig& config,
                           const std::string& base, bool priv) {
-  const Tiling native = t->info.georeference ? t->info.georeference->tiling : Tiling::none;
   if (a.kind == Address::Kind::tilejson) {
     HttpResponse r = error(400, "tiling= needs format=png, webp or jpg");
     if (!target.query.format) {
       r.route = Route::tilejson;
       return r;
     }
-    if (target.query.tiling && native == Tiling::world_crs84_quad) {
-      r = error(400, "tileset \"" + t->name +
-                         "\" is served from a cache: its WebMercatorQuad tiles are served by vts "
-                         "serve only");
-      r.route = Route::tilejson;
-      return r;
-    }
-    return web_tilejson_route(t->name, t->info, t->version, false, target.query, base, priv);
+    return web_tilejson_route(t->name, t->info, t->version, false, target.query, base, priv, false);
   }
   if (a.web_mercator) {
     return tile_error(404, "tileset \"" + t->name +
@@ -631,6 +642,31 @@ HttpResponse provided_web(const HttpRequest& request, std::shared_ptr<const Prov
   return r;
 }
 
+// Whether a request asks for an image and not our tile codec: a browser's <img> or a web map's
+// tile fetch (Accept: image/webp,*/*, ...). Our clients send */* or name kTileType.
+bool wants_image(std::string_view accept) {
+  std::string lower(accept);
+  std::transform(lower.begin(), lower.end(), lower.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return lower.find("image/") != std::string::npos && lower.find(kTileType) == std::string::npos;
+}
+
+// 406 for a native tile asked as an image, naming the routes that answer images. Not cached
+// (error()'s no-store): the 200 a cache may hold for the same URL is right for every other client,
+// so native tiles need no Vary: Accept.
+HttpResponse image_not_acceptable(std::string_view name, std::span<const std::string_view> zxy) {
+  const std::string ts(name);
+  const std::string tile =
+      std::string(zxy[0]) + "/" + std::string(zxy[1]) + "/" + std::string(zxy[2]);
+  HttpResponse r = error(406, "/" + ts + "/" + tile + " is a vtstream tile (" + kTileType +
+                                  "), not an image; web maps take /" + ts +
+                                  ".json?format=webp (a TileJSON of images) or the images "
+                                  "themselves, /" +
+                                  ts + "/" + tile + ".png, .webp or .jpg");
+  r.route = Route::tile;
+  return r;
+}
+
 // Looks the address up (archives first, then the provider), checks credentials, answers.
 HttpResponse serve_address(const HttpRequest& request, const Target& target, const Address& a,
                            const TilesetRegistry& registry, const RouterConfig& config,
@@ -656,12 +692,15 @@ HttpResponse serve_address(const HttpRequest& request, const Target& target, con
       r.route = Route::tilejson;
       return r;
     }
-    return web_tilejson_route(t->name, t->info, t->version, true, target.query, base, priv);
+    return web_tilejson_route(t->name, t->info, t->version, true, target.query, base, priv, true);
   }
   if (web && a.web_mercator) {
     return web_mercator_tile_route(request, std::move(t), a.version, a.zxy(), *a.web, config, priv);
   }
   if (web) return web_tile_route(request, std::move(t), a.version, a.zxy(), *a.web, config, priv);
+  if (a.kind == Address::Kind::tile && wants_image(request.accept)) {
+    return image_not_acceptable(a.name, a.zxy());
+  }
   if (provided) return serve_provided(request, std::move(provided), a, config, base, priv);
   return serve_archive(request, std::move(t), a, config, base, priv);
 }
@@ -689,6 +728,8 @@ HttpResponse dispatch(const HttpRequest& request, const TilesetRegistry& registr
     add(r, "Vary", "Accept");  // a browser gets the HTML index (router_web_page.cpp)
     return r;
   }
+  if (auto wmts = wmts_route(request, *target, registry, config, base)) return std::move(*wmts);
+  if (auto ogc = ogcapi_route(request, *target, registry, config, base)) return std::move(*ogc);
   Address a;
   if (auto bad = parse_address(target->path, a)) return std::move(*bad);
   return serve_address(request, *target, a, registry, config, provider, base);

@@ -116,6 +116,12 @@ std::optional<HttpResponse> check_access(const TilesetAccess& access, const Http
   return check_signature(access, raw_path, query, config);
 }
 
+bool is_protected(const RouterConfig& config, std::string_view name) {
+  auto it = config.access.find(name);
+  return it != config.access.end() &&
+         (!it->second.bearer_tokens.empty() || !it->second.hmac_keys.empty());
+}
+
 }  // namespace router_detail
 
 std::string sign_path(std::string_view path, std::int64_t expires_unix, std::string_view key) {

@@ -61,7 +61,14 @@ struct Query {
   std::optional<std::string_view> sig;
   std::optional<std::string_view> format;  // /{ts}.json?format=png|webp|jpg
   std::optional<std::string_view> tiling;  // /{ts}.json?format=...&tiling=WebMercatorQuad
+  // WMTS KVP (router_wmts.cpp), matched case-insensitively, as sent (decode_query_value()).
+  // `format` above is WMTS's FORMAT too.
+  std::optional<std::string_view> service, request, version, layer, style, tile_matrix_set,
+      tile_matrix, tile_row, tile_col;
 };
+// A query value as sent, percent-decoded ('+' is a space); nullopt for a malformed escape or an
+// escaped control character.
+std::optional<std::string> decode_query_value(std::string_view v);
 
 // The request target, checked once for both listeners: origin-form, at most max_target_bytes
 // (else 414), a path whose escapes and characters are allowed and a query without controls (else
@@ -96,6 +103,9 @@ struct RangeDecision {
 RangeDecision decide_range(std::string_view header, std::uint64_t size);
 
 // ---- access control (router_access.cpp)
+
+// Whether tileset `name` has bearer tokens or signing keys (docs/PROTOCOL.md §7).
+bool is_protected(const RouterConfig& config, std::string_view name);
 
 // nullopt = allowed; otherwise the error response (401 or 403).
 std::optional<HttpResponse> check_access(const TilesetAccess& access, const HttpRequest& request,
@@ -139,11 +149,13 @@ HttpResponse web_filler(std::uint32_t tile_size, imaging::WebFormat f, const Rou
 HttpResponse web_image_response(const std::shared_ptr<const http_detail::WebTile>& tile,
                                 std::string_view if_none_match, const std::string& cc);
 // GET /{ts}.json?format=...[&tiling=...]: the TileJSON stock web maps read; 400 for an unknown
-// format or a tiling this tileset cannot be served in. `versioned`: the template names the
-// version (archives); provided tilesets' tiles are not.
+// format or a tiling this tileset cannot be served in. Web Mercator unless tiling= names the
+// tileset's own grid: a WorldCRS84Quad tileset's template is then its WebMercatorQuad route, which
+// needs `can_reproject` (archives; a cache daemon's provided tilesets cannot). `versioned`: the
+// template names the version (archives); provided tilesets' tiles are not.
 HttpResponse web_tilejson_route(const std::string& name, const TilesetInfo& info,
                                 const std::string& version, bool versioned, const Query& q,
-                                const std::string& base, bool priv);
+                                const std::string& base, bool priv, bool can_reproject);
 
 // ---- the browser viewer (router_web_page.cpp, web_assets.cpp)
 
@@ -165,6 +177,18 @@ std::string url_segment(std::string_view s);
 std::optional<HttpResponse> web_page(const HttpRequest& request, const Target& target,
                                      const TilesetRegistry& registry, const RouterConfig& config,
                                      const AsyncTileProvider* provider);
+
+// ---- OGC entry points (router_wmts.cpp, router_ogcapi.cpp; docs/PROTOCOL.md §15)
+
+// /wmts (KVP) and /wmts/...: WMTS 1.0.0 over the georeferenced, unprotected archive tilesets;
+// nullopt for any other path. `base` is the URL prefix of absolute links (base_url()).
+std::optional<HttpResponse> wmts_route(const HttpRequest& request, const Target& target,
+                                       const TilesetRegistry& registry, const RouterConfig& config,
+                                       const std::string& base);
+// /ogcapi and /ogcapi/...: OGC API - Tiles over the same tilesets; nullopt for any other path.
+std::optional<HttpResponse> ogcapi_route(const HttpRequest& request, const Target& target,
+                                         const TilesetRegistry& registry,
+                                         const RouterConfig& config, const std::string& base);
 
 }  // namespace router_detail
 }  // namespace server

@@ -46,8 +46,38 @@ std::optional<std::string> decode_path(std::string_view raw, std::string& why) {
   return out;
 }
 
-// Only `expires`, `sig`, `format` and `tiling` mean anything; every other parameter is ignored.
-// A repeated one of these is ambiguous (a cache and we might disagree on which counts): refused.
+bool iequals(std::string_view a, std::string_view b) {
+  if (a.size() != b.size()) return false;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    auto lower = [](char c) { return c >= 'A' && c <= 'Z' ? char(c - 'A' + 'a') : c; };
+    if (lower(a[i]) != lower(b[i])) return false;
+  }
+  return true;
+}
+
+// The WMTS KVP parameters (OGC 07-057r7 §7.2.2 and §7.3.2; their names are case-insensitive),
+// with `format` shared with the web TileJSON's.
+std::optional<std::string_view>* wmts_slot(std::string_view key, Query& out) {
+  const std::pair<const char*, std::optional<std::string_view>*> keys[] = {
+      {"service", &out.service},
+      {"request", &out.request},
+      {"version", &out.version},
+      {"layer", &out.layer},
+      {"style", &out.style},
+      {"format", &out.format},
+      {"tilematrixset", &out.tile_matrix_set},
+      {"tilematrix", &out.tile_matrix},
+      {"tilerow", &out.tile_row},
+      {"tilecol", &out.tile_col}};
+  for (const auto& [name, slot] : keys) {
+    if (iequals(key, name)) return slot;
+  }
+  return nullptr;
+}
+
+// Only `expires`, `sig`, `format`, `tiling` and the WMTS parameters mean anything; every other
+// parameter is ignored. A repeated one of these is ambiguous (a cache and we might disagree on
+// which counts): refused.
 bool parse_query(std::string_view q, Query& out, std::string& why) {
   while (!q.empty()) {
     const std::size_t amp = q.find('&');
@@ -57,10 +87,9 @@ bool parse_query(std::string_view q, Query& out, std::string& why) {
     const std::string_view key = part.substr(0, eq);
     const std::string_view value =
         eq == std::string_view::npos ? std::string_view{} : part.substr(eq + 1);
-    std::optional<std::string_view>* slot = nullptr;
+    std::optional<std::string_view>* slot = wmts_slot(key, out);
     if (key == "expires") slot = &out.expires;
     if (key == "sig") slot = &out.sig;
-    if (key == "format") slot = &out.format;
     if (key == "tiling") slot = &out.tiling;
     if (slot == nullptr) continue;
     if (slot->has_value()) {
@@ -79,6 +108,27 @@ int hex_value(char c) {
   if (c >= 'a' && c <= 'f') return c - 'a' + 10;
   if (c >= 'A' && c <= 'F') return c - 'A' + 10;
   return -1;
+}
+
+std::optional<std::string> decode_query_value(std::string_view v) {
+  std::string out;
+  out.reserve(v.size());
+  for (std::size_t i = 0; i < v.size(); ++i) {
+    if (v[i] == '+') {
+      out.push_back(' ');
+    } else if (v[i] != '%') {
+      out.push_back(v[i]);
+    } else {
+      const int hi = i + 2 < v.size() ? hex_value(v[i + 1]) : -1;
+      const int lo = i + 2 < v.size() ? hex_value(v[i + 2]) : -1;
+      if (hi < 0 || lo < 0) return std::nullopt;
+      const int c = hi * 16 + lo;
+      if (c < 0x20 || c == 0x7f) return std::nullopt;  // a control: never in a name or a type
+      out.push_back(static_cast<char>(c));
+      i += 2;
+    }
+  }
+  return out;
 }
 
 std::optional<std::uint32_t> parse_u32(std::string_view s) {

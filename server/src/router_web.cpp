@@ -383,6 +383,8 @@ HttpResponse web_mercator_tilejson(const std::string& name, const TilesetInfo& i
   j.erase("vtstream");
   const LonLatBounds& b = range->bounds;
   j["tileSize"] = info.geometry.tile_size();
+  j["tileMatrixSet"] = tiling_name(Tiling::web_mercator_quad);
+  j["crs"] = tiling_crs(Tiling::web_mercator_quad);
   j["minzoom"] = range->min_zoom;
   j["maxzoom"] = range->max_zoom;
   j["bounds"] = {b.west, b.south, b.east, b.north};
@@ -400,7 +402,7 @@ HttpResponse web_mercator_tilejson(const std::string& name, const TilesetInfo& i
 
 HttpResponse web_tilejson_route(const std::string& name, const TilesetInfo& info,
                                 const std::string& version, bool versioned, const Query& q,
-                                const std::string& base, bool priv) {
+                                const std::string& base, bool priv, bool can_reproject) {
   auto fail = [](std::string why) {
     HttpResponse r = error(400, std::move(why));
     r.route = Route::tilejson;
@@ -409,21 +411,34 @@ HttpResponse web_tilejson_route(const std::string& name, const TilesetInfo& info
   auto format = imaging::parse_web_format(*q.format);
   if (!format) return fail("format: " + format.error().message);
   const Tiling native = info.georeference ? info.georeference->tiling : Tiling::none;
+  // Web maps draw every XYZ layer as Web Mercator: a WorldCRS84Quad tileset is offered on that
+  // grid unless its own grid is asked for by name (a map in EPSG:4326, a GIS).
+  Tiling grid = native == Tiling::world_crs84_quad ? Tiling::web_mercator_quad : native;
   if (q.tiling) {
     auto tiling = parse_tiling(*q.tiling);
-    if (!tiling || *tiling != Tiling::web_mercator_quad) {
+    if (!tiling || *tiling == Tiling::none) {
       return fail("tiling \"" + std::string(*q.tiling) +
-                  "\": the one tiling web tiles are offered in is WebMercatorQuad");
+                  "\": web tiles are offered in WebMercatorQuad or, for a WorldCRS84Quad "
+                  "tileset, WorldCRS84Quad (its own grid)");
     }
-    if (native == Tiling::world_crs84_quad) {
-      return web_mercator_tilejson(name, info, version, versioned, *format, base, priv);
+    if (native == Tiling::none) {
+      return fail("tileset \"" + name + "\" is a plain image (no georeference): it has no " +
+                  std::string(tiling_name(*tiling)) + " tiles; leave tiling= out");
     }
-    if (native != Tiling::web_mercator_quad) {
+    if (*tiling == Tiling::world_crs84_quad && native != Tiling::world_crs84_quad) {
+      return fail("tileset \"" + name + "\" is " + std::string(tiling_name(native)) +
+                  ": it has no WorldCRS84Quad tiles");
+    }
+    grid = *tiling;
+  }
+  if (grid != native) {
+    if (!can_reproject) {
       return fail("tileset \"" + name +
-                  "\" is a plain image (no georeference): it has no WebMercatorQuad tiles; "
-                  "tiling=WebMercatorQuad is served for WebMercatorQuad and WorldCRS84Quad "
-                  "tilesets");
+                  "\" is WorldCRS84Quad and served from a cache: its WebMercatorQuad tiles are "
+                  "served by vts serve only; tiling=WorldCRS84Quad gives its own grid, for a map "
+                  "in EPSG:4326");
     }
+    return web_mercator_tilejson(name, info, version, versioned, *format, base, priv);
   }
   const std::string ext(imaging::web_format_extension(*format));
   const std::string tiles =
@@ -433,6 +448,11 @@ HttpResponse web_tilejson_route(const std::string& name, const TilesetInfo& info
   j.erase("vtstream");  // the tiles are images, not our codec: native clients must not read it
   const Geometry& g = info.geometry;
   j["tileSize"] = g.tile_size();
+  if (native != Tiling::none) {
+    // TileJSON has no word for a grid: these say which one the {z}/{x}/{y} are on.
+    j["tileMatrixSet"] = tiling_name(native);
+    j["crs"] = tiling_crs(native);
+  }
   if (!info.georeference) {
     // Pixel space placed as if Web Mercator: level max_zoom's pixels are the world's at that
     // zoom, from the top-left (north-west) corner.

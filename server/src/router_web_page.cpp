@@ -117,12 +117,6 @@ HttpResponse tileset_page(std::string_view name) {
   return html_response(std::move(b));
 }
 
-bool is_protected(const RouterConfig& config, std::string_view name) {
-  auto it = config.access.find(name);
-  return it != config.access.end() &&
-         (!it->second.bearer_tokens.empty() || !it->second.hmac_keys.empty());
-}
-
 }  // namespace
 
 std::string url_segment(std::string_view s) {

@@ -200,7 +200,7 @@ expect_bad 2 "--tiling" "$L" -o "$WORK/bad/x.pmtiles" --format webp --tiling Mer
 expect_bad 2 "png is lossless" "$L" -o "$WORK/bad/x.pmtiles" --format png --quality 50
 expect_bad 4 "nowhere" "$L" -o "$WORK/nowhere/x.pmtiles" --format png
 expect_bad 2 "plain image" "$L" -o "$WORK/bad/x.pmtiles" --format png --tiling WebMercatorQuad
-expect_bad 2 "not an export grid" "$G" -o "$WORK/bad/x.pmtiles" --format png --tiling WorldCRS84Quad
+expect_bad 2 "not an export grid" "$W" -o "$WORK/bad/x.pmtiles" --format png --tiling WorldCRS84Quad
 expect_bad 2 "not an empty folder" "$L" --layout xyz -o "$WORK/full" --format png
 [[ $(ls -A "$WORK/full") == keep ]] || fail "a refused export touched the non-empty folder"
 expect_bad 2 "is an input|same file" "$L" -o "$L" --format png

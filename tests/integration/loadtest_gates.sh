@@ -101,6 +101,16 @@ stop_fault_proxy
 json_check "$OUT" "j.totals.errors > 0 && j.errors_by_kind.timeout == j.totals.errors &&
   j.totals.errors <= $(json_get "$WORK/proxy.stats.json" 'j.delays')" "the errors are the delayed tiles"
 
+note "fault_proxy holding every tile for 3 s: the progress lines of seconds without a response"
+note "show no latency (never 'p99 0')"
+start_proxy --delay-every 1 --delay-ms 3000
+expect_rc 0 "every tile 3 s late" "$VTS" loadtest "$PROXY/earth" --viewers 3 \
+  --duration 2 --path jumps
+stop_fault_proxy
+grep -qE '^\[ +[0-9]+s/2s\] .*, no responses this second, ' "$ERR" ||
+  { show_output; fail "no progress line says that no response came"; }
+grep -qE '^\[.*p99 0 ' "$ERR" && { show_output; fail "a progress line shows p99 0"; }
+
 # ---- --slo on a clean run ----------------------------------------------------------------------
 note "straight against vts serve: --slo 'p99<60s' --slo 'full_res_p95<60s' hold"
 expect_rc 0 "holding SLOs" "$VTS" loadtest "$BASE/earth" "${LT[@]}" --json --slo 'p99<60s' \
@@ -166,6 +176,25 @@ for want in 'id="plot-latency-cdf"' 'data-series="baseline_total"' \
 done
 grep -qF 'plot-latency-cdf' "$WORK/clean-report/index.html" && fail "a report without baseline overlays"
 
+note "the HTML report opens with the gates: red naming the failed one, else passed"
+# gate_rows REPORT: the gate section's rows as "gate|measured|result" lines.
+gate_rows() {
+  sed -n '/<section class="gates/,/<\/section>/p' "$1" |
+    sed -nE 's|<tr><td>([^<]*)</td><td class="num">([^<]*)</td><td class="[a-z]*">([^<]*)</td></tr>|\1\|\2\|\3|p'
+}
+head -c 2000 "$WORK/overlay/index.html" | grep -qF '<section class="gates failed" id="gates">' ||
+  fail "the failed run's report does not open with a failed gate section"
+gate_rows "$WORK/overlay/index.html" >"$WORK/overlay.gates"
+if ! grep -qE '^p99&lt;1ns\|p99 = [0-9.]+ (ns|us|ms|s)\|FAIL$' "$WORK/overlay.gates" ||
+  ! grep -qE '^error_rate&lt;=1%\|error_rate = [0-9.]+%\|pass$' "$WORK/overlay.gates"; then
+  cat "$WORK/overlay.gates" >&2
+  fail "the failed run's gate rows"
+fi
+head -c 2000 "$WORK/clean-report/index.html" | grep -qF '<section class="gates" id="gates">' ||
+  fail "the clean run's report does not open with a passed gate section"
+[[ $(gate_rows "$WORK/clean-report/index.html" | grep -c '|pass$') == 3 ]] ||
+  fail "the clean run's report does not show its 3 gates passed"
+
 # ---- merge ---------------------------------------------------------------------------------------
 note "two generators (--generators 2, index 0 and 1: seeds 7 and 8) merged: counts are sums"
 for i in 0 1; do
@@ -204,6 +233,8 @@ node_sum() {
 }
 node_sum "$WORK/merged.json" "$WORK/gen0.json" "$WORK/gen1.json" || fail "merged counts are not the sums"
 [[ -s $WORK/merged-report/index.html ]] || fail "merge --report wrote no index.html"
+grep -qF '<section class="gates" id="gates">' "$WORK/merged-report/index.html" ||
+  fail "the merged report has no gate section"
 note "merged: $(json_get "$WORK/merged.json" 'j.totals.requests') requests"
 expect_rc 1 "merge with a failing --slo" "$VTS" loadtest merge "$WORK/gen0.json" "$WORK/gen1.json" \
   --slo 'p50<1ns'

@@ -44,7 +44,8 @@ FORBIDDEN = {  # folder -> include prefixes it must not use
     "store": ["GLFW/", "epoxy/", "OpenImageIO/", "gdal", "boost/", "sqlite3.h", "png.h", "webp/",
               "turbojpeg.h"] + _NO_ENCODER,
     "imaging": _NO_HEAVY,
-    "builder": ["GLFW/", "epoxy/", "boost/", "curl/", "sqlite3.h"],
+    # SQLite only as the MBTiles container `vts export --format mbtiles` writes
+    "builder": ["GLFW/", "epoxy/", "boost/", "curl/"],
     "server": ["GLFW/", "epoxy/", "OpenImageIO/", "gdal", "curl/", "sqlite3.h"] + _NO_ENCODER,
     "client": ["GLFW/", "epoxy/", "OpenImageIO/", "gdal", "boost/"] + _NO_ENCODER,
     "renderer/core": _NO_HEAVY,

@@ -5,9 +5,12 @@
 
 #include <span>
 #include <string>
+#include <vector>
 
 #include "image_layout.hpp"
+#include "vts/client/image_tiles.hpp"
 #include "vts/client/source.hpp"
+#include "vts/imaging/web_image.hpp"
 
 using vts::ErrorCode;
 using vts::TileId;
@@ -143,3 +146,43 @@ TEST(ImageTileset, OpenSourceTakesATemplateOnlyWithItsZoomRange) {
 }
 
 }  // namespace
+
+namespace {
+
+std::vector<std::uint8_t> encoded(std::uint32_t size, vts::imaging::WebFormat format) {
+  vts::TileImage img;
+  img.width = img.height = size;
+  img.pixels.assign(std::size_t{size} * size * 4, 200);
+  auto bytes = vts::imaging::encode_web_image(img, format);
+  EXPECT_TRUE(bytes) << bytes.error().to_string();
+  return bytes ? *bytes : std::vector<std::uint8_t>{};
+}
+
+}  // namespace
+
+TEST(ImageTile, DecodesWhatItsTilesetDeclaresAtTheTileSize) {
+  auto png = vts::client::decode_image_tile(encoded(64, vts::imaging::WebFormat::png), "png", 64);
+  ASSERT_TRUE(png) << png.error().to_string();
+  EXPECT_EQ(png->width, 64u);
+  EXPECT_EQ(png->pixels.size(), 64u * 64 * 4);
+  // A template that does not say takes any of the three.
+  EXPECT_TRUE(
+      vts::client::decode_image_tile(encoded(64, vts::imaging::WebFormat::jpeg), "image", 64));
+}
+
+TEST(ImageTile, RefusesAnotherTypeThanDeclaredOrAnotherSizeNamingWhatItFound) {
+  auto jpeg = vts::client::decode_image_tile(encoded(64, vts::imaging::WebFormat::jpeg), "png", 64);
+  ASSERT_FALSE(jpeg);
+  EXPECT_EQ(jpeg.error().code, vts::ErrorCode::corrupt);
+  EXPECT_NE(jpeg.error().message.find("is a jpeg image"), std::string::npos)
+      << jpeg.error().message;
+  const std::vector<std::uint8_t> junk(100, 7);
+  auto bad = vts::client::decode_image_tile(junk, "webp", 64);
+  ASSERT_FALSE(bad);
+  EXPECT_NE(bad.error().message.find("not an image of a known type"), std::string::npos);
+  auto small = vts::client::decode_image_tile(encoded(32, vts::imaging::WebFormat::png), "png", 64);
+  ASSERT_FALSE(small);
+  EXPECT_NE(small.error().message.find("32x32 pixels in a tileset of 64 px tiles"),
+            std::string::npos)
+      << small.error().message;
+}

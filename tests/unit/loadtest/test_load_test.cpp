@@ -549,3 +549,20 @@ TEST(LoadTest, ProgressIsReportedOnceASecond) {
 }
 
 }  // namespace
+
+TEST(LoadTestProgress, ASecondWithoutResponsesShowsNoLatency) {
+  vts::loadtest::LoadProgress p;
+  p.elapsed_s = 3;
+  p.requests = 120;
+  p.in_flight = 7;
+  p.p99_ns = 0;  // nothing completed in the last second
+  const std::string idle = vts::loadtest::progress_text(p, 30);
+  EXPECT_NE(idle.find("no responses this second"), std::string::npos) << idle;
+  EXPECT_EQ(idle.find("p99"), std::string::npos) << idle;
+  p.requests_per_s = 40;
+  p.p99_ns = 8'210'000;
+  p.late_frames = 2;
+  EXPECT_EQ(vts::loadtest::progress_text(p, 30),
+            "[    3s/30s] 120 requests (40/s), 0 errors, 7 in flight, p99 8.21 ms, 0 moves at "
+            "full resolution, 2 late frames");
+}

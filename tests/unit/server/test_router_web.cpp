@@ -255,6 +255,21 @@ TEST_F(RouterWeb, WebTileJsonRefusesWhatItCannotServe) {
   expect_400("/dense.json?format=png&tiling=Mars", "WebMercatorQuad");
 }
 
+TEST_F(RouterWeb, ANativeTileAskedAsAnImageIs406NamingTheImageRoutes) {
+  req_.accept = "image/avif,image/webp,image/apng,image/*,*/*;q=0.8";  // a browser's <img>
+  auto r = get("/dense/1/0/0");
+  EXPECT_EQ(r.status, 406);
+  EXPECT_NE(body(r).find("/dense.json?format=webp"), std::string::npos) << body(r);
+  EXPECT_NE(body(r).find("/dense/1/0/0.png"), std::string::npos) << body(r);
+  EXPECT_EQ(header_of(r, "Cache-Control"), "no-store");  // caches keep the 200 for the rest
+  EXPECT_EQ(get("/dense/1/0/0.png").status, 200);        // the image route is not affected
+  for (const char* ours :
+       {"*/*", "", "application/vnd.vtstream.tile", "image/png, application/vnd.vtstream.tile"}) {
+    req_.accept = ours;
+    EXPECT_EQ(get("/dense/1/0/0").status, 200) << ours;
+  }
+}
+
 TEST_F(RouterWeb, SignedUrlsStillWorkWithOtherParameters) {
   config_.access["secret"].hmac_keys = {"key"};
   config_.now_unix_seconds = [] { return std::int64_t(1'700'000'000); };

@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <functional>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -57,6 +58,9 @@ TileImage extracted_texels(const TileImage& stored, const Geometry& geometry, Ti
 // Walks every directory once; a run of tiles costs the same as one tile, whatever its length.
 // Fails on malformed metadata or directories, or a header archive_tileset() refuses.
 Result<ArchiveSummary> summarize_archive(const archive::Reader& reader);
+// The same over a tileset the caller worked out instead of our metadata (a stock raster archive,
+// client::stock_archive_info()): info's geometry lays out the levels, and summary.info is `info`.
+Result<ArchiveSummary> summarize_archive(const archive::Reader& reader, const TilesetInfo& info);
 
 struct VerifyReport {
   std::uint64_t tiles_checked = 0;     // addressed tiles
@@ -78,6 +82,16 @@ struct VerifyReport {
 // has been joined.
 Result<VerifyReport> verify_archive(
     const archive::Reader& reader, unsigned threads = 0,
+    const std::function<void(std::uint64_t, std::uint64_t)>& on_progress = {});
+
+// How verify_archive() judges one distinct payload: ok, or the error that makes every tile using
+// it bad. Called from several threads at once.
+using PayloadCheck = std::function<Status(std::span<const std::uint8_t> payload)>;
+// The same checks over a tileset the caller worked out instead of our metadata (a stock raster
+// archive), each distinct payload judged by `check` instead of our tile decoder.
+Result<VerifyReport> verify_archive(
+    const archive::Reader& reader, const TilesetInfo& info, const PayloadCheck& check,
+    unsigned threads = 0,
     const std::function<void(std::uint64_t, std::uint64_t)>& on_progress = {});
 
 }  // namespace vts::archive

@@ -1,6 +1,8 @@
 // `vts export`: a vtstream archive (our codec: zstd lossless RGBA8 or bc1 tiles with borders) to
 // standard web tiles any PMTiles reader or web map displays: a raster PMTiles v3 archive of PNG,
-// WebP or JPEG tiles (tile compression none, gzip directories), or a {z}/{x}/{y}.ext folder.
+// WebP or JPEG tiles (tile compression none, gzip directories), a {z}/{x}/{y}.ext folder, or a
+// raster MBTiles 1.3 file (SQLite, TMS rows, always WebMercatorQuad); and to files GIS tools read:
+// a georeferenced Cloud Optimized GeoTIFF of one level or a box (export_geotiff below).
 //
 // Each output tile is the T x T content of one stored tile (web_image.hpp: tile_content), texels
 // beyond the image's edge transparent. Tiles wholly transparent (or absent from a sparse archive)
@@ -39,7 +41,7 @@
 namespace vts {
 inline namespace builder {
 
-enum class ExportLayout : std::uint8_t { pmtiles, xyz };
+enum class ExportLayout : std::uint8_t { pmtiles, xyz, mbtiles };
 
 struct ExportOptions {
   // Archive file, or for xyz a folder that must not exist or be empty (its missing parent
@@ -48,11 +50,14 @@ struct ExportOptions {
   ExportLayout layout = ExportLayout::pmtiles;
   imaging::WebFormat format = imaging::WebFormat::webp;
   imaging::WebEncodeOptions encode;
-  // none: the archive's own grid (our z/x/y). web_mercator_quad: the Web Mercator grid; native for
-  // a WebMercatorQuad archive, reprojected from a WorldCRS84Quad one (web_mercator.hpp: zooms and
-  // bounds of web_mercator_range(), tiles of render_web_mercator_tile()), refused for a plain
-  // image.
-  Tiling tiling = Tiling::none;
+  // The output grid. none: the archive's own grid (our z/x/y); world_crs84_quad: the same, said
+  // explicitly, for a WorldCRS84Quad archive only. web_mercator_quad: the Web Mercator grid;
+  // native for a WebMercatorQuad archive, reprojected from a WorldCRS84Quad one (web_mercator.hpp:
+  // zooms and bounds of web_mercator_range(), tiles of render_web_mercator_tile()), refused for a
+  // plain image. Unset (default): WebMercatorQuad for a WorldCRS84Quad archive, since web maps
+  // draw every tile as Web Mercator (a CRS84 grid would show the world squeezed into the northern
+  // half), the archive's own grid otherwise. MBTiles is always WebMercatorQuad.
+  std::optional<Tiling> tiling;
   unsigned threads = 0;  // 0 = one per hardware thread
   // The source archive's path, recorded in the metadata ("vtstream_source").
   std::string source_name;
@@ -71,6 +76,7 @@ struct ExportReport {
   std::uint64_t file_bytes = 0;     // archive size (0 for a folder)
   int min_zoom = 0, max_zoom = 0;
   LonLatBounds bounds;
+  Tiling grid = Tiling::none;  // the output's grid (none: a plain image's own z/x/y)
   double seconds = 0;
 };
 
@@ -96,6 +102,69 @@ std::string export_metadata_json(const TilesetInfo& info, const std::string& sou
 // flight" meaning the source tiles of two output tiles (a few stored tiles).
 Result<ExportReport> export_web_tiles(const archive::Reader& reader, const TilesetInfo& info,
                                       const ExportOptions& options);
+
+// The grid an export writes for these options (ExportOptions::tiling), or invalid_argument
+// naming why the archive cannot give the one asked for.
+Result<Tiling> export_grid(const TilesetInfo& info, ExportLayout layout,
+                           std::optional<Tiling> wanted);
+
+// ---- GeoTIFF / COG (export_gtiff.cpp) ----
+//
+// One level of a georeferenced archive, or the part of it inside a box, as a Cloud Optimized
+// GeoTIFF (GDAL's GTiff and COG drivers): RGBA8 with an unassociated alpha band, 512 x 512 tiles,
+// DEFLATE with the horizontal predictor (lossless), the tileset's CRS (EPSG:4326 for
+// WorldCRS84Quad, EPSG:3857 for WebMercatorQuad) and a geotransform whose cell is the level's
+// cell size. Overview k (k = 1..overviews) holds level - k of our pyramid texel for texel (our
+// levels are exact halvings; nothing is resampled again), so the region is snapped outward to
+// whole texels of the coarsest overview's level and clipped to the level's extent.
+//
+// Streaming: blocks of 512 x 512 texels are assembled from our tiles by the encoder pool (one row
+// of blocks per job, bounded queue) and written into a temporary tiled GTiff beside the output
+// (ZSTD level 1, fast), whose overview IFDs are created empty (GDALBuildOverviews "NONE") and
+// filled from the coarser levels; the COG driver then copies it (OVERVIEWS=FORCE_USE_EXISTING)
+// into the output's temporary, renamed over the output at the end. Memory: threads * (a block
+// and the few tiles it reads) + GDAL's block cache (64 MiB unless GDAL_CACHEMAX says otherwise),
+// independent of the level's size. Disk: the temporary GTiff and the COG (each about the size of
+// the result) at once. Nothing is left under the output name, or beside it, on any error.
+struct GeoTiffOptions {
+  std::filesystem::path output;
+  std::optional<int> level;          // default: the finest
+  std::optional<LonLatBounds> bbox;  // degrees; default: the georeference's footprint
+  unsigned threads = 0;              // 0 = one per hardware thread
+  std::function<void(std::uint64_t done, std::uint64_t total)> on_progress;  // blocks
+  const std::atomic<bool>* cancel = nullptr;
+};
+
+// Where a GeoTIFF's texels lie: a rectangle of a level, and its georeference.
+struct GeoTiffRegion {
+  int level = 0;
+  TexelRect texels;  // level texels, snapped (see above)
+  int overviews = 0;
+  Tiling tiling = Tiling::none;
+  double geotransform[6] = {};  // GDAL's: origin x, cell, 0, origin y, 0, -cell (CRS units)
+};
+
+struct GeoTiffReport {
+  GeoTiffRegion region;
+  LonLatBounds bounds;       // the region's corners in degrees
+  std::uint64_t texels = 0;  // full resolution and overviews
+  std::uint64_t file_bytes = 0;
+  double seconds = 0;
+};
+
+// The region export_geotiff writes for these options, without writing anything. invalid_argument
+// for a plain image, a level outside the pyramid, a box that is not finite, inverted or misses the
+// level's extent.
+Result<GeoTiffRegion> geotiff_region(const TilesetInfo& info, std::optional<int> level,
+                                     const std::optional<LonLatBounds>& bbox);
+// The georeference of `rect` of level `level` (no snapping): what extract writes beside its
+// texels. info must be georeferenced.
+GeoTiffRegion level_rect_georeference(const TilesetInfo& info, int level, const TexelRect& rect);
+
+// Errors: geotiff_region()'s, io for an unwritable output (GDAL's reason in the message), the
+// reader's errors for a damaged source, cancelled.
+Result<GeoTiffReport> export_geotiff(const archive::Reader& reader, const TilesetInfo& info,
+                                     const GeoTiffOptions& options);
 
 }  // namespace builder
 }  // namespace vts

@@ -1,5 +1,8 @@
 // `vts extract`: one tile, or a whole level stitched back together, written as an image file
-// through OpenImageIO (format chosen by the file extension).
+// through OpenImageIO (format chosen by the file extension). From a georeferenced archive the
+// file keeps its georeference (the CRS and geotransform export_geotiff gives the same texels): a
+// TIFF as GeoTIFF tags, any other format GDAL reads (PNG, JPEG, ...) in a PAM side file
+// OUTPUT.aux.xml, which GDAL and QGIS read.
 #pragma once
 
 #include <atomic>

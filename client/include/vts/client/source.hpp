@@ -177,8 +177,9 @@ bool image_tile_exists(const SourceInfo& info, TileId id);
 // our tileset, bad TileJSON...): not_found for a missing file, tileset or archive (HTTP 404), io
 // for an unreachable server or another HTTP status, corrupt for bytes that are not TileJSON or
 // PMTiles. A TileJSON without our "vtstream" object (TileJSON 2.x/3.0: "tiles", "minzoom",
-// "maxzoom", "bounds", "scheme") and a remote PMTiles archive without it whose tile type is png,
-// jpeg or webp open as image tilesets; other archives and TileJSON without it are unsupported.
+// "maxzoom", "bounds", "scheme") and a PMTiles archive (local or remote) without it whose tile type
+// is png, jpeg or webp (image_tiles.hpp) open as image tilesets; other archives and TileJSON
+// without it are unsupported.
 //
 // A TileJSON source follows a rebuilt tileset: when a versioned tile URL answers 404 "not
 // current", it refetches the TileJSON, moves to its new tile URLs and retries the tile. info()
@@ -196,7 +197,10 @@ Result<std::unique_ptr<TileSource>> open_image_template(const ImageLayout& layou
 
 // The three kinds of source, for callers that know which one they want (open_source picks one
 // from the location's form). Same blocking and error behaviour as open_source().
-Result<std::unique_ptr<TileSource>> open_local_archive(const std::filesystem::path& path);
+// A local stock raster archive opens as an image tileset, as a remote one does; options' bounds
+// and zoom range apply to it alone.
+Result<std::unique_ptr<TileSource>> open_local_archive(const std::filesystem::path& path,
+                                                       const SourceOptions& options = {});
 // An archive or a set in an object store or on a web server read by ranged GETs (store/open.hpp):
 // s3://bucket/key.pmtiles, s3://bucket/set/tileset.json, https://host/set/tileset.json. Reads
 // are synchronous, as for a local archive; credentials and endpoint from the AWS environment.

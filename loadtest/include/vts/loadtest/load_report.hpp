@@ -25,6 +25,8 @@
 
 namespace vts::loadtest {
 
+struct GateResult;  // load_gates.hpp
+
 // One second of the run: element i of LoadReport::seconds covers [i, i + 1) s after the start.
 // Requests count when they complete (with a tile or an error); the percentiles are those of the
 // total latency of the requests completed in that second, 0 when none completed.
@@ -115,11 +117,17 @@ std::string duration_text(double ns);
 // CDF (plot-latency-cdf, drawn only then) overlay the baseline's distributions in lighter colours
 // as series whose data-series keys start with "baseline_", and a "Change against the baseline"
 // table (class "compare", compare_reports() of load_gates.hpp) follows the summary.
+//
+// With gates (evaluate_gates() of the run's --slo and --max-error-rate), the page opens with a
+// <section id="gates" class="gates"> (class "gates failed" when any failed): a table of each gate
+// as given, the metric's measured value, and "pass" or "FAIL".
 Status write_html_report(const LoadReport& report, const std::filesystem::path& dir,
-                         const LoadReport* baseline = nullptr);
+                         const LoadReport* baseline = nullptr,
+                         const std::vector<GateResult>* gates = nullptr);
 
 // The page write_html_report() writes, as a string.
-std::string html_report(const LoadReport& report, const LoadReport* baseline = nullptr);
+std::string html_report(const LoadReport& report, const LoadReport* baseline = nullptr,
+                        const std::vector<GateResult>* gates = nullptr);
 
 // The most per-second rows a report read back may have: `vts loadtest --duration` runs at most a
 // week; a day more leaves room for requests still completing. No array or object of a report

@@ -78,6 +78,11 @@ vec4 sample_level(int L, ivec2 abs_i, vec2 fr, out int mapped_level) {
   uvec2 tm = ti >> d;                                                  // texel at level m
   vec2 fm = (vec2(ti & uvec2((1u << d) - 1u)) + tf) / float(1u << d);  // its fraction
   vec2 pos = vec2(tm & ((1u << uint(u_tile_shift)) - 1u)) + fm;                             // inside the tile, [0, T)
+  // The bilinear footprint stays inside the slot: a no-op for tiles with a border (B >= 1 covers
+  // the half texel), and for borderless tiles (third-party images, B = 0) it keeps filtering
+  // inside the tile's content instead of blending in the neighbouring slot's unrelated texels.
+  float tile_size = float(1u << uint(u_tile_shift));
+  pos = clamp(pos, vec2(0.5 - u_border), vec2(tile_size + u_border - 0.5));
   // slot < 2^24: exact in float, so row = floor((slot + 0.5) / per_row) needs no integer division.
   float row = floor((float(slot) + 0.5) / float(u_slots_per_row));
   vec2 slot_xy = vec2(float(slot) - row * float(u_slots_per_row), row);
