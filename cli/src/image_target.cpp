@@ -11,6 +11,9 @@ void add_image_target_options(CLI::App* c, ImageTargetArgs& a) {
                 "world)");
   c->add_option("--zoom", a.zoom,
                 "Image tiles: zoom levels A-B the server has (a {z}/{x}/{y} template needs it)");
+  c->add_option("--tile-size", a.tile_size,
+                "Image tiles: a {z}/{x}/{y} template's tile size in pixels, a power of two "
+                "64-1024 [default: 256]");
   add_max_download_option(c, a.max_download);
   c->add_option("--cacert", a.ca_file,
                 "Verify https:// servers with the CA certificates in this PEM file instead of the "
@@ -21,6 +24,7 @@ void add_image_target_options(CLI::App* c, ImageTargetArgs& a) {
 Status apply_image_target(const ImageTargetArgs& a, client::SourceOptions& o) {
   o.max_download = a.max_download;
   if (!a.ca_file.empty()) o.fetcher.ca_file = a.ca_file;
+  if (a.tile_size != 0) o.tile_size = a.tile_size;  // checked where the layout is made
   if (!a.bounds.empty()) {
     auto b = parse_numbers(a.bounds, 4, "--bounds", "W,S,E,N");
     if (!b) return b.error();

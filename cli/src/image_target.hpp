@@ -17,11 +17,13 @@ namespace vts::cli {
 struct ImageTargetArgs {
   std::string bounds, zoom;
   std::uint64_t max_download = client::kDefaultMaxDownload;
-  std::string ca_file;  // --cacert
+  std::string ca_file;          // --cacert
+  std::uint32_t tile_size = 0;  // --tile-size; 0: the source's own (a template's: 256)
 };
 
 void add_image_target_options(CLI::App* c, ImageTargetArgs& a);
-// Sets options.bounds, the zoom range and max_download; invalid_argument naming the flag.
+// Sets options.bounds, the zoom range, the tile size and max_download; invalid_argument naming
+// the flag.
 Status apply_image_target(const ImageTargetArgs& a, client::SourceOptions& options);
 
 // apply_image_target() then client::open_source().

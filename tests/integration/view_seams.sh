@@ -51,14 +51,9 @@ view() {
   grep -q 'complete at frame' "$OUT" || { show_output; fail "$name: the view never completed"; }
 }
 
-start_server "$WORK/smooth.pmtiles"
-note "vts view of our archive (borders) and of its PNG tiles as an XYZ template (no borders)"
-view ours "$WORK/smooth.pmtiles"
-view xyz "$BASE/smooth/{z}/{x}/{y}.png" --zoom 0-2
-stop_server
-
-note "the XYZ frame has no seams: within half a texel step of ours, no step over one texel's"
-"$PY" - "$WORK/smooth.tif" "$WORK/ours.png" "$WORK/xyz.png" "$LOGS/seams.png" <<'PYTHON' ||
+# check_seams NAME: $WORK/NAME.png (a borderless view) against $WORK/ours.png.
+check_seams() {
+  "$PY" - "$WORK/smooth.tif" "$WORK/ours.png" "$WORK/$1.png" "$LOGS/seams-$1.png" <<'PYTHON' ||
 import sys
 import numpy as np
 from osgeo import gdal
@@ -81,5 +76,31 @@ if not ok:
     print("seams: |xyz - ours| x8 written to", sys.argv[4], file=sys.stderr)
 sys.exit(0 if ok else 1)
 PYTHON
-  fail "seams at tile edges in the XYZ view (VTS_KEEP_TMP=1 keeps $LOGS/seams.png)"
+    fail "seams at tile edges in the $1 view (VTS_KEEP_TMP=1 keeps $LOGS/seams-$1.png)"
+}
+
+# The same image in 512 px tiles (levels 0..1), for a template whose tiles are not 256 px.
+mkdir -p "$WORK/ts"
+expect_ok "$VTS" build "$WORK/smooth.tif" -o "$WORK/ts/smooth512.pmtiles" --tiling WebMercatorQuad \
+  --tile 512 -q
+cp "$WORK/smooth.pmtiles" "$WORK/ts/"
+
+start_server "$WORK/ts"
+note "vts view of our archive (borders) and of its PNG tiles as an XYZ template (no borders)"
+view ours "$WORK/smooth.pmtiles"
+view xyz "$BASE/smooth/{z}/{x}/{y}.png" --zoom 0-2
+note "and of the 512 px tiles, the template's tile size given with --tile-size"
+view xyz512 "$BASE/smooth512/{z}/{x}/{y}.png" --zoom 0-1 --tile-size 512
+note "without --tile-size the 512 px tiles cannot be shown, and the view says why"
+expect_ok "${XVFB[@]}" "$VTS" view "$BASE/smooth512/{z}/{x}/{y}.png" --zoom 0-1 --headless \
+  --frames 2000 --width 64 --height 64
+grep -q 'tile errors, the last: tile 0/0/0: image tile of 512x512 pixels in a tileset of 256 px' \
+  "$OUT" || { show_output; fail "the view does not say why the 512 px tiles are not shown"; }
+stop_server
+
+for name in xyz xyz512; do
+  note "the $name frame has no seams: within half a texel step of ours, no step over one texel's"
+  check_seams "$name"
+done
 note "ok"
+

@@ -265,6 +265,14 @@ void Viewer::interactive_frame(double frame, int w, int h) {
   last_frame_ = now;
   uploads_ += st.uploads;
   ++counted_;
+  // The first tile that cannot be shown says why (a wrong tile size, a server error); the rest
+  // are counted in the HUD's error line.
+  if (!tile_error_logged_) {
+    if (auto e = vt_->last_tile_error()) {
+      log_("warning: " + e->message + " (further tile errors are counted in the HUD)");
+      tile_error_logged_ = true;
+    }
+  }
   if (lines_.empty() || now - last_title_ >= std::chrono::milliseconds(250)) {
     lines_ =
         hud_lines_now(st, double(uploads_) / double(counted_), wall_ms_ / double(counted_), w, h);
@@ -356,6 +364,7 @@ std::string Viewer::report_json(const HeadlessRun& run, const std::string& sourc
   j["physical_bytes"] = vt_->physical_gpu_bytes();
   j["tile_format"] = vt_->tile_format() == PixelFormat::bc1 ? "bc1" : "rgba8";
   j["gl_renderer"] = gl_->info().renderer;
+  if (auto e = vt_->last_tile_error()) j["last_tile_error"] = e->message;
   j["camera"] =
       camera_key_json(controls_.globe(), controls_.plane, controls_.globe_view, vt_->debug_view());
   return j.dump(2);
@@ -370,7 +379,11 @@ std::string Viewer::report_text(const HeadlessRun& run, const std::string& sourc
   std::snprintf(buf, sizeof buf, " %dx%d: %zu frames, %s; %u resident, %u pending, hit %.1f%%",
                 options_.window.width, options_.window.height, run.frames.size(), complete.c_str(),
                 last.resident, last.pending, last.hit_ratio * 100);
-  return std::string(controls_.globe() ? "globe " : "plane ") + source + buf +
+  std::string errors;
+  if (auto e = vt_->last_tile_error()) {
+    errors = "; " + std::to_string(last.errors) + " tile errors, the last: " + e->message;
+  }
+  return std::string(controls_.globe() ? "globe " : "plane ") + source + buf + errors +
          (screenshot.empty() ? "" : "; screenshot " + screenshot);
 }
 

@@ -319,6 +319,19 @@ class VirtualTexture::Impl {
     return img;
   }
 
+  // What went wrong with a tile event that cannot be placed, naming the tile: the client's error,
+  // or a decoded tile that is not the size or format of the tileset's slots.
+  Error tile_error(const client::TileEvent& e) const {
+    if (e.kind != client::TileEvent::Kind::decoded && e.error) {
+      return make_error(e.error->code, "tile " + e.id.to_string() + ": " + e.error->message);
+    }
+    return make_error(ErrorCode::corrupt,
+                      "tile " + e.id.to_string() + " decoded to " + std::to_string(e.image.width) +
+                          "x" + std::to_string(e.image.height) + " texels, not the " +
+                          std::to_string(slot_size_) + "x" + std::to_string(slot_size_) +
+                          " of the tileset's tiles");
+  }
+
   void blit_to_screen(int width, int height) const {
     glDisable(GL_FRAMEBUFFER_SRGB);
     glBlitNamedFramebuffer(color_fbo_.get(), 0, 0, 0, width_, height_, 0, 0, width, height,
@@ -327,6 +340,7 @@ class VirtualTexture::Impl {
 
   const Geometry& geometry() const { return geometry_; }
   std::optional<Error> last_error() const { return last_error_; }
+  std::optional<Error> last_tile_error() const { return last_tile_error_; }
   VirtualTextureOptions& options() { return options_; }
   // Read back from GL (what the driver was asked to allocate), not from the CPU-side table.
   std::uint64_t page_table_gpu_bytes() const { return texture_bytes(page_tex_.get(), 4); }
@@ -467,6 +481,7 @@ class VirtualTexture::Impl {
         stream_.absent(e.id);
       } else if (!well_formed) {  // an error, or a tile of the wrong size or format
         stream_.failed(e.id, Clock::now());
+        last_tile_error_ = tile_error(e);
       }
       // Placed, or (already resident, or no slot may be taken this frame) given back.
       const auto got = well_formed ? stream_.place(e.id) : std::nullopt;
@@ -576,6 +591,7 @@ class VirtualTexture::Impl {
 
   std::unordered_map<std::string, Programs> programs_;  // by scene GLSL
   std::optional<Error> last_error_;
+  std::optional<Error> last_tile_error_;  // the latest tile that failed, named
   GlProgram debug_prog_;
   GlVertexArray vao_;
   GlTexture page_tex_, physical_tex_, color_tex_, feedback_tex_;
@@ -681,6 +697,9 @@ Image VirtualTexture::read_image() const {
 }
 std::optional<Error> VirtualTexture::last_error() const {
   return impl_->last_error();
+}
+std::optional<Error> VirtualTexture::last_tile_error() const {
+  return impl_->last_tile_error();
 }
 void VirtualTexture::blit_to_screen(int width, int height) const {
   VTS_GL_CALL_SITE("VirtualTexture::blit_to_screen");

@@ -117,6 +117,7 @@ class Viewer {
   std::chrono::steady_clock::time_point last_title_, last_line_, last_frame_;
   std::uint64_t uploads_ = 0, counted_ = 0;
   double wall_ms_ = 0;
+  bool tile_error_logged_ = false;  // the first tile error went to the log
 };
 
 }  // namespace vts::renderer

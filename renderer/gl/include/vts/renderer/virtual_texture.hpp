@@ -98,6 +98,9 @@ class VirtualTexture {
   FrameStats render(const Scene& scene, int width, int height);
   FrameStats render(const PlaneView& view, int width, int height);  // a PlaneScene
   std::optional<Error> last_error() const;
+  // The latest tile that could not be shown (the client's error, or a tile of the wrong size or
+  // format), naming it; it is retried with back-off and counted in FrameStats::errors.
+  std::optional<Error> last_tile_error() const;
   // The last frame, sRGB RGBA8, rows top to bottom (a blocking read: screenshots and tests).
   Image read_image() const;
   // Copies the last frame to the window's default framebuffer (0), scaled to width x height.
