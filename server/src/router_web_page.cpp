@@ -86,19 +86,42 @@ std::string page_head(std::string_view title, std::string_view from) {
   return h;
 }
 
-HttpResponse index_page(const TilesetRegistry& registry, const AsyncTileProvider* provider) {
-  std::map<std::string, bool, std::less<>> names;  // sorted; the value: georeferenced
+// What the HTML index links for one tileset besides its viewer: the clients the JSON index names
+// (index_entry() of router.cpp, docs/GIS.md).
+struct IndexLinks {
+  bool georeferenced = false;
+  bool web_map = true;  // a web TileJSON (not for a cache daemon's WorldCRS84Quad tileset)
+  bool ogc = false;     // WMTS and OGC API: georeferenced, unprotected archive tilesets
+};
+
+HttpResponse index_page(const TilesetRegistry& registry, const AsyncTileProvider* provider,
+                        const RouterConfig& config) {
+  std::map<std::string, IndexLinks, std::less<>> names;  // sorted
   if (provider != nullptr) {
     for (const auto& t : provider->all()) {
-      if (t) names[t->name] = t->info.georeference.has_value();
+      if (!t) continue;
+      const auto& g = t->info.georeference;
+      names[t->name] = {g.has_value(), !g || g->tiling != Tiling::world_crs84_quad, false};
     }
   }
-  for (const auto& t : registry.all()) names[t->name] = t->info.georeference.has_value();
+  for (const auto& t : registry.all()) {
+    const bool georef = t->info.georeference.has_value();
+    names[t->name] = {georef, true, georef && !is_protected(config, t->name)};
+  }
   std::string b = page_head("vtstream tilesets", "");
   b += "<body class=\"vts-index\">\n<h1>Tilesets</h1>\n<ul id=\"tilesets\">\n";
-  for (const auto& [name, georef] : names) {
-    b += "<li><a href=\"" + html_escape(url_segment(name)) + "/\">" + html_escape(name) + "</a>" +
-         (georef ? " (georeferenced)" : "") + "</li>\n";
+  for (const auto& [name, links] : names) {
+    const std::string n = html_escape(url_segment(name));
+    b += "<li><a href=\"" + n + "/\">" + html_escape(name) + "</a>";
+    if (links.georeferenced) b += " (georeferenced)";
+    if (links.web_map)
+      b +=
+          " &middot; <a class=\"web-map\" href=\"" + n + ".json?format=webp\">web map TileJSON</a>";
+    if (links.ogc) {
+      b += " &middot; <a class=\"wmts\" href=\"wmts/1.0.0/WMTSCapabilities.xml\">WMTS</a>";
+      b += " &middot; <a class=\"ogcapi\" href=\"ogcapi/collections/" + n + "\">OGC API</a>";
+    }
+    b += "</li>\n";
   }
   b += "</ul>\n";
   if (names.empty()) b += "<p>No tilesets.</p>\n";
@@ -139,7 +162,7 @@ std::optional<HttpResponse> web_page(const HttpRequest& request, const Target& t
   const std::string_view path = target.path;
   if (path == "/") {
     if (!accepts_html(request.accept)) return std::nullopt;
-    return index_page(registry, provider);
+    return index_page(registry, provider, config);
   }
   if (path.starts_with(kAssetPrefix)) return asset_route(request, path.substr(kAssetPrefix.size()));
   // /{ts}/: one segment and a trailing slash.

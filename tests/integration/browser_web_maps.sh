@@ -48,6 +48,14 @@ json_check "$WORK/index.json" "j[0].tilejson === '$BASE/earth.json' &&
   j[0].gis.wmts === '$BASE/wmts/1.0.0/WMTSCapabilities.xml' &&
   j[0].gis.ogcapi === '$BASE/ogcapi/collections/earth'" "the index entry"
 
+note "a browser's index links the same: the web map TileJSON, WMTS, OGC API"
+curl -sf -H 'Accept: text/html' "$BASE/" >"$WORK/index.html" || fail "GET / as a browser failed"
+for want in '<a class="web-map" href="earth.json?format=webp">' \
+  '<a class="wmts" href="wmts/1.0.0/WMTSCapabilities.xml">' \
+  '<a class="ogcapi" href="ogcapi/collections/earth">'; do
+  grep -qF "$want" "$WORK/index.html" || { cat "$WORK/index.html" >&2; fail "no $want"; }
+done
+
 note "the plain web TileJSON is Web Mercator; the native grid only when asked by name"
 curl -sf "$BASE/earth.json?format=webp" >"$WORK/web.json" || fail "web TileJSON failed"
 json_check "$WORK/web.json" "j.tileMatrixSet === 'WebMercatorQuad' && j.crs === 'EPSG:3857' &&
