@@ -40,20 +40,7 @@ cat "$INPUT" "$ARCHIVE" >/dev/null # into the page cache
 OUTDIR="$CACHE/export_out"
 rm -rf "$OUTDIR"
 mkdir -p "$OUTDIR"
-declare -A BEST CPU RSS
-best_of() { # NAME CMD...: runs CMD $RUNS times, keeps the fastest run's figures
-  local name=$1 i
-  shift
-  for ((i = 1; i <= RUNS; i++)); do
-    rm -rf "$OUTDIR/vts.pmtiles" "$OUTDIR/dz" "$OUTDIR/dz.dzi" "$OUTDIR"/dz_files
-    measure "$OUTDIR/$name.log" "$@"
-    ((M_RC == 0)) || die "$name failed (exit $M_RC): $(tail -n 5 "$OUTDIR/$name.log")"
-    echo "[bench] $name run $i: ${M_WALL}s" >&2
-    if [[ -z ${BEST[$name]:-} ]] || awk -v a="$M_WALL" -v b="${BEST[$name]}" 'BEGIN { exit !(a < b) }'; then
-      BEST[$name]=$M_WALL CPU[$name]=$M_CPU RSS[$name]=$M_RSS_MB
-    fi
-  done
-}
+before_run() { rm -rf "$OUTDIR/vts.pmtiles" "$OUTDIR/dz" "$OUTDIR/dz.dzi" "$OUTDIR"/dz_files; }
 
 best_of vips vips dzsave "$INPUT" "$OUTDIR/dz" --layout google --tile-size 256 --overlap 0 \
   --suffix ".webp[Q=$QUALITY]"

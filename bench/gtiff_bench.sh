@@ -52,20 +52,7 @@ GDAL_THREADS=$THREADS
 OUTDIR="$CACHE/gtiff_out"
 rm -rf "$OUTDIR"
 mkdir -p "$OUTDIR"
-declare -A BEST CPU RSS
-best_of() { # NAME CMD...: runs CMD $RUNS times, keeps the fastest run's figures
-  local name=$1 i
-  shift
-  for ((i = 1; i <= RUNS; i++)); do
-    rm -f "$OUTDIR/$name.tif"
-    measure "$OUTDIR/$name.log" "$@"
-    ((M_RC == 0)) || die "$name failed (exit $M_RC): $(tail -n 5 "$OUTDIR/$name.log")"
-    echo "[bench] $name run $i: ${M_WALL}s" >&2
-    if [[ -z ${BEST[$name]:-} ]] || awk -v a="$M_WALL" -v b="${BEST[$name]}" 'BEGIN { exit !(a < b) }'; then
-      BEST[$name]=$M_WALL CPU[$name]=$M_CPU RSS[$name]=$M_RSS_MB
-    fi
-  done
-}
+before_run() { rm -f "$OUTDIR/$1.tif"; }
 
 best_of gdal gdal_translate -q -of COG -co COMPRESS=DEFLATE -co PREDICTOR=2 -co BLOCKSIZE=512 \
   -co OVERVIEW_RESAMPLING=AVERAGE -co NUM_THREADS="$GDAL_THREADS" "$LEVEL" "$OUTDIR/gdal.tif"

@@ -264,6 +264,25 @@ CONF
   die "nginx did not start: $(cat "$dir/stderr")"
 }
 
+# best_of NAME CMD...: runs CMD $RUNS times, after the caller's `before_run NAME` (to remove the
+# previous run's output) when it defines one, and keeps the fastest run's figures: BEST[NAME] (wall
+# seconds), CPU[NAME] and RSS[NAME] (of that run), in the global associative arrays BEST, CPU
+# and RSS. Each run's output goes to $OUTDIR/NAME.log; a failed run stops the benchmark.
+best_of() {
+  local name=$1 i
+  shift
+  declare -gA BEST CPU RSS # the caller's, when it declared them (their values are kept)
+  for ((i = 1; i <= RUNS; i++)); do
+    if declare -F before_run >/dev/null; then before_run "$name"; fi
+    measure "$OUTDIR/$name.log" "$@"
+    ((M_RC == 0)) || die "$name failed (exit $M_RC): $(tail -n 5 "$OUTDIR/$name.log")"
+    echo "[bench] $name run $i: ${M_WALL}s" >&2
+    if [[ -z ${BEST[$name]:-} ]] || awk -v a="$M_WALL" -v b="${BEST[$name]}" 'BEGIN { exit !(a < b) }'; then
+      BEST[$name]=$M_WALL CPU[$name]=$M_CPU RSS[$name]=$M_RSS_MB
+    fi
+  done
+}
+
 # emit_report: prints the caller's report() (the Markdown table) and, with JSON=1, its json() on
 # stdout with the table on stderr; OUT_FILE, when set, receives a copy of the table.
 emit_report() {

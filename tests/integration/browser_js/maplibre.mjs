@@ -8,13 +8,9 @@
 // resampling, no fade); once MapLibre is idle with every tile loaded, a screenshot is written and
 // one JSON line printed: the tiles MapLibre loaded and every console error, page error, failed
 // request and HTTP error met.
-import fs from 'node:fs';
-import path from 'node:path';
-import { fileURLToPath } from 'node:url';
-import puppeteer from 'puppeteer-core';
+import { shootStockMap } from './stock_map_page.mjs';
 
 const [origin, source, z, x0, y0, shot] = process.argv.slice(2);
-const here = path.dirname(fileURLToPath(import.meta.url));
 const files = {
   '/__maplibre/maplibre-gl.js': ['text/javascript', 'maplibre-gl/dist/maplibre-gl.js'],
   '/__maplibre/maplibre-gl.css': ['text/css', 'maplibre-gl/dist/maplibre-gl.css'],
@@ -46,40 +42,5 @@ map.on('error', (e) => console.error('maplibre: ' + (e.error ? e.error.message :
 map.once('idle', () => { window.idle = true; });
 </script></body></html>`;
 
-const browser = await puppeteer.launch({
-  executablePath: process.env.CHROMIUM || '/usr/bin/chromium',
-  headless: true,
-  args: ['--no-sandbox', '--force-device-scale-factor=1', '--use-angle=swiftshader',
-    '--enable-unsafe-swiftshader'],
-});
-const problems = [];
-try {
-  const page = await browser.newPage();
-  await page.setViewport({ width: 512, height: 384, deviceScaleFactor: 1 });
-  await page.setRequestInterception(true);
-  page.on('request', (r) => {
-    const u = new URL(r.url());
-    if (u.origin === origin && u.pathname === '/__maplibre.html') {
-      r.respond({ status: 200, contentType: 'text/html', body: html });
-    } else if (u.origin === origin && files[u.pathname]) {
-      const [type, file] = files[u.pathname];
-      r.respond({ status: 200, contentType: type,
-        body: fs.readFileSync(path.join(here, 'node_modules', file)) });
-    } else {
-      r.continue();
-    }
-  });
-  page.on('console', (m) => {
-    if (m.type() === 'error') problems.push('console: ' + m.text());
-  });
-  page.on('pageerror', (e) => problems.push('page error: ' + e.message));
-  page.on('requestfailed', (r) => problems.push('request failed: ' + r.url()));
-  page.on('response', (r) => { if (r.status() >= 400) problems.push(r.status() + ' ' + r.url()); });
-  await page.goto(origin + '/__maplibre.html', { waitUntil: 'load', timeout: 30000 });
-  await page.waitForFunction(() => window.idle === true, { timeout: 60000, polling: 50 });
-  await page.screenshot({ path: shot, type: 'png' });
-  const loaded = await page.evaluate(() => window.loaded);
-  console.log(JSON.stringify({ loaded, problems }));
-} finally {
-  await browser.close();
-}
+await shootStockMap({ origin, page: '/__maplibre.html', html, files, width: 512, height: 384,
+  shot });

@@ -8,13 +8,9 @@
 // is served at ORIGIN/__webmap.html by request interception (same origin as the tiles). Once the
 // map has drawn every tile, a screenshot is written and one JSON line printed: the tiles loaded and
 // every console error, page error, failed request and HTTP error met.
-import fs from 'node:fs';
-import path from 'node:path';
-import { fileURLToPath } from 'node:url';
-import puppeteer from 'puppeteer-core';
+import { shootStockMap } from './stock_map_page.mjs';
 
 const [lib, origin, tilejson, shot] = process.argv.slice(2);
-const here = path.dirname(fileURLToPath(import.meta.url));
 const assets = {
   maplibre: { js: 'maplibre-gl/dist/maplibre-gl.js', css: 'maplibre-gl/dist/maplibre-gl.css' },
   leaflet: { js: 'leaflet/dist/leaflet.js', css: 'leaflet/dist/leaflet.css' },
@@ -66,40 +62,6 @@ const TILEJSON = ${JSON.stringify(tilejson)};
 ${scripts[lib]}
 </script></body></html>`;
 
-const browser = await puppeteer.launch({
-  executablePath: process.env.CHROMIUM || '/usr/bin/chromium',
-  headless: true,
-  args: ['--no-sandbox', '--force-device-scale-factor=1', '--use-angle=swiftshader',
-    '--enable-unsafe-swiftshader'],
-});
-const problems = [];
-try {
-  const page = await browser.newPage();
-  await page.setViewport({ width: 512, height: 512, deviceScaleFactor: 1 });
-  await page.setRequestInterception(true);
-  page.on('request', (r) => {
-    const u = new URL(r.url());
-    if (u.origin === origin && u.pathname === '/__webmap.html') {
-      r.respond({ status: 200, contentType: 'text/html', body: html });
-    } else if (u.origin === origin && u.pathname.startsWith('/__webmap/lib.')) {
-      const css = u.pathname.endsWith('.css');
-      r.respond({ status: 200, contentType: css ? 'text/css' : 'text/javascript',
-        body: fs.readFileSync(path.join(here, 'node_modules', css ? assets.css : assets.js)) });
-    } else {
-      r.continue();
-    }
-  });
-  page.on('console', (m) => {
-    if (m.type() === 'error') problems.push('console: ' + m.text());
-  });
-  page.on('pageerror', (e) => problems.push('page error: ' + e.message));
-  page.on('requestfailed', (r) => problems.push('request failed: ' + r.url()));
-  page.on('response', (r) => { if (r.status() >= 400) problems.push(r.status() + ' ' + r.url()); });
-  await page.goto(origin + '/__webmap.html', { waitUntil: 'load', timeout: 30000 });
-  await page.waitForFunction(() => window.idle === true, { timeout: 60000, polling: 50 });
-  await page.screenshot({ path: shot, type: 'png' });
-  const loaded = await page.evaluate(() => window.loaded);
-  console.log(JSON.stringify({ loaded, problems }));
-} finally {
-  await browser.close();
-}
+await shootStockMap({ origin, page: '/__webmap.html', html, width: 512, height: 512, shot,
+  files: { '/__webmap/lib.js': ['text/javascript', assets.js],
+    '/__webmap/lib.css': ['text/css', assets.css] } });
