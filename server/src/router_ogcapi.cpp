@@ -289,6 +289,8 @@ std::optional<HttpResponse> ogcapi_route(const HttpRequest& request, const Targe
   if (s[1] == "conformance" && s.size() == 2) return conformance();
   if (s[1] == "collections") return collections(request, s, registry, config, root);
   if (s[1] == "tileMatrixSets") return matrix_sets(s, registry, config, root);
+  // Not an OGC API resource: the tile paths of a tileset named "ogcapi", when one is served.
+  if (registry.find("ogcapi")) return std::nullopt;
   return not_found(
       "no such resource; try /ogcapi, /ogcapi/conformance, /ogcapi/collections or "
       "/ogcapi/tileMatrixSets");

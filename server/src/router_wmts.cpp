@@ -307,6 +307,8 @@ std::optional<HttpResponse> wmts_route(const HttpRequest& request, const Target&
   std::string why;
   if (!split_segments(target.path, s, why)) return error(400, why);
   if (s[1] != "1.0.0") {
+    // Not a WMTS resource: the tile paths of a tileset named "wmts", when one is served.
+    if (registry.find("wmts")) return std::nullopt;
     return ows_exception(404, "VersionNegotiationFailed", "",
                          "the one WMTS version served is 1.0.0: /wmts/1.0.0/...");
   }

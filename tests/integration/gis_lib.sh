@@ -12,8 +12,8 @@ export GDAL_DEFAULT_WMS_CACHE_PATH="$WORK/gdalwmscache"
 # Half the side of Web Mercator's level-2 tile: the corners of its four middle tiles, in metres.
 MERC_HALF=10018754.171394622
 
-# gis_setup: earth (WorldCRS84Quad, TMS levels 0..2), merc (WebMercatorQuad 0..3) and secret (a
-# copy of earth behind a bearer token), served; earth3.png and merc2.png are what `vts extract`
+# gis_setup: earth (WorldCRS84Quad, TMS levels 0..2), merc (WebMercatorQuad 0..3), secret (a
+# copy of earth behind a bearer token) and the plain images wmts and ogcapi, served; earth3.png and merc2.png are what `vts extract`
 # writes of earth's level 3 (TMS 2) and merc's level 2.
 gis_setup() {
   gdal_translate -q -a_srs EPSG:4326 -a_ullr -180 90 180 -90 "$EARTH" "$WORK/world.tif" ||
@@ -25,8 +25,11 @@ gis_setup() {
   echo '{"access": {"secret": {"tokens": ["s3cret"]}}}' >"$WORK/serve.json"
   expect_ok "$VTS" extract "$WORK/earth.pmtiles" --level 3 -o "$WORK/earth3.png"
   expect_ok "$VTS" extract "$WORK/merc.pmtiles" --level 2 -o "$WORK/merc2.png"
+  # Plain images named as the OGC routes' first segments: their tile paths still answer.
+  build_earth "$WORK/wmts.pmtiles" --threads 2 -q
+  cp "$WORK/wmts.pmtiles" "$WORK/ogcapi.pmtiles"
   start_server "$WORK/earth.pmtiles" "$WORK/merc.pmtiles" "$WORK/secret.pmtiles" \
-    --config "$WORK/serve.json"
+    "$WORK/wmts.pmtiles" "$WORK/ogcapi.pmtiles" --config "$WORK/serve.json"
 }
 
 # same_texels OUT REF X Y MODE...: gis_compare.py (exact, or a PSNR floor for lossy codecs).

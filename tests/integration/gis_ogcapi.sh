@@ -92,4 +92,8 @@ expect_status 404 "$API/collections/earth/map/tiles/WorldCRS84Quad/2/4/0.png"
 expect_status 400 "$API/collections/earth/map/tiles/WorldCRS84Quad/2/01/0.png"
 expect_status 404 "$API/collections/earth/map/tiles/Nope"
 expect_status 404 "$API/tileMatrixSets/WorldCRS84Quad-100"
+note "a tileset named ogcapi keeps its tile paths; the OGC API resources stay OGC API's"
+[[ $(curl -s -o /dev/null -w '%{http_code} %{content_type}' "$BASE/ogcapi/1/1/0") == \
+  "200 application/vnd.vtstream.tile" ]] || fail "/ogcapi/1/1/0 is not the ogcapi tileset's tile"
+body_has "$BASE/ogcapi/collections" '"collections"'
 stop_server

@@ -105,4 +105,11 @@ expect_status 400 "$BASE/wmts/1.0.0/earth/fancy/WorldCRS84Quad/2/0/0.png"
 expect_status 400 "$BASE/wmts/1.0.0/earth/default/WorldCRS84Quad/2/0/0.gif"
 expect_status 501 "$BASE/wmts?SERVICE=WMTS&REQUEST=GetFeatureInfo"
 expect_status 400 "$BASE/wmts?SERVICE=WMTS&REQUEST=GetCapabilities&service=WMTS"
+
+note "a tileset named wmts keeps its tile paths; the WMTS resources stay WMTS's"
+[[ $(curl -s -o /dev/null -w '%{http_code} %{content_type}' "$BASE/wmts/1/1/0") == \
+  "200 application/vnd.vtstream.tile" ]] || fail "/wmts/1/1/0 is not the wmts tileset's tile"
+expect_status 200 "$BASE/wmts/1/1/0.png"
+body_has "$CAPS" '<Capabilities'
+body_has "$BASE/wmts?SERVICE=WMTS&REQUEST=GetCapabilities" '<Capabilities'
 stop_server
