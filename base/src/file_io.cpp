@@ -194,6 +194,12 @@ bool istarts_with(std::string_view s, std::string_view prefix) noexcept {
   return s.size() >= prefix.size() && iequals(s.substr(0, prefix.size()), prefix);
 }
 
+bool icontains(std::string_view s, std::string_view part) noexcept {
+  for (std::size_t i = 0; i + part.size() <= s.size(); ++i)
+    if (iequals(s.substr(i, part.size()), part)) return true;
+  return false;
+}
+
 std::string html_escape(std::string_view s) {
   std::string out;
   out.reserve(s.size());

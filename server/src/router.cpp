@@ -8,7 +8,6 @@
 #include <algorithm>
 #include <array>
 #include <cassert>
-#include <cctype>
 #include <charconv>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -645,10 +644,7 @@ HttpResponse provided_web(const HttpRequest& request, std::shared_ptr<const Prov
 // Whether a request asks for an image and not our tile codec: a browser's <img> or a web map's
 // tile fetch (Accept: image/webp,*/*, ...). Our clients send */* or name kTileType.
 bool wants_image(std::string_view accept) {
-  std::string lower(accept);
-  std::transform(lower.begin(), lower.end(), lower.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return lower.find("image/") != std::string::npos && lower.find(kTileType) == std::string::npos;
+  return icontains(accept, "image/") && !icontains(accept, kTileType);
 }
 
 // 406 for a native tile asked as an image, naming the routes that answer images. Not cached

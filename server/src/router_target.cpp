@@ -2,6 +2,7 @@
 #include <limits>
 
 #include "router_internal.hpp"
+#include "vts/base/file_io.hpp"
 
 namespace vts {
 inline namespace server {
@@ -44,15 +45,6 @@ std::optional<std::string> decode_path(std::string_view raw, std::string& why) {
     out.push_back(static_cast<char>(c));
   }
   return out;
-}
-
-bool iequals(std::string_view a, std::string_view b) {
-  if (a.size() != b.size()) return false;
-  for (std::size_t i = 0; i < a.size(); ++i) {
-    auto lower = [](char c) { return c >= 'A' && c <= 'Z' ? char(c - 'A' + 'a') : c; };
-    if (lower(a[i]) != lower(b[i])) return false;
-  }
-  return true;
 }
 
 // The WMTS KVP parameters (OGC 07-057r7 §7.2.2 and §7.3.2; their names are case-insensitive),

@@ -23,10 +23,7 @@ constexpr std::uint32_t kAssetMaxAge = 31536000;  // the URL names the content's
 constexpr std::uint32_t kPageMaxAge = 60;
 
 bool accepts_html(std::string_view accept) {
-  std::string lower(accept);
-  std::transform(lower.begin(), lower.end(), lower.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return lower.find("text/html") != std::string::npos;
+  return icontains(accept, "text/html");
 }
 
 const WebAsset* find_asset(std::string_view file) {

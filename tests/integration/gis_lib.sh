@@ -39,5 +39,9 @@ same_texels() { "$PY" "$HERE/gis_compare.py" "$@" || fail "$1 is not $2's texels
 body_has() {
   local url=$1 text=$2
   shift 2
-  curl -s "$@" "$url" | grep -qF -- "$text" || fail "$url: no '$text' in the body"
+  # Read whole before searching: grep -q stops at the first match, and curl writing the rest of a
+  # large body into the closed pipe would fail the pipeline (pipefail).
+  local body
+  body=$(curl -s "$@" "$url")
+  grep -qF -- "$text" <<<"$body" || fail "$url: no '$text' in the body"
 }

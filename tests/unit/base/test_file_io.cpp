@@ -171,3 +171,13 @@ TEST(HtmlEscape, TheFiveMarkupCharactersBecomeReferencesAndNothingElseChanges) {
 }
 
 }  // namespace
+
+TEST(HttpText, IcontainsFindsAPartInAnyAsciiCase) {
+  EXPECT_TRUE(vts::icontains("Image/WebP,*/*;q=0.8", "image/"));
+  EXPECT_TRUE(vts::icontains("text/HTML", "text/html"));
+  EXPECT_TRUE(vts::icontains("abc", ""));
+  EXPECT_TRUE(vts::icontains("abc", "abc"));
+  EXPECT_FALSE(vts::icontains("*/*", "image/"));
+  EXPECT_FALSE(vts::icontains("ab", "abc"));
+  EXPECT_FALSE(vts::icontains("", "a"));
+}

@@ -65,10 +65,11 @@ Status check_input_file(const std::filesystem::path& path);
 Result<std::string> read_file(const std::filesystem::path& path);
 
 // HTTP-style text: spaces and tabs (and CR/LF) trimmed from both ends; ASCII case-insensitive
-// comparison and prefix test.
+// comparison, prefix test and search (no copy: these run on request headers).
 std::string_view trim(std::string_view s) noexcept;
 bool iequals(std::string_view a, std::string_view b) noexcept;
 bool istarts_with(std::string_view s, std::string_view prefix) noexcept;
+bool icontains(std::string_view s, std::string_view part) noexcept;
 
 // Text for HTML (and SVG) element content and quoted attribute values (double or single quotes):
 // & < > " ' as character references (&amp; &lt; &gt; &quot; &#39;); every other byte as it is,
