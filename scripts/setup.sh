@@ -32,8 +32,9 @@ PACKAGES=(
   libexpat1-dev
   # the bc1 tile codec's encoders: libsquish, and stb_dxt from libstb-dev (below)
   libsquish-dev
-  # standard web images of tiles (PNG, WebP, JPEG) for web maps and `vts export`
-  libpng-dev libwebp-dev libturbojpeg0-dev
+  # standard web images of tiles (PNG, WebP, JPEG) for web maps and `vts export`; libdeflate is
+  # the PNG writer's deflate (several times zlib's speed at the same bytes)
+  libpng-dev libwebp-dev libturbojpeg0-dev libdeflate-dev
   # GeoTIFF and other georeferenced inputs of vts build (builder/src/gdal_source.cpp); gdal-bin's
   # gdal_translate/gdalwarp make the test inputs and references; python3-gdal is gdal2tiles.py's
   # (bench/georef_bench.sh's peer; gdal-bin depends on it on bookworm, named here all the same)
@@ -44,6 +45,9 @@ PACKAGES=(
   # the OpenGL viewer (renderer/): GLFW 3.3, libepoxy (GL loader), GLM; its tests render under
   # Xvfb with Mesa's llvmpipe (GL 4.5 core, no GPU needed)
   libglfw3-dev libepoxy-dev libglm-dev xvfb xauth libgl1-mesa-dri
+  # the viewer's headless path with no display (EGL: a GPU's device platform, or Mesa's
+  # surfaceless platform in the tests)
+  libegl-dev libegl-mesa0
   # the viewer's HUD text (stb_easy_font) and real input events in its
   # interactive test (xdotool)
   libstb-dev xdotool
