@@ -105,14 +105,65 @@ inline void interleave(__m128i r, __m128i g, __m128i b, __m128i a, __m128i px[4]
   px[3] = _mm_unpackhi_epi16(rg_hi, ba_hi);
 }
 
-// Decodes one texel: `left` holds the left texel as 4 x int16 in its low half, `d` holds
-// up - upleft likewise, `res` the residual bytes in its low 32 bits. Returns the texel bytes in
-// the low 32 bits and updates `left`. Latency: 4 single-cycle ops per texel.
-inline __m128i unfilter1(__m128i& left, __m128i d, __m128i res) {
-  const __m128i zero = _mm_setzero_si128();
-  const __m128i v = _mm_add_epi8(_mm_packus_epi16(_mm_add_epi16(left, d), zero), res);
-  left = _mm_unpacklo_epi8(v, zero);
-  return v;
+// The unfilter works in bytes: with dp = max(up - upleft, 0) and dn = max(upleft - up, 0) (one
+// of them is 0), clamp(left + up - upleft, 0, 255) == subs_epu8(adds_epu8(left, dp), dn). dp and
+// dn come from the row above, off the dependency chain, which is then three single-cycle byte ops
+// per texel (saturating add, saturating subtract, add of the residual).
+//
+// One row being unfiltered: its output, the row above, its four residual planes, and the texel
+// left of the next one (low 32 bits), kept in a register across the row: reading it back from
+// `cur` would put a store-to-load forwarding delay on the chain.
+struct UnfilterRow {
+  std::uint8_t* cur;
+  const std::uint8_t* up;
+  const std::uint8_t *r, *g, *b, *a;
+  __m128i left;
+};
+
+// Decodes one texel in the low 32 bits (the higher lanes are don't-care) and makes it `left`.
+inline __m128i unfilter1(__m128i& left, __m128i dp, __m128i dn, __m128i res) {
+  left = _mm_add_epi8(_mm_subs_epu8(_mm_adds_epu8(left, dp), dn), res);
+  return left;
+}
+
+// Texels x .. x+3 of a row, `res` their residuals interleaved.
+inline void unfilter4(UnfilterRow& row, std::uint32_t x, __m128i res) {
+  const std::uint8_t* u = row.up + 4 * x;
+  const __m128i uv = load16(u), ul = load16(u - 4);
+  const __m128i dp = _mm_subs_epu8(uv, ul), dn = _mm_subs_epu8(ul, uv);
+  const __m128i v0 = unfilter1(row.left, dp, dn, res);
+  const __m128i v1 =
+      unfilter1(row.left, _mm_srli_si128(dp, 4), _mm_srli_si128(dn, 4), _mm_srli_si128(res, 4));
+  const __m128i v2 =
+      unfilter1(row.left, _mm_srli_si128(dp, 8), _mm_srli_si128(dn, 8), _mm_srli_si128(res, 8));
+  const __m128i v3 =
+      unfilter1(row.left, _mm_srli_si128(dp, 12), _mm_srli_si128(dn, 12), _mm_srli_si128(res, 12));
+  // Gather the four texels (each in the low 32 bits) into one 16-byte store.
+  store16(row.cur + 4 * x,
+          _mm_unpacklo_epi64(_mm_unpacklo_epi32(v0, v1), _mm_unpacklo_epi32(v2, v3)));
+}
+
+inline void residuals16(const UnfilterRow& row, std::uint32_t x, __m128i res[4]) {
+  interleave(load16(row.r + x), load16(row.g + x), load16(row.b + x), load16(row.a + x), res);
+}
+
+// Texels x .. x+15 of one row.
+inline void unfilter16(UnfilterRow& row, std::uint32_t x) {
+  __m128i res[4];
+  residuals16(row, x, res);
+  for (std::uint32_t k = 0; k < 4; ++k) unfilter4(row, x + 4 * k, res[k]);
+}
+
+// Texels x0 .. x0+15 of row p and x1 .. x1+15 of row q, interleaved: the two dependency chains
+// are independent, so the CPU runs them side by side.
+inline void unfilter16x2(UnfilterRow& p, std::uint32_t x0, UnfilterRow& q, std::uint32_t x1) {
+  __m128i rp[4], rq[4];
+  residuals16(p, x0, rp);
+  residuals16(q, x1, rq);
+  for (std::uint32_t k = 0; k < 4; ++k) {
+    unfilter4(p, x0 + 4 * k, rp[k]);
+    unfilter4(q, x1 + 4 * k, rq[k]);
+  }
 }
 #endif
 
@@ -153,12 +204,71 @@ void gradient_filter(const std::uint8_t* rgba, std::uint32_t width, std::uint32_
   }
 }
 
+namespace {
+
+// Row y of the image, its first texel decoded (left = 0 and upleft = 0: the prediction is `up`).
+#if VTS_FILTER_SSE2
+UnfilterRow start_row(const std::uint8_t* planes, std::uint32_t width, std::uint32_t height,
+                      std::uint32_t y, std::uint8_t* rgba) {
+  const std::size_t plane = std::size_t(width) * height;
+  UnfilterRow row;
+  row.cur = rgba + std::size_t(y) * width * 4;
+  row.up = y == 0 ? kZeroRow : row.cur - std::size_t(width) * 4;
+  row.r = planes + std::size_t(y) * width;
+  row.g = row.r + plane;
+  row.b = row.g + plane;
+  row.a = row.b + plane;
+  row.cur[0] = static_cast<std::uint8_t>(row.r[0] + row.up[0]);
+  row.cur[1] = static_cast<std::uint8_t>(row.g[0] + row.up[1]);
+  row.cur[2] = static_cast<std::uint8_t>(row.b[0] + row.up[2]);
+  row.cur[3] = static_cast<std::uint8_t>(row.a[0] + row.up[3]);
+  std::uint32_t first;
+  std::memcpy(&first, row.cur, 4);
+  row.left = _mm_cvtsi32_si128(static_cast<int>(first));
+  return row;
+}
+
+void finish_row(const UnfilterRow& row, std::uint32_t x, std::uint32_t width) {
+  unfilter_row_scalar(row.cur, row.up, x, width, row.r, row.g, row.b, row.a);
+}
+
+// Rows y and y+1 together, the second one 16-texel block behind the first (a block needs the
+// row above up to its own last texel): two independent chains instead of one.
+void unfilter_row_pair(const std::uint8_t* planes, std::uint32_t width, std::uint32_t height,
+                       std::uint32_t y, std::uint8_t* rgba) {
+  const std::uint32_t blocks = (width - 1) / 16;  // >= 1: width >= 17
+  const std::uint32_t tail = 1 + 16 * blocks;
+  UnfilterRow p = start_row(planes, width, height, y, rgba);
+  unfilter16(p, 1);
+  UnfilterRow q = start_row(planes, width, height, y + 1, rgba);
+  for (std::uint32_t i = 1; i < blocks; ++i) unfilter16x2(p, 1 + 16 * i, q, 1 + 16 * (i - 1));
+  finish_row(p, tail, width);
+  unfilter16(q, tail - 16);
+  finish_row(q, tail, width);
+}
+#endif
+
+}  // namespace
+
 void gradient_unfilter(const std::uint8_t* planes, std::uint32_t width, std::uint32_t height,
                        std::uint8_t* rgba) {
   assert(width >= 1 && width <= TileHeader::kMaxDimension && height >= 1);
+  std::uint32_t y = 0;
+#if VTS_FILTER_SSE2
+  if (width >= 17) {
+    for (; y + 2 <= height; y += 2) unfilter_row_pair(planes, width, height, y, rgba);
+    if (y < height) {
+      UnfilterRow row = start_row(planes, width, height, y, rgba);
+      std::uint32_t x = 1;
+      for (; x + 16 <= width; x += 16) unfilter16(row, x);
+      finish_row(row, x, width);
+      ++y;
+    }
+  }
+#endif
   const std::size_t plane = std::size_t(width) * height;
   const std::size_t row_bytes = std::size_t(width) * 4;
-  for (std::uint32_t y = 0; y < height; ++y) {
+  for (; y < height; ++y) {
     std::uint8_t* cur = rgba + y * row_bytes;
     const std::uint8_t* up = y == 0 ? kZeroRow : cur - row_bytes;
     const std::uint8_t* r = planes + std::size_t(y) * width;
@@ -169,38 +279,7 @@ void gradient_unfilter(const std::uint8_t* planes, std::uint32_t width, std::uin
     cur[1] = static_cast<std::uint8_t>(g[0] + up[1]);
     cur[2] = static_cast<std::uint8_t>(b[0] + up[2]);
     cur[3] = static_cast<std::uint8_t>(a[0] + up[3]);
-    std::uint32_t x = 1;
-#if VTS_FILTER_SSE2
-    if (width >= 17) {
-      const __m128i zero = _mm_setzero_si128();
-      std::uint32_t first;
-      std::memcpy(&first, cur, 4);
-      // The left texel stays in a register across the row: reading it back from `cur` would put
-      // a store-to-load forwarding delay on the dependency chain.
-      __m128i left = _mm_unpacklo_epi8(_mm_cvtsi32_si128(static_cast<int>(first)), zero);
-      for (; x + 16 <= width; x += 16) {
-        __m128i res[4];
-        interleave(load16(r + x), load16(g + x), load16(b + x), load16(a + x), res);
-        std::uint8_t* c = cur + 4 * x;
-        const std::uint8_t* u = up + 4 * x;
-        for (int k = 0; k < 4; ++k, c += 16, u += 16) {
-          const __m128i uv = load16(u), ul = load16(u - 4);
-          const __m128i d_lo =
-              _mm_sub_epi16(_mm_unpacklo_epi8(uv, zero), _mm_unpacklo_epi8(ul, zero));
-          const __m128i d_hi =
-              _mm_sub_epi16(_mm_unpackhi_epi8(uv, zero), _mm_unpackhi_epi8(ul, zero));
-          const __m128i v0 = unfilter1(left, d_lo, res[k]);
-          const __m128i v1 = unfilter1(left, _mm_srli_si128(d_lo, 8), _mm_srli_si128(res[k], 4));
-          const __m128i v2 = unfilter1(left, d_hi, _mm_srli_si128(res[k], 8));
-          const __m128i v3 = unfilter1(left, _mm_srli_si128(d_hi, 8), _mm_srli_si128(res[k], 12));
-          // Gather the four texels (each in the low 32 bits) into one 16-byte store.
-          const __m128i v01 = _mm_unpacklo_epi32(v0, v1), v23 = _mm_unpacklo_epi32(v2, v3);
-          store16(c, _mm_unpacklo_epi64(v01, v23));
-        }
-      }
-    }
-#endif
-    unfilter_row_scalar(cur, up, x, width, r, g, b, a);
+    unfilter_row_scalar(cur, up, 1, width, r, g, b, a);
   }
 }
 
