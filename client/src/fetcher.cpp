@@ -10,6 +10,7 @@
 #include "vts/client/fetcher.hpp"
 
 #include <curl/curl.h>
+#include <pthread.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -100,7 +101,10 @@ class Fetcher::Impl {
     }
     curl_multi_setopt(multi_, CURLMOPT_PIPELINING, long(CURLPIPE_MULTIPLEX));
     try {
-      thread_ = std::thread([this] { run(); });
+      thread_ = std::thread([this] {
+        pthread_setname_np(pthread_self(), "vts-fetch");  // profiles, `top -H`
+        run();
+      });
     } catch (const std::system_error& e) {
       return make_error(ErrorCode::io, std::string("cannot start fetcher thread: ") + e.what());
     }
@@ -474,7 +478,10 @@ class Fetcher::Impl {
       t->too_large = true;
       return 0;  // aborts the transfer with CURLE_WRITE_ERROR
     }
-    t->body.insert(t->body.end(), data, data + bytes);
+    // As bytes: inserting the char range into a vector of uint8_t converts byte by byte (a
+    // one-byte loop, 5-11% of `vts warm`'s CPU); the same type copies with memmove.
+    const auto* first = reinterpret_cast<const std::uint8_t*>(data);
+    t->body.insert(t->body.end(), first, first + bytes);
     t->owner->stats_.bytes.fetch_add(bytes, std::memory_order_relaxed);
     return bytes;
   }
