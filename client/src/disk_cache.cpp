@@ -31,8 +31,9 @@
 //   - pages: each payload occupies whole 16 KiB pages (on average half a page lost per tile) plus
 //     b-tree and index entries: a few percent for tiles of tens of KiB, but much more for tiles of
 //     a few bytes (the cap counts payload bytes only);
-//   - the WAL: checkpointed every kWalAutocheckpointPages pages (2 MiB) and truncated back to
-//     kJournalSizeLimit (2 MiB) after a checkpoint; one transaction's pages more at worst (another
+//   - the WAL: checkpointed once it holds DiskCacheOptions::wal_checkpoint_bytes (2 MiB by
+//     default) of pages and truncated back to that size after a checkpoint (a larger setting, as
+//     `vts warm` uses, adds the difference); one transaction's pages more at worst (another
 //     process reading through a checkpoint can make it grow further until it finishes);
 //   - free pages: evictions free pages that the next puts reuse; when more than
 //     2 * kFreePagesKept (1 MiB) are free, PRAGMA incremental_vacuum (auto_vacuum = INCREMENTAL,
@@ -59,13 +60,11 @@
 namespace vts::client {
 namespace {
 
-constexpr int kEvictBatch = 64;               // rows fetched per eviction query
-constexpr int kWalAutocheckpointPages = 128;  // 2 MiB of 16 KiB pages
-constexpr int kJournalSizeLimit = 2 << 20;    // WAL truncated back to this after a checkpoint
-constexpr std::int64_t kFreePagesKept = 32;   // 512 KiB of 16 KiB pages
+constexpr int kEvictBatch = 64;              // rows fetched per eviction query
+constexpr std::int64_t kFreePagesKept = 32;  // 512 KiB of 16 KiB pages
 // The page size of new caches: 16 KiB rather than SQLite's 4 KiB, so a tile of tens of KiB is a
 // quarter of the pages, and of the page writes (to the WAL, then again at each checkpoint).
-// Caches made with 4 KiB pages keep them (their WAL is then checkpointed every 512 KiB).
+// Caches made with 4 KiB pages keep them.
 constexpr int kPageSize = 16384;
 constexpr std::size_t kMaxPendingTouchesFactor = 16;  // drop access times beyond batch * this
 
@@ -604,6 +603,15 @@ struct DiskCache::Impl {
 
   // ---- opening ----------------------------------------------------------------------------
 
+  // The database's page size (kPageSize for caches we created; 4 KiB for older ones).
+  std::int64_t read_page_size() {
+    Statement stmt;
+    if (sqlite3_prepare_v2(db(), "PRAGMA page_size", -1, stmt.out(), nullptr) != SQLITE_OK ||
+        sqlite3_step(stmt.get()) != SQLITE_ROW)
+      return kPageSize;
+    return std::max<std::int64_t>(512, sqlite3_column_int64(stmt.get(), 0));
+  }
+
   Status check_version(std::int64_t version, std::int64_t tables) {
     if (version > kSchemaVersion)
       return make_error(ErrorCode::unsupported,
@@ -679,11 +687,22 @@ struct DiskCache::Impl {
     // it one that may need a partial rollback) otherwise spilled every page it touched to a temp
     // file past 64 KiB, ~3 bytes written there for each byte cached (a cold `vts warm` of 65 MiB
     // wrote 190 MiB of them).
+    // The WAL is checkpointed once it holds wal_checkpoint_bytes of pages and truncated back to
+    // that size after (so the next transactions overwrite the file rather than grow it again).
+    const std::uint64_t wal_bytes = std::max<std::uint64_t>(options.wal_checkpoint_bytes, 1);
+    const std::int64_t wal_pages =
+        std::max<std::int64_t>(1, static_cast<std::int64_t>(wal_bytes) / read_page_size());
     const std::string pragmas =
         "PRAGMA synchronous = NORMAL; PRAGMA temp_store = MEMORY; PRAGMA journal_size_limit = " +
-        std::to_string(kJournalSizeLimit) +
-        "; PRAGMA wal_autocheckpoint = " + std::to_string(kWalAutocheckpointPages) + ";";
+        std::to_string(wal_bytes) + "; PRAGMA wal_autocheckpoint = " + std::to_string(wal_pages) +
+        ";";
     if (int rc = exec(pragmas.c_str()); rc != SQLITE_OK) return db_error(rc, "opening");
+    if (!options.extra_pragmas.empty()) {
+      if (int rc = exec(options.extra_pragmas.c_str()); rc != SQLITE_OK)
+        return make_error(ErrorCode::invalid_argument, "cache " + path_str + ": extra pragmas '" +
+                                                           options.extra_pragmas +
+                                                           "': " + sqlite3_errmsg(db()));
+    }
 
     if (*version == 0) {
       // Another process may be creating the same cache right now: decide under the write lock.

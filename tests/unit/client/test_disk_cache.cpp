@@ -596,6 +596,45 @@ TEST(DiskCache, FileStaysNearTheCapUnderHeavyOverwriting) {
   EXPECT_LE(file_size_or_zero(db), (1u << 20) + (256u << 10));
 }
 
+// The log is checkpointed once it holds wal_checkpoint_bytes, and not before: with 8 MiB it grows
+// past the default's 2 MiB, yet stays within 8 MiB and one transaction; every tile survives.
+TEST(DiskCache, WalIsCheckpointedAtTheConfiguredSizeAndNotBefore) {
+  TempFolder dir;
+  const std::uint64_t wal_bytes = 8 << 20, tile_bytes = 40 << 10;
+  auto o = options_for(dir.path());
+  o.wal_checkpoint_bytes = wal_bytes;
+  auto cache = open_ok(o);
+  const fs::path wal = cache->path().string() + "-wal";
+  std::uint64_t largest = 0;
+  for (std::uint32_t i = 0; i < 600; ++i) {  // 24 MiB, one tile per transaction
+    ASSERT_TRUE(cache->put("a", tid(i), make_tile(tile_bytes, i)).ok());
+    largest = std::max(largest, file_size_or_zero(wal));
+    ASSERT_LE(file_size_or_zero(wal), wal_bytes + 4 * tile_bytes) << "after tile " << i;
+  }
+  EXPECT_GT(largest, 6u << 20);  // not checkpointed at the default 2 MiB
+  cache.reset();
+  auto again = open_ok(options_for(dir.path()));
+  for (std::uint32_t i = 0; i < 600; i += 97)
+    expect_tile(*again, "a", tid(i), make_tile(tile_bytes, i));
+  EXPECT_EQ(again->stats().tiles, 600u);
+}
+
+TEST(DiskCache, ExtraPragmasRunAfterTheCachesOwnAndABadOneFailsTheOpen) {
+  TempFolder dir;
+  auto o = options_for(dir.path());
+  o.extra_pragmas = "PRAGMA cache_size = -8192; PRAGMA mmap_size = 1048576";
+  {
+    auto cache = open_ok(o);
+    ASSERT_TRUE(cache->put("a", tid(1), make_tile(1000, 1)).ok());
+    expect_tile(*cache, "a", tid(1), make_tile(1000, 1));
+  }
+  o.extra_pragmas = "PRAGMA no_such_thing = ; nonsense";
+  auto bad = DiskCache::open(o);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.error().code, ErrorCode::invalid_argument);
+  EXPECT_NE(bad.error().message.find("nonsense"), std::string::npos) << bad.error().message;
+}
+
 // ---- corruption ---------------------------------------------------------------------------------
 
 TEST(DiskCache, DropsARowWhoseChecksumDoesNotMatch) {

@@ -7,8 +7,11 @@
 // - Holds at most `max_bytes` of payload (pinned tiles included), evicting unpinned tiles in
 //   least-recently-used order after each put. The files on disk (cache.db + cache.db-wal) stay
 //   within max_bytes + max_bytes / 8 + kFileSlackBytes (page and index overhead, the write-ahead
-//   log and a bounded free-page list; disk_cache.cpp has the breakdown).
-// - Survives kill -9 at any moment (every change is one SQLite transaction; WAL journal), a full
+//   log and a bounded free-page list; disk_cache.cpp has the breakdown), plus
+//   wal_checkpoint_bytes beyond its default of 2 MiB when it is set larger.
+// - Survives kill -9 at any moment (every change is one SQLite transaction; WAL journal with
+//   synchronous=NORMAL: a commit is not synced, so a power cut, unlike kill -9, may lose the last
+//   commits since the previous checkpoint, but never corrupts the file), a full
 //   disk (the write fails with ErrorCode::io "disk full writing cache <path>: ...", the
 //   transaction rolls back, reads keep working) and several processes sharing the folder (WAL lets
 //   readers run beside the one writer; writers wait up to busy_timeout for each other).
@@ -51,6 +54,15 @@ struct DiskCacheOptions {
   std::chrono::milliseconds busy_timeout{10000};
   std::size_t touch_batch = 256;                   // access times flushed after this many hits ...
   std::chrono::milliseconds touch_interval{5000};  // ... or this long, or on flush()/destruction
+  // The write-ahead log is checkpointed into cache.db once it holds this many bytes of pages, and
+  // truncated back to this size after. Each checkpoint syncs the log and the database (two
+  // fsyncs) and copies every page once, so a bulk fill (`vts warm`) runs faster with a larger
+  // log; the files on disk may then exceed the bound above by the difference from the default.
+  std::uint64_t wal_checkpoint_bytes = 2ull << 20;
+  // SQL run on the connection after the cache's own settings (PRAGMAs such as cache_size or
+  // mmap_size), for measuring settings (bench/warm_bench.sh). Weakening synchronous or
+  // journal_mode voids the crash guarantees above. Fails open (invalid_argument) when it fails.
+  std::string extra_pragmas;
   // Name of a registered SQLite VFS to open the database with; empty for SQLite's default. Lets
   // tests inject I/O faults (a write failing with "disk full" at the n-th write).
   std::string vfs;
