@@ -15,12 +15,9 @@
 #include "vts/protocol/tileset.hpp"
 
 #ifdef VTS_ACCURACY_HAVE_GL
-// epoxy first: GLFW must not pull in the system GL header before it.
 #include <epoxy/gl.h>
-// clang-format off
-#include <GLFW/glfw3.h>
-// clang-format on
 
+#include "vts/renderer/gl_context.hpp"
 #include "vts/renderer/gl_handle.hpp"
 #endif
 
@@ -102,7 +99,7 @@ Result<std::vector<TileImage>> source_tiles(const std::filesystem::path& archive
 double upload_ms_per_tile(const std::vector<TileImage>& decoded, PixelFormat format,
                           std::uint32_t size, int rounds) {
   // Measured only where a GL context is current (run_accuracy makes one when it can).
-  if (glfwGetCurrentContext() == nullptr || decoded.empty()) return NAN;
+  if (!renderer::GlContext::any_current() || decoded.empty()) return NAN;
   const bool bc1 = format == PixelFormat::bc1;
   if (bc1 && !(epoxy_has_gl_extension("GL_EXT_texture_compression_s3tc") &&
                epoxy_has_gl_extension("GL_EXT_texture_sRGB")))

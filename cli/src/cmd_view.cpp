@@ -1,7 +1,8 @@
 // vts view: the sparse-virtual-texture viewer. Parsing and printing only: the viewer itself
 // (camera controls, HUD, frame loops, recorder) is vts::renderer::Viewer (viewer.hpp).
-// Interactive by default; --headless --frames N renders N frames in a hidden window and prints
-// per-frame stats. Screenshots are the virtual texture's frame alone unless --hud.
+// Interactive by default; --headless --frames N renders N frames in a hidden window (with no
+// display, on EGL; VTS_GL picks: docs/RENDERER.md) and prints per-frame stats. Screenshots are the
+// virtual texture's frame alone unless --hud.
 #include <cstdio>
 #include <filesystem>
 #include <memory>

@@ -1,5 +1,6 @@
 // GL tests run under Xvfb with Mesa llvmpipe (tests/CMakeLists.txt wraps them in xvfb-run): the
-// real driver CI has. GlNoDisplay runs in its own ctest entry with DISPLAY unset.
+// real driver CI has. GlNoDisplay runs in its own ctest entry with DISPLAY unset; these tests run
+// again with no display on an EGL context (gl.egl_without_display, test_gl_egl.cpp).
 #include <epoxy/gl.h>
 #include <gtest/gtest.h>
 
@@ -148,13 +149,26 @@ TEST(GlContext, RejectsANonPositiveSize) {
   EXPECT_EQ(c.error().code, vts::ErrorCode::invalid_argument);
 }
 
-// Run with DISPLAY unset: the error must say what is missing and what to do, not crash.
-TEST(GlNoDisplay, CreatingAContextFailsWithAClearMessage) {
+// Run with DISPLAY unset: GLFW's error must say what is missing and what to do, not crash (a
+// hidden context left to choose comes from EGL there: test_gl_egl.cpp).
+TEST(GlNoDisplay, CreatingAGlfwContextFailsWithAClearMessage) {
   ASSERT_EQ(std::getenv("DISPLAY"), nullptr) << "this test runs with DISPLAY unset";
-  auto c = GlContext::create(hidden());
+  auto o = hidden();
+  o.backend = vts::renderer::GlBackend::glfw;
+  auto c = GlContext::create(o);
   ASSERT_FALSE(c);
   EXPECT_NE(c.error().message.find("xvfb-run"), std::string::npos) << c.error().message;
   EXPECT_NE(c.error().message.find("DISPLAY"), std::string::npos) << c.error().message;
+  EXPECT_NE(c.error().message.find("VTS_GL=egl"), std::string::npos) << c.error().message;
+}
+
+// A visible window is GLFW's whatever the display: with none, the same clear error.
+TEST(GlNoDisplay, AVisibleWindowWithoutADisplayFailsWithAClearMessage) {
+  auto o = hidden();
+  o.visible = true;
+  auto c = GlContext::create(o);
+  ASSERT_FALSE(c);
+  EXPECT_NE(c.error().message.find("xvfb-run"), std::string::npos) << c.error().message;
 }
 
 }  // namespace

@@ -248,7 +248,9 @@ TEST_F(HudTest, PutsBackTheGlStateItChanged) {
   glBlendFunc(GL_ONE, GL_ZERO);
   glUseProgram(0);
 
-  ASSERT_TRUE(hud_->draw(kLines, 64, 64, 1, 0));
+  // Into another framebuffer than the bound one (not 0: an EGL context has no default one).
+  Target other(64, 64);
+  ASSERT_TRUE(hud_->draw(kLines, 64, 64, 1, other.fbo));
 
   GLint fbo = -1, vp[4] = {}, prog = -1, src = 0, dst = 0;
   glGetIntegerv(GL_DRAW_FRAMEBUFFER_BINDING, &fbo);

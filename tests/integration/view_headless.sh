@@ -193,8 +193,8 @@ echo '{"keys":[{"frame":0},{"frame":"later"}]}' >"$WORK/path.json"
 expect_clean_failure "${XVFB[@]}" "$VTS" view "$ARCHIVE" --headless --frames 5 --camera-path "$WORK/path.json"
 grep -q 'key 1' "$ERR" || { show_output; fail "the camera path error does not name key 1"; }
 
-note "no display: the error says to use xvfb-run"
-expect_clean_failure env -u DISPLAY -u WAYLAND_DISPLAY "$VTS" view "$ARCHIVE" --headless --frames 5
+note "no display with GLFW asked for (VTS_GL=glfw): the error says to use xvfb-run"
+expect_clean_failure env -u DISPLAY -u WAYLAND_DISPLAY VTS_GL=glfw "$VTS" view "$ARCHIVE" --headless --frames 5
 grep -q 'xvfb-run' "$ERR" || { show_output; fail "the no-display error does not mention xvfb-run"; }
 [[ ! -s $OUT ]] || { show_output; fail "vts view printed a report without a display"; }
 

@@ -6,10 +6,6 @@
 #pragma once
 
 #include <epoxy/gl.h>
-#ifndef GLFW_INCLUDE_NONE
-#define GLFW_INCLUDE_NONE  // epoxy declares GL
-#endif
-#include <GLFW/glfw3.h>
 
 #include <algorithm>
 #include <chrono>
@@ -30,6 +26,7 @@
 #include "vts/client/tile_client.hpp"
 #include "vts/protocol/geometry.hpp"
 #include "vts/renderer/camera.hpp"
+#include "vts/renderer/gl_context.hpp"
 #include "vts/renderer/globe.hpp"
 #include "vts/renderer/reference.hpp"
 #include "vts/renderer/scene.hpp"
@@ -161,10 +158,11 @@ inline View make_view(ViewKind kind, Rng& rng, const Geometry& g, int height) {
   return out;
 }
 
-// Error when no OpenGL context is current on the calling thread (GlContext makes one current):
+// Error when no OpenGL context (GLFW's or EGL's) is current on the calling thread (GlContext makes
+// one current):
 // without it the first GL call would not fail cleanly.
 inline Status need_gl_context(const std::string& table) {
-  if (glfwGetCurrentContext() == nullptr) {
+  if (!renderer::GlContext::any_current()) {
     return Error{ErrorCode::unsupported,
                  table + ": needs a current OpenGL 4.5 core context on the calling thread"};
   }

@@ -1,5 +1,6 @@
 #include "vts/renderer/gl_context.hpp"
 
+#include "gl_context_egl.hpp"
 #include "vts/renderer/gl_check.hpp"
 
 // clang-format off
@@ -47,11 +48,55 @@ void GLAPIENTRY on_gl_debug(GLenum, GLenum type, GLuint, GLenum severity, GLsize
 
 }  // namespace
 
-Result<std::unique_ptr<GlContext>> GlContext::create(const GlContextOptions& o) {
-  if (o.width <= 0 || o.height <= 0)
-    return make_error(ErrorCode::invalid_argument, "window size must be positive, not " +
-                                                       std::to_string(o.width) + "x" +
-                                                       std::to_string(o.height));
+std::optional<GlBackend> gl_backend_from_name(const std::string& name) {
+  for (GlBackend b : {GlBackend::automatic, GlBackend::glfw, GlBackend::egl, GlBackend::egl_device,
+                      GlBackend::egl_surfaceless})
+    if (name == gl_backend_name(b)) return b;
+  return std::nullopt;
+}
+
+const char* gl_backend_name(GlBackend b) {
+  switch (b) {
+    case GlBackend::glfw:
+      return "glfw";
+    case GlBackend::egl:
+      return "egl";
+    case GlBackend::egl_device:
+      return "egl-device";
+    case GlBackend::egl_surfaceless:
+      return "egl-surfaceless";
+    case GlBackend::automatic:
+      break;
+  }
+  return "auto";
+}
+
+Result<GlBackend> resolve_gl_backend(const GlContextOptions& o) {
+  GlBackend b = o.backend;
+  if (b == GlBackend::automatic) {
+    if (const char* env = std::getenv("VTS_GL"); env && *env) {
+      auto named = gl_backend_from_name(env);
+      if (!named)
+        return make_error(ErrorCode::invalid_argument,
+                          std::string("VTS_GL=") + env +
+                              " is none of auto, glfw, egl, egl-device, egl-surfaceless");
+      b = *named;
+    }
+  }
+  if (b == GlBackend::automatic) {
+    const bool display_named = std::getenv("DISPLAY") || std::getenv("WAYLAND_DISPLAY");
+    b = o.visible || display_named ? GlBackend::glfw : GlBackend::egl;
+  }
+  if (o.visible && b != GlBackend::glfw)
+    return make_error(ErrorCode::invalid_argument,
+                      std::string("a visible window needs GLFW and a display, not ") +
+                          gl_backend_name(b) + " (EGL renders headless only)");
+  return b;
+}
+
+namespace {
+
+Result<GLFWwindow*> open_glfw_window(const GlContextOptions& o) {
   std::lock_guard lock(g_mutex);
   if (g_users == 0) {
     glfwSetErrorCallback(on_glfw_error);
@@ -68,7 +113,8 @@ Result<std::unique_ptr<GlContext>> GlContext::create(const GlContextOptions& o) 
     if (!ok)
       return make_error(ErrorCode::unsupported,
                         "cannot open a display for OpenGL: " + take_glfw_error() +
-                            "; without a screen, run under xvfb-run");
+                            "; without a screen, run under xvfb-run, or headless through EGL "
+                            "(VTS_GL=egl)");
   }
   glfwDefaultWindowHints();
   glfwWindowHint(GLFW_CONTEXT_VERSION_MAJOR, 4);
@@ -84,51 +130,109 @@ Result<std::unique_ptr<GlContext>> GlContext::create(const GlContextOptions& o) 
     return make_error(ErrorCode::unsupported, "cannot create an OpenGL 4.5 core context: " + why);
   }
   ++g_users;
-  std::unique_ptr<GlContext> c(new GlContext(w));
   glfwMakeContextCurrent(w);
+  glfwSwapInterval(o.vsync ? 1 : 0);
+  return w;
+}
+
+}  // namespace
+
+Result<std::unique_ptr<GlContext>> GlContext::create(const GlContextOptions& o) {
+  if (o.width <= 0 || o.height <= 0)
+    return make_error(ErrorCode::invalid_argument, "window size must be positive, not " +
+                                                       std::to_string(o.width) + "x" +
+                                                       std::to_string(o.height));
+  auto backend = resolve_gl_backend(o);
+  if (!backend) return backend.error();
+  std::unique_ptr<GlContext> c(new GlContext());
+  c->width_ = o.width;
+  c->height_ = o.height;
+  if (*backend == GlBackend::glfw) {
+    auto w = open_glfw_window(o);
+    if (!w) return w.error();
+    c->window_ = *w;
+    c->info_.backend = "glfw";
+  } else {
+    int device = o.egl_device;
+    if (const char* env = std::getenv("VTS_EGL_DEVICE"); device < 0 && env && *env) {
+      char* end = nullptr;
+      device = int(std::strtol(env, &end, 10));
+      if (*end != '\0' || device < 0)
+        return make_error(ErrorCode::invalid_argument,
+                          std::string("VTS_EGL_DEVICE=") + env + " is not a device index");
+    }
+    auto egl = EglContext::create(*backend, device, o.debug, c->info_);
+    if (!egl) return egl.error();
+    c->egl_ = std::move(*egl);
+  }
+  if (Status s = c->finish(o); !s) return s.error();
+  return c;
+}
+
+Status GlContext::finish(const GlContextOptions& o) {
 #if VTS_GL_CHECKS
   gl_check::set_gl_thread();
 #endif
-  glfwSwapInterval(o.vsync ? 1 : 0);
-  c->info_.version = epoxy_gl_version();
-  c->info_.version_text = gl_string(GL_VERSION);
-  c->info_.renderer = gl_string(GL_RENDERER);
-  c->info_.vendor = gl_string(GL_VENDOR);
-  if (c->info_.version < 45)
+  info_.version = epoxy_gl_version();
+  info_.version_text = gl_string(GL_VERSION);
+  info_.renderer = gl_string(GL_RENDERER);
+  info_.vendor = gl_string(GL_VENDOR);
+  if (info_.version < 45)
     return make_error(ErrorCode::unsupported, "OpenGL 4.5 core is needed; the driver gives " +
-                                                  c->info_.version_text + " on " +
-                                                  c->info_.renderer);
+                                                  info_.version_text + " on " + info_.renderer +
+                                                  " (" + info_.backend + ")");
   if (o.debug) {
     glEnable(GL_DEBUG_OUTPUT);
     glEnable(GL_DEBUG_OUTPUT_SYNCHRONOUS);
     glDebugMessageCallback(on_gl_debug, nullptr);
   }
-  return c;
+  return {};
 }
 
 GlContext::~GlContext() {
+  egl_.reset();
+  if (window_ == nullptr) return;  // EGL, or a GLFW context that never got its window
   std::lock_guard lock(g_mutex);
   glfwDestroyWindow(window_);
   if (--g_users == 0) glfwTerminate();
 }
 
 void GlContext::make_current() {
-  glfwMakeContextCurrent(window_);
+  if (egl_)
+    egl_->make_current();
+  else
+    glfwMakeContextCurrent(window_);
 #if VTS_GL_CHECKS
   gl_check::set_gl_thread();
 #endif
 }
 bool GlContext::should_close() const {
-  return glfwWindowShouldClose(window_) == GLFW_TRUE;
+  return window_ && glfwWindowShouldClose(window_) == GLFW_TRUE;
 }
 void GlContext::swap_buffers() {
-  glfwSwapBuffers(window_);
+  if (window_) glfwSwapBuffers(window_);
 }
 void GlContext::poll_events() {
-  glfwPollEvents();
+  if (window_) glfwPollEvents();
 }
 void GlContext::framebuffer_size(int& width, int& height) const {
-  glfwGetFramebufferSize(window_, &width, &height);
+  if (window_) {
+    glfwGetFramebufferSize(window_, &width, &height);
+  } else {
+    width = width_;
+    height = height_;
+  }
+}
+
+bool GlContext::any_current() {
+  // glfwGetCurrentContext is safe whether or not GLFW is initialised.
+  return glfwGetCurrentContext() != nullptr || EglContext::any_current();
+}
+
+void GlContext::release_current() {
+  std::lock_guard lock(g_mutex);
+  if (g_users > 0) glfwMakeContextCurrent(nullptr);
+  EglContext::release_current();
 }
 
 }  // namespace vts::renderer

@@ -364,6 +364,8 @@ std::string Viewer::report_json(const HeadlessRun& run, const std::string& sourc
   j["physical_bytes"] = vt_->physical_gpu_bytes();
   j["tile_format"] = vt_->tile_format() == PixelFormat::bc1 ? "bc1" : "rgba8";
   j["gl_renderer"] = gl_->info().renderer;
+  j["gl_backend"] = gl_->info().backend;
+  if (!gl_->info().device.empty()) j["gl_device"] = gl_->info().device;
   if (auto e = vt_->last_tile_error()) j["last_tile_error"] = e->message;
   j["camera"] =
       camera_key_json(controls_.globe(), controls_.plane, controls_.globe_view, vt_->debug_view());

@@ -14,9 +14,6 @@
 #include <string>
 #include <variant>
 
-#define GLFW_INCLUDE_NONE
-#include <GLFW/glfw3.h>
-
 #include "gl_fixture.hpp"
 #include "vts/accuracy/accuracy.hpp"
 #include "vts/builder/builder.hpp"
@@ -291,7 +288,8 @@ TEST_F(AccuracyViews, MissingArchiveAndBadViewportAreErrors) {
 TEST_F(AccuracyViews, WithoutACurrentGlContextTheTablesRefuseToRun) {
   vts::renderer::GlContext* gl = vts::test::shared_gl_context();
   ASSERT_NE(gl, nullptr);
-  glfwMakeContextCurrent(nullptr);
+  vts::renderer::GlContext::release_current();
+  ASSERT_FALSE(vts::renderer::GlContext::any_current());
   const AccuracyContext ctx = quick_context();
   auto feedback = vts::accuracy::feedback_table(ctx);
   auto filtering = vts::accuracy::filtering_table(ctx);
