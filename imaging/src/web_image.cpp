@@ -1,6 +1,5 @@
-// Standard web images of tiles: libpng (full API, for the zlib level), libwebp (advanced API),
-// TurboJPEG. libpng reports errors by longjmp: its calls sit in small functions that hold no C++
-// object with a destructor across setjmp.
+// Standard web images of tiles: our PNG writer over libdeflate (png_writer.cpp) and libpng's
+// simplified reading API, libwebp (advanced API), TurboJPEG.
 #include "vts/imaging/web_image.hpp"
 
 #include <png.h>
@@ -9,11 +8,10 @@
 #include <webp/encode.h>
 
 #include <algorithm>
-#include <csetjmp>
-#include <cstdio>
 #include <cstring>
 #include <string>
 
+#include "png_writer.hpp"
 #include "vts/base/file_io.hpp"
 
 namespace vts::imaging {
@@ -23,50 +21,7 @@ Error bad(std::string message) {
   return make_error(ErrorCode::invalid_argument, std::move(message));
 }
 
-// ---- PNG
-
-struct PngMessage {
-  char text[200] = "";
-};
-
-void png_append(png_structp png, png_bytep data, png_size_t n) {
-  auto* out = static_cast<std::vector<std::uint8_t>*>(png_get_io_ptr(png));
-  out->insert(out->end(), data, data + n);
-}
-void png_flush_nothing(png_structp) {}
-[[noreturn]] void png_fail(png_structp png, png_const_charp message) {
-  auto* m = static_cast<PngMessage*>(png_get_error_ptr(png));
-  std::snprintf(m->text, sizeof m->text, "%s", message);
-  png_longjmp(png, 1);
-}
-void png_ignore_warning(png_structp, png_const_charp) {}
-
-// Writes `rows` (RGB or RGBA, 8 bits) as PNG into `out`, with an sRGB chunk when `srgb`; false
-// with `message` set on failure.
-bool write_png(const std::uint8_t* pixels, std::uint32_t width, std::uint32_t height,
-               bool has_alpha, int level, bool srgb, std::vector<std::uint8_t>* out,
-               PngMessage* message) {
-  png_structp png =
-      png_create_write_struct(PNG_LIBPNG_VER_STRING, message, png_fail, png_ignore_warning);
-  if (png == nullptr) return false;
-  png_infop info = png_create_info_struct(png);
-  if (info == nullptr || setjmp(png_jmpbuf(png))) {
-    png_destroy_write_struct(&png, info != nullptr ? &info : nullptr);
-    return false;
-  }
-  png_set_write_fn(png, out, png_append, png_flush_nothing);
-  png_set_compression_level(png, level);
-  png_set_IHDR(png, info, width, height, 8, has_alpha ? PNG_COLOR_TYPE_RGBA : PNG_COLOR_TYPE_RGB,
-               PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
-  if (srgb) png_set_sRGB(png, info, PNG_sRGB_INTENT_PERCEPTUAL);
-  png_write_info(png, info);
-  const std::size_t stride = std::size_t(width) * (has_alpha ? 4 : 3);
-  for (std::uint32_t y = 0; y < height; ++y)
-    png_write_row(png, const_cast<png_bytep>(pixels + y * stride));
-  png_write_end(png, info);
-  png_destroy_write_struct(&png, &info);
-  return true;
-}
+// ---- PNG (written by png_writer.cpp; read by libpng's simplified API)
 
 bool opaque(const TileImage& rgba) {
   for (std::size_t i = 3; i < rgba.pixels.size(); i += 4)
@@ -74,20 +29,21 @@ bool opaque(const TileImage& rgba) {
   return true;
 }
 
-Result<std::vector<std::uint8_t>> encode_png(const TileImage& rgba, int level) {
-  std::vector<std::uint8_t> out;
-  PngMessage message;
-  bool ok = false;
+// The RGB bytes of rgba8 pixels (alpha dropped).
+std::vector<std::uint8_t> rgb_of(std::span<const std::uint8_t> rgba) {
+  std::vector<std::uint8_t> rgb(rgba.size() / 4 * 3);
+  for (std::size_t i = 0, j = 0; i < rgba.size(); i += 4, j += 3) std::memcpy(&rgb[j], &rgba[i], 3);
+  return rgb;
+}
+
+Result<std::vector<std::uint8_t>> encode_png(const TileImage& rgba, const WebEncodeOptions& o) {
   if (opaque(rgba)) {  // RGB: a quarter smaller to write, decodes to the same rgba8
-    std::vector<std::uint8_t> rgb(std::size_t(rgba.width) * rgba.height * 3);
-    for (std::size_t i = 0, j = 0; i < rgba.pixels.size(); i += 4, j += 3)
-      std::memcpy(&rgb[j], &rgba.pixels[i], 3);
-    ok = write_png(rgb.data(), rgba.width, rgba.height, false, level, false, &out, &message);
-  } else {
-    ok = write_png(rgba.pixels.data(), rgba.width, rgba.height, true, level, false, &out, &message);
+    const std::vector<std::uint8_t> rgb = rgb_of(rgba.pixels);
+    return detail::png_bytes(rgb.data(), rgba.width, rgba.height, 3, o.png_level, o.png_filter,
+                             false);
   }
-  if (!ok) return make_error(ErrorCode::io, std::string("PNG encoding failed: ") + message.text);
-  return out;
+  return detail::png_bytes(rgba.pixels.data(), rgba.width, rgba.height, 4, o.png_level,
+                           o.png_filter, false);
 }
 
 Result<TileImage> decode_png(std::span<const std::uint8_t> bytes) {
@@ -123,7 +79,9 @@ Result<std::vector<std::uint8_t>> encode_webp(const TileImage& rgba, const WebEn
   config.lossless = o.webp_lossless ? 1 : 0;
   WebPPicture picture;
   if (!WebPPictureInit(&picture)) return make_error(ErrorCode::io, "libwebp: version mismatch");
-  picture.use_argb = 1;
+  // Lossy: the import converts straight to YUV (with an alpha plane only when a texel is not
+  // opaque); lossless encodes ARGB.
+  picture.use_argb = o.webp_lossless ? 1 : 0;
   picture.width = static_cast<int>(rgba.width);
   picture.height = static_cast<int>(rgba.height);
   WebPMemoryWriter writer;
@@ -271,7 +229,7 @@ Result<std::vector<std::uint8_t>> encode_web_image(const TileImage& rgba, WebFor
   }
   switch (format) {
     case WebFormat::png:
-      return encode_png(rgba, options.png_level);
+      return encode_png(rgba, options);
     case WebFormat::webp:
       return encode_webp(rgba, options);
     case WebFormat::jpeg:
@@ -333,21 +291,14 @@ Status write_png(const std::filesystem::path& path, int width, int height,
                " image of " + std::to_string(rgba.size()) + " bytes");
   if (level < 0 || level > 9) return bad(where + "PNG level " + std::to_string(level));
   if (channels != 3 && channels != 4) return bad(where + std::to_string(channels) + " channels");
-  const std::uint8_t* pixels = rgba.data();
   std::vector<std::uint8_t> rgb;
-  if (channels == 3) {  // alpha dropped
-    rgb.resize(rgba.size() / 4 * 3);
-    for (std::size_t i = 0, j = 0; i < rgba.size(); i += 4, j += 3)
-      std::memcpy(&rgb[j], &rgba[i], 3);
-    pixels = rgb.data();
-  }
-  std::vector<std::uint8_t> bytes;
-  PngMessage message;
-  if (!write_png(pixels, std::uint32_t(width), std::uint32_t(height), channels == 4, level, true,
-                 &bytes, &message))
-    return make_error(ErrorCode::io, where + "PNG encoding failed: " + message.text);
+  if (channels == 3) rgb = rgb_of(rgba);  // alpha dropped
+  auto bytes = detail::png_bytes(channels == 3 ? rgb.data() : rgba.data(), std::uint32_t(width),
+                                 std::uint32_t(height), channels, level,
+                                 WebEncodeOptions{}.png_filter, true);
+  if (!bytes) return make_error(ErrorCode::io, where + bytes.error().message);
   Status written = write_file_atomically(
-      path, std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
+      path, std::string_view(reinterpret_cast<const char*>(bytes->data()), bytes->size()));
   if (written) return written;
   Error e = std::move(written).error();  // names the temporary file: name the target as well
   e.message = where + e.message;

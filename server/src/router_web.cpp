@@ -29,8 +29,8 @@ using http_detail::WebTilePtr;
 // a server restarted with other options never answers a stale client copy with 304.
 std::string options_tag(imaging::WebFormat f, const imaging::WebEncodeOptions& o) {
   switch (f) {
-    case imaging::WebFormat::png:
-      return "png" + std::to_string(o.png_level);
+    case imaging::WebFormat::png:  // level and row filter: "png4a" is level 4, average
+      return "png" + std::to_string(o.png_level) + "nsuapx"[static_cast<int>(o.png_filter)];
     case imaging::WebFormat::webp:
       return o.webp_lossless
                  ? "webpll" + std::to_string(o.webp_method)

@@ -155,8 +155,10 @@ TEST_F(RouterWeb, EveryFormatHasItsTypeAndItsOwnStrongEtag) {
   EXPECT_EQ(header_of(jpg, "Content-Type"), "image/jpeg");
   EXPECT_EQ(header_of(jpeg, "ETag"), header_of(jpg, "ETag"));
   const auto tag = *header_of(png, "ETag");
-  EXPECT_EQ(tag.size(), 1 + 16 + 1 + 4 + 1) << tag;  // "<16 hex>-png6"
-  EXPECT_TRUE(tag.ends_with("-png6\"")) << tag;
+  // "<16 hex>-png4a": the default png_level and row filter (average)
+  const std::string level = std::to_string(vts::imaging::WebEncodeOptions{}.png_level) + "a";
+  EXPECT_EQ(tag.size(), 1 + 16 + 1 + 3 + level.size() + 1) << tag;
+  EXPECT_TRUE(tag.ends_with("-png" + level + "\"")) << tag;
   EXPECT_NE(tag, header_of(webp, "ETag"));
   EXPECT_NE(tag, header_of(jpg, "ETag"));
   EXPECT_NE(tag, header_of(get("/dense/1/1/0.png"), "ETag"));
@@ -326,8 +328,9 @@ TEST_F(RouterWeb, AMissWhileAnotherEncodesWaitsForThatFlight) {
   config_.web.cache = c;
   // Lead the flight of the image as the router keys it, as if another request were encoding it.
   const auto t = registry_->find("dense");
-  const std::string key =
-      "dense@" + t->version + "/" + std::to_string(vts::archive::zxy_to_tile_id(1, 1, 0)) + "/png6";
+  const std::string key = "dense@" + t->version + "/" +
+                          std::to_string(vts::archive::zxy_to_tile_id(1, 1, 0)) + "/png" +
+                          std::to_string(vts::imaging::WebEncodeOptions{}.png_level) + "a";
   auto lead = c->acquire(key);
   ASSERT_TRUE(lead.lead);
   auto marker = plan("/dense/1/1/0.png");

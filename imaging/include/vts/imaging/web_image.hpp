@@ -1,7 +1,8 @@
 // Standard web images (PNG, WebP, JPEG) of a tile's content: what stock web maps and PMTiles
 // readers display. The content of tile (z, x, y) is its T x T texels without the border, padded
-// with transparent texels beyond the image's edge; encoders are libpng, libwebp and libjpeg-turbo
-// (TurboJPEG API). Every function is thread-safe.
+// with transparent texels beyond the image's edge; encoders are our PNG writer over libdeflate,
+// libwebp and libjpeg-turbo (TurboJPEG API); decoders libpng, libwebp and TurboJPEG. Every
+// function is thread-safe.
 #pragma once
 
 #include <cstdint>
@@ -25,11 +26,18 @@ std::string_view web_format_content_type(WebFormat f) noexcept;
 // "png", "webp", "jpg" or "jpeg" (case-insensitive); invalid_argument naming the known ones.
 Result<WebFormat> parse_web_format(std::string_view text);
 
+// The PNG row filter (PNG spec §9): one of the five for every row, or `adaptive`, a choice per
+// row by libpng's heuristic (the smallest sum of absolute filtered bytes).
+enum class PngFilter : std::uint8_t { none, sub, up, average, paeth, adaptive };
+
+// The defaults are chosen from the measured table in docs/ACCURACY.md ("Web tile encoding").
 struct WebEncodeOptions {
-  int png_level = 6;      // zlib level 0..9 (libpng's filters chosen adaptively)
+  // 0 (stored, fastest) .. 9 (smallest): libdeflate's levels 0..8, and 12 for 9.
+  int png_level = 4;
+  PngFilter png_filter = PngFilter::average;
   int webp_quality = 90;  // 0..100, lossy
   bool webp_lossless = false;
-  int webp_method = 4;    // 0 (fast) .. 6 (small)
+  int webp_method = 2;    // 0 (fast) .. 6 (small)
   int jpeg_quality = 90;  // 1..100, 4:2:0 chroma subsampling
 };
 // invalid_argument naming the field when a value is out of its range.
@@ -52,9 +60,10 @@ Result<TileImage> tile_content(const TileImage& stored, const Geometry& geometry
 // Writes an 8-bit RGBA PNG file (whatever the extension) of width x height pixels, rows top to
 // bottom, straight alpha, tagged sRGB, through write_file_atomically: the one PNG writer of
 // screenshots, plots, references and extracted tiles. With `channels` 3 the file is RGB (alpha
-// dropped). invalid_argument when `rgba` does not hold width * height * 4 bytes, `level` is not a
-// zlib level 0..9 or `channels` is neither 3 nor 4; io when the file cannot be written.
+// dropped). `level` as WebEncodeOptions::png_level, with its default filter. invalid_argument
+// when `rgba` does not hold width * height * 4 bytes, `level` is not 0..9 or `channels` is
+// neither 3 nor 4; io when the file cannot be written.
 Status write_png(const std::filesystem::path& path, int width, int height,
-                 std::span<const std::uint8_t> rgba, int level = 6, int channels = 4);
+                 std::span<const std::uint8_t> rgba, int level = 4, int channels = 4);
 
 }  // namespace vts::imaging
