@@ -2,7 +2,8 @@
 # Tile serving benchmark: `vts serve` against nginx serving the same tiles
 # extracted as static files (sendfile on, access_log off, 2 workers), on this machine in one run,
 # with wrk -t2 -c64 --latency and bench/random_tiles.lua:
-#   tiles  random existing tiles (GET /earth/z/x/y): vts reads each with pread, nginx sendfiles
+#   tiles  random existing tiles (GET /earth/z/x/y): vts answers a hot tile from its RAM tile cache
+#          (tile_cache_mib, default 256 MiB; a miss reads it with pread), nginx sendfiles
 #   304    the same with a matching If-None-Match (each server's own ETags)
 #   range  random tile-sized Range reads of /earth.pmtiles (206)
 # Prints a markdown table (req/s, MB/s, p50, p99, ratio vs nginx) with machine, date and commit.
@@ -67,6 +68,7 @@ for ((i = 0; i < 100; i++)); do
   sleep 0.05
 done
 VTS_PORT=$(sed -nE 's|.*listening on http://[^ ]*:([0-9]+) .*|\1|p' "$T/vts.out")
+VTS_ADMIN=$(sed -nE 's|.*admin http://[^ ]*:([0-9]+)\).*|\1|p' "$T/vts.out")
 [[ -n $VTS_PORT ]] || die "vts serve did not start: $(cat "$T/vts.err")"
 # The archive is named serve_<input>; serve it under /earth like nginx's copy.
 VTS_NAME=$(basename "${ARCHIVE%.pmtiles}")
@@ -108,13 +110,25 @@ server_ticks() { # SERVER
   for p in $pids; do awk '{ print $14 + $15 }' "/proc/$p/stat"; done | awk '{ s += $1 } END { print s }'
 }
 CLK_TCK=$(getconf CLK_TCK)
-declare -A RPS MBS P50 P99 ERR CPU
+# vts's tile cache counters so far: "HITS MISSES".
+tile_cache_counts() {
+  curl -sf "http://127.0.0.1:$VTS_ADMIN/metrics" |
+    awk '$1 == "vts_tile_cache_hits_total" { h = $2 } $1 == "vts_tile_cache_misses_total" { m = $2 }
+         END { print h + 0, m + 0 }'
+}
+declare -A RPS MBS P50 P99 ERR CPU HITS
 run_wrk() { # SERVER MODE LIST
-  local s=$1 mode=$2 list=$3 log="$T/wrk_$1_$2.txt" t0 t1 n
+  local s=$1 mode=$2 list=$3 log="$T/wrk_$1_$2.txt" t0 t1 n c0 c1
+  [[ $s == vts ]] && c0=$(tile_cache_counts)
   t0=$(server_ticks "$s")
   wrk -t2 -c64 -d"$DURATION" --latency -s "$BENCH_DIR/random_tiles.lua" "${BASE[$s]}" -- \
     "$list" "$mode" >"$log" 2>&1 || die "wrk failed: $(cat "$log")"
   t1=$(server_ticks "$s")
+  if [[ $s == vts ]]; then
+    c1=$(tile_cache_counts)
+    HITS[$mode]=$(awk -v a="$c0" -v b="$c1" 'BEGIN { split(a, x, " "); split(b, y, " ");
+      h = y[1] - x[1]; m = y[2] - x[2]; printf "%.1f", (h + m) ? 100 * h / (h + m) : 0 }')
+  fi
   n=$(awk '/requests in/ { print $1 }' "$log")
   CPU[$s.$mode]=$(awk -v a="$t0" -v b="$t1" -v n="$n" -v hz="$CLK_TCK" 'BEGIN { printf "%.1f", (b - a) / hz * 1e6 / n }')
   RPS[$s.$mode]=$(awk '/^Requests\/sec:/ { printf "%.0f", $2 }' "$log")
@@ -122,7 +136,7 @@ run_wrk() { # SERVER MODE LIST
   P50[$s.$mode]=$(to_ms "$(awk '$1 == "50%" { print $2 }' "$log")")
   P99[$s.$mode]=$(to_ms "$(awk '$1 == "99%" { print $2 }' "$log")")
   ERR[$s.$mode]=$(awk '/Non-2xx or 3xx/ { print $NF } /Socket errors/ { print }' "$log" | head -1)
-  echo "$s $mode: ${RPS[$s.$mode]} req/s, ${MBS[$s.$mode]} MB/s, p50 ${P50[$s.$mode]} ms, p99 ${P99[$s.$mode]} ms, ${CPU[$s.$mode]} us CPU/req ${ERR[$s.$mode]}" >&2
+  echo "$s $mode: ${HITS[$mode]:+tile cache hits ${HITS[$mode]}%, }${RPS[$s.$mode]} req/s, ${MBS[$s.$mode]} MB/s, p50 ${P50[$s.$mode]} ms, p99 ${P99[$s.$mode]} ms, ${CPU[$s.$mode]} us CPU/req ${ERR[$s.$mode]}" >&2
 }
 for mode in tiles inm range; do
   for s in nginx vts; do
@@ -140,6 +154,7 @@ done
   machine_info
   echo "- input: $(basename "$INPUT"), $NTILES tiles, $(mb "$TILE_BYTES") MiB of tile payloads (avg $((TILE_BYTES / NTILES)) B)"
   echo "- wrk -t2 -c64 -d$DURATION --latency, bench/random_tiles.lua; nginx $(nginx -v 2>&1 | sed 's|.*/||') ($WORKERS workers, sendfile), vts serve --threads $WORKERS"
+  echo "- vts tile cache (default tile_cache_mib) hits: tiles ${HITS[tiles]}%, 304 ${HITS[inm]}% of lookups"
   echo
   echo "| workload | server | req/s | MB/s | p50 ms | p99 ms | server CPU µs/req | req/s vs nginx | p99 vs nginx | CPU/req vs nginx |"
   echo "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"

@@ -25,6 +25,7 @@
 #include "access_log.hpp"
 #include "deadline_sweeper.hpp"
 #include "metrics.hpp"
+#include "native_tile_cache.hpp"
 #include "reload_loop.hpp"
 #include "session.hpp"
 #include "web_tile_cache.hpp"
@@ -60,6 +61,11 @@ class Server final : public HttpServer, public SessionHost {
           http_detail::EncodeLimits{options_.router.web.max_queued_encodes,
                                     options_.router.web.max_queued_encodes_per_connection});
     }
+    if (!options_.router.tile_cache && options_.router.tile_cache_bytes > 0) {
+      options_.router.tile_cache =
+          std::make_shared<http_detail::NativeTileCache>(options_.router.tile_cache_bytes);
+    }
+    reload_.drop_stale_tiles_from(options_.router.tile_cache);
     for (int i = 1; i < n; ++i) workers_.push_back(std::make_unique<asio::io_context>(1));
     // Deadline sweeps at an eighth of the shortest timeout (so a deadline is enforced within
     // 12.5% of its length), between 10 ms and 250 ms.
@@ -172,6 +178,8 @@ class Server final : public HttpServer, public SessionHost {
     return prometheus_text(metrics_, registry_->size(), registry_->skipped().size(),
                            options_.provider.get()) +
            web_metrics_text(*options_.router.web.cache) +
+           (options_.router.tile_cache ? tile_cache_metrics_text(*options_.router.tile_cache)
+                                       : std::string()) +
            (options_.registry.store.counters ? store_metrics_text(*options_.registry.store.counters)
                                              : std::string());
   }

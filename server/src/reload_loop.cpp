@@ -59,8 +59,18 @@ void ReloadLoop::run() {
   }
 }
 
+void ReloadLoop::drop_stale_tiles() {
+  std::vector<std::uint64_t> live;
+  for (const auto& t : registry_.all())
+    if (!t->modified.load(std::memory_order_relaxed)) live.push_back(t->generation);
+  tiles_->retain(live);
+}
+
 void ReloadLoop::reload(bool force) {
   auto result = registry_.reload(force, settle_);
+  if (tiles_ &&
+      (result.swapped > 0 || result.removed > 0 || result.settling > 0 || !result.failures.empty()))
+    drop_stale_tiles();
   if (result.swapped > 0) {
     metrics_.reloads_swapped.fetch_add(std::uint64_t(result.swapped));
     std::fprintf(stderr, "vts serve: reloaded %d tileset(s)\n", result.swapped);

@@ -21,6 +21,7 @@
 #include <thread>
 
 #include "metrics.hpp"
+#include "native_tile_cache.hpp"
 #include "vts/base/result.hpp"
 #include "vts/server/tileset_registry.hpp"
 
@@ -40,6 +41,9 @@ class ReloadLoop {
   ReloadLoop& operator=(const ReloadLoop&) = delete;
   ~ReloadLoop() { stop(); }
 
+  // After each reload that replaced, removed or found modified a tileset, drops from `cache` the
+  // tiles of every archive no longer served as it was opened. Before start().
+  void drop_stale_tiles_from(std::shared_ptr<NativeTileCache> cache) { tiles_ = std::move(cache); }
   // Starts the thread. Error io when the system refuses a thread (the loop then does nothing;
   // stop() is still safe).
   Status start();
@@ -53,6 +57,7 @@ class ReloadLoop {
  private:
   void run();
   void reload(bool force);
+  void drop_stale_tiles();
 
   static constexpr std::chrono::milliseconds kMinGap{100};
   static constexpr std::chrono::milliseconds kMaxSettle{2000}, kIdleSettle{1000};
@@ -67,6 +72,7 @@ class ReloadLoop {
 
   TilesetRegistry& registry_;
   Metrics& metrics_;
+  std::shared_ptr<NativeTileCache> tiles_;  // may be null
   const std::chrono::milliseconds interval_;
   const std::chrono::milliseconds settle_;  // see TilesetRegistry::reload
   std::mutex mutex_;

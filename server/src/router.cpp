@@ -12,6 +12,8 @@
 #include <map>
 #include <nlohmann/json.hpp>
 
+#include "deadline_sweeper.hpp"
+#include "native_tile_cache.hpp"
 #include "router_internal.hpp"
 #include "tile_tag_memo.hpp"
 #include "vts/base/file_io.hpp"
@@ -86,6 +88,8 @@ HttpResponse outside_pyramid(std::uint32_t z, std::uint32_t x, std::uint32_t y,
 // its tilesets, and the client tries again shortly (by then against the archive that replaced
 // it, once that one is complete and valid).
 HttpResponse archive_changed(std::shared_ptr<const Tileset> t, const Error& e) {
+  // Nothing kept from this archive answers any more (its tags, its cached tiles).
+  t->modified.store(true, std::memory_order_relaxed);
   HttpResponse r = error(503, "the archive of tileset " + t->name +
                                   " is being replaced; try again shortly (" + e.message + ")");
   add(r, "Retry-After", "1");
@@ -319,6 +323,48 @@ HttpResponse tag_response(std::uint64_t checksum, std::string_view if_none_match
   return r;
 }
 
+HttpResponse damaged_tile(int status, TileId id, std::string_view tileset, const Error& e) {
+  return tile_error(status, "tile " + id.to_string() + " of " + std::string(tileset) +
+                                " is damaged: " + e.to_string());
+}
+
+// 200 with a tile kept in memory (its bytes sent from `tile`'s buffer, which the response keeps)
+// or 304 when `if_none_match` names its tag.
+HttpResponse kept_tile_response(http_detail::CachedTilePtr tile, std::string_view if_none_match,
+                                const std::string& cc) {
+  HttpResponse r = tag_response(tile->checksum, if_none_match, cc);
+  if (r.status == 304) return r;
+  add(r, "Content-Type", kTileType);
+  r.view = tile->bytes;
+  r.content_length = r.view.size();
+  r.keep = std::move(tile);
+  return r;
+}
+
+std::int64_t coarse_now_ns() {
+  return http_detail::DeadlineClock::now().time_since_epoch().count();
+}
+
+// The tile of `t` the cache keeps for `tile_id`, when it may answer: `t` is not known to be
+// modified, and was verified unchanged less than `recheck` ago — or is now, by this call (one
+// fstat, made by one request per interval; a change found marks `t` modified). Null otherwise
+// (the lookup of an archive known to be modified is counted neither as a hit nor as a miss).
+http_detail::CachedTilePtr fresh_cached_tile(http_detail::NativeTileCache& cache, const Tileset& t,
+                                             std::uint64_t tile_id,
+                                             std::chrono::milliseconds recheck) {
+  if (t.modified.load(std::memory_order_relaxed)) return nullptr;
+  const std::int64_t now = coarse_now_ns();
+  std::int64_t seen = t.verified_ns.load(std::memory_order_relaxed);
+  if (now - seen >= std::chrono::nanoseconds(recheck).count() &&
+      t.verified_ns.compare_exchange_strong(seen, now, std::memory_order_relaxed)) {
+    if (!t.reader->check_unchanged().ok()) {
+      t.modified.store(true, std::memory_order_relaxed);
+      return nullptr;
+    }
+  }
+  return cache.find(t.generation, tile_id);
+}
+
 // 200 with the stored payload (a view: the caller keeps its bytes alive) or 304, with the ETag
 // read from the payload's tile header frame; `damaged_status` when that frame does not parse
 // (500 for our own archive, 502 for a provider's origin). The frame's checksum goes to `memo`.
@@ -327,10 +373,7 @@ HttpResponse payload_response(std::span<const std::uint8_t> payload, std::string
                               std::string_view tileset, http_detail::TileTagMemo* memo = nullptr,
                               std::uint64_t tile_id = 0) {
   auto header = parse_tile_header(payload);
-  if (!header) {
-    return tile_error(damaged_status, "tile " + id.to_string() + " of " + std::string(tileset) +
-                                          " is damaged: " + header.error().to_string());
-  }
+  if (!header) return damaged_tile(damaged_status, id, tileset, header.error());
   if (memo) memo->remember(tile_id, header->checksum);
   HttpResponse r = tag_response(header->checksum, if_none_match, cc);
   if (r.status == 304) return r;
@@ -346,13 +389,22 @@ namespace router_detail {
 
 HttpResponse stored_tile_answer(std::shared_ptr<const Tileset> t, TileId id,
                                 Result<std::vector<std::uint8_t>> payload,
-                                std::string_view if_none_match, const std::string& cc) {
+                                std::string_view if_none_match, const std::string& cc,
+                                http_detail::NativeTileCache* cache) {
   if (!payload) return unreadable_tile(std::move(t), id, payload.error(), cc);
+  auto header = parse_tile_header(*payload);
+  if (!header) return damaged_tile(500, id, t->name, header.error());
   const std::uint64_t tile_id = archive::zxy_to_tile_id(id.z, id.x, id.y);
-  auto bytes = std::make_shared<const std::vector<std::uint8_t>>(std::move(*payload));
-  HttpResponse r =
-      payload_response(*bytes, if_none_match, cc, 500, id, t->name, t->tags.get(), tile_id);
-  if (!r.view.empty()) r.keep = std::move(bytes);
+  if (t->tags) t->tags->remember(tile_id, header->checksum);
+  auto tile = std::make_shared<http_detail::CachedTile>(
+      http_detail::CachedTile{std::move(*payload), header->checksum});
+  if (cache != nullptr && !t->remote) {
+    // Read whole and verified unchanged after the read (archive::Reader::get): it may be kept,
+    // unless the archive is already known to have changed.
+    t->verified_ns.store(coarse_now_ns(), std::memory_order_relaxed);
+    if (!t->modified.load(std::memory_order_relaxed)) cache->insert(t->generation, tile_id, tile);
+  }
+  HttpResponse r = kept_tile_response(std::move(tile), if_none_match, cc);
   r.hold = std::move(t);  // names the tileset in access logs
   return r;
 }
@@ -394,7 +446,17 @@ HttpResponse tile_route(const HttpRequest& request, std::shared_ptr<const Tilese
   const std::string cc = version.empty() ? cache_control(priv, config.max_age_seconds, false)
                                          : cache_control(priv, kImmutableMaxAge, true);
   const std::uint64_t tile_id = archive::zxy_to_tile_id(id.z, id.x, id.y);
-  http_detail::TileTagMemo* memo = t->tags.get();
+  http_detail::NativeTileCache* cache = t->remote ? nullptr : config.tile_cache.get();
+  if (cache != nullptr) {
+    // A hot tile: no read, no stat (the archive is re-checked once per recheck interval).
+    if (auto kept = fresh_cached_tile(*cache, *t, tile_id, config.tile_cache_recheck)) {
+      HttpResponse r = kept_tile_response(std::move(kept), request.if_none_match, cc);
+      r.hold = std::move(t);
+      return r;
+    }
+  }
+  http_detail::TileTagMemo* memo =
+      t->modified.load(std::memory_order_relaxed) ? nullptr : t->tags.get();
   if (!request.if_none_match.empty() && memo) {
     // A tag read before from this file answers without touching it.
     if (auto known = memo->find(tile_id)) {
@@ -426,7 +488,7 @@ HttpResponse tile_route(const HttpRequest& request, std::shared_ptr<const Tilese
   // A request to a store: the answer pipeline reads it off the I/O thread.
   if (t->remote) return stored_read_plan(std::move(t), id, request, cc);
   auto payload = t->reader->get(id);
-  return stored_tile_answer(std::move(t), id, std::move(payload), request.if_none_match, cc);
+  return stored_tile_answer(std::move(t), id, std::move(payload), request.if_none_match, cc, cache);
 }
 
 // Versioned URLs of a provided tileset: the version must be the one the provider reports (the

@@ -13,6 +13,9 @@
 
 namespace vts {
 inline namespace server {
+namespace http_detail {
+class NativeTileCache;  // native_tile_cache.hpp
+}
 namespace router_detail {
 
 inline constexpr const char* kAllowedMethods = "GET, HEAD, OPTIONS";
@@ -33,10 +36,12 @@ HttpResponse tile_error(int status, std::string message);
 // The answer to a request for tile `id` of the archive tileset `t` from its stored payload (or
 // the error reading it): 200 with the payload, 304 when `if_none_match` names its tag, 204/404/
 // 500/503 as the error says. What route() answers for a local archive, and the answer pipeline
-// for one in an object store.
+// for one in an object store. With `cache` (a local archive's), the tile read is kept there under
+// the tileset's generation unless the archive is known to have been modified.
 HttpResponse stored_tile_answer(std::shared_ptr<const Tileset> t, TileId id,
                                 Result<std::vector<std::uint8_t>> payload,
-                                std::string_view if_none_match, const std::string& cc);
+                                std::string_view if_none_match, const std::string& cc,
+                                http_detail::NativeTileCache* cache = nullptr);
 // The plan for a tile of a remote tileset (Tileset::remote): read on the answer pipeline's
 // store-read pool, then answered by `answer` (unset: stored_tile_answer()).
 HttpResponse stored_read_plan(

@@ -15,7 +15,7 @@ namespace {
 
 using nlohmann::json;
 
-constexpr std::array<std::string_view, 15> kTopKeys = {"listen",
+constexpr std::array<std::string_view, 16> kTopKeys = {"listen",
                                                        "admin",
                                                        "threads",
                                                        "cors_origin",
@@ -28,6 +28,7 @@ constexpr std::array<std::string_view, 15> kTopKeys = {"listen",
                                                        "web",
                                                        "s3_endpoint",
                                                        "directory_cache_mib",
+                                                       "tile_cache_mib",
                                                        "store_timeout_ms",
                                                        "store_retries"};
 constexpr std::array<std::string_view, 8> kWebKeys = {
@@ -216,6 +217,12 @@ Status apply(const json& j, const std::string& file, HttpServerOptions& o) {
       return config_error(file,
                           "directory_cache_mib is " + v.dump() + ": a whole number 0 to 1048576");
     o.registry.directory_cache_bytes = std::size_t(v.get<std::uint64_t>()) << 20;
+  }
+  if (j.contains("tile_cache_mib")) {
+    const json& v = j.at("tile_cache_mib");
+    if (!v.is_number_unsigned() || v.get<std::uint64_t>() > (1u << 20))
+      return config_error(file, "tile_cache_mib is " + v.dump() + ": a whole number 0 to 1048576");
+    o.router.tile_cache_bytes = std::size_t(v.get<std::uint64_t>()) << 20;
   }
   if (j.contains("access"))
     if (auto st = apply_access(j.at("access"), file, o.router); !st.ok()) return st;

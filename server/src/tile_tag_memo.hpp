@@ -4,10 +4,10 @@
 // and is emptied when full (tags are re-learnt from the next reads), about 16 MiB in all.
 //
 // A memo belongs to one Tileset, i.e. to one opened file: a replaced archive is a new Tileset
-// with an empty memo. An archive modified in place (which the reader reports as
-// ErrorCode::changed on its next read) keeps confirming the tags it read before until the
-// registry's reload replaces the tileset — which is answering 304 for a whole old tile, as a
-// request made a moment earlier would have been.
+// with an empty memo. An archive modified in place keeps confirming the tags it read before
+// until the change is noticed (Tileset::modified: a read answered ErrorCode::changed, a reload
+// saw the file change) — which is answering 304 for a whole old tile, as a request made a moment
+// earlier would have been; from then on the router no longer consults the memo.
 //
 // Thread-safe: every member may be called from any thread.
 #pragma once

@@ -152,6 +152,8 @@ Result<std::shared_ptr<const Tileset>> open_archive(const fs::path& path,
   t->info = std::move(*info);
   t->version = t->reader->version();
   t->tags = std::make_shared<http_detail::TileTagMemo>();
+  static std::atomic<std::uint64_t> openings{0};
+  t->generation = openings.fetch_add(1, std::memory_order_relaxed) + 1;
   t->file_size = id->size;
   t->file_mtime_ns = id->mtime_ns;
   t->file_inode = id->inode;
@@ -468,6 +470,10 @@ void TilesetRegistry::refresh_loaded(const std::vector<fs::path>& folders, bool 
       continue;
     }
     if (!force && *id == identity_of(*old)) continue;
+    // Modified in place (same file): nothing kept from the old archive answers any more, even
+    // while the new one settles or is refused. (A file renamed over it leaves the old one whole.)
+    if (*id != identity_of(*old) && id->inode == old->file_inode && !is_remote_path(old->path))
+      old->modified.store(true, std::memory_order_relaxed);
     {
       std::lock_guard lock(mutex_);
       auto r = refused_.find(old->path);

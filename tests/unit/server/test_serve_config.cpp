@@ -176,6 +176,18 @@ TEST(ServeConfig, TheEncodeQueueCapsAreAppliedAndZeroIsRefused) {
                  "web.max_queued_encodes_per_connection");
 }
 
+TEST(ServeConfig, TheTileCacheSizeIsAppliedInMibAndZeroTurnsItOff) {
+  EXPECT_EQ(HttpServerOptions{}.router.tile_cache_bytes, std::size_t(256) << 20);
+  HttpServerOptions o;
+  ASSERT_TRUE(apply(R"({"tile_cache_mib": 200})", o).ok());
+  EXPECT_EQ(o.router.tile_cache_bytes, std::size_t(200) << 20);
+  ASSERT_TRUE(apply(R"({"tile_cache_mib": 0})", o).ok());
+  EXPECT_EQ(o.router.tile_cache_bytes, 0u);
+  expect_refused(R"({"tile_cache_mib": -1})", "tile_cache_mib");
+  expect_refused(R"({"tile_cache_mib": 1.5})", "tile_cache_mib");
+  expect_refused(R"({"tile_cache_mib": 1048577})", "tile_cache_mib");
+}
+
 TEST(ServeConfig, AFileIsReadAndAMissingOneIsAnIoErrorNamingIt) {
   const fs::path dir =
       fs::temp_directory_path() / ("vts-serve-config-" + std::to_string(::getpid()));

@@ -1,7 +1,8 @@
 // The HTTP semantics of `vts serve`: functions from a parsed request to a response description,
 // with no sockets, so every route and status is unit-testable and fuzzable. route() answers at
-// once what its archive, memo and caches hold (it reads a tile's bytes, remembers tile tags in the
-// tileset's memo, looks web images up in the web tile cache) and starts no work: an answer that
+// once what its archive, memo and caches hold (it reads a tile's bytes or takes them from the
+// native tile cache, remembers tile tags in the tileset's memo, looks web images up in the web
+// tile cache) and starts no work: an answer that
 // needs a provided tile or a web image encode is a plan (PendingAnswer) that finish_pending()
 // carries out (docs/ARCHITECTURE.md "One answer pipeline"). The network layer (http_server.hpp)
 // parses bytes into HttpRequest, calls route() (tile listener) or route_admin() (admin listener),
@@ -34,6 +35,7 @@ inline namespace server {
 namespace http_detail {
 class WebTileCache;  // web_tile_cache.hpp
 struct WebTile;
+class NativeTileCache;  // native_tile_cache.hpp
 }  // namespace http_detail
 
 // Web images of tiles (/{ts}/{z}/{x}/{y}.png|.webp|.jpg; docs/PROTOCOL.md §12).
@@ -65,6 +67,14 @@ struct RouterConfig {
   // Clock for signed-URL expiry (seconds since the Unix epoch); tests substitute their own.
   std::int64_t (*now_unix_seconds)() = nullptr;
   WebTileConfig web;
+  // Native tiles of local archives kept in RAM (docs/PROTOCOL.md §6): at most tile_cache_bytes
+  // ("tile_cache_mib", default 256 MiB; 0 = none). A kept tile answers while its archive is not
+  // known to be modified in place and was verified unchanged within tile_cache_recheck (else
+  // one request re-checks it: one fstat). Made by HttpServer when null; route() without one
+  // reads every tile.
+  std::size_t tile_cache_bytes = std::size_t(256) << 20;
+  std::chrono::milliseconds tile_cache_recheck{50};
+  std::shared_ptr<http_detail::NativeTileCache> tile_cache;
 };
 
 enum class HttpMethod : std::uint8_t { get, head, options, other };

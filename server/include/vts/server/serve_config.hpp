@@ -2,7 +2,8 @@
 // flags then override it). Keys (every one optional; docs/PROTOCOL.md §10 lists them):
 //   listen, admin ("HOST:PORT"; admin null = no admin listener), threads, cors_origin, max_age,
 //   public_url, access_log, reload_interval_ms,
-//   s3_endpoint, directory_cache_mib, store_timeout_ms (100..600000), store_retries (0..10),
+//   s3_endpoint, directory_cache_mib, tile_cache_mib (0..1048576), store_timeout_ms (100..600000),
+//   store_retries (0..10),
 //   access: {"<tileset>": {"tokens": [...], "hmac_keys": [...]}},
 //   limits: {max_header_bytes, max_target_bytes, max_connections, max_pipeline, min_send_rate,
 //            idle_timeout_ms, header_timeout_ms, write_timeout_ms,

@@ -48,6 +48,19 @@ struct Tileset {
   // Tags of tiles already read from this file, so that a conditional request for one of them is
   // answered without reading the file (server/src/tile_tag_memo.hpp). Null: none kept.
   std::shared_ptr<http_detail::TileTagMemo> tags;
+  // Which opening of an archive this is: unique in the process and never reused (open_tileset()
+  // numbers them), so what a cache keeps under it is never answered for a re-opened archive.
+  std::uint64_t generation = 0;
+  // Set, for good, once this archive is known to have been modified in place since it was opened:
+  // a read found it (ErrorCode::changed), a re-check did, or a reload saw its file change. From
+  // then on nothing kept from it (tags, cached tiles) answers a request: the file is read, and
+  // answers 503 until the reload replaces the tileset.
+  mutable std::atomic<bool> modified{false};
+  // When the archive was last verified unchanged (DeadlineClock, ns since its epoch): a read
+  // (pread, then fstat) or a re-check. Tiles are answered from the RAM cache only while this is
+  // recent (router.cpp: kRecheckInterval), so a change is noticed within that time even when
+  // every request is a cache hit.
+  mutable std::atomic<std::int64_t> verified_ns{0};
 };
 
 // Where a registry reads remote tilesets from, and how much of each archive it keeps.
