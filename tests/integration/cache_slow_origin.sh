@@ -52,6 +52,9 @@ PROXY="http://127.0.0.1:$(sed -nE 's/^listening on ([0-9]+)/\1/p' "$LOGS/proxy.o
 
 # start_daemon ARGS...: a fresh `vts cache serve` on the slow origin; sets DAEMON_PID, D, DA.
 start_daemon() {
+  # Emptied here, not by the redirection below: that runs in the background child, so the
+  # previous daemon's "listening on" line could satisfy wait_line before it is truncated.
+  : >"$LOGS/daemon.out"
   "$VTS" cache serve --upstream "$PROXY/s" --cache-dir "$WORK/cache$#" --listen 127.0.0.1:0 \
     --admin 127.0.0.1:0 "$@" >"$LOGS/daemon.out" 2>"$LOGS/daemon.err" </dev/null &
   DAEMON_PID=$!

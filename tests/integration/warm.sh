@@ -76,6 +76,7 @@ expect_tiles() {
 start_server_on() {
   local listen=$1 i
   shift
+  : >"$LOGS/serve.out" # not the redirection's job: a previous server's line would pass the poll
   "$VTS" serve "$@" --listen "$listen" --admin 127.0.0.1:0 \
     >"$LOGS/serve.out" 2>"$LOGS/serve.err" </dev/null &
   SERVER_PID=$!
