@@ -20,6 +20,20 @@
 
 namespace vts::test {
 
+// A small hidden context's options, GL debug output on, made through `backend`: what the context
+// tests open (GLFW's and EGL's alike).
+inline renderer::GlContextOptions hidden_options(
+    int width = 64, int height = 64, renderer::GlBackend backend = renderer::GlBackend::automatic) {
+  renderer::GlContextOptions o;
+  o.width = width;
+  o.height = height;
+  o.visible = false;
+  o.vsync = false;
+  o.debug = true;
+  o.backend = backend;
+  return o;
+}
+
 // The context, current on the calling (main) thread; nullptr with the reason in `error`. Created
 // on first use and kept until the process exits.
 inline renderer::GlContext* shared_gl_context(std::string* error = nullptr) {

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "gl_fixture.hpp"
 #include "vts/renderer/gl_context.hpp"
 
 namespace {
@@ -17,13 +18,7 @@ using vts::renderer::GlContext;
 using vts::renderer::GlContextOptions;
 
 GlContextOptions hidden(int w = 64, int h = 64) {
-  GlContextOptions o;
-  o.width = w;
-  o.height = h;
-  o.visible = false;
-  o.vsync = false;
-  o.debug = true;
-  return o;
+  return vts::test::hidden_options(w, h);
 }
 
 GLuint compile(GLenum type, const char* source) {

@@ -23,14 +23,7 @@ using vts::renderer::GlContext;
 using vts::renderer::GlContextOptions;
 
 GlContextOptions headless(GlBackend backend, int w = 64, int h = 64) {
-  GlContextOptions o;
-  o.width = w;
-  o.height = h;
-  o.visible = false;
-  o.vsync = false;
-  o.debug = true;
-  o.backend = backend;
-  return o;
+  return vts::test::hidden_options(w, h, backend);
 }
 
 // Sets an environment variable for one scope.
